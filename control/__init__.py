@@ -1,0 +1,1 @@
+"""Control layer: valve logic, estimators, NMPC/LMPC/PID (never imports mujoco)."""

@@ -1,0 +1,1 @@
+"""Hydraulic tensioning circuit (pure numpy/scipy; never imports mujoco)."""

@@ -1,0 +1,1 @@
+"""trackmj model files: lf1352.xml (generated) and its parameter files."""
