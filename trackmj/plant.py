@@ -1,0 +1,365 @@
+"""Plant interface over the MuJoCo track model: named accessors and the 1 ms stepping loop.
+
+Sign conventions (see also :mod:`trackmj.ports`):
+
+* stroke s [m] = ``stroke_at_layout_m`` + position of ``idler_slide``; grows outward
+  (tensioning). Stroke velocity v = ds/dt [m/s].
+* tensioner force [N] > 0 pushes the idler carrier outward.
+* pin tension [N] > 0 pulls the two links of a pin apart along the track (tension);
+  pin k joins link_{k-1} and link_k; array index k, shape (82,).
+* chassis pose (x [m] forward, z [m] up, pitch [rad] about +y, nose-down positive).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from trackmj.model import (
+    LOOP_CLOSURE_PIN,
+    ModelParams,
+    default_xml_path,
+    load_model_params,
+)
+from trackmj.ports import ForceLaw, TensionerElement
+
+COUPLING_STEP_S = 1e-3
+"""Fixed exchange step between mechanics, hydraulics and sensors [s]."""
+
+
+@dataclass
+class PassiveTensioner:
+    """Preload spring-damper acting on the idler carrier (like Chrono's M113 idler).
+
+    F = preload_N - stiffness_N_m·(s - stroke_ref_m) - damping_N_s_m·v_{k+1}
+    The spring term is evaluated at the start of the step, the damping implicitly.
+    """
+
+    preload_N: float
+    stiffness_N_m: float
+    damping_N_s_m: float
+    stroke_ref_m: float
+
+    def force_law(self, t_s: float, stroke_m: float, velocity_m_s: float) -> ForceLaw:
+        return ForceLaw(self.preload_N - self.stiffness_N_m * (stroke_m - self.stroke_ref_m),
+                        -self.damping_N_s_m)
+
+    def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
+        """Nothing to finish: the element has no state."""
+
+    @classmethod
+    def from_params(cls, params: ModelParams) -> PassiveTensioner:
+        t = params.tensioner
+        return cls(t.preload_N, t.stiffness_N_m, t.damping_N_s_m,
+                   params.idler.stroke_at_layout_m)
+
+
+@dataclass(frozen=True)
+class DerailmentStatus:
+    """Indicators that the track is losing its guidance (all False when healthy)."""
+
+    sprocket_disengaged: bool   # no sprocket tooth touches a pin
+    links_off_envelope: bool    # a pin is further than the threshold outside its home envelope
+    slack_strand: bool          # a pin in the upper strand carries (almost) no tension
+    max_envelope_excursion_m: float
+    min_upper_strand_tension_N: float
+
+    @property
+    def any(self) -> bool:
+        return self.sprocket_disengaged or self.links_off_envelope or self.slack_strand
+
+
+class TrackPlant:
+    """One LF1352 track side in MuJoCo with named accessors.
+
+    State layout: ``data.qpos`` holds chassis (x, z, pitch), sprocket angle, idler slide,
+    six suspension slides, then link_00 (x, z, pitch) and the 81 pin hinges; use the
+    accessors rather than raw indices. The coupling step is 1 ms; the MuJoCo timestep
+    must divide it (``substeps`` MuJoCo steps per coupling step).
+    """
+
+    ENVELOPE_THRESHOLD_M = 0.10
+    SLACK_TENSION_N = 50.0
+
+    def __init__(self, model: mujoco.MjModel, params: ModelParams) -> None:
+        self.model = model
+        self.params = params
+        self.data = mujoco.MjData(model)
+        ratio = COUPLING_STEP_S / model.opt.timestep
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError(f"MuJoCo timestep {model.opt.timestep} s must divide the "
+                             f"{COUPLING_STEP_S} s coupling step")
+        self.substeps = round(ratio)
+        m = model
+        self._slide_q = m.jnt_qposadr[m.joint("idler_slide").id]
+        self._slide_v = m.jnt_dofadr[m.joint("idler_slide").id]
+        self._sprocket_v = m.jnt_dofadr[m.joint("sprocket_hinge").id]
+        self._chassis_q = np.array([m.jnt_qposadr[m.joint(n).id]
+                                    for n in ("chassis_x", "chassis_z", "chassis_pitch")])
+        self._chassis_v = np.array([m.jnt_dofadr[m.joint(n).id]
+                                    for n in ("chassis_x", "chassis_z", "chassis_pitch")])
+        self._tensioner = m.actuator("tensioner").id
+        self._drive = m.actuator("sprocket_drive").id
+        n = params.track.link_count
+        self.link_count = n
+        self._link_body = np.array([m.body(f"link_{k:02d}").id for k in range(n)])
+        self._pin_geom = np.array([m.geom(f"link_{k:02d}_pin").id for k in range(n)])
+        self._closure_eq = m.equality("loop_closure").id
+        self._closure_sites = (m.site("closure_a").id, m.site("closure_b").id)
+        self._chassis_body = m.body("chassis").id
+        self._sprocket_body = m.body("sprocket").id
+        self._tooth_geoms = {i for i in range(m.ngeom)
+                             if m.geom(i).name.startswith("sprocket_tooth_")}
+        self._group_of_body = self._contact_groups()
+        self.time_s = 0.0
+        self.reset("home" if model.nkey else None)
+        self._envelope = self._home_envelope()
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def load(cls, xml_path: str | Path | None = None,
+             param_path: str | Path | None = None) -> TrackPlant:
+        """Load the committed model (default ``models/lf1352.xml``) and its parameters."""
+        path = Path(xml_path) if xml_path is not None else default_xml_path()
+        if not path.is_file():
+            raise FileNotFoundError(f"model file not found: {path}")
+        try:
+            model = mujoco.MjModel.from_xml_path(str(path))
+        except ValueError as exc:
+            raise ValueError(f"{path}: MuJoCo could not load the model: {exc}") from None
+        return cls(model, load_model_params(param_path))
+
+    def reset(self, keyframe: str | None = "home") -> None:
+        """Reset to a keyframe (default the pretensioned ``home``) or to the layout."""
+        mujoco.mj_resetData(self.model, self.data)
+        if keyframe is not None:
+            mujoco.mj_resetDataKeyframe(self.model, self.data, self.model.key(keyframe).id)
+        self.data.ctrl[self._drive] = 0.0
+        self.time_s = 0.0
+        mujoco.mj_forward(self.model, self.data)
+
+    def _contact_groups(self) -> dict[int, str]:
+        groups = {self._sprocket_body: "sprocket", 0: "ground"}
+        for i in range(self.model.nbody):
+            name = self.model.body(i).name
+            if name.startswith("road_wheel_"):
+                groups[i] = "road_wheels"
+            elif name in ("idler", "idler_carrier"):
+                groups[i] = "idler"
+            elif name.startswith("return_roller_"):
+                groups[i] = "return_rollers"
+        return groups
+
+    # ------------------------------------------------------------------ accessors
+    @property
+    def stroke_m(self) -> float:
+        """Cylinder stroke [m] (outward positive)."""
+        return self.params.idler.stroke_at_layout_m + float(self.data.qpos[self._slide_q])
+
+    @property
+    def stroke_velocity_m_s(self) -> float:
+        """Cylinder stroke velocity [m/s]."""
+        return float(self.data.qvel[self._slide_v])
+
+    @property
+    def idler_force_N(self) -> float:
+        """Tensioner force applied to the idler carrier in the last step [N]."""
+        return float(self.data.actuator_force[self._tensioner])
+
+    @property
+    def sprocket_speed_rad_s(self) -> float:
+        return float(self.data.qvel[self._sprocket_v])
+
+    @property
+    def track_speed_m_s(self) -> float:
+        """Sprocket pitch-line speed [m/s] (positive drives the vehicle forward)."""
+        return self.sprocket_speed_rad_s * self.params.sprocket_pitch_radius_m
+
+    def set_track_speed(self, speed_m_s: float) -> None:
+        """Command the sprocket velocity servo to a pitch-line speed [m/s]."""
+        if not math.isfinite(speed_m_s):
+            raise ValueError(f"track speed must be finite, got {speed_m_s!r}")
+        self.data.ctrl[self._drive] = speed_m_s / self.params.sprocket_pitch_radius_m
+
+    @property
+    def chassis_pose(self) -> np.ndarray:
+        """(x [m], z [m], pitch [rad]) of the chassis frame relative to its layout pose."""
+        return self.data.qpos[self._chassis_q].copy()
+
+    @property
+    def chassis_velocity(self) -> np.ndarray:
+        """(vx [m/s], vz [m/s], pitch rate [rad/s])."""
+        return self.data.qvel[self._chassis_v].copy()
+
+    @property
+    def chassis_acceleration(self) -> np.ndarray:
+        """(ax [m/s²], az [m/s²], pitch acc [rad/s²]) from the last step."""
+        return self.data.qacc[self._chassis_v].copy()
+
+    @property
+    def contact_count(self) -> int:
+        return int(self.data.ncon)
+
+    @property
+    def closure_error_m(self) -> float:
+        """Gap between the two ends of the loop at the closure pin [m]."""
+        a, b = self._closure_sites
+        return float(np.linalg.norm(self.data.site_xpos[a] - self.data.site_xpos[b]))
+
+    @property
+    def warning_count(self) -> int:
+        """Total MuJoCo warnings raised since the last reset."""
+        return int(sum(w.number for w in self.data.warning))
+
+    def pin_positions(self) -> np.ndarray:
+        """World (x, z) of every pin [m], shape (82, 2)."""
+        return self.data.geom_xpos[self._pin_geom][:, [0, 2]].copy()
+
+    def pin_tensions_N(self) -> np.ndarray:
+        """Axial force at every pin [N], shape (82,), tension positive.
+
+        Tree pins from the interaction force of each child link with its parent
+        (``cfrc_int`` after ``mj_rnePostConstraint``), projected on the child's axis;
+        the closure pin from the ``loop_closure`` constraint force.
+        """
+        m, d = self.model, self.data
+        mujoco.mj_rnePostConstraint(m, d)
+        n = self.link_count
+        tension = np.empty(n)
+        for k in range(n):
+            if k == 0 or k == LOOP_CLOSURE_PIN:
+                continue
+            # pin k joins link_{k-1} and link_k; the child in the tree is link_k for
+            # branch A (k <= 40) and link_{k-1} for branch B (k >= 42); pin 0: link_81
+            child = k if k < LOOP_CLOSURE_PIN else k - 1
+            tension[k] = self._child_tension(child)
+        tension[0] = self._child_tension(n - 1)
+        tension[LOOP_CLOSURE_PIN] = self._closure_tension()
+        return tension
+
+    def _child_tension(self, link: int) -> float:
+        body = self._link_body[link]
+        force_from_parent = self.data.cfrc_int[body, 3:6]
+        axis = self.data.xmat[body].reshape(3, 3)[:, 0]
+        return float(-force_from_parent @ axis)
+
+    def _closure_tension(self) -> float:
+        d = self.data
+        rows = np.nonzero((d.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+                          & (d.efc_id == self._closure_eq))[0]
+        if len(rows) != 3:
+            return 0.0
+        # connect residual is anchor(link_40) - anchor(link_41): the row forces act on link_40
+        force_on_link40 = d.efc_force[rows]
+        axis = d.xmat[self._link_body[LOOP_CLOSURE_PIN - 1]].reshape(3, 3)[:, 0]
+        return float(force_on_link40 @ axis)
+
+    def contact_forces_N(self) -> dict[str, float]:
+        """Sum of contact normal forces on the track by partner [N]:
+        sprocket, road_wheels, idler, return_rollers, ground."""
+        m, d = self.model, self.data
+        totals = dict.fromkeys(("sprocket", "road_wheels", "idler", "return_rollers",
+                                "ground"), 0.0)
+        wrench = np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
+            group = self._group_of_body.get(b1) or self._group_of_body.get(b2)
+            if group is None:
+                continue
+            mujoco.mj_contactForce(m, d, i, wrench)
+            totals[group] += float(wrench[0])
+        return totals
+
+    def sprocket_tooth_contacts(self) -> int:
+        d = self.data
+        return sum(1 for i in range(d.ncon)
+                   if d.contact[i].geom1 in self._tooth_geoms
+                   or d.contact[i].geom2 in self._tooth_geoms)
+
+    # ------------------------------------------------------------------ derailment
+    def _chassis_frame_pins(self) -> np.ndarray:
+        x, z, pitch = self.chassis_pose
+        ride = self.params.chassis.ride_height_m
+        rel = self.pin_positions() - np.array([x, ride + z])
+        c, s = math.cos(pitch), math.sin(pitch)
+        # undo the rotation about +y by `pitch`: x' = c x - s z, z' = s x + c z
+        return np.column_stack([c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]])
+
+    def _home_envelope(self) -> np.ndarray:
+        from scipy.spatial import ConvexHull
+
+        pts = self._chassis_frame_pins()
+        return pts[ConvexHull(pts).vertices]  # counter-clockwise
+
+    def envelope_excursion_m(self) -> np.ndarray:
+        """Distance of each pin outside its home envelope (chassis frame) [m], (82,)."""
+        pts = self._chassis_frame_pins()
+        hull = self._envelope
+        edges = np.roll(hull, -1, axis=0) - hull
+        normals = np.column_stack([edges[:, 1], -edges[:, 0]])
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        offsets = np.einsum("ij,ij->i", normals, hull)
+        return np.maximum((pts @ normals.T - offsets).max(axis=1), 0.0)
+
+    def upper_strand_pins(self) -> np.ndarray:
+        """Indices of pins in the upper strand (above the sprocket and idler centres)."""
+        pts = self._chassis_frame_pins()
+        ride = self.params.chassis.ride_height_m
+        level = max(self.params.sprocket.z_m, self.params.idler.z_m) - ride
+        return np.nonzero(pts[:, 1] > level + 0.05)[0]
+
+    def derailment(self) -> DerailmentStatus:
+        excursion = float(self.envelope_excursion_m().max())
+        upper = self.upper_strand_pins()
+        tension = self.pin_tensions_N()
+        min_upper = float(tension[upper].min()) if len(upper) else 0.0
+        return DerailmentStatus(
+            sprocket_disengaged=self.sprocket_tooth_contacts() == 0,
+            links_off_envelope=excursion > self.ENVELOPE_THRESHOLD_M,
+            slack_strand=min_upper < self.SLACK_TENSION_N,
+            max_envelope_excursion_m=excursion,
+            min_upper_strand_tension_N=min_upper,
+        )
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, element: TensionerElement) -> ForceLaw:
+        """Advance one 1 ms coupling step with ``element`` acting on the idler carrier.
+
+        With several MuJoCo substeps the law is held and the element is completed with
+        the mean velocity over the step (displacement / step), which keeps the work
+        exchanged consistent with the stroke change.
+        """
+        m, d = self.model, self.data
+        stroke0 = self.stroke_m
+        law = element.force_law(self.time_s, stroke0, self.stroke_velocity_m_s)
+        if not (math.isfinite(law.force_N) and math.isfinite(law.damping_N_s_m)):
+            raise ValueError(f"tensioner returned a non-finite force law {law}")
+        d.ctrl[self._tensioner] = law.force_N
+        m.actuator_biasprm[self._tensioner, 2] = law.damping_N_s_m
+        for _ in range(self.substeps):
+            mujoco.mj_step(m, d)
+        self.time_s += COUPLING_STEP_S
+        if self.substeps == 1:
+            velocity = self.stroke_velocity_m_s
+        else:
+            velocity = (self.stroke_m - stroke0) / COUPLING_STEP_S
+        element.complete_step(self.time_s, self.stroke_m, velocity)
+        return law
+
+    def run(self, element: TensionerElement, duration_s: float,
+            track_speed: Callable[[float], float] | float = 0.0,
+            on_step: Callable[[TrackPlant], None] | None = None) -> None:
+        """Step for ``duration_s`` with a track-speed command [m/s] (constant or f(t))."""
+        steps = round(duration_s / COUPLING_STEP_S)
+        speed = track_speed if callable(track_speed) else (lambda _t: track_speed)
+        for _ in range(steps):
+            self.set_track_speed(speed(self.time_s))
+            self.step(element)
+            if on_step is not None:
+                on_step(self)
