@@ -127,7 +127,7 @@ class EstimatorParams:
     process_std: tuple[float, float, float, float] = (0.2e6, 0.3e6, 0.05e-3, 0.1e-3)
     measurement_std: tuple[float, float, float] = (0.15e6, 0.15e6, 0.2e-3)
     initial_std: tuple[float, float, float, float] = (0.5e6, 0.5e6, 1.0e-3, 10.0e-3)
-    ukf_alpha: float = 0.8
+    ukf_alpha: float = 1.0
     ukf_beta: float = 2.0
     ukf_kappa: float = -1.0
 
