@@ -1,0 +1,568 @@
+"""Hydraulic tensioner: two cylinders, 4/2 main valve, V_L/V_R, supply; implicit coupling.
+
+Circuit and sizing: see models/lf1352_hydraulics.toml (header) and docs/sizing.md. In short:
+supply S -> main 4/2 (rest P->A, B->T; energised P->B, A->T) -> line A -> V_L / V_R (NC
+2/2, each with a 1.1e-7 m^2 restrictor in series) -> heads; line B (2.2e-7 m^2 restrictor)
+feeds both rod chambers. The restrictors make a 3 kN tension change against ~1e6 N/m take
+~0.45 s at 12 MPa supply (~1 s at 9 MPa), i.e. 7.9e-6 m^3 of oil at ~1.7e-5 m^3/s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+from trackmj.ports import ForceLaw
+
+from .components import (
+    GasAccumulator,
+    Solenoid,
+    endstop_force,
+    friction_force,
+    orifice_flow,
+    orifice_gain,
+    series_area,
+    smoothstep,
+    valve_area,
+)
+from .ledger import EnergyLedger
+from .params import HydraulicParams, load_hydraulic_params
+
+Coupling = Literal["strong", "weak", "multirate"]
+MODES: dict[int, tuple[float, float, float]] = {
+    1: (0.0, 1.0, 1.0),    # pressurize: main at rest (P->A, B->T), V_L and V_R open
+    0: (0.0, 0.0, 0.0),    # hold: main at rest, V_L and V_R closed
+    -1: (1.0, 1.0, 1.0),   # release: main energised (P->B, A->T), V_L and V_R open
+}
+FLOW_NAMES = ("main_PA", "main_AT", "main_PB", "main_BT", "V_L", "V_R", "relief",
+              "makeup_L", "makeup_R", "makeup_rod", "leak_L", "leak_R")
+
+
+@dataclass(frozen=True, slots=True)
+class StepRecord:
+    """Everything exposed after a completed step (SI, gauge Pa, flows a->b as named).
+
+    flows_m3_s keys: FLOW_NAMES ("main_PA" = S->A, "main_AT" = A->T, "main_PB" = S->rod node,
+    "main_BT" = rod node->T, "V_L"/"V_R" = A->head, "relief" = S->T, "makeup_*" = T->chamber,
+    "leak_*" = head->rod). p_rod_L_Pa == p_rod_R_Pa (one rod node). dF_dp_m2 maps a chamber
+    to ∂F/∂p (A_head or −A_rod); dv_dQ_1_m2 maps it to ∂v/∂Q for flow INTO that chamber
+    (1/A_head, −1/A_rod), per cylinder.
+    """
+
+    t_s: float
+    stroke_m: float
+    velocity_m_s: float
+    p_head_L_Pa: float
+    p_head_R_Pa: float
+    p_rod_L_Pa: float
+    p_rod_R_Pa: float
+    p_line_A_Pa: float
+    p_supply_Pa: float
+    p_tank_Pa: float
+    q_supply_m3_s: float
+    q_pump_m3_s: float
+    flows_m3_s: dict[str, float]
+    V_head_L_m3: float
+    V_head_R_m3: float
+    V_rod_L_m3: float
+    V_rod_R_m3: float
+    V_line_A_m3: float
+    force_N: float
+    piston_force_N: float
+    friction_N: float
+    endstop_N: float
+    dF_dp_m2: dict[str, float]
+    dv_dQ_1_m2: dict[str, float]
+    law: ForceLaw
+    Z_N_s_m: float
+    correction_N: float
+    valve_positions: tuple[float, float, float]
+    valve_commands: tuple[float, float, float]
+    newton_iterations: int
+    interface_residual_J: float
+
+
+def _orf(pa: float, pb: float, k: float, pcr2: float, la: float, dla: float, lb: float,
+         dlb: float) -> tuple[float, float, float]:
+    """Limited orifice a->b: (Q, dQ/dp_a, dQ/dp_b); the upstream limiter l scales Q."""
+    d = pa - pb
+    r = d * d + pcr2
+    r4 = math.sqrt(math.sqrt(r))
+    q0 = k * d / r4
+    g = k * (0.5 * d * d + pcr2) / (r * r4)
+    if d >= 0.0:
+        return q0 * la, g * la + q0 * dla, -g * la
+    return q0 * lb, g * lb, -g * lb + q0 * dlb
+
+
+class HydraulicTensioner:
+    """Two-cylinder hydraulic tensioner implementing ``trackmj.ports.TensionerElement``.
+
+    State (gauge Pa): ``p = [p_A, p_HL, p_HR, p_B, p_S]`` = line-A node, head L, head R,
+    rod node (line B + both rod chambers), supply node (a state in accumulator mode,
+    prescribed otherwise). Stroke s [m] grows outward, v = ds/dt; F > 0 pushes the idler
+    outward; F = A_h(p_HL + p_HR) − 2·A_r·p_B − F_fric(v) + F_endstop(s, v). Flows positive
+    in the named direction (see StepRecord). Node volumes V_HL = V_dh + A_h·s,
+    V_B = V_lineB + 2(V_dr + A_r(s_max − s)).
+
+    Integration (one exchange step h): backward Euler on every node,
+    R_i = (V_i(s_{k+1})/β)(p_i − p_i^k) − h(ΣQ_in,i(p) − σ_i·A_i·v) = 0 (+ V_oil,acc(p_S)
+    − V_oil,acc(p_S^k) on the supply node), solved by Newton with the analytic Jacobian
+    (heads eliminated by Schur complement, then a 3x3 / 2x2 solve). Cavitation: every orifice
+    outflow is scaled by a smoothstep of its upstream pressure (0 at floor, 1 at floor+band),
+    and make-up check valves feed a chamber from the tank below p_t − crack.
+
+    Strong coupling (default). ``force_law(t_k, s_k, v_k)``: Newton-solve R(p, v) = 0 at
+    v* = v_k with s_{k+1} = s_k + h·v, then dp/dv = −R_p⁻¹·R_v (same Jacobian) and
+    F(v) ≈ F(v*) + Z·(v − v*), Z = dF/dv = Σ ∂F/∂p·dp/dv − dF_fric/dv + dF_es/dv (< 0:
+    the oil spring over one step, ≈ −h·ΣβA²/V, plus friction). Returned law:
+    ForceLaw(F(v*) − Z·v* + δF, Z). ``complete_step(t_{k+1}, s_{k+1}, v_{k+1})``: full Newton
+    from the linear predictor p* + dp/dv·(v_{k+1} − v*), then the step residual
+    r_k = F_hyd(v_{k+1})·v_{k+1}·h − law.at(v_{k+1})·v_{k+1}·h, F_hyd = piston force at the
+    converged pressures − friction + end stop. NEPCE-style carry: E_c = Σ r (the cumulative
+    interface error, which already contains the work the correction delivered); the next law
+    adds δF = clip(E_c/(h·v_k), ±max_correction_N) when |v_k| ≥ min_correction_velocity,
+    else 0. Deadbeat when v changes little per step, so Σ r stays ≈ one step's residual.
+
+    Weak coupling: F0 = pressure force of the last completed step + end stop at (s_k, v_k),
+    friction linearised at v_k (Z = −dF_fric/dv only), no correction. Multi-rate: the force
+    is updated every ``exchange_steps`` calls to force_law; in between, each completed step
+    advances the hydraulics in ``substep_s`` BE sub-steps with the velocity held from the last
+    exchange (stroke integrated internally, re-synchronised at each exchange).
+
+    Valves: ``set_mode(+1/0/−1)`` or ``set_command(main, v_l, v_r)`` (each in [0, 1]) at the
+    time of the last call; solenoid delay and first-order opening apply inside.
+    """
+
+    def __init__(self, params: HydraulicParams | None = None, *, dt_s: float = 1e-3,
+                 stroke_m: float = 0.05, head_pressure_Pa: float | None = None,
+                 supply_profile: Callable[[float], float] | str | None = None,
+                 coupling: Coupling = "strong", exchange_steps: int = 5,
+                 substep_s: float = 1e-4, t0_s: float = 0.0) -> None:
+        self.params = prm = params if params is not None else load_hydraulic_params()
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            raise ValueError(f"dt_s = {dt_s!r} must be finite and > 0")
+        if coupling not in ("strong", "weak", "multirate"):
+            raise ValueError(f"coupling = {coupling!r} must be 'strong', 'weak' or 'multirate'")
+        if exchange_steps < 1 or not (0.0 < substep_s <= dt_s):
+            raise ValueError("exchange_steps must be >= 1 and substep_s in (0, dt_s]")
+        self._check_input("stroke_m", stroke_m)
+        self.dt = dt_s
+        self.coupling = coupling
+        self.exchange_steps = exchange_steps
+        self.n_sub = max(1, round(dt_s / substep_s))
+        if isinstance(supply_profile, str):
+            supply_profile = prm.profiles[supply_profile]
+        self.profile = supply_profile
+        self.prescribed = supply_profile is not None or prm.supply.mode == "prescribed"
+        if self.prescribed and supply_profile is None:
+            raise ValueError("supply.mode = 'prescribed' needs a supply_profile")
+        cyl, fl = prm.cylinder, prm.fluid
+        self.Ah, self.Ar = cyl.area_head_m2, cyl.area_rod_m2
+        self.beta = fl.bulk_modulus_Pa
+        self.pT = prm.tank_pressure_Pa
+        self.pcr = prm.orifice.critical_pressure_Pa
+        self.pcr2 = self.pcr * self.pcr
+        self.leak = cyl.leakage_m3_s_Pa
+        cq, rho = prm.orifice.discharge_coefficient, fl.density_kg_m3
+        self._gain = lambda a: orifice_gain(cq, a, rho)
+        cav = prm.cavitation
+        self.floor, self.band = cav.floor_Pa, cav.band_Pa
+        self.mu_open = self.pT - cav.makeup_crack_below_tank_Pa
+        self.mu_width = cav.makeup_full_below_tank_Pa - cav.makeup_crack_below_tank_Pa
+        self.K_mu = self._gain(cav.makeup_area_m2)
+        rel = prm.relief
+        self.rel_crack, self.rel_width = rel.crack_Pa, rel.full_open_Pa - rel.crack_Pa
+        self.K_rel = self._gain(rel.full_area_m2)
+        self.Q_pump = 0.0 if self.prescribed else prm.supply.pump_flow_m3_s
+        self.acc = GasAccumulator(prm.accumulator)
+        self.main = Solenoid(prm.main_valve)
+        self.vl = Solenoid(prm.switching_valves)
+        self.vr = Solenoid(prm.switching_valves)
+        self.t = t0_s
+        self.s = stroke_m
+        self.v = 0.0
+        if head_pressure_Pa is None:  # 15 kN with the rods at tank pressure
+            head_pressure_Pa = (15e3 + 2.0 * self.Ar * self.pT) / (2.0 * self.Ah)
+        ps = self._supply_pressure(t0_s) if self.prescribed else prm.relief.crack_Pa
+        self.p = [ps, head_pressure_Pa, head_pressure_Pa, self.pT, ps]
+        self.V = self._volumes(stroke_m)
+        self.ledger = EnergyLedger()
+        self.step_ledger = EnergyLedger()
+        self.ledger.oil_energy_J = self.ledger.oil_energy_start_J = self._oil_energy(self.p,
+                                                                                     self.V)
+        self.ledger.gas_energy_J = self.ledger.gas_energy_start_J = self._gas_energy(ps)
+        self.carry_J = 0.0
+        self._law = ForceLaw(self._pressure_force(self.p), 0.0)
+        self._correction = 0.0
+        self._lin: tuple[list[float], list[float], float] | None = None
+        self._calls = 0
+        self._v_hold = 0.0
+        self._s_hyd = stroke_m
+        self._iters = 0
+        self._rec: tuple | None = None
+
+    # ----------------------------------------------------------------- public API
+    def set_mode(self, mode: int) -> None:
+        """Circuit mode +1 pressurize / 0 hold / −1 release as a valve-command set."""
+        if mode not in MODES:
+            raise ValueError(f"mode = {mode!r} must be +1, 0 or -1")
+        self.set_command(*MODES[mode])
+
+    def set_command(self, main: float, v_l: float, v_r: float) -> None:
+        """Per-valve commands in [0, 1] (main 1 = energised P->B, A->T; V 1 = open)."""
+        self.main.set(self.t, main)
+        self.vl.set(self.t, v_l)
+        self.vr.set(self.t, v_r)
+
+    def force_law(self, t_s: float, stroke_m: float, velocity_m_s: float) -> ForceLaw:
+        """Affine force law F(v) = F0 + Z·v for the step starting at (t_k, s_k, v_k)."""
+        self._check_input("t_s", t_s)
+        self._check_input("stroke_m", stroke_m)
+        self._check_input("velocity_m_s", velocity_m_s)
+        self.t, self.s, self.v = t_s, stroke_m, velocity_m_s
+        h = self.dt
+        if self.coupling == "strong":
+            self._set_gains(t_s, h)
+            s1 = stroke_m + h * velocity_m_s
+            p1 = self._newton(h, s1, velocity_m_s, list(self.p))
+            dpdv = self._dpdv(h, p1)
+            f_star, dfdv = self._force(p1, s1, velocity_m_s)
+            z = (self.Ah * (dpdv[1] + dpdv[2]) - 2.0 * self.Ar * dpdv[3] + dfdv)
+            self._lin = (p1, dpdv, velocity_m_s)
+            corr = 0.0
+            if abs(velocity_m_s) >= self.params.coupling.min_correction_velocity_m_s:
+                cmax = self.params.coupling.max_correction_N
+                corr = max(-cmax, min(cmax, self.carry_J / (h * velocity_m_s)))
+            self._correction = corr
+            self._law = ForceLaw(f_star - z * velocity_m_s + corr, z)
+        elif self.coupling == "weak" or self._calls % self.exchange_steps == 0:
+            if self.coupling == "multirate":
+                self._s_hyd, self._v_hold = stroke_m, velocity_m_s
+            ff, dff = self._friction(velocity_m_s)
+            fes = self._endstop(stroke_m, velocity_m_s)[0]
+            f0 = self._pressure_force(self.p) - (ff - dff * velocity_m_s) + fes
+            self._law = ForceLaw(f0, -dff)
+        self._calls += 1
+        return self._law
+
+    def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
+        """Finish the step with the end-of-step state (t_{k+1}, s_{k+1}, v_{k+1})."""
+        self._check_input("t_s", t_s)
+        self._check_input("stroke_m", stroke_m)
+        self._check_input("velocity_m_s", velocity_m_s)
+        h = t_s - self.t
+        if not h > 0.0:
+            raise ValueError(f"t_s = {t_s!r} must exceed the step start time {self.t!r}")
+        law, v1 = self._law, velocity_m_s
+        sl = self.step_ledger
+        if self.coupling == "multirate":
+            hs = h / self.n_sub
+            self._set_gains(self.t, hs)
+            for j in range(self.n_sub):
+                if j:
+                    self._set_gains(self.t + j * hs, hs)
+                self._s_hyd += hs * self._v_hold
+                p1 = self._newton(hs, self._s_hyd, self._v_hold, list(self.p))
+                self._commit(p1, self._s_hyd, self._v_hold, hs, accumulate=j > 0)
+                self._advance_valves(self.t + j * hs, hs)
+            self.s, self.v, self.t = stroke_m, v1, t_s
+        else:
+            if self.coupling == "weak":
+                self._set_gains(self.t, h)
+                p_guess = list(self.p)
+            else:
+                p_star, dpdv, v_star = self._lin
+                dv = v1 - v_star
+                p_guess = [p_star[i] + dpdv[i] * dv for i in range(5)]
+            p1 = self._newton(h, stroke_m, v1, p_guess)
+            self._commit(p1, stroke_m, v1, h, accumulate=False)
+            self._advance_valves(self.t, h)
+            self.s, self.v, self.t = stroke_m, v1, t_s
+        ff = self._friction(v1)[0]
+        fes = self._endstop(stroke_m, v1)[0]
+        sl.friction_J = ff * v1 * h
+        sl.endstop_J = -fes * v1 * h
+        sl.mech_work_J = law.at(v1) * v1 * h
+        sl.interface_residual_J = (sl.piston_work_J - sl.friction_J - sl.endstop_J
+                                   - sl.mech_work_J)
+        self.carry_J += sl.interface_residual_J
+        self.ledger.add(sl)
+        self._rec = (t_s, stroke_m, v1, ff, fes)
+
+    @property
+    def record(self) -> StepRecord:
+        """Record of the last completed step (built on access)."""
+        if self._rec is None:
+            raise RuntimeError("no step completed yet")
+        t, s, v, ff, fes = self._rec
+        p, fl, V = self.p, self._flows, self.V
+        ah, ar = self.Ah, self.Ar
+        fp = self._pressure_force(p)
+        law = self._law
+        vrod = (V[3] - self.params.lines.line_b_volume_m3) / 2.0
+        return StepRecord(
+            t_s=t, stroke_m=s, velocity_m_s=v, p_head_L_Pa=p[1], p_head_R_Pa=p[2],
+            p_rod_L_Pa=p[3], p_rod_R_Pa=p[3], p_line_A_Pa=p[0], p_supply_Pa=p[4],
+            p_tank_Pa=self.pT, q_supply_m3_s=fl[0] + fl[2], q_pump_m3_s=self.Q_pump,
+            flows_m3_s=dict(zip(FLOW_NAMES, fl, strict=True)),
+            V_head_L_m3=V[1], V_head_R_m3=V[2], V_rod_L_m3=vrod, V_rod_R_m3=vrod,
+            V_line_A_m3=V[0], force_N=fp - ff + fes, piston_force_N=fp, friction_N=ff,
+            endstop_N=fes,
+            dF_dp_m2={"head_L": ah, "head_R": ah, "rod_L": -ar, "rod_R": -ar},
+            dv_dQ_1_m2={"head_L": 1.0 / ah, "head_R": 1.0 / ah, "rod_L": -1.0 / ar,
+                        "rod_R": -1.0 / ar},
+            law=law, Z_N_s_m=law.damping_N_s_m, correction_N=self._correction,
+            valve_positions=(self.main.position, self.vl.position, self.vr.position),
+            valve_commands=(self.main.command, self.vl.command, self.vr.command),
+            newton_iterations=self._iters,
+            interface_residual_J=self.step_ledger.interface_residual_J,
+        )
+
+    @property
+    def pressures(self) -> tuple[float, float, float, float, float]:
+        """(p_A, p_head_L, p_head_R, p_rod, p_supply) [Pa gauge] now."""
+        return tuple(self.p)
+
+    # ----------------------------------------------------------------- internals
+    @staticmethod
+    def _check_input(name: str, x: float) -> None:
+        if not math.isfinite(x):
+            raise ValueError(f"{name} = {x!r} must be finite")
+
+    def _supply_pressure(self, t_s: float) -> float:
+        ps = float(self.profile(t_s))
+        if not (math.isfinite(ps) and ps >= 0.0):
+            raise ValueError(f"supply profile gave p_s = {ps!r} Pa at t = {t_s} s")
+        return ps
+
+    def _volumes(self, s: float) -> list[float]:
+        prm = self.params
+        cyl = prm.cylinder
+        vh = cyl.dead_volume_head_m3 + self.Ah * s
+        vr = prm.lines.line_b_volume_m3 + 2.0 * (cyl.dead_volume_rod_m3
+                                                 + self.Ar * (cyl.stroke_max_m - s))
+        return [prm.lines.line_a_volume_m3, vh, vh, vr, prm.supply.line_volume_m3]
+
+    def _oil_energy(self, p: list[float], V: list[float]) -> float:
+        n = 4 if self.prescribed else 5
+        return sum(p[i] * p[i] * V[i] for i in range(n)) / (2.0 * self.beta)
+
+    def _gas_energy(self, ps: float) -> float:
+        return 0.0 if self.prescribed else self.acc.energy(ps)
+
+    def _friction(self, v: float) -> tuple[float, float]:
+        c = self.params.cylinder
+        f, d = friction_force(v, c.coulomb_friction_N, c.coulomb_velocity_m_s,
+                              c.viscous_friction_N_s_m)
+        return 2.0 * f, 2.0 * d
+
+    def _endstop(self, s: float, v: float) -> tuple[float, float, float]:
+        c = self.params.cylinder
+        f, ds, dv = endstop_force(s, v, c.stroke_max_m, c.endstop_stiffness_N_m,
+                                  c.endstop_damping_N_s_m)
+        return 2.0 * f, 2.0 * ds, 2.0 * dv
+
+    def _pressure_force(self, p: list[float]) -> float:
+        return self.Ah * (p[1] + p[2]) - 2.0 * self.Ar * p[3]
+
+    def _force(self, p: list[float], s1: float, v: float) -> tuple[float, float]:
+        """Cylinder force [N] at pressures p, end stroke s1, velocity v, and its explicit
+        dF/dv (friction + end stop through s1 = s_k + h·v; pressures held)."""
+        ff, dff = self._friction(v)
+        fes, dfes_ds, dfes_dv = self._endstop(s1, v)
+        return (self._pressure_force(p) - ff + fes, -dff + dfes_ds * self.dt + dfes_dv)
+
+    def _set_gains(self, t_s: float, h: float) -> None:
+        """Valve positions at t_s + h (not committed) -> orifice gains of the step."""
+        prm = self.params
+        mv, sv, met = prm.main_valve, prm.switching_valves, prm.metering
+        xm = self.main.position_at(t_s, h)[0]
+        xl = self.vl.position_at(t_s, h)[0]
+        xr = self.vr.position_at(t_s, h)[0]
+        a_rest, a_ener = valve_area(1.0 - xm, mv), valve_area(xm, mv)
+        g = self._gain
+        self.K = (g(a_rest), g(a_ener), g(series_area(a_ener, met.line_b_area_m2)),
+                  g(series_area(a_rest, met.line_b_area_m2)),
+                  g(series_area(valve_area(xl, sv), met.head_branch_area_m2)),
+                  g(series_area(valve_area(xr, sv), met.head_branch_area_m2)))
+        if self.prescribed:
+            self.ps_next = self._supply_pressure(t_s + h)
+
+    def _advance_valves(self, t_s: float, h: float) -> None:
+        self.main.advance(t_s, h)
+        self.vl.advance(t_s, h)
+        self.vr.advance(t_s, h)
+
+    def _lim(self, p: float) -> tuple[float, float]:
+        x = (p - self.floor) / self.band
+        if x >= 1.0:
+            return 1.0, 0.0
+        s, ds = smoothstep(x)
+        return s, ds / self.band
+
+    def _makeup(self, p: float) -> tuple[float, float]:
+        """Make-up check valve T -> chamber at pressure p: (Q, dQ/dp)."""
+        x = (self.mu_open - p) / self.mu_width
+        if x <= 0.0:
+            return 0.0, 0.0
+        s, ds = smoothstep(x)
+        f, df = orifice_flow(self.pT - p, self.K_mu, self.pcr)
+        return s * f, -ds / self.mu_width * f - s * df
+
+    def _relief(self, ps: float) -> tuple[float, float]:
+        """Relief valve S -> T: (Q, dQ/dp_S)."""
+        x = (ps - self.rel_crack) / self.rel_width
+        if x <= 0.0:
+            return 0.0, 0.0
+        s, ds = smoothstep(x)
+        f, df = orifice_flow(ps - self.pT, self.K_rel, self.pcr)
+        return s * f, ds / self.rel_width * f + s * df
+
+    def _eval(self, h: float, s1: float, v: float, p: list[float]) -> tuple:
+        """Flows, residual R (5) and Jacobian entries at pressures p (see class docstring)."""
+        pA, pHL, pHR, pB, pS = p
+        if self.prescribed:
+            pS = self.ps_next
+        pT, pcr2, leak = self.pT, self.pcr2, self.leak
+        KPA, KAT, KPB, KBT, KVL, KVR = self.K
+        lA, dlA = self._lim(pA)
+        lHL, dlHL = self._lim(pHL)
+        lHR, dlHR = self._lim(pHR)
+        lB, dlB = self._lim(pB)
+        qPA, aPA_S, aPA_A = _orf(pS, pA, KPA, pcr2, 1.0, 0.0, lA, dlA)
+        qAT, aAT_A, _ = _orf(pA, pT, KAT, pcr2, lA, dlA, 1.0, 0.0)
+        qPB, aPB_S, aPB_B = _orf(pS, pB, KPB, pcr2, 1.0, 0.0, lB, dlB)
+        qBT, aBT_B, _ = _orf(pB, pT, KBT, pcr2, lB, dlB, 1.0, 0.0)
+        qVL, aVL_A, aVL_H = _orf(pA, pHL, KVL, pcr2, lA, dlA, lHL, dlHL)
+        qVR, aVR_A, aVR_H = _orf(pA, pHR, KVR, pcr2, lA, dlA, lHR, dlHR)
+        qlL, qlR = leak * (pHL - pB), leak * (pHR - pB)
+        qmL, dmL = self._makeup(pHL)
+        qmR, dmR = self._makeup(pHR)
+        qmB, dmB = self._makeup(pB)
+        p0 = self.p
+        V = self._volumes(s1)
+        ib = 1.0 / self.beta
+        cA, cHL, cHR, cB = V[0] * ib, V[1] * ib, V[2] * ib, V[3] * ib
+        Ahv, Arv2 = self.Ah * v, 2.0 * self.Ar * v
+        R = [cA * (pA - p0[0]) - h * (qPA - qAT - qVL - qVR),
+             cHL * (pHL - p0[1]) - h * (qVL - qlL + qmL - Ahv),
+             cHR * (pHR - p0[2]) - h * (qVR - qlR + qmR - Ahv),
+             cB * (pB - p0[3]) - h * (qPB - qBT + qlL + qlR + qmB + Arv2),
+             0.0]
+        J = [cA - h * (aPA_A - aAT_A - aVL_A - aVR_A), h * aVL_H, h * aVR_H, 0.0, -h * aPA_S,
+             cHL - h * (aVL_H - leak + dmL), -h * aVL_A, -h * leak,
+             cHR - h * (aVR_H - leak + dmR), -h * aVR_A, -h * leak,
+             cB - h * (aPB_B - aBT_B - 2.0 * leak + dmB), -h * leak, -h * leak, -h * aPB_S,
+             1.0, 0.0, 0.0]
+        qrel = 0.0
+        if not self.prescribed:
+            qrel, drel = self._relief(pS)
+            voil1, dvoil = self.acc.oil_volume(pS)
+            voil0 = self.acc.oil_volume(p0[4])[0]
+            cS = V[4] * ib
+            R[4] = cS * (pS - p0[4]) + voil1 - voil0 - h * (self.Q_pump - qPA - qPB - qrel)
+            J[15] = cS + dvoil + h * (aPA_S + aPB_S + drel)
+            J[16] = h * aPA_A
+            J[17] = h * aPB_B
+        flows = (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR)
+        return R, J, flows, V
+
+    @staticmethod
+    def _solve(J: list[float], r: list[float]) -> list[float]:
+        """Solve J·x = r with the circuit's sparsity (heads eliminated first)."""
+        (JAA, JAHL, JAHR, JAB, JAS, JHH, JHA, JHB, JRR, JRA, JRB, JBB, JBHL, JBHR, JBS,
+         JSS, JSA, JSB) = J
+        rA, rHL, rHR, rB, rS = r
+        iH, iR = 1.0 / JHH, 1.0 / JRR
+        a11 = JAA - JAHL * JHA * iH - JAHR * JRA * iR
+        a12 = JAB - JAHL * JHB * iH - JAHR * JRB * iR
+        b1 = rA - JAHL * rHL * iH - JAHR * rHR * iR
+        a21 = -JBHL * JHA * iH - JBHR * JRA * iR
+        a22 = JBB - JBHL * JHB * iH - JBHR * JRB * iR
+        b2 = rB - JBHL * rHL * iH - JBHR * rHR * iR
+        # 3x3 [[a11 a12 JAS] [a21 a22 JBS] [JSA JSB JSS]] by elimination on the S row
+        iS = 1.0 / JSS
+        a11 -= JAS * JSA * iS
+        a12 -= JAS * JSB * iS
+        b1 -= JAS * rS * iS
+        a21 -= JBS * JSA * iS
+        a22 -= JBS * JSB * iS
+        b2 -= JBS * rS * iS
+        det = a11 * a22 - a12 * a21
+        xA = (b1 * a22 - a12 * b2) / det
+        xB = (a11 * b2 - a21 * b1) / det
+        xS = (rS - JSA * xA - JSB * xB) * iS
+        return [xA, (rHL - JHA * xA - JHB * xB) * iH, (rHR - JRA * xA - JRB * xB) * iR, xB,
+                xS]
+
+    def _newton(self, h: float, s1: float, v: float, p: list[float]) -> list[float]:
+        """Backward-Euler step: Newton on R(p) = 0 from the guess p; returns p_{k+1}."""
+        cp = self.params.coupling
+        tol = cp.newton_tol_Pa
+        it = 0
+        for it in range(1, cp.newton_max_iter + 1):  # noqa: B007 (count reported)
+            R, J, flows, V = self._eval(h, s1, v, p)
+            dx = self._solve(J, [-R[0], -R[1], -R[2], -R[3], -R[4]])
+            p = [p[0] + dx[0], p[1] + dx[1], p[2] + dx[2], p[3] + dx[3], p[4] + dx[4]]
+            if max(abs(dx[0]), abs(dx[1]), abs(dx[2]), abs(dx[3]), abs(dx[4])) < tol:
+                break
+        else:
+            raise RuntimeError(f"hydraulic Newton did not converge in {cp.newton_max_iter} "
+                               f"iterations (t = {self.t} s, last |dp| = {max(map(abs, dx))} Pa)")
+        if self.prescribed:
+            p[4] = self.ps_next
+        self._iters, self._J, self._flows, self._V1 = it, J, flows, V
+        return p
+
+    def _dpdv(self, h: float, p: list[float]) -> list[float]:
+        """dp_{k+1}/dv from −R_p⁻¹·R_v with the last Newton Jacobian."""
+        p0, ib = self.p, h / self.beta
+        ah, ar2 = self.Ah, 2.0 * self.Ar
+        rv = [0.0, -(ah * ib * (p[1] - p0[1]) + h * ah), -(ah * ib * (p[2] - p0[2]) + h * ah),
+              -(-ar2 * ib * (p[3] - p0[3]) - h * ar2), 0.0]
+        return self._solve(self._J, rv)
+
+    def _commit(self, p1: list[float], s1: float, v: float, h: float, accumulate: bool) -> None:
+        """Take p1 as the new state and book the step's hydraulic energy terms."""
+        sl = self.step_ledger
+        if not accumulate:
+            for name in ("supply_J", "to_tank_J", "throttle_main_J", "throttle_VL_J",
+                         "throttle_VR_J", "throttle_relief_J", "throttle_makeup_J",
+                         "leakage_J", "numerical_J", "volume_term_J", "piston_work_J"):
+                setattr(sl, name, 0.0)
+        qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR = self._flows
+        pA, pHL, pHR, pB, pS = p1
+        pT = self.pT
+        p0, V0, V1 = self.p, self.V, self._V1
+        sl.supply_J += h * (pS * self.Q_pump if not self.prescribed else pS * (qPA + qPB))
+        sl.to_tank_J += h * pT * (qAT + qBT + qrel - qmL - qmR - qmB)
+        sl.throttle_main_J += h * ((pS - pA) * qPA + (pA - pT) * qAT + (pS - pB) * qPB
+                                   + (pB - pT) * qBT)
+        sl.throttle_VL_J += h * (pA - pHL) * qVL
+        sl.throttle_VR_J += h * (pA - pHR) * qVR
+        sl.throttle_relief_J += h * (pS - pT) * qrel
+        sl.throttle_makeup_J += h * ((pT - pHL) * qmL + (pT - pHR) * qmR + (pT - pB) * qmB)
+        sl.leakage_J += h * ((pHL - pB) * qlL + (pHR - pB) * qlR)
+        ib2 = 0.5 / self.beta
+        n = 4 if self.prescribed else 5
+        num = vol = 0.0
+        for i in range(n):
+            d = p1[i] - p0[i]
+            num += V1[i] * d * d
+            vol += (V1[i] - V0[i]) * p0[i] * p0[i]
+        num *= ib2
+        vol *= -ib2
+        oil = self._oil_energy(p1, V1)
+        gas = self._gas_energy(pS)
+        if not self.prescribed:
+            dvoil = self.acc.oil_volume(pS)[0] - self.acc.oil_volume(p0[4])[0]
+            num += pS * dvoil - (gas - self.ledger.gas_energy_J)
+        sl.numerical_J += num
+        sl.volume_term_J += vol
+        sl.piston_work_J += h * v * self._pressure_force(p1)
+        sl.oil_energy_J, sl.gas_energy_J = oil, gas
+        self.ledger.oil_energy_J, self.ledger.gas_energy_J = oil, gas
+        self.p, self.V = p1, V1
