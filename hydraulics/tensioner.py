@@ -140,7 +140,8 @@ class HydraulicTensioner:
                  stroke_m: float = 0.05, head_pressure_Pa: float | None = None,
                  supply_profile: Callable[[float], float] | str | None = None,
                  coupling: Coupling = "strong", exchange_steps: int = 5,
-                 substep_s: float = 1e-4, t0_s: float = 0.0) -> None:
+                 substep_s: float = 1e-4, t0_s: float = 0.0,
+                 supply_pressure_Pa: float | None = None) -> None:
         self.params = prm = params if params is not None else load_hydraulic_params()
         if not (math.isfinite(dt_s) and dt_s > 0.0):
             raise ValueError(f"dt_s = {dt_s!r} must be finite and > 0")
@@ -186,7 +187,11 @@ class HydraulicTensioner:
         self.v = 0.0
         if head_pressure_Pa is None:  # 15 kN with the rods at tank pressure
             head_pressure_Pa = (15e3 + 2.0 * self.Ar * self.pT) / (2.0 * self.Ah)
-        ps = self._supply_pressure(t0_s) if self.prescribed else prm.relief.crack_Pa
+        if self.prescribed:
+            ps = self._supply_pressure(t0_s)
+        else:
+            ps = prm.relief.crack_Pa if supply_pressure_Pa is None else supply_pressure_Pa
+            self._check_input("supply_pressure_Pa", ps)
         self.p = [ps, head_pressure_Pa, head_pressure_Pa, self.pT, ps]
         self.V = self._volumes(stroke_m)
         self.ledger = EnergyLedger()
