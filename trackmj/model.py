@@ -157,6 +157,7 @@ class SolverParams:
     tolerance: float = param(0.0, 1e-2)
     cone: str = "pyramidal"
     jacobian: str = "dense"
+    warmstart: bool = False
 
 
 @dataclass(frozen=True)
@@ -400,6 +401,8 @@ def build_mjcf(p: ModelParams, layout: Layout, home_qpos: np.ndarray | None = No
          gravity=_fmt(0, 0, -p.simulation.gravity_m_s2), integrator="implicitfast",
          solver="Newton", jacobian=p.solver.jacobian, iterations=str(p.solver.iterations),
          tolerance=_fmt(p.solver.tolerance), cone=p.solver.cone)
+    if not p.solver.warmstart:
+        _sub(root.find("option"), "flag", warmstart="disable")
     _sub(root, "size", memory="16M")
     visual = _sub(root, "visual")
     _sub(visual, "global", offwidth="1280", offheight="720")

@@ -63,9 +63,9 @@ class PassiveTensioner:
 class DerailmentStatus:
     """Indicators that the track is losing its guidance (all False when healthy)."""
 
-    sprocket_disengaged: bool   # no sprocket tooth touches a pin
+    sprocket_disengaged: bool   # fewer than 2 pins seated on the sprocket pitch circle
     links_off_envelope: bool    # a pin is further than the threshold outside its home envelope
-    slack_strand: bool          # a pin in the upper strand carries (almost) no tension
+    slack_strand: bool          # upper-strand tension fell to what its own weight causes
     max_envelope_excursion_m: float
     min_upper_strand_tension_N: float
 
@@ -84,11 +84,16 @@ class TrackPlant:
     """
 
     ENVELOPE_THRESHOLD_M = 0.10
-    SLACK_TENSION_N = 50.0
+    SEAT_TOLERANCE_M = 0.012
+    MIN_SEATED_PINS = 2
+    SLACK_TENSION_N = 1000.0
+    """Below this the upper strand hangs on its own weight (rigid links never reach zero:
+    one metre of track weighs ~460 N and a hanging span keeps a few hundred newtons)."""
 
     def __init__(self, model: mujoco.MjModel, params: ModelParams) -> None:
         self.model = model
         self.params = params
+        self.model_path: Path | None = None
         self.data = mujoco.MjData(model)
         ratio = COUPLING_STEP_S / model.opt.timestep
         if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
@@ -132,7 +137,9 @@ class TrackPlant:
             model = mujoco.MjModel.from_xml_path(str(path))
         except ValueError as exc:
             raise ValueError(f"{path}: MuJoCo could not load the model: {exc}") from None
-        return cls(model, load_model_params(param_path))
+        plant = cls(model, load_model_params(param_path))
+        plant.model_path = path
+        return plant
 
     def reset(self, keyframe: str | None = "home") -> None:
         """Reset to a keyframe (default the pretensioned ``home``) or to the layout."""
@@ -276,6 +283,14 @@ class TrackPlant:
             totals[group] += float(wrench[0])
         return totals
 
+    def seated_sprocket_pins(self) -> int:
+        """Pins within ``SEAT_TOLERANCE_M`` of the sprocket pitch circle; a pin riding on a
+        tooth tip sits about 40 mm further out."""
+        centre = self.data.xpos[self._sprocket_body][[0, 2]]
+        radius = np.linalg.norm(self.pin_positions() - centre, axis=1)
+        off = np.abs(radius - self.params.sprocket_pitch_radius_m)
+        return int(np.count_nonzero(off < self.SEAT_TOLERANCE_M))
+
     def sprocket_tooth_contacts(self) -> int:
         d = self.data
         return sum(1 for i in range(d.ncon)
@@ -320,7 +335,7 @@ class TrackPlant:
         tension = self.pin_tensions_N()
         min_upper = float(tension[upper].min()) if len(upper) else 0.0
         return DerailmentStatus(
-            sprocket_disengaged=self.sprocket_tooth_contacts() == 0,
+            sprocket_disengaged=self.seated_sprocket_pins() < self.MIN_SEATED_PINS,
             links_off_envelope=excursion > self.ENVELOPE_THRESHOLD_M,
             slack_strand=min_upper < self.SLACK_TENSION_N,
             max_envelope_excursion_m=excursion,

@@ -1,0 +1,206 @@
+"""The LF1352 MuJoCo model: structure, generation, initial state, static and driven physics."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import mujoco
+import numpy as np
+import pytest
+
+from trackmj.model import (
+    LOOP_CLOSURE_PIN,
+    build_mjcf,
+    compute_layout,
+    default_xml_path,
+    generate_mjcf,
+)
+from trackmj.plant import PassiveTensioner, TrackPlant
+from trackmj.ports import ForceLaw
+
+
+def _named(model: mujoco.MjModel, obj: mujoco.mjtObj, count: int) -> list[str]:
+    return [mujoco.mj_id2name(model, obj, i) for i in range(count)]
+
+
+def test_counts_and_names(plant: TrackPlant) -> None:
+    m = plant.model
+    bodies = _named(m, mujoco.mjtObj.mjOBJ_BODY, m.nbody)
+    links = sorted(b for b in bodies if b.startswith("link_"))
+    assert links == [f"link_{k:02d}" for k in range(82)]
+    assert [b for b in bodies if b.startswith("road_wheel_")] == [
+        f"road_wheel_{k}" for k in range(1, 7)]
+    assert bodies.count("sprocket") == 1 and bodies.count("idler") == 1
+    assert "chassis" in bodies and "idler_carrier" in bodies
+    for obj, n in ((mujoco.mjtObj.mjOBJ_BODY, m.nbody - 1), (mujoco.mjtObj.mjOBJ_GEOM, m.ngeom),
+                   (mujoco.mjtObj.mjOBJ_JOINT, m.njnt), (mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu),
+                   (mujoco.mjtObj.mjOBJ_EQUALITY, m.neq), (mujoco.mjtObj.mjOBJ_SITE, m.nsite)):
+        start = 1 if obj == mujoco.mjtObj.mjOBJ_BODY else 0
+        names = [mujoco.mj_id2name(m, obj, i) for i in range(start, start + n)]
+        assert all(names), f"unnamed {obj.name}"
+    assert m.neq == 1 and m.equality("loop_closure").type == mujoco.mjtEq.mjEQ_CONNECT
+    assert m.actuator("tensioner").biastype == mujoco.mjtBias.mjBIAS_AFFINE
+    assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    assert m.key("home") is not None
+    # sprocket teeth: count and pitch radius matched to the link pitch
+    teeth = [n for n in _named(m, mujoco.mjtObj.mjOBJ_GEOM, m.ngeom) if "tooth" in n]
+    p = plant.params
+    assert len(teeth) == p.sprocket.tooth_count
+    assert p.sprocket_pitch_radius_m == pytest.approx(
+        p.track.pitch_m / (2 * math.sin(math.pi / len(teeth))))
+
+
+def test_no_link_link_contact_pairs(plant: TrackPlant) -> None:
+    m = plant.model
+    link_geoms = [i for i in range(m.ngeom) if m.geom(i).name.startswith("link_")]
+    for i in link_geoms:
+        for j in link_geoms:
+            assert not (m.geom_contype[i] & m.geom_conaffinity[j]), (m.geom(i).name,
+                                                                   m.geom(j).name)
+
+
+def _strip_keyframe(xml: str) -> tuple[str, np.ndarray]:
+    match = re.search(r'<key name="home" qpos="([^"]+)"', xml)
+    assert match, "no home keyframe"
+    values = np.array([float(v) for v in match.group(1).split()])
+    return xml.replace(match.group(1), "QPOS"), values
+
+
+def test_generated_xml_equals_committed(model_params) -> None:
+    committed = default_xml_path().read_text()
+    generated = generate_mjcf(model_params)
+    structure_c, home_c = _strip_keyframe(committed)
+    structure_g, home_g = _strip_keyframe(generated)
+    assert structure_g == structure_c, "run `trackmj model generate` and commit lf1352.xml"
+    # the settled keyframe is rounded to 1 µm; allow one rounding step of platform noise
+    np.testing.assert_allclose(home_g, home_c, rtol=0, atol=2.01e-6)
+
+
+def test_initial_layout_closes_without_penetration(model_params) -> None:
+    layout = compute_layout(model_params)
+    gaps = np.linalg.norm(np.roll(layout.pins, -1, axis=0) - layout.pins, axis=1)
+    np.testing.assert_allclose(gaps, model_params.track.pitch_m, rtol=0, atol=1e-9)
+    model = mujoco.MjModel.from_xml_string(build_mjcf(model_params, layout))
+    plant = TrackPlant(model, model_params)
+    d = plant.data
+    assert d.ncon > 10
+    assert min(c.dist for c in d.contact[: d.ncon]) > -1e-3
+    assert plant.closure_error_m < 0.5e-3
+    assert plant.warning_count == 0
+
+
+def test_home_keyframe_is_settled(plant: TrackPlant) -> None:
+    d = plant.data
+    assert min(c.dist for c in d.contact[: d.ncon]) > -1e-3
+    assert plant.closure_error_m < 0.5e-3
+    element = PassiveTensioner.from_params(plant.params)
+    start = plant.data.qpos.copy()
+    plant.run(element, 0.2)
+    # a settled state barely moves (chassis and links within 1 mm, no warnings)
+    assert np.abs(plant.data.qpos[:3] - start[:3]).max() < 1e-3
+    assert plant.warning_count == 0
+
+
+def _strand_unit(pins: np.ndarray, a: int, b: int) -> np.ndarray:
+    v = pins[b] - pins[a]
+    return v / np.linalg.norm(v)
+
+
+def test_static_tension_matches_idler_force_balance(plant: TrackPlant) -> None:
+    """Frictionless idler: both strands carry T and F_idler = -T (e_u + e_l) · x_slide."""
+    p = plant.params
+    element = PassiveTensioner(15_000.0, 0.0, 1.4e4, p.idler.stroke_at_layout_m)
+    plant.run(element, 1.5)
+    force = plant.idler_force_N
+    assert force == pytest.approx(15_000.0, rel=0.01)  # settled: damping term small
+    pins = plant.pin_positions()
+    centre = plant.data.xpos[plant.model.body("idler").id][[0, 2]]
+    vertex_r = math.hypot(p.idler.radius_m + p.track.rail_radius_m, p.track.pitch_m / 2)
+    on_idler = np.nonzero(np.linalg.norm(pins - centre, axis=1) < vertex_r + 1.5e-3)[0]
+    assert len(on_idler) >= 3
+    first, last = on_idler.min(), on_idler.max()   # running order: top strand -> idler -> bottom
+    assert last - first + 1 == len(on_idler), "idler wrap must be contiguous"
+    e_upper = _strand_unit(pins, first, first - 1)   # from the idler back along the top strand
+    e_lower = _strand_unit(pins, last, last + 1)     # from the idler down the front strand
+    pitch = plant.chassis_pose[2]
+    slide_axis = np.array([math.cos(pitch), -math.sin(pitch)])
+    carrier_mass = p.idler.mass_kg + p.idler.carrier_mass_kg
+    gravity_along = carrier_mass * p.simulation.gravity_m_s2 * math.sin(pitch)
+    t_hand = (force + gravity_along) / -(e_upper @ slide_axis + e_lower @ slide_axis)
+    tension = plant.pin_tensions_N()
+    upper_near_idler = np.arange(first - 6, first)   # the span between roller 2 and the idler
+    measured = tension[upper_near_idler].mean()
+    assert measured == pytest.approx(t_hand, rel=0.10), (measured, t_hand)
+    # the closure pin (constraint force) agrees with its tree neighbours
+    closure = tension[LOOP_CLOSURE_PIN]
+    neighbours = tension[[LOOP_CLOSURE_PIN - 1, LOOP_CLOSURE_PIN + 1]].mean()
+    assert closure == pytest.approx(neighbours, rel=0.05)
+
+
+def test_driving_keeps_track_engaged(plant: TrackPlant) -> None:
+    element = PassiveTensioner.from_params(plant.params)
+    speed, ramp = 1.5, 1.0
+    vx, closure, statuses = [], [], []
+
+    def check(pl: TrackPlant) -> None:
+        ms = round(pl.time_s * 1000)
+        closure.append(pl.closure_error_m)
+        if pl.time_s > ramp + 1.0:
+            vx.append(pl.chassis_velocity[0])
+        if ms % 100 == 0:
+            statuses.append(pl.derailment())
+
+    plant.run(element, 10.0, lambda t: speed * min(1.0, t / ramp), check)
+    assert plant.warning_count == 0
+    assert np.all(np.isfinite(plant.data.qpos)) and np.all(np.isfinite(plant.data.qvel))
+    assert not any(s.any for s in statuses), [s for s in statuses if s.any][:3]
+    assert max(closure) < 1e-3
+    assert np.mean(vx) == pytest.approx(speed, rel=0.05)
+    assert plant.track_speed_m_s == pytest.approx(speed, rel=0.05)
+
+
+def test_derailment_indicators_fire_when_track_is_loosened(plant: TrackPlant) -> None:
+    class PullIn:
+        """Retracts the idler with 3 kN: the track must go slack."""
+
+        def force_law(self, t_s, stroke_m, velocity_m_s):
+            return ForceLaw(-3_000.0, -1e4)
+
+        def complete_step(self, t_s, stroke_m, velocity_m_s):
+            pass
+
+    plant.run(PullIn(), 1.0)
+    status = plant.derailment()
+    assert status.slack_strand and status.any
+    assert status.min_upper_strand_tension_N < TrackPlant.SLACK_TENSION_N
+
+
+def test_sparse_and_dense_constraint_solutions_agree(plant: TrackPlant) -> None:
+    """Guards against MuJoCo 4.0.0's sparse-factorisation bug (upstream issue 3767)."""
+    plant.run(PassiveTensioner.from_params(plant.params), 1.0,
+              lambda t: 1.5 * min(1.0, t / 0.5))
+    m, d = plant.model, plant.data
+    results = {}
+    for jacobian in (mujoco.mjtJacobian.mjJAC_DENSE, mujoco.mjtJacobian.mjJAC_SPARSE):
+        m.opt.jacobian = jacobian
+        probe = mujoco.MjData(m)
+        probe.qpos[:], probe.qvel[:], probe.ctrl[:] = d.qpos, d.qvel, d.ctrl
+        mujoco.mj_forward(m, probe)
+        results[jacobian] = (probe.qacc.copy(), probe.efc_force[: probe.nefc].copy())
+    dense, sparse = results.values()
+    assert len(dense[1]) == len(sparse[1]) > 20
+    np.testing.assert_allclose(sparse[0], dense[0], rtol=0, atol=1e-6 * np.abs(dense[0]).max())
+    np.testing.assert_allclose(sparse[1], dense[1], rtol=0, atol=1e-6 * np.abs(dense[1]).max())
+
+
+def _trajectory() -> np.ndarray:
+    plant = TrackPlant.load()
+    element = PassiveTensioner.from_params(plant.params)
+    states: list[np.ndarray] = []
+    plant.run(element, 0.5, 1.0, lambda pl: states.append(pl.data.qpos.copy()))
+    return np.array(states)
+
+
+def test_runs_are_bit_identical() -> None:
+    assert np.array_equal(_trajectory(), _trajectory())
