@@ -1,0 +1,93 @@
+"""Bare-model speed: wall time per 1 ms step driving at 1.5 m/s on flat ground.
+
+Reports, in one run: bare ``mj_step`` (tensioner as a fixed affine law set once), the
+plant's coupled step with the passive tensioner element (Python port exchange every step),
+their ratio, the real-time factor, and MuJoCo's timer split (collision vs constraint).
+Run: ``python benchmarks/bench_model.py [--seconds 5]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import mujoco
+import numpy as np
+
+from trackmj.machine import machine
+from trackmj.plant import PassiveTensioner, TrackPlant
+
+
+def _reset_timers(d: mujoco.MjData) -> None:
+    for timer in d.timer:
+        timer.duration, timer.number = 0.0, 0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=5.0, help="simulated time per case")
+    args = parser.parse_args()
+    steps = round(args.seconds / 1e-3)
+
+    plant = TrackPlant.load()
+    element = PassiveTensioner.from_params(plant.params)
+    plant.run(element, 1.5, lambda t: 1.5 * min(1.0, t))   # spin up to 1.5 m/s
+    state = (plant.data.qpos.copy(), plant.data.qvel.copy(), plant.data.act.copy())
+    m, d = plant.model, plant.data
+
+    def restore() -> None:
+        d.qpos[:], d.qvel[:], d.act[:] = state
+        mujoco.mj_forward(m, d)
+
+    tensioner = m.actuator("tensioner").id
+
+    def bare_run() -> float:
+        """mj_step with the affine law fixed (preload + implicit damping), no Python."""
+        restore()
+        law = element.force_law(0.0, plant.stroke_m, plant.stroke_velocity_m_s)
+        d.ctrl[tensioner] = law.force_N
+        m.actuator_biasprm[tensioner, 2] = law.damping_N_s_m
+        _reset_timers(d)
+        start = time.perf_counter()
+        for _ in range(steps):
+            mujoco.mj_step(m, d)
+        return (time.perf_counter() - start) / steps
+
+    def coupled_run() -> float:
+        restore()
+        start = time.perf_counter()
+        for _ in range(steps):
+            plant.step(element)
+        return (time.perf_counter() - start) / steps
+
+    # alternate the two cases and keep each one's best of three (load noise only adds)
+    bare_times, coupled_times = [], []
+    for _ in range(3):
+        bare_times.append(bare_run())
+        timers = {name: d.timer[int(getattr(mujoco.mjtTimer, name))].duration / steps
+                  for name in ("mjTIMER_STEP", "mjTIMER_POS_COLLISION", "mjTIMER_CONSTRAINT",
+                               "mjTIMER_POS_KINEMATICS", "mjTIMER_POS_INERTIA")}
+        ncon, nefc = d.ncon, d.nefc
+        coupled_times.append(coupled_run())
+    bare, coupled = min(bare_times), min(coupled_times)
+
+    print(f"machine: {machine()}")
+    print(f"model: nv {m.nv}, contacts {ncon}, constraint rows {nefc}, "
+          f"{args.seconds:.1f} s simulated per case, best of 3")
+    print(f"bare mj_step           {bare * 1e6:8.1f} us/step   "
+          f"real-time factor {1e-3 / bare:5.2f}x")
+    print(f"  collision            {timers['mjTIMER_POS_COLLISION'] * 1e6:8.1f} us "
+          f"({timers['mjTIMER_POS_COLLISION'] / timers['mjTIMER_STEP']:.0%})")
+    print(f"  constraint solve     {timers['mjTIMER_CONSTRAINT'] * 1e6:8.1f} us "
+          f"({timers['mjTIMER_CONSTRAINT'] / timers['mjTIMER_STEP']:.0%})")
+    print(f"  kinematics+inertia   "
+          f"{(timers['mjTIMER_POS_KINEMATICS'] + timers['mjTIMER_POS_INERTIA']) * 1e6:8.1f} us")
+    print(f"plant.step (passive)   {coupled * 1e6:8.1f} us/step   real-time factor "
+          f"{1e-3 / coupled:5.2f}x   ratio to bare {coupled / bare:.3f}")
+    print(f"final speed {plant.chassis_velocity[0]:.3f} m/s, closure "
+          f"{plant.closure_error_m * 1e3:.3f} mm, warnings {plant.warning_count}, "
+          f"finite {bool(np.isfinite(d.qpos).all())}")
+
+
+if __name__ == "__main__":
+    main()
