@@ -628,3 +628,43 @@ def write_model(path: str | Path | None = None, params: ModelParams | None = Non
     path = Path(path) if path is not None else default_xml_path()
     write_text_atomic(path, generate_mjcf(params))
     return path
+
+
+# ----------------------------------------------------------------------------- terrain
+
+TERRAIN_WIDTH_M = 2.0
+TERRAIN_BASE_M = 0.5
+
+
+def with_heightfield(mjcf: str, x_start_m: float, dx_m: float, heights_m: np.ndarray) -> str:
+    """Replace the flat ground of ``mjcf`` by a heightfield road profile.
+
+    heights_m: road elevation [m], shape (n,), at x = x_start_m + i·dx_m (world frame),
+    constant across the track (the model is planar). The ground contact keeps the flat
+    ground's foundation (default class ``ground``). Elevation 0 is the flat ground level.
+    """
+    heights = np.asarray(heights_m, dtype=float)
+    if heights.ndim != 1 or len(heights) < 4 or not np.all(np.isfinite(heights)):
+        raise ParameterError("terrain heights_m must be a finite 1-D array of >= 4 values")
+    if not (math.isfinite(dx_m) and dx_m > 0.0):
+        raise ParameterError(f"terrain dx_m = {dx_m!r} must be > 0")
+    root = ET.fromstring(mjcf.split("-->", 1)[1] if mjcf.lstrip().startswith("<!--") else mjcf)
+    low, high = float(heights.min()), float(heights.max())
+    span = max(high - low, 1e-6)
+    normalised = (heights - low) / span
+    length = dx_m * (len(heights) - 1)
+    asset = root.find("asset")
+    _sub(asset, "hfield", name="terrain", nrow="2", ncol=str(len(heights)),
+         size=_fmt(length / 2.0, TERRAIN_WIDTH_M / 2.0, span, TERRAIN_BASE_M),
+         elevation=" ".join(f"{v:.6f}" for v in np.tile(normalised, 2)))
+    world = root.find("worldbody")
+    ground = world.find("geom[@name='ground']")
+    for key in ("type", "size"):
+        ground.attrib.pop(key, None)
+    ground.set("type", "hfield")
+    ground.set("hfield", "terrain")
+    ground.set("pos", _fmt(x_start_m + length / 2.0, 0.0, low))
+    visual = world.find("geom[@name='ground_visual']")
+    visual.set("pos", _fmt(0.0, 0.0, low - 0.01))
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="unicode") + "\n"

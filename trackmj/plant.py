@@ -25,6 +25,7 @@ from trackmj.model import (
     ModelParams,
     default_xml_path,
     load_model_params,
+    with_heightfield,
 )
 from trackmj.ports import ForceLaw, TensionerElement
 
@@ -128,13 +129,22 @@ class TrackPlant:
     # ------------------------------------------------------------------ construction
     @classmethod
     def load(cls, xml_path: str | Path | None = None,
-             param_path: str | Path | None = None) -> TrackPlant:
-        """Load the committed model (default ``models/lf1352.xml``) and its parameters."""
+             param_path: str | Path | None = None,
+             terrain: tuple[float, float, np.ndarray] | None = None) -> TrackPlant:
+        """Load the committed model (default ``models/lf1352.xml``) and its parameters.
+
+        terrain: optional road profile ``(x_start_m, dx_m, heights_m)`` replacing the flat
+        ground by a heightfield (see :func:`trackmj.model.with_heightfield`).
+        """
         path = Path(xml_path) if xml_path is not None else default_xml_path()
         if not path.is_file():
             raise FileNotFoundError(f"model file not found: {path}")
         try:
-            model = mujoco.MjModel.from_xml_path(str(path))
+            if terrain is None:
+                model = mujoco.MjModel.from_xml_path(str(path))
+            else:
+                mjcf = with_heightfield(path.read_text(), *terrain)
+                model = mujoco.MjModel.from_xml_string(mjcf)
         except ValueError as exc:
             raise ValueError(f"{path}: MuJoCo could not load the model: {exc}") from None
         plant = cls(model, load_model_params(param_path))
