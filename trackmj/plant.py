@@ -123,6 +123,7 @@ class TrackPlant:
                              if m.geom(i).name.startswith("sprocket_tooth_")}
         self._group_of_body = self._contact_groups()
         self.time_s = 0.0
+        self.last_law: ForceLaw | None = None
         self.reset("home" if model.nkey else None)
         self._envelope = self._home_envelope()
 
@@ -158,6 +159,7 @@ class TrackPlant:
             mujoco.mj_resetDataKeyframe(self.model, self.data, self.model.key(keyframe).id)
         self.data.ctrl[self._drive] = 0.0
         self.time_s = 0.0
+        self.last_law = None
         mujoco.mj_forward(self.model, self.data)
 
     def _contact_groups(self) -> dict[int, str]:
@@ -185,8 +187,12 @@ class TrackPlant:
 
     @property
     def idler_force_N(self) -> float:
-        """Tensioner force applied to the idler carrier in the last step [N]."""
-        return float(self.data.actuator_force[self._tensioner])
+        """Tensioner force applied to the idler carrier over the last step [N]: the force
+        law at the end-of-step velocity (what ``implicitfast`` integrates), not MuJoCo's
+        ``actuator_force``, which is evaluated at the start-of-step velocity."""
+        if self.last_law is None:
+            return float(self.data.actuator_force[self._tensioner])
+        return self.last_law.at(self.stroke_velocity_m_s)
 
     @property
     def sprocket_speed_rad_s(self) -> float:
@@ -374,6 +380,7 @@ class TrackPlant:
             velocity = self.stroke_velocity_m_s
         else:
             velocity = (self.stroke_m - stroke0) / COUPLING_STEP_S
+        self.last_law = law
         element.complete_step(self.time_s, self.stroke_m, velocity)
         return law
 
