@@ -1,0 +1,96 @@
+"""Coupled step (MuJoCo track + hydraulic plugin, strong coupling) vs the bare MuJoCo step.
+
+Both run in one process on the same spun-up state (driving at 1.5 m/s, hold mode), so the
+ratio is measured, not assembled from separate runs. Also times the plugin alone
+(force_law + complete_step) inside the coupled loop. Best of three alternating blocks.
+Run: ``python benchmarks/bench_coupled.py [--seconds 3]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import mujoco
+
+from trackmj.hydraulics import HydraulicTensioner
+from trackmj.machine import machine
+from trackmj.plant import PassiveTensioner, TrackPlant
+
+
+class _TimedElement:
+    """Wraps a tensioner element and accumulates the wall time spent inside it."""
+
+    def __init__(self, inner: HydraulicTensioner) -> None:
+        self.inner = inner
+        self.seconds = 0.0
+
+    def force_law(self, t_s: float, stroke_m: float, velocity_m_s: float):
+        start = time.perf_counter()
+        law = self.inner.force_law(t_s, stroke_m, velocity_m_s)
+        self.seconds += time.perf_counter() - start
+        return law
+
+    def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
+        start = time.perf_counter()
+        self.inner.complete_step(t_s, stroke_m, velocity_m_s)
+        self.seconds += time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=3.0, help="simulated time per block")
+    args = parser.parse_args()
+    steps = round(args.seconds / 1e-3)
+
+    plant = TrackPlant.load()
+    passive = PassiveTensioner.from_params(plant.params)
+    plant.run(passive, 1.5, lambda t: 1.5 * min(1.0, t))
+    m, d = plant.model, plant.data
+    state = (d.qpos.copy(), d.qvel.copy(), d.act.copy(), plant.time_s)
+    force = plant.idler_force_N
+    tensioner_id = m.actuator("tensioner").id
+
+    def restore() -> None:
+        d.qpos[:], d.qvel[:], d.act[:] = state[:3]
+        plant.time_s = state[3]
+        mujoco.mj_forward(m, d)
+
+    def bare() -> float:
+        restore()
+        law = passive.force_law(plant.time_s, plant.stroke_m, plant.stroke_velocity_m_s)
+        d.ctrl[tensioner_id] = law.force_N
+        m.actuator_biasprm[tensioner_id, 2] = law.damping_N_s_m
+        start = time.perf_counter()
+        for _ in range(steps):
+            mujoco.mj_step(m, d)
+        return (time.perf_counter() - start) / steps
+
+    def coupled() -> tuple[float, float]:
+        restore()
+        probe = HydraulicTensioner(stroke_m=plant.stroke_m)
+        head = (force + 2 * probe.Ar * probe.pT) / (2 * probe.Ah)
+        element = _TimedElement(HydraulicTensioner(stroke_m=plant.stroke_m,
+                                                   head_pressure_Pa=head, t0_s=plant.time_s))
+        element.inner.set_mode(0)
+        start = time.perf_counter()
+        for _ in range(steps):
+            plant.step(element)
+        return (time.perf_counter() - start) / steps, element.seconds / steps
+
+    bare_t, coupled_t, plugin_t = [], [], []
+    for _ in range(3):
+        bare_t.append(bare())
+        total, plugin = coupled()
+        coupled_t.append(total)
+        plugin_t.append(plugin)
+    b, c, p = min(bare_t), min(coupled_t), min(plugin_t)
+    print(f"machine: {machine()}")
+    print(f"bare mj_step            {b * 1e6:8.1f} us/step  ({1e-3 / b:.2f}x real time)")
+    print(f"coupled step (strong)   {c * 1e6:8.1f} us/step  ({1e-3 / c:.2f}x real time)")
+    print(f"  plugin inside it      {p * 1e6:8.1f} us/step  ({p / b:.1%} of the bare step)")
+    print(f"ratio coupled / bare    {c / b:.3f}")
+
+
+if __name__ == "__main__":
+    main()
