@@ -36,6 +36,8 @@ MODES: dict[int, tuple[float, float, float]] = {
     0: (0.0, 0.0, 0.0),    # hold: main at rest, V_L and V_R closed
     -1: (1.0, 1.0, 1.0),   # release: main energised (P->B, A->T), V_L and V_R open
 }
+_MAX_BACKTRACKS = 12  # line-search halvings per Newton iteration (alpha >= 2^-12)
+_MIN_STEP = 2.0 ** -_MAX_BACKTRACKS
 FLOW_NAMES = ("main_PA", "main_AT", "main_PB", "main_BT", "V_L", "V_R", "relief",
               "makeup_L", "makeup_R", "makeup_rod", "leak_L", "leak_R")
 
@@ -48,7 +50,8 @@ class StepRecord:
     "main_BT" = rod node->T, "V_L"/"V_R" = A->head, "relief" = S->T, "makeup_*" = T->chamber,
     "leak_*" = head->rod). p_rod_L_Pa == p_rod_R_Pa (one rod node). dF_dp_m2 maps a chamber
     to ∂F/∂p (A_head or −A_rod); dv_dQ_1_m2 maps it to ∂v/∂Q for flow INTO that chamber
-    (1/A_head, −1/A_rod), per cylinder.
+    (1/A_head, −1/A_rod), per cylinder. newton_iterations: of the last solve;
+    newton_backtracks: line-search halvings in all solves of the step.
     """
 
     t_s: float
@@ -81,6 +84,7 @@ class StepRecord:
     valve_positions: tuple[float, float, float]
     valve_commands: tuple[float, float, float]
     newton_iterations: int
+    newton_backtracks: int
     interface_residual_J: float
 
 
@@ -110,9 +114,15 @@ class HydraulicTensioner:
     Integration (one exchange step h): backward Euler on every node,
     R_i = (V_i(s_{k+1})/β)(p_i − p_i^k) − h(ΣQ_in,i(p) − σ_i·A_i·v) = 0 (+ V_oil,acc(p_S)
     − V_oil,acc(p_S^k) on the supply node), solved by Newton with the analytic Jacobian
-    (heads eliminated by Schur complement, then a 3x3 / 2x2 solve). Cavitation: every orifice
-    outflow is scaled by a smoothstep of its upstream pressure (0 at floor, 1 at floor+band),
-    and make-up check valves feed a chamber from the tank below p_t − crack.
+    (heads eliminated by Schur complement, then a 3x3 / 2x2 solve), globalised by an Armijo
+    backtracking line search on ½·Σ(β·R_i/V_i)² (node residuals as pressure errors). Cavitation:
+    every orifice outflow is scaled by a smoothstep of its upstream pressure (0 at floor, 1 at
+    floor+band), and make-up check valves feed a chamber from the tank below p_t − crack.
+    The make-up flow s((p_t − crack − p)/w)·Q_orifice(p_t − p) is S-shaped in p (ds/dx = 0 at
+    both ends of the band) and its gain h·dQ/dp exceeds the rod node's V/β ~10x, so when the
+    rod chambers expand faster than line B can feed them (hold mode, idler at ±0.04 m/s) the
+    undamped Newton step jumps between the closed and the fully open side of the band and
+    cycles (|dp| ~ 2e5 Pa); the line search makes it converge (newton_backtracks counts it).
 
     Strong coupling (default). ``force_law(t_k, s_k, v_k)``: Newton-solve R(p, v) = 0 at
     v* = v_k with s_{k+1} = s_k + h·v, then dp/dv = −R_p⁻¹·R_v (same Jacobian) and
@@ -207,6 +217,9 @@ class HydraulicTensioner:
         self._v_hold = 0.0
         self._s_hyd = stroke_m
         self._iters = 0
+        self._backtracks = 0  # line-search halvings since the last force_law
+        self._step_backtracks = 0
+        self.newton_backtracks_total = 0
         self._rec: tuple | None = None
 
     # ----------------------------------------------------------------- public API
@@ -228,6 +241,7 @@ class HydraulicTensioner:
         self._check_input("stroke_m", stroke_m)
         self._check_input("velocity_m_s", velocity_m_s)
         self.t, self.s, self.v = t_s, stroke_m, velocity_m_s
+        self._backtracks = 0
         h = self.dt
         if self.coupling == "strong":
             self._set_gains(t_s, h)
@@ -296,6 +310,8 @@ class HydraulicTensioner:
         self.carry_J += sl.interface_residual_J
         self.ledger.add(sl)
         self._rec = (t_s, stroke_m, v1, ff, fes)
+        self._step_backtracks = self._backtracks
+        self.newton_backtracks_total += self._backtracks
 
     @property
     def record(self) -> StepRecord:
@@ -322,7 +338,7 @@ class HydraulicTensioner:
             law=law, Z_N_s_m=law.damping_N_s_m, correction_N=self._correction,
             valve_positions=(self.main.position, self.vl.position, self.vr.position),
             valve_commands=(self.main.command, self.vl.command, self.vr.command),
-            newton_iterations=self._iters,
+            newton_iterations=self._iters, newton_backtracks=self._step_backtracks,
             interface_residual_J=self.step_ledger.interface_residual_J,
         )
 
@@ -504,22 +520,45 @@ class HydraulicTensioner:
                 xS]
 
     def _newton(self, h: float, s1: float, v: float, p: list[float]) -> list[float]:
-        """Backward-Euler step: Newton on R(p) = 0 from the guess p; returns p_{k+1}."""
+        """Backward-Euler step: damped Newton on R(p) = 0 from the guess p; returns p_{k+1}.
+
+        Globalised by an Armijo backtracking line search on f = ½·Σ(β·R_i/V_i)² (the residual
+        of each node expressed as a pressure error [Pa]; the Newton direction is a descent
+        direction of f). Converged when the full Newton correction is below newton_tol_Pa.
+        """
         cp = self.params.coupling
         tol = cp.newton_tol_Pa
+        R, J, flows, V = self._eval(h, s1, v, p)
+        beta = self.beta
+        w0, w1, w2, w3, w4 = beta / V[0], beta / V[1], beta / V[2], beta / V[3], beta / V[4]
+        f = ((R[0] * w0) ** 2 + (R[1] * w1) ** 2 + (R[2] * w2) ** 2 + (R[3] * w3) ** 2
+             + (R[4] * w4) ** 2)
+        backtracks = 0
         it = 0
         for it in range(1, cp.newton_max_iter + 1):  # noqa: B007 (count reported)
-            R, J, flows, V = self._eval(h, s1, v, p)
             dx = self._solve(J, [-R[0], -R[1], -R[2], -R[3], -R[4]])
-            p = [p[0] + dx[0], p[1] + dx[1], p[2] + dx[2], p[3] + dx[3], p[4] + dx[4]]
             if max(abs(dx[0]), abs(dx[1]), abs(dx[2]), abs(dx[3]), abs(dx[4])) < tol:
+                p = [p[0] + dx[0], p[1] + dx[1], p[2] + dx[2], p[3] + dx[3], p[4] + dx[4]]
                 break
+            alpha = 1.0
+            for _ in range(_MAX_BACKTRACKS + 1):
+                pt = [p[0] + alpha * dx[0], p[1] + alpha * dx[1], p[2] + alpha * dx[2],
+                      p[3] + alpha * dx[3], p[4] + alpha * dx[4]]
+                Rt, Jt, flt, Vt = self._eval(h, s1, v, pt)
+                ft = ((Rt[0] * w0) ** 2 + (Rt[1] * w1) ** 2 + (Rt[2] * w2) ** 2
+                      + (Rt[3] * w3) ** 2 + (Rt[4] * w4) ** 2)
+                if ft <= (1.0 - 1e-4 * alpha) * f or alpha < _MIN_STEP:
+                    break
+                alpha *= 0.5
+                backtracks += 1
+            p, R, J, flows, V, f = pt, Rt, Jt, flt, Vt, ft
         else:
             raise RuntimeError(f"hydraulic Newton did not converge in {cp.newton_max_iter} "
                                f"iterations (t = {self.t} s, last |dp| = {max(map(abs, dx))} Pa)")
         if self.prescribed:
             p[4] = self.ps_next
         self._iters, self._J, self._flows, self._V1 = it, J, flows, V
+        self._backtracks += backtracks
         return p
 
     def _dpdv(self, h: float, p: list[float]) -> list[float]:

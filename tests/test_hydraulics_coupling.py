@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 
 import pytest
+
 from trackmj.hydraulics import HydraulicTensioner
 
 CYCLE = (1, 0, -1, 0)  # pressurize, hold, release, hold

@@ -10,9 +10,9 @@ import tomllib
 from importlib.resources import files
 
 import pytest
+
 from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
 from trackmj.hydraulics.params import params_from_dict
-
 from trackmj.ports import TensionerElement
 
 

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from scipy.optimize import brentq
+
 from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
 from trackmj.hydraulics.components import orifice_flow, orifice_gain, series_area
 
