@@ -103,11 +103,12 @@ class GasAccumulator:
         """Gas volume [m^3] at gauge pressure p."""
         return self.v0 - self.oil_volume(p_Pa)[0]
 
-    def energy(self, p_Pa: float) -> float:
-        """Stored energy [J] relative to the precharged, empty state (gauge basis)."""
+    def energy(self, p_Pa: float, v_oil_m3: float | None = None) -> float:
+        """Stored energy [J] relative to the precharged, empty state (gauge basis); pass
+        ``v_oil_m3 = oil_volume(p_Pa)[0]`` when already known."""
         if p_Pa <= self.p0:
             return 0.0
-        v_oil = self.oil_volume(p_Pa)[0]
+        v_oil = self.oil_volume(p_Pa)[0] if v_oil_m3 is None else v_oil_m3
         p_abs = p_Pa + self.p_atm
         return ((p_abs * (self.v0 - v_oil) - self.p0_abs * self.v0) / (self.n - 1.0)
                 - self.p_atm * v_oil)
@@ -142,6 +143,8 @@ class Solenoid:
     def position_at(self, t_s: float, h_s: float) -> tuple[float, float]:
         """(position, effective command) at t_s + h_s without committing."""
         eff = self.effective
+        if not self._pending and self.position == eff:  # at rest: exp(...)·0 = 0
+            return eff, eff
         t_end = t_s + h_s
         for t_on, c in self._pending:
             if t_on <= t_end + 1e-12:

@@ -13,11 +13,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-_FLOWS = ("supply_J", "to_tank_J", "throttle_main_J", "throttle_VL_J", "throttle_VR_J",
-          "throttle_relief_J", "throttle_makeup_J", "leakage_J", "friction_J", "endstop_J",
-          "numerical_J", "volume_term_J", "piston_work_J", "mech_work_J",
-          "interface_residual_J")
-
 
 @dataclass(slots=True)
 class EnergyLedger:
@@ -86,8 +81,21 @@ class EnergyLedger:
 
     def add(self, other: EnergyLedger) -> None:
         """Accumulate the flow terms of ``other`` and take its end stored energies."""
-        for name in _FLOWS:
-            setattr(self, name, getattr(self, name) + getattr(other, name))
+        self.supply_J += other.supply_J
+        self.to_tank_J += other.to_tank_J
+        self.throttle_main_J += other.throttle_main_J
+        self.throttle_VL_J += other.throttle_VL_J
+        self.throttle_VR_J += other.throttle_VR_J
+        self.throttle_relief_J += other.throttle_relief_J
+        self.throttle_makeup_J += other.throttle_makeup_J
+        self.leakage_J += other.leakage_J
+        self.friction_J += other.friction_J
+        self.endstop_J += other.endstop_J
+        self.numerical_J += other.numerical_J
+        self.volume_term_J += other.volume_term_J
+        self.piston_work_J += other.piston_work_J
+        self.mech_work_J += other.mech_work_J
+        self.interface_residual_J += other.interface_residual_J
         self.oil_energy_J = other.oil_energy_J
         self.gas_energy_J = other.gas_energy_J
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from math import sqrt
 from typing import Literal
 
 from trackmj.ports import ForceLaw
@@ -209,6 +210,9 @@ class HydraulicTensioner:
         self.ledger.oil_energy_J = self.ledger.oil_energy_start_J = self._oil_energy(self.p,
                                                                                      self.V)
         self.ledger.gas_energy_J = self.ledger.gas_energy_start_J = self._gas_energy(ps)
+        self._voil0 = 0.0 if self.prescribed else self.acc.oil_volume(ps)[0]  # V_oil,acc(p_S^k)
+        self._areas: tuple[float, ...] = ()
+        self._lim_top = self.floor + self.band
         self.carry_J = 0.0
         self._law = ForceLaw(self._pressure_force(self.p), 0.0)
         self._correction = 0.0
@@ -237,9 +241,7 @@ class HydraulicTensioner:
 
     def force_law(self, t_s: float, stroke_m: float, velocity_m_s: float) -> ForceLaw:
         """Affine force law F(v) = F0 + Z·v for the step starting at (t_k, s_k, v_k)."""
-        self._check_input("t_s", t_s)
-        self._check_input("stroke_m", stroke_m)
-        self._check_input("velocity_m_s", velocity_m_s)
+        t_s, stroke_m, velocity_m_s = self._check_state(t_s, stroke_m, velocity_m_s)
         self.t, self.s, self.v = t_s, stroke_m, velocity_m_s
         self._backtracks = 0
         h = self.dt
@@ -269,9 +271,7 @@ class HydraulicTensioner:
 
     def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
         """Finish the step with the end-of-step state (t_{k+1}, s_{k+1}, v_{k+1})."""
-        self._check_input("t_s", t_s)
-        self._check_input("stroke_m", stroke_m)
-        self._check_input("velocity_m_s", velocity_m_s)
+        t_s, stroke_m, velocity_m_s = self._check_state(t_s, stroke_m, velocity_m_s)
         h = t_s - self.t
         if not h > 0.0:
             raise ValueError(f"t_s = {t_s!r} must exceed the step start time {self.t!r}")
@@ -353,6 +353,17 @@ class HydraulicTensioner:
         if not math.isfinite(x):
             raise ValueError(f"{name} = {x!r} must be finite")
 
+    @classmethod
+    def _check_state(cls, t_s: float, stroke_m: float,
+                     velocity_m_s: float) -> tuple[float, float, float]:
+        """(t, s, v) as Python floats; ValueError naming the first non-finite one."""
+        t, s, v = float(t_s), float(stroke_m), float(velocity_m_s)
+        if not math.isfinite(t + s + v):
+            cls._check_input("t_s", t)
+            cls._check_input("stroke_m", s)
+            cls._check_input("velocity_m_s", v)
+        return t, s, v
+
     def _supply_pressure(self, t_s: float) -> float:
         ps = float(self.profile(t_s))
         if not (math.isfinite(ps) and ps >= 0.0):
@@ -397,18 +408,25 @@ class HydraulicTensioner:
         return (self._pressure_force(p) - ff + fes, -dff + dfes_ds * self.dt + dfes_dv)
 
     def _set_gains(self, t_s: float, h: float) -> None:
-        """Valve positions at t_s + h (not committed) -> orifice gains of the step."""
+        """Valve positions at t_s + h (not committed) -> orifice gains of the step.
+
+        The gains are recomputed only when one of the four edge areas changed (valves at
+        rest, or moving inside their overlap, keep the cached gains).
+        """
         prm = self.params
-        mv, sv, met = prm.main_valve, prm.switching_valves, prm.metering
+        mv, sv = prm.main_valve, prm.switching_valves
         xm = self.main.position_at(t_s, h)[0]
-        xl = self.vl.position_at(t_s, h)[0]
-        xr = self.vr.position_at(t_s, h)[0]
-        a_rest, a_ener = valve_area(1.0 - xm, mv), valve_area(xm, mv)
-        g = self._gain
-        self.K = (g(a_rest), g(a_ener), g(series_area(a_ener, met.line_b_area_m2)),
-                  g(series_area(a_rest, met.line_b_area_m2)),
-                  g(series_area(valve_area(xl, sv), met.head_branch_area_m2)),
-                  g(series_area(valve_area(xr, sv), met.head_branch_area_m2)))
+        areas = (valve_area(1.0 - xm, mv), valve_area(xm, mv),
+                 valve_area(self.vl.position_at(t_s, h)[0], sv),
+                 valve_area(self.vr.position_at(t_s, h)[0], sv))
+        if areas != self._areas:
+            self._areas = areas
+            a_rest, a_ener, a_l, a_r = areas
+            met, g = prm.metering, self._gain
+            self.K = (g(a_rest), g(a_ener), g(series_area(a_ener, met.line_b_area_m2)),
+                      g(series_area(a_rest, met.line_b_area_m2)),
+                      g(series_area(a_l, met.head_branch_area_m2)),
+                      g(series_area(a_r, met.head_branch_area_m2)))
         if self.prescribed:
             self.ps_next = self._supply_pressure(t_s + h)
 
@@ -418,78 +436,100 @@ class HydraulicTensioner:
         self.vr.advance(t_s, h)
 
     def _lim(self, p: float) -> tuple[float, float]:
-        x = (p - self.floor) / self.band
-        if x >= 1.0:
-            return 1.0, 0.0
-        s, ds = smoothstep(x)
+        """Cavitation limiter below floor + band: (l, dl/dp); callers take (1, 0) above."""
+        s, ds = smoothstep((p - self.floor) / self.band)
         return s, ds / self.band
 
     def _makeup(self, p: float) -> tuple[float, float]:
-        """Make-up check valve T -> chamber at pressure p: (Q, dQ/dp)."""
+        """Make-up check valve T -> chamber at p < mu_open: (Q, dQ/dp); callers take 0 above."""
         x = (self.mu_open - p) / self.mu_width
-        if x <= 0.0:
-            return 0.0, 0.0
         s, ds = smoothstep(x)
         f, df = orifice_flow(self.pT - p, self.K_mu, self.pcr)
         return s * f, -ds / self.mu_width * f - s * df
 
     def _relief(self, ps: float) -> tuple[float, float]:
-        """Relief valve S -> T: (Q, dQ/dp_S)."""
+        """Relief valve S -> T at p_S > crack: (Q, dQ/dp_S); callers take 0 below."""
         x = (ps - self.rel_crack) / self.rel_width
-        if x <= 0.0:
-            return 0.0, 0.0
         s, ds = smoothstep(x)
         f, df = orifice_flow(ps - self.pT, self.K_rel, self.pcr)
         return s * f, ds / self.rel_width * f + s * df
 
-    def _eval(self, h: float, s1: float, v: float, p: list[float]) -> tuple:
-        """Flows, residual R (5) and Jacobian entries at pressures p (see class docstring)."""
+    def _eval(self, h: float, c: tuple[float, ...], v: float, p: list[float]) -> tuple:
+        """Flows, residual R (5) and Jacobian entries at pressures p (see class docstring);
+        c = V_i(s_{k+1})/β [m^3/Pa] of the five nodes."""
         pA, pHL, pHR, pB, pS = p
         if self.prescribed:
             pS = self.ps_next
-        pT, pcr2, leak = self.pT, self.pcr2, self.leak
+        pT, pcr2, leak, fb, mo = self.pT, self.pcr2, self.leak, self._lim_top, self.mu_open
         KPA, KAT, KPB, KBT, KVL, KVR = self.K
-        lA, dlA = self._lim(pA)
-        lHL, dlHL = self._lim(pHL)
-        lHR, dlHR = self._lim(pHR)
-        lB, dlB = self._lim(pB)
-        qPA, aPA_S, aPA_A = _orf(pS, pA, KPA, pcr2, 1.0, 0.0, lA, dlA)
-        qAT, aAT_A, _ = _orf(pA, pT, KAT, pcr2, lA, dlA, 1.0, 0.0)
-        qPB, aPB_S, aPB_B = _orf(pS, pB, KPB, pcr2, 1.0, 0.0, lB, dlB)
-        qBT, aBT_B, _ = _orf(pB, pT, KBT, pcr2, lB, dlB, 1.0, 0.0)
-        qVL, aVL_A, aVL_H = _orf(pA, pHL, KVL, pcr2, lA, dlA, lHL, dlHL)
-        qVR, aVR_A, aVR_H = _orf(pA, pHR, KVR, pcr2, lA, dlA, lHR, dlHR)
+        if pA >= fb and pHL >= fb and pHR >= fb and pB >= fb:
+            # no node near the cavitation floor: plain orifices Q = K·Δp/(Δp²+p_cr²)^¼,
+            # dQ/dΔp = K·(Δp²/2 + p_cr²)/(Δp²+p_cr²)^(5/4) (inlined components.orifice_flow)
+            d = pS - pA
+            r = d * d + pcr2
+            r4 = sqrt(sqrt(r))
+            qPA, aPA_S = KPA * d / r4, KPA * (0.5 * d * d + pcr2) / (r * r4)
+            d = pA - pT
+            r = d * d + pcr2
+            r4 = sqrt(sqrt(r))
+            qAT, aAT_A = KAT * d / r4, KAT * (0.5 * d * d + pcr2) / (r * r4)
+            d = pS - pB
+            r = d * d + pcr2
+            r4 = sqrt(sqrt(r))
+            qPB, aPB_S = KPB * d / r4, KPB * (0.5 * d * d + pcr2) / (r * r4)
+            d = pB - pT
+            r = d * d + pcr2
+            r4 = sqrt(sqrt(r))
+            qBT, aBT_B = KBT * d / r4, KBT * (0.5 * d * d + pcr2) / (r * r4)
+            d = pA - pHL
+            r = d * d + pcr2
+            r4 = sqrt(sqrt(r))
+            qVL, aVL_A = KVL * d / r4, KVL * (0.5 * d * d + pcr2) / (r * r4)
+            d = pA - pHR
+            r = d * d + pcr2
+            r4 = sqrt(sqrt(r))
+            qVR, aVR_A = KVR * d / r4, KVR * (0.5 * d * d + pcr2) / (r * r4)
+            aPA_A, aPB_B, aVL_H, aVR_H = -aPA_S, -aPB_S, -aVL_A, -aVR_A
+        else:
+            lA, dlA = (1.0, 0.0) if pA >= fb else self._lim(pA)
+            lHL, dlHL = (1.0, 0.0) if pHL >= fb else self._lim(pHL)
+            lHR, dlHR = (1.0, 0.0) if pHR >= fb else self._lim(pHR)
+            lB, dlB = (1.0, 0.0) if pB >= fb else self._lim(pB)
+            qPA, aPA_S, aPA_A = _orf(pS, pA, KPA, pcr2, 1.0, 0.0, lA, dlA)
+            qAT, aAT_A, _ = _orf(pA, pT, KAT, pcr2, lA, dlA, 1.0, 0.0)
+            qPB, aPB_S, aPB_B = _orf(pS, pB, KPB, pcr2, 1.0, 0.0, lB, dlB)
+            qBT, aBT_B, _ = _orf(pB, pT, KBT, pcr2, lB, dlB, 1.0, 0.0)
+            qVL, aVL_A, aVL_H = _orf(pA, pHL, KVL, pcr2, lA, dlA, lHL, dlHL)
+            qVR, aVR_A, aVR_H = _orf(pA, pHR, KVR, pcr2, lA, dlA, lHR, dlHR)
         qlL, qlR = leak * (pHL - pB), leak * (pHR - pB)
-        qmL, dmL = self._makeup(pHL)
-        qmR, dmR = self._makeup(pHR)
-        qmB, dmB = self._makeup(pB)
+        qmL, dmL = (0.0, 0.0) if pHL >= mo else self._makeup(pHL)
+        qmR, dmR = (0.0, 0.0) if pHR >= mo else self._makeup(pHR)
+        qmB, dmB = (0.0, 0.0) if pB >= mo else self._makeup(pB)
         p0 = self.p
-        V = self._volumes(s1)
-        ib = 1.0 / self.beta
-        cA, cHL, cHR, cB = V[0] * ib, V[1] * ib, V[2] * ib, V[3] * ib
+        cA, cHL, cHR, cB, cS = c
         Ahv, Arv2 = self.Ah * v, 2.0 * self.Ar * v
+        hl = h * leak
         R = [cA * (pA - p0[0]) - h * (qPA - qAT - qVL - qVR),
              cHL * (pHL - p0[1]) - h * (qVL - qlL + qmL - Ahv),
              cHR * (pHR - p0[2]) - h * (qVR - qlR + qmR - Ahv),
              cB * (pB - p0[3]) - h * (qPB - qBT + qlL + qlR + qmB + Arv2),
              0.0]
         J = [cA - h * (aPA_A - aAT_A - aVL_A - aVR_A), h * aVL_H, h * aVR_H, 0.0, -h * aPA_S,
-             cHL - h * (aVL_H - leak + dmL), -h * aVL_A, -h * leak,
-             cHR - h * (aVR_H - leak + dmR), -h * aVR_A, -h * leak,
-             cB - h * (aPB_B - aBT_B - 2.0 * leak + dmB), -h * leak, -h * leak, -h * aPB_S,
+             cHL - h * (aVL_H + dmL) + hl, -h * aVL_A, -hl,
+             cHR - h * (aVR_H + dmR) + hl, -h * aVR_A, -hl,
+             cB - h * (aPB_B - aBT_B + dmB) + 2.0 * hl, -hl, -hl, -h * aPB_S,
              1.0, 0.0, 0.0]
         qrel = 0.0
         if not self.prescribed:
-            qrel, drel = self._relief(pS)
+            qrel, drel = (0.0, 0.0) if pS <= self.rel_crack else self._relief(pS)
             voil1, dvoil = self.acc.oil_volume(pS)
-            voil0 = self.acc.oil_volume(p0[4])[0]
-            cS = V[4] * ib
-            R[4] = cS * (pS - p0[4]) + voil1 - voil0 - h * (self.Q_pump - qPA - qPB - qrel)
+            R[4] = (cS * (pS - p0[4]) + voil1 - self._voil0
+                    - h * (self.Q_pump - qPA - qPB - qrel))
             J[15] = cS + dvoil + h * (aPA_S + aPB_S + drel)
             J[16] = h * aPA_A
             J[17] = h * aPB_B
         flows = (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR)
-        return R, J, flows, V
+        return R, J, flows
 
     @staticmethod
     def _solve(J: list[float], r: list[float]) -> list[float]:
@@ -522,39 +562,47 @@ class HydraulicTensioner:
     def _newton(self, h: float, s1: float, v: float, p: list[float]) -> list[float]:
         """Backward-Euler step: damped Newton on R(p) = 0 from the guess p; returns p_{k+1}.
 
-        Globalised by an Armijo backtracking line search on f = ½·Σ(β·R_i/V_i)² (the residual
+        Globalised by an Armijo backtracking line search on f = Σ(β·R_i/V_i)² (the residual
         of each node expressed as a pressure error [Pa]; the Newton direction is a descent
-        direction of f). Converged when the full Newton correction is below newton_tol_Pa.
+        direction of f). Converged when the Newton correction |dx|∞ is below newton_tol_Pa,
+        or, after a full (undamped) step, when the estimated remaining error
+        θ/(1−θ)·|dx|, θ = |dx_k|/|dx_{k−1}| < 1, is below it (Hairer & Wanner, Solving ODEs
+        II, IV.8); the correction is applied in both cases.
         """
         cp = self.params.coupling
         tol = cp.newton_tol_Pa
-        R, J, flows, V = self._eval(h, s1, v, p)
+        V = self._volumes(s1)
         beta = self.beta
         w0, w1, w2, w3, w4 = beta / V[0], beta / V[1], beta / V[2], beta / V[3], beta / V[4]
+        c = (1.0 / w0, 1.0 / w1, 1.0 / w2, 1.0 / w3, 1.0 / w4)
+        R, J, flows = self._eval(h, c, v, p)
         f = ((R[0] * w0) ** 2 + (R[1] * w1) ** 2 + (R[2] * w2) ** 2 + (R[3] * w3) ** 2
              + (R[4] * w4) ** 2)
         backtracks = 0
         it = 0
+        n_prev, full = math.inf, False
         for it in range(1, cp.newton_max_iter + 1):  # noqa: B007 (count reported)
             dx = self._solve(J, [-R[0], -R[1], -R[2], -R[3], -R[4]])
-            if max(abs(dx[0]), abs(dx[1]), abs(dx[2]), abs(dx[3]), abs(dx[4])) < tol:
+            n = max(abs(dx[0]), abs(dx[1]), abs(dx[2]), abs(dx[3]), abs(dx[4]))
+            if n < tol or (full and n < n_prev and n * n < tol * (n_prev - n)):
                 p = [p[0] + dx[0], p[1] + dx[1], p[2] + dx[2], p[3] + dx[3], p[4] + dx[4]]
                 break
             alpha = 1.0
             for _ in range(_MAX_BACKTRACKS + 1):
                 pt = [p[0] + alpha * dx[0], p[1] + alpha * dx[1], p[2] + alpha * dx[2],
                       p[3] + alpha * dx[3], p[4] + alpha * dx[4]]
-                Rt, Jt, flt, Vt = self._eval(h, s1, v, pt)
+                Rt, Jt, flt = self._eval(h, c, v, pt)
                 ft = ((Rt[0] * w0) ** 2 + (Rt[1] * w1) ** 2 + (Rt[2] * w2) ** 2
                       + (Rt[3] * w3) ** 2 + (Rt[4] * w4) ** 2)
                 if ft <= (1.0 - 1e-4 * alpha) * f or alpha < _MIN_STEP:
                     break
                 alpha *= 0.5
                 backtracks += 1
-            p, R, J, flows, V, f = pt, Rt, Jt, flt, Vt, ft
+            p, R, J, flows, f = pt, Rt, Jt, flt, ft
+            n_prev, full = n, alpha == 1.0
         else:
             raise RuntimeError(f"hydraulic Newton did not converge in {cp.newton_max_iter} "
-                               f"iterations (t = {self.t} s, last |dp| = {max(map(abs, dx))} Pa)")
+                               f"iterations (t = {self.t} s, last |dp| = {n} Pa)")
         if self.prescribed:
             p[4] = self.ps_next
         self._iters, self._J, self._flows, self._V1 = it, J, flows, V
@@ -570,43 +618,46 @@ class HydraulicTensioner:
         return self._solve(self._J, rv)
 
     def _commit(self, p1: list[float], s1: float, v: float, h: float, accumulate: bool) -> None:
-        """Take p1 as the new state and book the step's hydraulic energy terms."""
+        """Take p1 as the new state and book the step's hydraulic energy terms (added to the
+        step ledger's terms when ``accumulate``, else replacing them)."""
         sl = self.step_ledger
-        if not accumulate:
-            for name in ("supply_J", "to_tank_J", "throttle_main_J", "throttle_VL_J",
-                         "throttle_VR_J", "throttle_relief_J", "throttle_makeup_J",
-                         "leakage_J", "numerical_J", "volume_term_J", "piston_work_J"):
-                setattr(sl, name, 0.0)
+        keep = 1.0 if accumulate else 0.0
         qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR = self._flows
         pA, pHL, pHR, pB, pS = p1
         pT = self.pT
         p0, V0, V1 = self.p, self.V, self._V1
-        sl.supply_J += h * (pS * self.Q_pump if not self.prescribed else pS * (qPA + qPB))
-        sl.to_tank_J += h * pT * (qAT + qBT + qrel - qmL - qmR - qmB)
-        sl.throttle_main_J += h * ((pS - pA) * qPA + (pA - pT) * qAT + (pS - pB) * qPB
-                                   + (pB - pT) * qBT)
-        sl.throttle_VL_J += h * (pA - pHL) * qVL
-        sl.throttle_VR_J += h * (pA - pHR) * qVR
-        sl.throttle_relief_J += h * (pS - pT) * qrel
-        sl.throttle_makeup_J += h * ((pT - pHL) * qmL + (pT - pHR) * qmR + (pT - pB) * qmB)
-        sl.leakage_J += h * ((pHL - pB) * qlL + (pHR - pB) * qlR)
+        sl.supply_J = keep * sl.supply_J + h * (pS * (qPA + qPB) if self.prescribed
+                                                else pS * self.Q_pump)
+        sl.to_tank_J = keep * sl.to_tank_J + h * pT * (qAT + qBT + qrel - qmL - qmR - qmB)
+        sl.throttle_main_J = keep * sl.throttle_main_J + h * (
+            (pS - pA) * qPA + (pA - pT) * qAT + (pS - pB) * qPB + (pB - pT) * qBT)
+        sl.throttle_VL_J = keep * sl.throttle_VL_J + h * (pA - pHL) * qVL
+        sl.throttle_VR_J = keep * sl.throttle_VR_J + h * (pA - pHR) * qVR
+        sl.throttle_relief_J = keep * sl.throttle_relief_J + h * (pS - pT) * qrel
+        sl.throttle_makeup_J = keep * sl.throttle_makeup_J + h * (
+            (pT - pHL) * qmL + (pT - pHR) * qmR + (pT - pB) * qmB)
+        sl.leakage_J = keep * sl.leakage_J + h * ((pHL - pB) * qlL + (pHR - pB) * qlR)
         ib2 = 0.5 / self.beta
         n = 4 if self.prescribed else 5
-        num = vol = 0.0
+        num = vol = oil = 0.0
         for i in range(n):
             d = p1[i] - p0[i]
             num += V1[i] * d * d
             vol += (V1[i] - V0[i]) * p0[i] * p0[i]
+            oil += p1[i] * p1[i] * V1[i]
         num *= ib2
         vol *= -ib2
-        oil = self._oil_energy(p1, V1)
-        gas = self._gas_energy(pS)
+        oil *= ib2
+        gas = 0.0
         if not self.prescribed:
-            dvoil = self.acc.oil_volume(pS)[0] - self.acc.oil_volume(p0[4])[0]
-            num += pS * dvoil - (gas - self.ledger.gas_energy_J)
-        sl.numerical_J += num
-        sl.volume_term_J += vol
-        sl.piston_work_J += h * v * self._pressure_force(p1)
+            voil = self.acc.oil_volume(pS)[0]
+            gas = self.acc.energy(pS, voil)
+            num += pS * (voil - self._voil0) - (gas - self.ledger.gas_energy_J)
+            self._voil0 = voil
+        sl.numerical_J = keep * sl.numerical_J + num
+        sl.volume_term_J = keep * sl.volume_term_J + vol
+        sl.piston_work_J = keep * sl.piston_work_J + h * v * (
+            self.Ah * (pHL + pHR) - 2.0 * self.Ar * pB)
         sl.oil_energy_J, sl.gas_energy_J = oil, gas
         self.ledger.oil_energy_J, self.ledger.gas_energy_J = oil, gas
         self.p, self.V = p1, V1
