@@ -169,12 +169,12 @@ class MpcParams:
 
     horizon_steps: int = 15
     block_steps: int = 3
-    collocation_degree: int = 2
+    collocation_degree: int = 1
     weight_force_per_kN2: float = 1.0
     weight_input: float = 0.05
     weight_input_rate: float = 0.5
     weight_force_slack_per_kN2: float = 1.0e3
-    max_iter: int = 10
+    max_iter: int = 3
     time_budget_s: float = 0.010
 
     def __post_init__(self) -> None:

@@ -1,0 +1,196 @@
+"""Nonlinear MPC on the reduced model: CasADi ``nlpsol`` (sqpmethod + OSQP, Gauss-Newton
+Hessian, a few SQP iterations per period) on SX, built once. qrqp was tried first and stalled
+(tens of ms per QP on this problem, measured); OSQP ships with CasADi (no compilation).
+Warm-started from the shifted previous solution; falls back to
+the shifted previous plan (or hold) on failure or overrun and counts it, never raises."""
+
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from trackmj.control.interface import ControlOutput
+from trackmj.control.model import ReducedModel
+from trackmj.control.ocp import X_SCALE, Ocp, build_ocp, initial_guess, parameter_vector
+from trackmj.control.params import ControllerParams, MpcParams
+
+#: Largest constraint violation (scaled units: MPa, mm, kN, ...) accepted from a truncated SQP.
+FEASIBILITY_TOL = 0.1
+
+
+class _MpcBase:
+    """Warm start, fallback and statistics common to NMPC and LMPC."""
+
+    def __init__(
+        self, model: ReducedModel, ctrl: ControllerParams, mpc: MpcParams, ocp: Ocp
+    ) -> None:
+        self.model, self.ctrl, self.mpc, self.ocp = model, ctrl, mpc, ocp
+        self.theta = np.array(
+            (model.p.supply_pressure_Pa, model.p.stiffness_N_m, model.p.free_position_m)
+        )
+        self.u_prev = 0.0
+        self.failures = 0
+        self.overruns = 0
+        self.fallbacks = 0
+        self.solve_times: list[float] = []
+        self._w: NDArray[np.float64] | None = None
+        self._lam_g: NDArray[np.float64] | None = None
+        self._plan: NDArray[np.float64] = np.zeros(mpc.horizon_steps)
+        self._plan_age = mpc.horizon_steps
+
+    def set_parameters(
+        self,
+        supply_pressure_Pa: float | None = None,
+        stiffness_N_m: float | None = None,
+        free_position_m: float | None = None,
+        pressure_max_Pa: float | None = None,
+    ) -> None:
+        """Online update of NLP parameters (supply, identified stiffness/preload, p_max)."""
+        if supply_pressure_Pa is not None:
+            self.theta[0] = supply_pressure_Pa
+        if stiffness_N_m is not None:
+            self.theta[1] = stiffness_N_m
+        if free_position_m is not None:
+            self.theta[2] = free_position_m
+        if pressure_max_Pa is not None:
+            self.ctrl = ControllerParams(
+                **{
+                    **{f: getattr(self.ctrl, f) for f in self.ctrl.__slots__},
+                    "pressure_max_Pa": pressure_max_Pa,
+                }
+            )
+
+    def _solve(
+        self, w0: NDArray[np.float64], p: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool, int]:
+        raise NotImplementedError
+
+    def __call__(
+        self, estimate: NDArray[np.float64], reference_preview: NDArray[np.float64], t: float
+    ) -> ControlOutput:
+        """Opening u for the coming period from the state estimate (4,) and the reference
+        preview F_ref(t + i Ts), i = 0..N (N+1,) [N]."""
+        n, lb = self.mpc.horizon_steps, self.mpc.block_steps
+        x0 = np.array(estimate, dtype=float)
+        # gauge pressures below p_min are estimator noise; a hard bound at node 1 would make
+        # the problem locally infeasible, so the initial state is projected onto p >= p_min
+        x0[:2] = np.maximum(x0[:2], self.ctrl.pressure_min_Pa)
+        p = parameter_vector(
+            x0, np.asarray(reference_preview, float), self.u_prev, self.theta, self.ctrl
+        )
+        w0 = self._shifted_guess(x0)
+        t0 = time.perf_counter()
+        try:
+            w, lam_g, ok, iters = self._solve(w0, p)
+        except RuntimeError:
+            w, lam_g, ok, iters = w0, np.zeros(self.ocp.g.numel()), False, 0
+        dt = time.perf_counter() - t0
+        self.solve_times.append(dt)
+        overrun = dt > self.mpc.time_budget_s
+        ok = ok and bool(np.all(np.isfinite(w)))
+        if ok:
+            self._w, self._lam_g = w, lam_g
+        if ok and not overrun:
+            self._plan = np.repeat(w[: self.ocp.n_blocks], lb)
+            self._plan_age = 0
+            u = float(np.clip(self._plan[0], self.ctrl.u_min, self.ctrl.u_max))
+        else:
+            self.failures += not ok
+            self.overruns += overrun
+            self.fallbacks += 1
+            self._plan_age += 1
+            u = float(self._plan[self._plan_age]) if self._plan_age < n else 0.0
+        self.u_prev = u
+        return ControlOutput(u, ok and not overrun, dt, iters, not (ok and not overrun))
+
+    def _shifted_guess(self, x0: NDArray[np.float64]) -> NDArray[np.float64]:
+        n, d, nb = self.mpc.horizon_steps, self.mpc.collocation_degree, self.ocp.n_blocks
+        if self._w is None:
+            return initial_guess(n, d, nb, x0)
+        w = self._w.copy()
+        xs = w[nb + n :].reshape(n, 4 * d)
+        xs[:-1] = xs[1:].copy()
+        w[nb + n :] = xs.ravel()
+        w[nb : nb + n - 1] = w[nb + 1 : nb + n]
+        # the first collocation block is re-anchored at the new measurement
+        w[nb + n : nb + n + 4 * d] = np.tile(x0 / X_SCALE, d)
+        return w
+
+
+class NonlinearMpc(_MpcBase):
+    """NMPC; ``jit=True`` compiles the NLP functions with the system C compiler (slow build)."""
+
+    def __init__(
+        self, model: ReducedModel, ctrl: ControllerParams, mpc: MpcParams, jit: bool = False
+    ) -> None:
+        ocp = build_ocp(model, ctrl, mpc)
+        super().__init__(model, ctrl, mpc, ocp)
+        sigma = ca.SX.sym("sigma")
+        lam_g = ca.SX.sym("lam_g", ocp.g.numel())
+        hess = ca.hessian(ocp.f, ocp.w)[0]
+        hess_lag = ca.Function(
+            "nlp_hess_l",
+            [ocp.w, ocp.p, sigma, lam_g],
+            [sigma * hess],
+            ["x", "p", "lam_f", "lam_g"],
+            ["hess_gamma_x_x"],
+        )
+        opts: dict = {
+            "qpsol": "osqp",
+            "qpsol_options": {
+                "osqp": {
+                    "verbose": False,
+                    "eps_abs": 1e-5,
+                    "eps_rel": 1e-5,
+                    "max_iter": 4000,
+                    "polish": False,
+                },
+                "error_on_fail": False,
+                "warm_start_primal": True,
+                "warm_start_dual": True,
+            },
+            "hess_lag": hess_lag,
+            "max_iter": mpc.max_iter,
+            "print_header": False,
+            "print_iteration": False,
+            "print_status": False,
+            "print_time": False,
+            "error_on_fail": False,
+            "tol_pr": 1e-6,
+            "tol_du": 1e-4,
+        }
+        if jit:
+            opts.update({"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"]}})
+        self.solver = ca.nlpsol(
+            "nmpc", "sqpmethod", {"x": ocp.w, "p": ocp.p, "f": ocp.f, "g": ocp.g}, opts
+        )
+
+    def _solve(
+        self, w0: NDArray[np.float64], p: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool, int]:
+        lam0 = self._lam_g if self._lam_g is not None else 0.0
+        r = self.solver(
+            x0=w0,
+            p=p,
+            lbx=self.ocp.lbw,
+            ubx=self.ocp.ubw,
+            lbg=self.ocp.lbg,
+            ubg=self.ocp.ubg,
+            lam_g0=lam0,
+        )
+        st = self.solver.stats()
+        w, g = np.array(r["x"]).ravel(), np.array(r["g"]).ravel()
+        # a truncated SQP (few iterations per period) is accepted only if its plan is feasible
+        viol = max(
+            np.max(self.ocp.lbg - g, initial=0.0),
+            np.max(g - self.ocp.ubg, initial=0.0),
+            np.max(self.ocp.lbw - w, initial=0.0),
+            np.max(w - self.ocp.ubw, initial=0.0),
+        )
+        ok = (
+            bool(st["success"]) or st.get("return_status") == "Maximum_Iterations_Exceeded"
+        ) and viol <= FEASIBILITY_TOL
+        return w, np.array(r["lam_g"]).ravel(), ok, int(st.get("iter_count", 0))

@@ -1,0 +1,72 @@
+"""NMPC in closed loop on the reduced plant (sensors -> EKF -> NMPC -> valve logic -> plant)."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from trackmj.control.interface import steps_per_period
+from trackmj.control.loop import run_closed_loop, step_metrics
+from trackmj.control.model import ReducedModel
+from trackmj.control.nmpc import NonlinearMpc
+from trackmj.control.params import load_config
+
+CFG = load_config()
+
+
+def _nmpc() -> NonlinearMpc:
+    return NonlinearMpc(ReducedModel(CFG.plant), CFG.controller, CFG.mpc)
+
+
+def test_step_12_to_15_kN_settles_without_overshoot() -> None:
+    ctrl = _nmpc()
+    res = run_closed_loop(CFG, ctrl, lambda t: 12e3 if t < 0.2 else 15e3, 3.0, seed=1)
+    m = step_metrics(res, 0.2, 15e3)
+    print(f"NMPC step: {m}, switches {res.switches}, fallbacks {ctrl.fallbacks}")
+    assert m["settling_s"] <= 2.0
+    assert m["overshoot"] < 0.05
+    c = CFG.controller
+    assert c.force_min_N <= res.force.min() and res.force.max() <= c.force_max_N
+    assert res.x[:, :2].max() <= c.pressure_max_Pa
+    assert ctrl.fallbacks <= 5  # an occasional first-call overrun is tolerated, not a habit
+
+
+def test_supply_drop_keeps_tension_in_band_and_still_tracks() -> None:
+    """W4-like: supply 12 -> 9 MPa from 0.3 s to 3 s, reference step 12 -> 15 kN at 0.5 s."""
+    ctrl = _nmpc()
+    res = run_closed_loop(
+        CFG,
+        ctrl,
+        lambda t: 12e3 if t < 0.5 else 15e3,
+        3.0,
+        supply=lambda t: 9e6 if 0.3 <= t < 3.0 else 12e6,
+        seed=2,
+    )
+    m = step_metrics(res, 0.5, 15e3)
+    print(f"NMPC supply drop: {m}, min/max {res.force.min():.0f}/{res.force.max():.0f} N")
+    c = CFG.controller
+    assert c.force_min_N <= res.force.min() and res.force.max() <= c.force_max_N
+    assert m["settling_s"] <= 2.0
+
+
+def test_forced_infeasible_falls_back_and_counts() -> None:
+    """p_max below the current head pressure: no plan can satisfy it -> fallback, no raise."""
+    ctrl = _nmpc()
+    x = ReducedModel(CFG.plant).equilibrium(15e3)
+    ref = np.full(CFG.mpc.horizon_steps + 1, 15e3)
+    first = ctrl(x, ref, 0.0)
+    assert first.success and not first.fallback
+    ctrl.set_parameters(pressure_max_Pa=2e6)
+    outs = [ctrl(x, ref, 0.01 * k) for k in range(1, 4)]
+    assert all(o.fallback and not o.success for o in outs)
+    assert ctrl.fallbacks == 3 and ctrl.failures == 3
+    assert all(CFG.controller.u_min <= o.u <= CFG.controller.u_max for o in outs)
+
+
+def test_controller_period_must_be_multiple_of_step() -> None:
+    assert steps_per_period(0.010, 0.001) == 10
+    with pytest.raises(ValueError, match="integer multiple"):
+        steps_per_period(0.0105, 0.001)
+    bad = dataclasses.replace(CFG, controller=dataclasses.replace(CFG.controller, period_s=0.0025))
+    with pytest.raises(ValueError, match="integer multiple"):
+        run_closed_loop(bad, _nmpc(), lambda t: 12e3, 0.01, dt=1e-3)
