@@ -23,8 +23,7 @@ def test_builtin_scenarios_load_with_defaults(name: str) -> None:
 def test_w1_reference_step_and_ramp() -> None:
     s = load_scenario("W1")
     t = np.array([0.0, 2.999, 3.0, 10.0, 15.0, 25.0, 30.0])
-    np.testing.assert_allclose(s.reference_N(t),
-                               [12e3, 12e3, 15e3, 15e3, 15e3, 15.5e3, 15.75e3])
+    np.testing.assert_allclose(s.reference_N(t), [12e3, 12e3, 15e3, 15e3, 15e3, 15.5e3, 15.75e3])
     assert s.reference_N(3.5).shape == ()
     prev = s.reference_preview(2.95, 11, 0.01)
     assert prev.shape == (11,)
@@ -44,8 +43,9 @@ def test_w4_supply_drop_profile() -> None:
     s = load_scenario("W4")
     assert s.supply.mode == "prescribed"
     t = np.array([0.0, 11.99, 12.05, 12.1, 16.0, 20.0, 20.05, 20.1, 29.0])
-    np.testing.assert_allclose(s.supply_pressure_Pa(t),
-                               [12e6, 12e6, 10.5e6, 9e6, 9e6, 9e6, 10.5e6, 12e6, 12e6])
+    np.testing.assert_allclose(
+        s.supply_pressure_Pa(t), [12e6, 12e6, 10.5e6, 9e6, 9e6, 9e6, 10.5e6, 12e6, 12e6]
+    )
     assert s.metric_windows().disturbances == ((12.0, 20.0),)
     np.testing.assert_array_equal(load_scenario("W1").supply_pressure_Pa(t), 12e6)
 
@@ -84,9 +84,16 @@ def test_w5_variants() -> None:
         for k in (0.8, 1.2):
             v = s.variant(f"{param}_{k}")
             assert getattr(v, f"{param}_scale") == k
-            others = [f.removesuffix("_scale") for f in ("bulk_modulus_scale", "friction_scale",
-                      "contact_stiffness_scale", "pretension_scale")
-                      if not f.startswith(param)]
+            others = [
+                f.removesuffix("_scale")
+                for f in (
+                    "bulk_modulus_scale",
+                    "friction_scale",
+                    "contact_stiffness_scale",
+                    "pretension_scale",
+                )
+                if not f.startswith(param)
+            ]
             assert all(getattr(v, f"{o}_scale") == 1.0 for o in others)
     with pytest.raises(KeyError, match="available"):
         s.variant("beta_0.5")
@@ -105,24 +112,45 @@ def _bad(tmp_path, old: str, new: str, base: str = "W1"):
     return path
 
 
-@pytest.mark.parametrize(("old", "new", "message"), [
-    ("duration_s = 30.0", "duration_s = -1.0",
-     r"bad\.toml \[scenario\]\.duration_s = -1\.0 is outside the allowed range \(0, 3600\]"),
-    ("controller = \"nmpc\"", "controller = \"mpcc\"",
-     r"\[scenario\]\.controller = 'mpcc' is not one of \['nmpc', 'lmpc', 'pid'\]"),
-    ("seeds = [0, 1, 2, 3, 4]", "seeds = [0, 1.5]", r"\[scenario\]\.seeds"),
-    ("initial_N = 12.0e3", "initial_n = 12.0e3",
-     r"bad\.toml \[reference\]: unknown key.*'initial_n'"),
-    ("rate_N_s = 50.0", "rate_N_s = 5.0e4",
-     r"\[\[reference\.ramps\]\]\[0\]\.rate_N_s = 50000\.0 is outside"),
-    ("nominal_Pa = 12.0e6", "nominal_Pa = nan", r"\[supply\]\.nominal_Pa: must be finite"),
-    ("kind = \"flat\"", "kind = \"bumpy\"", r"\[terrain\]\.kind = 'bumpy' is not one of"),
-    ("force_max_N = 20.0e3", "force_max_N = 5.0e3",
-     r"\[limits\]\.force_max_N = 5000\.0 must be > force_min_N"),
-    ("[evaluation]", "[evaluaton]", r"unknown table\(s\) \['evaluaton'\]"),
-    ("time_s = 3.0", "time_s = \"3\"",
-     r"\[\[reference\.steps\]\]\[0\]\.time_s: expected a number"),
-])
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        (
+            "duration_s = 30.0",
+            "duration_s = -1.0",
+            r"bad\.toml \[scenario\]\.duration_s = -1\.0 is outside the allowed range \(0, 3600\]",
+        ),
+        (
+            'controller = "nmpc"',
+            'controller = "mpcc"',
+            r"\[scenario\]\.controller = 'mpcc' is not one of \['nmpc', 'lmpc', 'pid'\]",
+        ),
+        ("seeds = [0, 1, 2, 3, 4]", "seeds = [0, 1.5]", r"\[scenario\]\.seeds"),
+        (
+            "initial_N = 12.0e3",
+            "initial_n = 12.0e3",
+            r"bad\.toml \[reference\]: unknown key.*'initial_n'",
+        ),
+        (
+            "rate_N_s = 50.0",
+            "rate_N_s = 5.0e4",
+            r"\[\[reference\.ramps\]\]\[0\]\.rate_N_s = 50000\.0 is outside",
+        ),
+        ("nominal_Pa = 12.0e6", "nominal_Pa = nan", r"\[supply\]\.nominal_Pa: must be finite"),
+        ('kind = "flat"', 'kind = "bumpy"', r"\[terrain\]\.kind = 'bumpy' is not one of"),
+        (
+            "force_max_N = 20.0e3",
+            "force_max_N = 5.0e3",
+            r"\[limits\]\.force_max_N = 5000\.0 must be > force_min_N",
+        ),
+        ("[evaluation]", "[evaluaton]", r"unknown table\(s\) \['evaluaton'\]"),
+        (
+            "time_s = 3.0",
+            'time_s = "3"',
+            r"\[\[reference\.steps\]\]\[0\]\.time_s: expected a number",
+        ),
+    ],
+)
 def test_bad_files_name_file_and_key(tmp_path, old: str, new: str, message: str) -> None:
     with pytest.raises(ParameterError, match=message):
         load_scenario(_bad(tmp_path, old, new))
@@ -136,8 +164,11 @@ def test_bad_w2_class_and_band(tmp_path) -> None:
 
 
 def test_bad_w3_w4_windows(tmp_path) -> None:
-    with pytest.raises(ParameterError, match=r"\[\[load_pulses\]\]\[0\]\.end_s = 5\.0 must be > "
-                                             r"start_s = 6\.0"):
+    with pytest.raises(
+        ParameterError,
+        match=r"\[\[load_pulses\]\]\[0\]\.end_s = 5\.0 must be > "
+        r"start_s = 6\.0",
+    ):
         load_scenario(_bad(tmp_path, "end_s = 8.0", "end_s = 5.0", "W3"))
     with pytest.raises(ParameterError, match=r"\[supply\]\.mode = 'accumulator': \[\[supply"):
         load_scenario(_bad(tmp_path, 'mode = "prescribed"', 'mode = "accumulator"', "W4"))
@@ -156,3 +187,21 @@ def test_custom_minimal_file_gets_defaults(tmp_path) -> None:
     s = load_scenario(path)
     assert s.duration_s == 30.0 and s.track.speed_m_s == 1.5 and s.terrain.kind == "flat"
     assert s.variants[0].name == "nominal" and s.reference_N(10.0) == 14e3
+
+
+def test_w4_windows_give_dip_and_recovery_from_compute_metrics() -> None:
+    """A synthetic W4 run: a 900 N dip at the drop onset decaying with tau = 0.5 s."""
+    from trackmj.metrics import compute_metrics
+
+    s = load_scenario("W4")
+    t = np.arange(30001) * 1e-3
+    ref = s.reference_N(t)
+    y = ref - np.where(t >= 12.0, 900.0 * np.exp(-(t - 12.0) / 0.5), 0.0)
+    zeros = np.zeros_like(t)
+    cols = {"t_s": t, "tension_N": y, "tension_ref_N": ref, "p_head_Pa": zeros,
+            "valve_mode": zeros, "u": zeros, "e_supply_J": zeros, "p_work_J": zeros,
+            "mech_work_J": zeros, "chassis_acc_z_m_s2": zeros}
+    out = compute_metrics(cols, s.metric_windows())
+    assert out["disturbance_peak_error_N"] == pytest.approx(900.0)
+    assert out["recovery_time_s"] == pytest.approx(0.5 * np.log(3.0), abs=1e-3)  # ±300 N band
+    assert np.isnan(out["overshoot_N"]) and out["constraint_violation_s"] == 0.0
