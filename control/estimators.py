@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import EstimatorParams
 

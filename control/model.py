@@ -28,6 +28,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
+
 from trackmj.control.params import PlantParams
 
 #: Online parameters theta of the CasADi model: [p_supply Pa, k_eq N/m, y0 m].

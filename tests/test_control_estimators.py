@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from scipy.stats import chi2
+
 from trackmj.control.estimators import ExtendedKalmanFilter, UnscentedKalmanFilter
 from trackmj.control.model import ReducedModel, ReducedPlant
 from trackmj.control.params import EstimatorParams, SensorParams, ValveParams, load_config

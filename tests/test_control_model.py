@@ -3,6 +3,7 @@
 import casadi as ca
 import numpy as np
 import pytest
+
 from trackmj.control.model import ReducedModel, ReducedPlant
 from trackmj.control.params import PlantParams, load_config
 
