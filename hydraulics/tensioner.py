@@ -13,7 +13,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from math import sqrt
-from typing import Literal
+from typing import Literal, NamedTuple
 
 from trackmj.ports import ForceLaw
 
@@ -89,6 +89,25 @@ class StepRecord:
     interface_residual_J: float
 
 
+class LogRow(NamedTuple):
+    """The per-step logging values of a completed step (cheap; see ``HydraulicTensioner.log``).
+
+    p_head_Pa is the mean of the two head pressures, q_supply_m3_s the flow out of the supply
+    node through the main valve (S->A + S->rod node), force_N the cylinder force on the idler
+    (> 0 outward; = StepRecord.force_N); the *_J values are the cumulative ledger terms.
+    """
+
+    t_s: float
+    p_head_Pa: float
+    p_rod_Pa: float
+    p_supply_Pa: float
+    q_supply_m3_s: float
+    force_N: float
+    supply_J: float
+    piston_work_J: float
+    mech_work_J: float
+
+
 def _orf(pa: float, pb: float, k: float, pcr2: float, la: float, dla: float, lb: float,
          dlb: float) -> tuple[float, float, float]:
     """Limited orifice a->b: (Q, dQ/dp_a, dQ/dp_b); the upstream limiter l scales Q."""
@@ -141,7 +160,15 @@ class HydraulicTensioner:
     friction linearised at v_k (Z = −dF_fric/dv only), no correction. Multi-rate: the force
     is updated every ``exchange_steps`` calls to force_law; in between, each completed step
     advances the hydraulics in ``substep_s`` BE sub-steps with the velocity held from the last
-    exchange (stroke integrated internally, re-synchronised at each exchange).
+    exchange (stroke integrated internally, re-synchronised at each exchange). With a light
+    carrier (80 kg against the ~2e7 N/m oil spring, ω ≈ 500 rad/s) the 5 ms held exchange is
+    unstable, a real property of the scheme: the carrier oscillation grows until the held
+    velocity drives a chamber below absolute vacuum (p < −p_atm gauge), empties a chamber
+    volume or stops Newton converging. The element then does not raise: it sets
+    ``diverged = True`` and ``divergence_time_s`` (start of the failing sub-step), keeps the
+    hydraulics frozen at the last physical state (its last force law is held, the ledger
+    stops at the last completed sub-step) and keeps accepting steps, so an experiment can
+    run the scheme to the end and report that and when it diverged.
 
     Valves: ``set_mode(+1/0/−1)`` or ``set_command(main, v_l, v_r)`` (each in [0, 1]) at the
     time of the last call; solenoid delay and first-order opening apply inside.
@@ -213,6 +240,12 @@ class HydraulicTensioner:
         self._voil0 = 0.0 if self.prescribed else self.acc.oil_volume(ps)[0]  # V_oil,acc(p_S^k)
         self._areas: tuple[float, ...] = ()
         self._lim_top = self.floor + self.band
+        self.p_atm = prm.accumulator.atmospheric_pressure_Pa_abs
+        self.diverged = False  # multi-rate only: the lagged exchange left physics
+        self.divergence_time_s = math.nan
+        cp = prm.coupling
+        self._tol, self._max_iter = cp.newton_tol_Pa, cp.newton_max_iter
+        self._v_corr, self._max_corr = cp.min_correction_velocity_m_s, cp.max_correction_N
         self.carry_J = 0.0
         self._law = ForceLaw(self._pressure_force(self.p), 0.0)
         self._correction = 0.0
@@ -254,12 +287,13 @@ class HydraulicTensioner:
             z = (self.Ah * (dpdv[1] + dpdv[2]) - 2.0 * self.Ar * dpdv[3] + dfdv)
             self._lin = (p1, dpdv, velocity_m_s)
             corr = 0.0
-            if abs(velocity_m_s) >= self.params.coupling.min_correction_velocity_m_s:
-                cmax = self.params.coupling.max_correction_N
+            if abs(velocity_m_s) >= self._v_corr:
+                cmax = self._max_corr
                 corr = max(-cmax, min(cmax, self.carry_J / (h * velocity_m_s)))
             self._correction = corr
             self._law = ForceLaw(f_star - z * velocity_m_s + corr, z)
-        elif self.coupling == "weak" or self._calls % self.exchange_steps == 0:
+        elif self.coupling == "weak" or (self._calls % self.exchange_steps == 0
+                                         and not self.diverged):
             if self.coupling == "multirate":
                 self._s_hyd, self._v_hold = stroke_m, velocity_m_s
             ff, dff = self._friction(velocity_m_s)
@@ -278,16 +312,10 @@ class HydraulicTensioner:
         law, v1 = self._law, velocity_m_s
         sl = self.step_ledger
         if self.coupling == "multirate":
-            hs = h / self.n_sub
-            self._set_gains(self.t, hs)
-            for j in range(self.n_sub):
-                if j:
-                    self._set_gains(self.t + j * hs, hs)
-                self._s_hyd += hs * self._v_hold
-                p1 = self._newton(hs, self._s_hyd, self._v_hold, list(self.p))
-                self._commit(p1, self._s_hyd, self._v_hold, hs, accumulate=j > 0)
-                self._advance_valves(self.t + j * hs, hs)
+            done = 0 if self.diverged else self._multirate_substeps(h)
             self.s, self.v, self.t = stroke_m, v1, t_s
+            if done == 0:  # diverged before this step: nothing to book
+                return
         else:
             if self.coupling == "weak":
                 self._set_gains(self.t, h)
@@ -295,7 +323,9 @@ class HydraulicTensioner:
             else:
                 p_star, dpdv, v_star = self._lin
                 dv = v1 - v_star
-                p_guess = [p_star[i] + dpdv[i] * dv for i in range(5)]
+                p_guess = [p_star[0] + dpdv[0] * dv, p_star[1] + dpdv[1] * dv,
+                           p_star[2] + dpdv[2] * dv, p_star[3] + dpdv[3] * dv,
+                           p_star[4] + dpdv[4] * dv]
             p1 = self._newton(h, stroke_m, v1, p_guess)
             self._commit(p1, stroke_m, v1, h, accumulate=False)
             self._advance_valves(self.t, h)
@@ -312,6 +342,36 @@ class HydraulicTensioner:
         self._rec = (t_s, stroke_m, v1, ff, fes)
         self._step_backtracks = self._backtracks
         self.newton_backtracks_total += self._backtracks
+
+    def _multirate_substeps(self, h: float) -> int:
+        """Advance the hydraulics over h in n_sub BE sub-steps with the held velocity; returns
+        the number of sub-steps taken (< n_sub when the scheme diverged in this step)."""
+        hs = h / self.n_sub
+        for j in range(self.n_sub):
+            t_j = self.t + j * hs
+            self._set_gains(t_j, hs)
+            s_next = self._s_hyd + hs * self._v_hold
+            p1 = self._substep_or_none(hs, s_next)
+            if p1 is None:
+                self.diverged, self.divergence_time_s = True, t_j
+                return j
+            self._s_hyd = s_next
+            self._commit(p1, s_next, self._v_hold, hs, accumulate=j > 0)
+            self._advance_valves(t_j, hs)
+        return self.n_sub
+
+    def _substep_or_none(self, h: float, s1: float) -> list[float] | None:
+        """One multi-rate BE sub-step to stroke s1; None if the state left physics: a chamber
+        volume ≤ 0, no Newton convergence, or a pressure below absolute vacuum."""
+        if min(self._volumes(s1)) <= 0.0:
+            return None
+        try:
+            p1 = self._newton(h, s1, self._v_hold, list(self.p))
+        except RuntimeError:
+            return None
+        if not all(math.isfinite(x) and x >= -self.p_atm for x in p1):
+            return None
+        return p1
 
     @property
     def record(self) -> StepRecord:
@@ -341,6 +401,16 @@ class HydraulicTensioner:
             newton_iterations=self._iters, newton_backtracks=self._step_backtracks,
             interface_residual_J=self.step_ledger.interface_residual_J,
         )
+
+    def log(self) -> LogRow:
+        """The handful of values logged every step, without building a StepRecord (~1 µs)."""
+        if self._rec is None:
+            raise RuntimeError("no step completed yet")
+        t, _, _, ff, fes = self._rec
+        p, fl, led = self.p, self._flows, self.ledger
+        return LogRow(t, 0.5 * (p[1] + p[2]), p[3], p[4], fl[0] + fl[2],
+                      self.Ah * (p[1] + p[2]) - 2.0 * self.Ar * p[3] - ff + fes,
+                      led.supply_J, led.piston_work_J, led.mech_work_J)
 
     @property
     def pressures(self) -> tuple[float, float, float, float, float]:
@@ -447,12 +517,16 @@ class HydraulicTensioner:
         f, df = orifice_flow(self.pT - p, self.K_mu, self.pcr)
         return s * f, -ds / self.mu_width * f - s * df
 
-    def _relief(self, ps: float) -> tuple[float, float]:
+    def _relief(self, ps: float, pT: float, pcr2: float) -> tuple[float, float]:
         """Relief valve S -> T at p_S > crack: (Q, dQ/dp_S); callers take 0 below."""
-        x = (ps - self.rel_crack) / self.rel_width
-        s, ds = smoothstep(x)
-        f, df = orifice_flow(ps - self.pT, self.K_rel, self.pcr)
-        return s * f, ds / self.rel_width * f + s * df
+        w = self.rel_width
+        x = (ps - self.rel_crack) / w
+        s, ds = (1.0, 0.0) if x >= 1.0 else (x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) / w)
+        d = ps - pT
+        r = d * d + pcr2
+        r4 = sqrt(sqrt(r))
+        f = self.K_rel * d / r4
+        return s * f, ds * f + s * self.K_rel * (0.5 * d * d + pcr2) / (r * r4)
 
     def _eval(self, h: float, c: tuple[float, ...], v: float, p: list[float]) -> tuple:
         """Flows, residual R (5) and Jacobian entries at pressures p (see class docstring);
@@ -521,7 +595,7 @@ class HydraulicTensioner:
              1.0, 0.0, 0.0]
         qrel = 0.0
         if not self.prescribed:
-            qrel, drel = (0.0, 0.0) if pS <= self.rel_crack else self._relief(pS)
+            qrel, drel = (0.0, 0.0) if pS <= self.rel_crack else self._relief(pS, pT, pcr2)
             voil1, dvoil = self.acc.oil_volume(pS)
             R[4] = (cS * (pS - p0[4]) + voil1 - self._voil0
                     - h * (self.Q_pump - qPA - qPB - qrel))
@@ -569,31 +643,30 @@ class HydraulicTensioner:
         θ/(1−θ)·|dx|, θ = |dx_k|/|dx_{k−1}| < 1, is below it (Hairer & Wanner, Solving ODEs
         II, IV.8); the correction is applied in both cases.
         """
-        cp = self.params.coupling
-        tol = cp.newton_tol_Pa
+        tol = self._tol
         V = self._volumes(s1)
         beta = self.beta
         w0, w1, w2, w3, w4 = beta / V[0], beta / V[1], beta / V[2], beta / V[3], beta / V[4]
         c = (1.0 / w0, 1.0 / w1, 1.0 / w2, 1.0 / w3, 1.0 / w4)
         R, J, flows = self._eval(h, c, v, p)
-        f = ((R[0] * w0) ** 2 + (R[1] * w1) ** 2 + (R[2] * w2) ** 2 + (R[3] * w3) ** 2
-             + (R[4] * w4) ** 2)
+        r0, r1, r2, r3, r4 = R[0] * w0, R[1] * w1, R[2] * w2, R[3] * w3, R[4] * w4
+        f = r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3 + r4 * r4
         backtracks = 0
         it = 0
         n_prev, full = math.inf, False
-        for it in range(1, cp.newton_max_iter + 1):  # noqa: B007 (count reported)
+        for it in range(1, self._max_iter + 1):  # noqa: B007 (count reported)
             dx = self._solve(J, [-R[0], -R[1], -R[2], -R[3], -R[4]])
             n = max(abs(dx[0]), abs(dx[1]), abs(dx[2]), abs(dx[3]), abs(dx[4]))
             if n < tol or (full and n < n_prev and n * n < tol * (n_prev - n)):
                 p = [p[0] + dx[0], p[1] + dx[1], p[2] + dx[2], p[3] + dx[3], p[4] + dx[4]]
                 break
             alpha = 1.0
-            for _ in range(_MAX_BACKTRACKS + 1):
+            while True:
                 pt = [p[0] + alpha * dx[0], p[1] + alpha * dx[1], p[2] + alpha * dx[2],
                       p[3] + alpha * dx[3], p[4] + alpha * dx[4]]
                 Rt, Jt, flt = self._eval(h, c, v, pt)
-                ft = ((Rt[0] * w0) ** 2 + (Rt[1] * w1) ** 2 + (Rt[2] * w2) ** 2
-                      + (Rt[3] * w3) ** 2 + (Rt[4] * w4) ** 2)
+                r0, r1, r2, r3, r4 = Rt[0] * w0, Rt[1] * w1, Rt[2] * w2, Rt[3] * w3, Rt[4] * w4
+                ft = r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3 + r4 * r4
                 if ft <= (1.0 - 1e-4 * alpha) * f or alpha < _MIN_STEP:
                     break
                 alpha *= 0.5
@@ -601,7 +674,7 @@ class HydraulicTensioner:
             p, R, J, flows, f = pt, Rt, Jt, flt, ft
             n_prev, full = n, alpha == 1.0
         else:
-            raise RuntimeError(f"hydraulic Newton did not converge in {cp.newton_max_iter} "
+            raise RuntimeError(f"hydraulic Newton did not converge in {self._max_iter} "
                                f"iterations (t = {self.t} s, last |dp| = {n} Pa)")
         if self.prescribed:
             p[4] = self.ps_next

@@ -113,7 +113,7 @@ def test_multirate_exchange_has_larger_interface_error(strong: Run) -> None:
     st = run("strong", m=2e4, duration=1.8)
     e_mr = abs(mr.ht.ledger.interface_residual_J)
     print(f"multirate 5 ms: {e_mr:.3e} J, strong: {st.gross_J:.3e} J")
-    assert all(math.isfinite(x) for x in mr.ht.pressures)
+    assert all(math.isfinite(x) for x in mr.ht.pressures) and not mr.ht.diverged
     assert e_mr > 10.0 * st.gross_J
 
 
@@ -126,3 +126,52 @@ def test_ledger_closes_over_30_s_with_valve_cycling() -> None:
     assert abs(led.balance_error_J) <= 5e-3 * led.supply_J
     # the backward-Euler dissipation is a small part of the budget
     assert led.numerical_J < 0.01 * led.supply_J
+
+
+def test_log_row_matches_record_and_ledger(strong: Run) -> None:
+    """The cheap per-step accessor reports the same numbers as the full record."""
+    ht = strong.ht
+    row, rec, led = ht.log(), ht.record, ht.ledger
+    assert row.t_s == rec.t_s
+    assert row.p_head_Pa == pytest.approx(0.5 * (rec.p_head_L_Pa + rec.p_head_R_Pa), rel=1e-15)
+    assert (row.p_rod_Pa, row.p_supply_Pa) == (rec.p_rod_L_Pa, rec.p_supply_Pa)
+    assert row.q_supply_m3_s == rec.q_supply_m3_s
+    assert row.force_N == pytest.approx(rec.force_N, rel=1e-12)
+    assert (row.supply_J, row.piston_work_J, row.mech_work_J) == (
+        led.supply_J, led.piston_work_J, led.mech_work_J)
+
+
+def _pressurize_80kg(coupling: str, steps: int = 100) -> tuple[HydraulicTensioner, list[float]]:
+    """80 kg carrier on 1e6 N/m, pressurize from t = 0; returns the element and |v| per step."""
+    h, m, k, c = 1e-3, 80.0, 1e6, 5e3
+    kw = {"dt_s": h, "coupling": coupling, "supply_profile": "W4", "exchange_steps": 5,
+          "substep_s": 1e-4}
+    s, v = 0.05, 0.0
+    s_free = s - HydraulicTensioner(**kw).force_law(0.0, s, 0.0).force_N / k
+    ht = HydraulicTensioner(**kw)
+    ht.set_mode(1)
+    speeds = []
+    for i in range(steps):
+        law = ht.force_law(i * h, s, v)
+        v = (v + h * (law.force_N - k * (s - s_free)) / m) / (1 - h * (law.damping_N_s_m - c) / m)
+        s += h * v
+        ht.complete_step((i + 1) * h, s, v)
+        speeds.append(abs(v))
+    return ht, speeds
+
+
+def test_multirate_divergence_is_reported_not_raised() -> None:
+    """With 80 kg the 5 ms held exchange across the ~2e7 N/m oil spring is unstable: the
+    carrier's oscillation grows until a chamber is driven below absolute vacuum; the element
+    flags it, freezes the hydraulics at the last physical state and keeps stepping."""
+    mr, v_mr = _pressurize_80kg("multirate")
+    st, v_st = _pressurize_80kg("strong")
+    print(f"multirate diverged at t = {mr.divergence_time_s} s; max |v| multirate "
+          f"{max(v_mr):.3g} m/s, strong {max(v_st):.3g} m/s")
+    assert mr.diverged and 0.02 < mr.divergence_time_s < 0.1   # valves open at 20 ms
+    assert not st.diverged and max(v_st) < 0.01
+    assert max(v_mr) > 10.0 * max(v_st)   # the growing oscillation, not a solver artefact
+    assert all(math.isfinite(x) and x >= -mr.p_atm for x in mr.pressures)
+    led = mr.ledger   # closed up to the divergence
+    assert abs(led.balance_error_J) <= 5e-3 * (led.supply_J + abs(led.piston_work_J)
+                                               + led.oil_energy_J)
