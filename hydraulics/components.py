@@ -119,10 +119,11 @@ class Solenoid:
 
     Command c ∈ [0, 1] set at time t takes effect at t + delay; the position x ∈ [0, 1]
     then follows dx/dt = (c − x)/τ, integrated exactly over each step with the command
-    in force at the step end.
+    in force at the step end. ``moving`` is False only at rest (no pending command and
+    the position equal to the command in force), when stepping cannot change the position.
     """
 
-    __slots__ = ("_pending", "command", "delay", "effective", "position", "tau")
+    __slots__ = ("_pending", "command", "delay", "effective", "moving", "position", "tau")
 
     def __init__(self, valve: Valve, position: float = 0.0) -> None:
         self.delay = valve.delay_s
@@ -130,6 +131,7 @@ class Solenoid:
         self.position = position
         self.command = position
         self.effective = position
+        self.moving = False
         self._pending: deque[tuple[float, float]] = deque()
 
     def set(self, t_s: float, command: float) -> None:
@@ -139,11 +141,12 @@ class Solenoid:
         if command != self.command:
             self.command = command
             self._pending.append((t_s + self.delay, command))
+            self.moving = True
 
     def position_at(self, t_s: float, h_s: float) -> tuple[float, float]:
         """(position, effective command) at t_s + h_s without committing."""
         eff = self.effective
-        if not self._pending and self.position == eff:  # at rest: exp(...)·0 = 0
+        if not self.moving:
             return eff, eff
         t_end = t_s + h_s
         for t_on, c in self._pending:
@@ -160,4 +163,5 @@ class Solenoid:
         t_end = t_s + h_s
         while self._pending and self._pending[0][0] <= t_end + 1e-12:
             self._pending.popleft()
+        self.moving = bool(self._pending) or self.position != self.effective
         return self.position

@@ -483,6 +483,10 @@ class HydraulicTensioner:
         The gains are recomputed only when one of the four edge areas changed (valves at
         rest, or moving inside their overlap, keep the cached gains).
         """
+        if self.prescribed:
+            self.ps_next = self._supply_pressure(t_s + h)
+        if self._areas and not (self.main.moving or self.vl.moving or self.vr.moving):
+            return
         prm = self.params
         mv, sv = prm.main_valve, prm.switching_valves
         xm = self.main.position_at(t_s, h)[0]
@@ -497,13 +501,11 @@ class HydraulicTensioner:
                       g(series_area(a_rest, met.line_b_area_m2)),
                       g(series_area(a_l, met.head_branch_area_m2)),
                       g(series_area(a_r, met.head_branch_area_m2)))
-        if self.prescribed:
-            self.ps_next = self._supply_pressure(t_s + h)
 
     def _advance_valves(self, t_s: float, h: float) -> None:
-        self.main.advance(t_s, h)
-        self.vl.advance(t_s, h)
-        self.vr.advance(t_s, h)
+        for sol in (self.main, self.vl, self.vr):
+            if sol.moving:
+                sol.advance(t_s, h)
 
     def _lim(self, p: float) -> tuple[float, float]:
         """Cavitation limiter below floor + band: (l, dl/dp); callers take (1, 0) above."""
