@@ -172,6 +172,9 @@ class HydraulicTensioner:
 
     Valves: ``set_mode(+1/0/−1)`` or ``set_command(main, v_l, v_r)`` (each in [0, 1]) at the
     time of the last call; solenoid delay and first-order opening apply inside.
+
+    Output: ``record`` builds the full StepRecord of the last completed step on access
+    (~9 µs); ``log()`` returns the per-step logging values as a LogRow (~0.6 µs).
     """
 
     def __init__(self, params: HydraulicParams | None = None, *, dt_s: float = 1e-3,
