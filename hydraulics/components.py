@@ -12,6 +12,7 @@ from collections import deque
 from .params import Accumulator, Valve
 
 SQRT2 = math.sqrt(2.0)
+_ARRIVED = 1e-9  # a solenoid this close to its command [normalised travel] has arrived
 
 
 def orifice_gain(cq: float, area_m2: float, density_kg_m3: float) -> float:
@@ -119,8 +120,9 @@ class Solenoid:
 
     Command c ∈ [0, 1] set at time t takes effect at t + delay; the position x ∈ [0, 1]
     then follows dx/dt = (c − x)/τ, integrated exactly over each step with the command
-    in force at the step end. ``moving`` is False only at rest (no pending command and
-    the position equal to the command in force), when stepping cannot change the position.
+    in force at the step end; within 1e-9 of the command the position snaps to it.
+    ``moving`` is False only at rest (no pending command, position equal to the command in
+    force), when stepping cannot change the position.
     """
 
     __slots__ = ("_pending", "command", "delay", "effective", "moving", "position", "tau")
@@ -163,5 +165,7 @@ class Solenoid:
         t_end = t_s + h_s
         while self._pending and self._pending[0][0] <= t_end + 1e-12:
             self._pending.popleft()
+        if abs(self.position - self.effective) < _ARRIVED:
+            self.position = self.effective
         self.moving = bool(self._pending) or self.position != self.effective
         return self.position

@@ -285,7 +285,7 @@ class HydraulicTensioner:
             self._set_gains(t_s, h)
             s1 = stroke_m + h * velocity_m_s
             p1 = self._newton(h, s1, velocity_m_s, list(self.p))
-            dpdv = self._dpdv(h, p1)
+            dpdv = self._dpdv(p1)
             f_star, dfdv = self._force(p1, s1, velocity_m_s)
             z = (self.Ah * (dpdv[1] + dpdv[2]) - 2.0 * self.Ar * dpdv[3] + dfdv)
             self._lin = (p1, dpdv, velocity_m_s)
@@ -534,8 +534,8 @@ class HydraulicTensioner:
         return s * f, ds * f + s * self.K_rel * (0.5 * d * d + pcr2) / (r * r4)
 
     def _eval(self, h: float, c: tuple[float, ...], v: float, p: list[float]) -> tuple:
-        """Flows, residual R (5) and Jacobian entries at pressures p (see class docstring);
-        c = V_i(s_{k+1})/β [m^3/Pa] of the five nodes."""
+        """Flows, residual R/h (5) [m^3/s] and Jacobian entries of R/h at pressures p (see class
+        docstring); c = V_i(s_{k+1})/(β·h) [m^3/(s·Pa)] of the five nodes."""
         pA, pHL, pHR, pB, pS = p
         if self.prescribed:
             pS = self.ps_next
@@ -587,26 +587,26 @@ class HydraulicTensioner:
         p0 = self.p
         cA, cHL, cHR, cB, cS = c
         Ahv, Arv2 = self.Ah * v, 2.0 * self.Ar * v
-        hl = h * leak
-        R = [cA * (pA - p0[0]) - h * (qPA - qAT - qVL - qVR),
-             cHL * (pHL - p0[1]) - h * (qVL - qlL + qmL - Ahv),
-             cHR * (pHR - p0[2]) - h * (qVR - qlR + qmR - Ahv),
-             cB * (pB - p0[3]) - h * (qPB - qBT + qlL + qlR + qmB + Arv2),
+        R = [cA * (pA - p0[0]) - qPA + qAT + qVL + qVR,
+             cHL * (pHL - p0[1]) - qVL + qlL - qmL + Ahv,
+             cHR * (pHR - p0[2]) - qVR + qlR - qmR + Ahv,
+             cB * (pB - p0[3]) - qPB + qBT - qlL - qlR - qmB - Arv2,
              0.0]
-        J = [cA - h * (aPA_A - aAT_A - aVL_A - aVR_A), h * aVL_H, h * aVR_H, 0.0, -h * aPA_S,
-             cHL - h * (aVL_H + dmL) + hl, -h * aVL_A, -hl,
-             cHR - h * (aVR_H + dmR) + hl, -h * aVR_A, -hl,
-             cB - h * (aPB_B - aBT_B + dmB) + 2.0 * hl, -hl, -hl, -h * aPB_S,
+        J = [cA - aPA_A + aAT_A + aVL_A + aVR_A, aVL_H, aVR_H, 0.0, -aPA_S,
+             cHL - aVL_H - dmL + leak, -aVL_A, -leak,
+             cHR - aVR_H - dmR + leak, -aVR_A, -leak,
+             cB - aPB_B + aBT_B - dmB + 2.0 * leak, -leak, -leak, -aPB_S,
              1.0, 0.0, 0.0]
         qrel = 0.0
         if not self.prescribed:
             qrel, drel = (0.0, 0.0) if pS <= self.rel_crack else self._relief(pS, pT, pcr2)
             voil1, dvoil = self.acc.oil_volume(pS)
-            R[4] = (cS * (pS - p0[4]) + voil1 - self._voil0
-                    - h * (self.Q_pump - qPA - qPB - qrel))
-            J[15] = cS + dvoil + h * (aPA_S + aPB_S + drel)
-            J[16] = h * aPA_A
-            J[17] = h * aPB_B
+            ih = 1.0 / h
+            R[4] = (cS * (pS - p0[4]) + (voil1 - self._voil0) * ih
+                    - self.Q_pump + qPA + qPB + qrel)
+            J[15] = cS + dvoil * ih + aPA_S + aPB_S + drel
+            J[16] = aPA_A
+            J[17] = aPB_B
         flows = (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR)
         return R, J, flows
 
@@ -650,8 +650,8 @@ class HydraulicTensioner:
         """
         tol = self._tol
         V = self._volumes(s1)
-        beta = self.beta
-        w0, w1, w2, w3, w4 = beta / V[0], beta / V[1], beta / V[2], beta / V[3], beta / V[4]
+        bh = self.beta * h  # the residual is evaluated divided by h: weights β·h/V_i
+        w0, w1, w2, w3, w4 = bh / V[0], bh / V[1], bh / V[2], bh / V[3], bh / V[4]
         c = (1.0 / w0, 1.0 / w1, 1.0 / w2, 1.0 / w3, 1.0 / w4)
         R, J, flows = self._eval(h, c, v, p)
         r0, r1, r2, r3, r4 = R[0] * w0, R[1] * w1, R[2] * w2, R[3] * w3, R[4] * w4
@@ -687,12 +687,12 @@ class HydraulicTensioner:
         self._backtracks += backtracks
         return p
 
-    def _dpdv(self, h: float, p: list[float]) -> list[float]:
-        """dp_{k+1}/dv from −R_p⁻¹·R_v with the last Newton Jacobian."""
-        p0, ib = self.p, h / self.beta
+    def _dpdv(self, p: list[float]) -> list[float]:
+        """dp_{k+1}/dv from −R_p⁻¹·R_v with the last Newton Jacobian (both of R/h)."""
+        p0, ib = self.p, 1.0 / self.beta
         ah, ar2 = self.Ah, 2.0 * self.Ar
-        rv = [0.0, -(ah * ib * (p[1] - p0[1]) + h * ah), -(ah * ib * (p[2] - p0[2]) + h * ah),
-              -(-ar2 * ib * (p[3] - p0[3]) - h * ar2), 0.0]
+        rv = [0.0, -ah * (ib * (p[1] - p0[1]) + 1.0), -ah * (ib * (p[2] - p0[2]) + 1.0),
+              ar2 * (ib * (p[3] - p0[3]) + 1.0), 0.0]
         return self._solve(self._J, rv)
 
     def _commit(self, p1: list[float], s1: float, v: float, h: float, accumulate: bool) -> None:
