@@ -136,14 +136,15 @@ class Valve:
 
 @dataclass(frozen=True, slots=True)
 class Metering:
-    """Fixed restrictors [m^2]: one per head branch, one in line B."""
+    """Fixed restrictors [m^2]: one per head branch (A -> head, both directions) and one in
+    the release feed P -> B; the rods vent B -> T through the main valve edge alone."""
 
     head_branch_area_m2: float
-    line_b_area_m2: float
+    rod_feed_area_m2: float
 
     def __post_init__(self) -> None:
         _check(self, {"head_branch_area_m2": (0.0, 1.0, False),
-                      "line_b_area_m2": (0.0, 1.0, False)})
+                      "rod_feed_area_m2": (0.0, 1.0, False)})
 
 
 @dataclass(frozen=True, slots=True)

