@@ -51,7 +51,8 @@ def run_closed_loop(
     feed_supply: bool = True,
 ) -> LoopResult:
     """Simulate ``t_end`` seconds. ``reference(t)`` [N], ``supply(t)`` [Pa] (default the
-    nominal supply). With ``feed_supply`` the supply pressure is handed to the estimator and,
+    nominal supply). The controller receives the estimator's mean posterior over the past
+    period (``period_mean``: decimation filter 1 kHz -> controller rate). With ``feed_supply`` the supply pressure is handed to the estimator and,
     if it has ``set_parameters``, to the controller (assumes a supply pressure transducer)."""
     ratio = steps_per_period(cfg.controller.period_s, dt)
     if abs(cfg.sensors.sample_period_s - dt) > 1e-12:
@@ -71,7 +72,6 @@ def run_closed_loop(
     xs, xe, modes = np.empty((steps, 4)), np.empty((steps, 4)), np.empty(steps, dtype=np.int64)
     ctrl_times, est_times = [], []
     u = 0.0
-    x_hat = x0.copy()
     set_params = getattr(controller, "set_parameters", None)
     period = cfg.controller.period_s
     for k in range(steps):
@@ -81,8 +81,9 @@ def run_closed_loop(
             preview = np.array([reference(t + i * period) for i in range(n_horizon + 1)])
             if feed_supply and set_params is not None:
                 set_params(supply_pressure_Pa=p_s)
+            x_ctrl = est.period_mean()
             t0 = time.perf_counter()
-            u = controller(x_hat, preview, t).u
+            u = controller(x_ctrl, preview, t).u
             ctrl_times.append(time.perf_counter() - t0)
         mode = valves.step(u)
         x = plant.step(float(mode), p_s)

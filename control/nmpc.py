@@ -143,9 +143,9 @@ class NonlinearMpc(_MpcBase):
             "qpsol_options": {
                 "osqp": {
                     "verbose": False,
-                    "eps_abs": 1e-5,
-                    "eps_rel": 1e-5,
-                    "max_iter": 4000,
+                    "eps_abs": mpc.qp_tolerance,
+                    "eps_rel": mpc.qp_tolerance,
+                    "max_iter": mpc.qp_max_iter,
                     "polish": False,
                 },
                 "error_on_fail": False,

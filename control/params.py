@@ -165,7 +165,11 @@ class ControllerParams:
 
 @dataclass(frozen=True, slots=True)
 class MpcParams:
-    """NMPC/LMPC horizon (steps of the controller period), blocking, weights, SQP settings."""
+    """NMPC/LMPC horizon (steps of the controller period), blocking, weights, SQP settings.
+
+    max_iter: SQP iterations per period (1 = real-time iteration); qp_max_iter: OSQP
+    iteration cap per QP; qp_tolerance: OSQP eps_abs = eps_rel (scaled units).
+    """
 
     horizon_steps: int = 15
     block_steps: int = 3
@@ -175,6 +179,8 @@ class MpcParams:
     weight_input_rate: float = 0.5
     weight_force_slack_per_kN2: float = 1.0e3
     max_iter: int = 3
+    qp_max_iter: int = 4000
+    qp_tolerance: float = 1e-5
     time_budget_s: float = 0.010
 
     def __post_init__(self) -> None:
@@ -186,6 +192,8 @@ class MpcParams:
         _check(self, "weight_input_rate", 0.0, 1e6)
         _check(self, "weight_force_slack_per_kN2", 0.0, 1e9, lo_open=True)
         _check(self, "max_iter", 1, 1000)
+        _check(self, "qp_max_iter", 1, 100000)
+        _check(self, "qp_tolerance", 0.0, 1.0, lo_open=True)
         _check(self, "time_budget_s", 0.0, 10.0, lo_open=True)
         if self.horizon_steps % self.block_steps:
             raise ValueError(
