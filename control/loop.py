@@ -52,8 +52,9 @@ def run_closed_loop(
 ) -> LoopResult:
     """Simulate ``t_end`` seconds. ``reference(t)`` [N], ``supply(t)`` [Pa] (default the
     nominal supply). The controller receives the estimator's mean posterior over the past
-    period (``period_mean``: decimation filter 1 kHz -> controller rate). With ``feed_supply`` the supply pressure is handed to the estimator and,
-    if it has ``set_parameters``, to the controller (assumes a supply pressure transducer)."""
+    period (``period_mean``: decimation filter 1 kHz -> controller rate). With
+    ``feed_supply`` the supply pressure is handed to the estimator and, if it has
+    ``set_parameters``, to the controller (assumes a supply pressure transducer)."""
     ratio = steps_per_period(cfg.controller.period_s, dt)
     if abs(cfg.sensors.sample_period_s - dt) > 1e-12:
         raise ValueError(f"sensor period {cfg.sensors.sample_period_s} s must equal dt = {dt} s")
