@@ -9,6 +9,7 @@ import argparse
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -102,6 +103,105 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     return 0 if plant.warning_count == 0 and derail_events == 0 else 1
 
 
+SUMMARY_METRICS = (
+    ("rmse_N", "tension RMSE", 1e-3, "kN"),
+    ("peak_error_N", "peak error", 1e-3, "kN"),
+    ("overshoot_N", "overshoot", 1e-3, "kN"),
+    ("settling_time_s", "settling time", 1.0, "s"),
+    ("fluctuation_N", "fluctuation (±)", 1e-3, "kN"),
+    ("supply_energy_J", "supply energy", 1e-3, "kJ"),
+    ("valve_switch_rate_Hz", "valve switching", 1.0, "Hz"),
+    ("interface_energy_residual_J", "interface residual", 1.0, "J"),
+    ("solve_time_median_s", "solve time median", 1e3, "ms"),
+    ("solve_time_max_s", "solve time max", 1e3, "ms"),
+    ("real_time_factor", "real-time factor", 1.0, "x"),
+)
+
+
+def _summary_table(results: list, title: str) -> str:
+    """Markdown table of the headline metrics, one column per result."""
+    head = "| metric | " + " | ".join(title.format(r=r) for r in results) + " |"
+    lines = [head, "|---|" + "---|" * len(results)]
+    for key, name, scale, unit in SUMMARY_METRICS:
+        cells = []
+        for r in results:
+            value = r.metrics.get(key, float("nan"))
+            cells.append("–" if value != value else f"{value * scale:.3g}")
+        lines.append(f"| {name} [{unit}] | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _run_one(kwargs: dict):
+    from trackmj.simulate import simulate
+
+    return simulate(**kwargs)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from trackmj.figures import run_figure
+    from trackmj.results import write_result
+    from trackmj.scenarios import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    controller = args.controller or scenario.controller
+    out = Path(args.out or f"runs/{scenario.name}-{args.arch}-{controller}-s{args.seed}")
+    result = _run_one(dict(scenario=scenario, architecture=args.arch,
+                           controller=args.controller, estimator=args.estimator,
+                           seed=args.seed, duration=args.duration, variant=args.variant,
+                           rrd=out / "run.rrd" if args.rrd else None, progress=True))
+    write_result(result, out, csv=args.csv)
+    run_figure(result, out / "timeseries.png")
+    print(f"{scenario.name} ({scenario.title}), {result.architecture}, {result.controller}/"
+          f"{result.estimator}, seed {result.seed} -> {out}")
+    print(_summary_table([result], "{r.architecture}"))
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from concurrent.futures import ProcessPoolExecutor
+
+    from trackmj.figures import compare_figure
+    from trackmj.io import write_text_atomic
+    from trackmj.results import write_result
+    from trackmj.scenarios import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    out = Path(args.out or f"runs/compare-{scenario.name}")
+    controllers = args.controllers.split(",") if args.controllers else [None]
+    base = dict(scenario=scenario, estimator=args.estimator, seed=args.seed,
+                duration=args.duration)
+    cases = [dict(base, architecture=a, controller=c) for c in controllers
+             for a in ("tp", "tp-weak", "dp-b")]
+    with ProcessPoolExecutor(max_workers=args.workers) as pool:
+        results = list(pool.map(_run_one, cases))
+        tp = {r.controller: r for r in results if r.architecture == "tp"}
+        dpa = list(pool.map(_run_one, [dict(base, architecture="dp-a", controller=c,
+                                             tp_result=tp[c or scenario.controller])
+                                        for c in controllers]))
+    results += dpa
+    order = {"tp": 0, "tp-weak": 1, "dp-a": 2, "dp-b": 3}
+    results.sort(key=lambda r: (r.controller, order[r.architecture]))
+    for r in results:
+        write_result(r, out / f"{r.architecture}-{r.controller}")
+    label = "architecture" if len(controllers) == 1 else "controller"
+    for c in {r.controller for r in results}:
+        compare_figure([r for r in results if r.controller == c], out / f"compare-{c}.png")
+    table = _summary_table(results, "{r.architecture} {r.controller}")
+    write_text_atomic(out / "compare.md", f"# {scenario.name}: {scenario.title}\n\n"
+                      f"seed {args.seed}, duration {results[0].metadata['duration_s']} s\n\n"
+                      f"{table}\n")
+    print(table)
+    print(f"-> {out} ({label} comparison)")
+    return 0
+
+
+def _cmd_view(args: argparse.Namespace) -> int:
+    from trackmj.playback import open_viewer
+
+    open_viewer(args.path)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="trackmj", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -126,6 +226,32 @@ def build_parser() -> argparse.ArgumentParser:
     drive.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
     drive.add_argument("--preload", type=float, help="tensioner preload [kN]")
     drive.set_defaults(func=_cmd_drive)
+
+    def run_args(p: argparse.ArgumentParser) -> None:
+        p.add_argument("scenario", help="W1..W5 or a scenario TOML file")
+        p.add_argument("--estimator", choices=("ekf", "ukf"), help="default: the scenario's")
+        p.add_argument("--seed", type=int, default=0, help="noise and terrain seed")
+        p.add_argument("--duration", type=float, help="simulated time [s] (default: scenario)")
+        p.add_argument("--out", help="output directory")
+
+    run = sub.add_parser("run", help="one closed-loop run of a scenario")
+    run_args(run)
+    run.add_argument("--arch", default="tp", choices=("tp", "tp-weak", "dp-a", "dp-b"))
+    run.add_argument("--controller", choices=("nmpc", "lmpc", "pid"))
+    run.add_argument("--variant", default="nominal", help="W5 variant name")
+    run.add_argument("--csv", action="store_true", help="also write timeseries.csv")
+    run.add_argument("--rrd", action="store_true", help="also write a Rerun recording")
+    run.set_defaults(func=_cmd_run)
+
+    compare = sub.add_parser("compare", help="all architectures on one scenario")
+    run_args(compare)
+    compare.add_argument("--controllers", help="comma list, e.g. nmpc,lmpc,pid")
+    compare.add_argument("--workers", type=int, default=2, help="parallel processes")
+    compare.set_defaults(func=_cmd_compare)
+
+    view = sub.add_parser("view", help="open a run's Rerun recording in the viewer")
+    view.add_argument("path", help="run directory or .rrd file")
+    view.set_defaults(func=_cmd_view)
     return parser
 
 
@@ -135,7 +261,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ParameterError, FileNotFoundError) as exc:
+    except (ParameterError, FileNotFoundError, ValueError, KeyError) as exc:
         print(f"trackmj: error: {exc}", file=sys.stderr)
         return 2
 
