@@ -56,8 +56,11 @@ def recording(plant: TrackPlant, tmp_path_factory: pytest.TempPathFactory) -> di
                   on_step=rec.step_callback(FRAME_PERIOD_S))
         rec.log_timeseries(synthetic_result(round(DURATION_S * 1e3)))
         frames = rec.frame_count
+    d, m = plant.data, plant.model
+    poses = {name: (d.xpos[m.body(name).id].copy(), d.xquat[m.body(name).id].copy())
+             for name in ("chassis", "sprocket", "road_wheel_3", "idler_carrier")}
     return {"path": out, "frames": frames, "pins": plant.pin_positions(),
-            "tension": plant.pin_tensions_N()}
+            "tension": plant.pin_tensions_N(), "poses": poses}
 
 
 def read_chunks(path: Path) -> dict[str, list[pa.RecordBatch]]:
@@ -91,9 +94,12 @@ def test_entities_blueprint_and_static_terrain(recording: dict) -> None:
 
     reader = RrdReader(recording["path"])
     paths = set(reader.store().schema().entity_paths())
-    scene = {"/scene/terrain", "/scene/track/links", "/scene/track/pins", "/scene/wheels",
-             "/scene/sprocket_teeth", "/scene/chassis", "/scene/chassis/body",
-             "/scene/idler_carrier", "/plots/pin_tension"}
+    wheels = ["sprocket", "idler", *(f"road_wheel_{k}" for k in range(1, 7)),
+              "return_roller_1", "return_roller_2"]
+    scene = {"/scene/terrain", "/scene/track/links", "/scene/track/pins",
+             "/scene/wheels/sprocket/teeth", "/scene/chassis", "/scene/chassis/box",
+             "/scene/idler_carrier", "/scene/idler_carrier/box", "/plots/pin_tension",
+             *(f"/scene/wheels/{w}" for w in wheels)}
     plots = {"/" + s.entity for s in SERIES}
     assert scene | plots <= paths
     assert "/plots/tension/actual" in paths and "/plots/tension/reference" in paths
@@ -105,8 +111,8 @@ def test_entities_blueprint_and_static_terrain(recording: dict) -> None:
 def test_sim_timeline_spans_the_run(recording: dict) -> None:
     chunks = read_chunks(recording["path"])
     frames = np.arange(1, N_FRAMES + 1) * FRAME_PERIOD_S
-    for entity in ("/scene/track/links", "/scene/track/pins", "/scene/wheels",
-                   "/scene/chassis", "/plots/pin_tension"):
+    for entity in ("/scene/track/links", "/scene/track/pins", "/scene/wheels/sprocket",
+                   "/scene/wheels/road_wheel_3", "/scene/chassis", "/plots/pin_tension"):
         np.testing.assert_allclose(sim_times_s(chunks[entity]), frames, atol=1e-9)
     n = round(DURATION_S * 1e3)
     for s in SERIES:
@@ -131,6 +137,28 @@ def test_last_frame_matches_the_plant(recording: dict) -> None:
     np.testing.assert_allclose(bars["buffer"], recording["tension"] * 1e-3, rtol=1e-12)
     links = _last_row(chunks["/scene/track/links"], "LineStrips3D:strips").as_py()
     assert [len(s) for s in links] == [83, 83, 83]  # rail + two shoe edges, closed
+
+
+def test_body_poses_and_wheel_outlines(recording: dict, plant: TrackPlant) -> None:
+    """Last-frame body transforms equal MuJoCo's poses; the static sprocket outline lies on
+    its pitch circle in the body frame."""
+    from rerun.chunk import RrdReader
+
+    chunks = read_chunks(recording["path"])
+    for body, (pos, wxyz) in recording["poses"].items():
+        entity = f"/scene/{body}" if body in ("chassis", "idler_carrier") \
+            else f"/scene/wheels/{body}"
+        t = np.array(_last_row(chunks[entity], "Transform3D:translation").as_py()[0])
+        q = np.array(_last_row(chunks[entity], "Transform3D:quaternion").as_py()[0])
+        np.testing.assert_allclose(t, pos, atol=1e-6)
+        np.testing.assert_allclose(q, wxyz[[1, 2, 3, 0]], atol=1e-6)
+    static = [c for c in RrdReader(recording["path"]).stream()
+              if c.is_static and c.entity_path == "/scene/wheels/sprocket"]
+    faces = static[0].to_record_batch().column("LineStrips3D:strips")[0].as_py()
+    assert len(faces) == 2
+    xyz = np.array(faces[0])
+    np.testing.assert_allclose(np.hypot(xyz[:, 0], xyz[:, 2]),
+                               plant.params.sprocket_pitch_radius_m, rtol=1e-6)
 
 
 def test_timeseries_values_in_display_units(recording: dict) -> None:

@@ -13,11 +13,11 @@ Scene (:meth:`PlaybackRecorder.log_frame`, one row per frame; ``scene/terrain`` 
   shoe edges, y = ±width/2;
 - ``scene/track/links``: the rail line through the 82 pins (y = 0) and the two shoe edges;
 - ``scene/track/pins``: pin points coloured by pin tension (blue low → red high);
-- ``scene/wheels``: outlines of sprocket (pitch circle), idler, road wheels and return
-  rollers at both faces of each wheel, from the bodies' poses;
-- ``scene/sprocket_teeth``: tooth segments across the sprocket (shows its rotation);
-- ``scene/chassis``: chassis pose (``Transform3D``), its box static in ``scene/chassis/body``;
-- ``scene/idler_carrier``: the carrier box;
+- ``scene/wheels/<body>`` for sprocket, idler, road_wheel_1..6, return_roller_1..2: the
+  body pose (``Transform3D``, one row per frame) and, static in the body frame, the outline
+  of its visual cylinder at both faces (the sprocket's is its pitch circle);
+  ``scene/wheels/sprocket/teeth``: the tooth segments (show the sprocket's rotation);
+- ``scene/chassis``, ``scene/idler_carrier``: body pose per frame, box static in ``.../box``;
 - ``plots/pin_tension``: bar chart of the pin tensions [kN] by pin index 0..81.
 
 Time series (:meth:`PlaybackRecorder.log_timeseries`, columnar): see :data:`SERIES`.
@@ -106,13 +106,6 @@ def tension_colors(tension_N: np.ndarray, range_N: tuple[float, float]) -> np.nd
     return rgb.astype(np.uint8)
 
 
-def _mat_to_xyzw(xmat: np.ndarray) -> np.ndarray:
-    """Rerun quaternion (x, y, z, w) of a row-major 3×3 rotation (MuJoCo ``xmat``)."""
-    wxyz = np.empty(4)
-    mujoco.mju_mat2Quat(wxyz, np.asarray(xmat, dtype=float).ravel())
-    return wxyz[[1, 2, 3, 0]]
-
-
 def _tensor_rows(values: np.ndarray) -> pa.Array:
     """Rerun ``TensorData`` Arrow array with one 1-D float64 tensor per row of ``values``
     (n, m), built column-wise (``rr.BarChart`` converts one tensor per call, ~0.4 ms)."""
@@ -171,12 +164,10 @@ class PlaybackRecorder:
         self._geometry(plant)
         if frames_per_batch < 1:
             raise ValueError(f"frames_per_batch must be >= 1, got {frames_per_batch}")
-        n_geoms = len(self._geoms)
         self._t = np.empty(frames_per_batch)
-        self._xpos = np.empty((frames_per_batch, n_geoms, 3))
-        self._xmat = np.empty((frames_per_batch, n_geoms, 9))
-        self._chassis_pos = np.empty((frames_per_batch, 3))
-        self._chassis_quat = np.empty((frames_per_batch, 4))
+        self._pins = np.empty((frames_per_batch, len(self._pin_geoms), 3))
+        self._body_pos = np.empty((frames_per_batch, len(self._bodies), 3))
+        self._body_quat = np.empty((frames_per_batch, len(self._bodies), 4))
         self._tension = np.empty((frames_per_batch, plant.link_count))
         self._buffered = 0
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -198,40 +189,47 @@ class PlaybackRecorder:
 
     # ------------------------------------------------------------------ geometry
     def _geometry(self, plant: TrackPlant) -> None:
-        """Geoms drawn per frame and their constant shapes, read once from the model.
+        """Rigid bodies drawn per frame and their constant shapes in the body frames.
 
-        The frame buffer holds the world poses of ``self._geoms``: pins, wheel cylinders,
-        sprocket teeth and the idler-carrier box, in that order (``*_slice`` select them).
+        Each body in ``self._bodies`` gets a ``Transform3D`` per frame (its world pose) and
+        static shapes at its entity: wheels their visual-cylinder outline at both faces
+        (``scene/wheels/<body>``), the sprocket its teeth (``.../teeth``), chassis and idler
+        carrier their visual box (``.../box``).
         """
         m = plant.model
-        names = [m.geom(i).name for i in range(m.ngeom)]
-        body_of = [m.body(m.geom_bodyid[i]).name for i in range(m.ngeom)]
-        pins = [m.geom(f"link_{k:02d}_pin").id for k in range(plant.link_count)]
+        self.half_width_m = 0.5 * plant.params.track.link_width_m
+        self._pin_geoms = np.array([m.geom(f"link_{k:02d}_pin").id
+                                    for k in range(plant.link_count)])
         wheels = [i for i in range(m.ngeom)
                   if m.geom_type[i] == mujoco.mjtGeom.mjGEOM_CYLINDER
-                  and any(body_of[i] == b or (b.endswith("_") and body_of[i].startswith(b))
+                  and any(m.body(m.geom_bodyid[i]).name == b
+                          or (b.endswith("_") and m.body(m.geom_bodyid[i]).name.startswith(b))
                           for b in WHEEL_BODIES)]
-        teeth = [i for i, n in enumerate(names) if n.startswith("sprocket_tooth_")]
-        carrier = m.geom("idler_carrier_visual").id
-        self._geoms = np.array([*pins, *wheels, *teeth, carrier])
-        a, b, c = len(pins), len(pins) + len(wheels), len(pins) + len(wheels) + len(teeth)
-        self._pin_slice, self._wheel_slice, self._tooth_slice = slice(0, a), slice(a, b), \
-            slice(b, c)
-        self._carrier_index = c
-        self.wheel_names = [body_of[i] for i in wheels]
+        self.entities = {"scene/chassis": m.body("chassis").id,
+                         "scene/idler_carrier": m.body("idler_carrier").id}
+        self.entities |= {f"scene/wheels/{m.body(m.geom_bodyid[g]).name}": int(m.geom_bodyid[g])
+                          for g in wheels}
+        self._bodies = np.array(list(self.entities.values()))
         ang = np.linspace(0.0, 2.0 * np.pi, CIRCLE_SEGMENTS + 1)
-        unit = np.column_stack([np.cos(ang), np.sin(ang), np.zeros_like(ang)])
-        # outline points in the geom frame (n_wheels, 2 faces, K+1, 3); cylinder axis = local z
-        radius = m.geom_size[wheels, 0]
-        faces = np.stack([-m.geom_size[wheels, 1], m.geom_size[wheels, 1]], axis=1)
-        self._wheel_local = (radius[:, None, None, None] * unit[None, None]
-                             + faces[:, :, None, None] * np.array([0.0, 0.0, 1.0]))
-        self._tooth_half_len = m.geom_size[teeth, 1]
+        self._outlines: dict[str, np.ndarray] = {}
+        for g in wheels:
+            r, half = m.geom_size[g, :2]
+            rot = np.empty(9)
+            mujoco.mju_quat2Mat(rot, m.geom_quat[g])
+            faces = [np.column_stack([r * np.cos(ang), r * np.sin(ang), np.full_like(ang, z)])
+                     for z in (-half, half)]  # cylinder axis = geom z
+            name = f"scene/wheels/{m.body(m.geom_bodyid[g]).name}"
+            self._outlines[name] = np.stack(faces) @ rot.reshape(3, 3).T + m.geom_pos[g]
+        teeth = [i for i in range(m.ngeom) if m.geom(i).name.startswith("sprocket_tooth_")]
+        axes = np.empty((len(teeth), 9))
+        for row, g in zip(axes, teeth, strict=True):
+            mujoco.mju_quat2Mat(row, m.geom_quat[g])
+        half_axis = axes.reshape(-1, 3, 3)[:, :, 2] * m.geom_size[teeth, 1][:, None]
+        self._teeth = np.stack([m.geom_pos[teeth] - half_axis, m.geom_pos[teeth] + half_axis],
+                               axis=1)
         self.tooth_radius_m = float(m.geom_size[teeth[0], 0]) if teeth else 0.0
-        self.half_width_m = 0.5 * plant.params.track.link_width_m
-        self._chassis_body = m.body("chassis").id
-        self._chassis_box = m.geom("chassis_body").id
-        self._carrier_box = carrier
+        self._boxes = {"scene/chassis": m.geom("chassis_body").id,
+                       "scene/idler_carrier": m.geom("idler_carrier_visual").id}
         self._ground = m.geom("ground").id
 
     def terrain_profile(self) -> np.ndarray:
@@ -283,8 +281,8 @@ class PlaybackRecorder:
             collapse_panels=True)
 
     def _log_static(self) -> None:
-        """Coordinates, terrain, and the per-frame entities' constant components."""
-        s, hw = self.stream, self.half_width_m
+        """Coordinates, terrain, body shapes, and the per-frame entities' constant parts."""
+        s, hw, m = self.stream, self.half_width_m, self.plant.model
         s.log("scene", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         ground = self.terrain_profile()
         edges = [np.column_stack([ground[:, 0], np.full(len(ground), y), ground[:, 1]])
@@ -298,39 +296,33 @@ class PlaybackRecorder:
                                                   (120, 120, 125)]), static=True)
         s.log("scene/track/pins",
               rr.Points3D.from_fields(radii=self.plant.params.track.pin_radius_m), static=True)
-        wheel_labels = [n for n in self.wheel_names for _ in (0, 1)]
-        s.log("scene/wheels",
-              rr.LineStrips3D.from_fields(radii=0.006, colors=[(60, 60, 60)],
-                                          labels=wheel_labels, show_labels=False),
+        for entity, outline in self._outlines.items():
+            s.log(entity, rr.LineStrips3D(outline, radii=0.006, colors=[(60, 60, 60)],
+                                          labels=entity.rsplit("/", 1)[1], show_labels=False),
+                  static=True)
+        s.log("scene/wheels/sprocket/teeth",
+              rr.LineStrips3D(self._teeth, radii=self.tooth_radius_m, colors=[(40, 40, 40)]),
               static=True)
-        s.log("scene/sprocket_teeth",
-              rr.LineStrips3D.from_fields(radii=self.tooth_radius_m, colors=[(40, 40, 40)]),
-              static=True)
-        m = self.plant.model
-        b = self._chassis_box
-        s.log("scene/chassis/body",
-              rr.Boxes3D(centers=m.geom_pos[b], half_sizes=m.geom_size[b],
-                         quaternions=[m.geom_quat[b][[1, 2, 3, 0]]], colors=[(230, 150, 25)],
-                         fill_mode="MajorWireframe", labels="chassis", show_labels=False),
-              static=True)
-        s.log("scene/idler_carrier",
-              rr.Boxes3D.from_fields(half_sizes=[m.geom_size[self._carrier_box]],
-                                     colors=[(75, 75, 200)], fill_mode="Solid"), static=True)
+        for (entity, g), color in zip(self._boxes.items(), [(230, 150, 25), (75, 75, 200)],
+                                      strict=True):
+            s.log(f"{entity}/box",
+                  rr.Boxes3D(centers=m.geom_pos[g], half_sizes=m.geom_size[g],
+                             quaternions=[m.geom_quat[g][[1, 2, 3, 0]]], colors=[color],
+                             fill_mode="MajorWireframe"), static=True)
 
     # ------------------------------------------------------------------ per frame
     def log_frame(self, t_s: float) -> None:
         """Record the plant's current state as the scene at simulated time ``t_s`` [s].
 
-        The state (geom poses, chassis pose, pin tensions) is copied into a buffer that is
+        The state (pin positions, body poses, pin tensions) is copied into a buffer that is
         sent column-wise every ``frames_per_batch`` frames and at :meth:`close`.
         """
         self._check_open()
         d, i = self.plant.data, self._buffered
         self._t[i] = t_s
-        self._xpos[i] = d.geom_xpos[self._geoms]
-        self._xmat[i] = d.geom_xmat[self._geoms]
-        self._chassis_pos[i] = d.xpos[self._chassis_body]
-        self._chassis_quat[i] = d.xquat[self._chassis_body]
+        self._pins[i] = d.geom_xpos[self._pin_geoms]
+        self._body_pos[i] = d.xpos[self._bodies]
+        self._body_quat[i] = d.xquat[self._bodies]
         self._tension[i] = self.plant.pin_tensions_N()
         self._buffered += 1
         self._frames += 1
@@ -345,43 +337,23 @@ class PlaybackRecorder:
         self._buffered = 0
         s = self.stream
         times = [rr.TimeColumn(TIMELINE, duration=self._t[:k].copy())]
-        xpos, xmat = self._xpos[:k], self._xmat[:k]
-
-        pins = xpos[:, self._pin_slice]
+        pins = self._pins[:k]
         loop = np.concatenate([pins, pins[:, :1]], axis=1)
         shift = np.array([0.0, self.half_width_m, 0.0])
         strips = np.stack([loop, loop - shift, loop + shift], axis=1)
         s.send_columns("scene/track/links", indexes=times, columns=rr.LineStrips3D.columns(
             strips=strips.reshape(-1, *loop.shape[1:])).partition(np.full(k, 3)))
         tension = self._tension[:k]
-        n_pins = tension.shape[1]
         s.send_columns("scene/track/pins", indexes=times, columns=rr.Points3D.columns(
             positions=pins.reshape(-1, 3),
             colors=tension_colors(tension.ravel(), self.tension_range_N),
-        ).partition(np.full(k, n_pins)))
+        ).partition(np.full(k, tension.shape[1])))
         s.send_columns("plots/pin_tension", indexes=times, columns=[rr.ComponentColumn(
             rr.BarChart.descriptor_values(), TensorDataBatch(_tensor_rows(tension * 1e-3)))])
-
-        sl = self._wheel_slice
-        rot = xmat[:, sl].reshape(k, -1, 3, 3)
-        outline = (np.einsum("fwij,wskj->fwski", rot, self._wheel_local)
-                   + xpos[:, sl, None, None, :])
-        s.send_columns("scene/wheels", indexes=times, columns=rr.LineStrips3D.columns(
-            strips=outline.reshape(-1, CIRCLE_SEGMENTS + 1, 3),
-        ).partition(np.full(k, 2 * rot.shape[1])))
-
-        sl = self._tooth_slice
-        axis = xmat[:, sl].reshape(k, -1, 3, 3)[..., 2] * self._tooth_half_len[:, None]
-        centre = xpos[:, sl]
-        teeth = np.stack([centre - axis, centre + axis], axis=2)
-        s.send_columns("scene/sprocket_teeth", indexes=times, columns=rr.LineStrips3D.columns(
-            strips=teeth.reshape(-1, 2, 3)).partition(np.full(k, teeth.shape[1])))
-
-        s.send_columns("scene/chassis", indexes=times, columns=rr.Transform3D.columns(
-            translation=self._chassis_pos[:k], quaternion=self._chassis_quat[:k, [1, 2, 3, 0]]))
-        c = self._carrier_index
-        s.send_columns("scene/idler_carrier", indexes=times, columns=rr.Boxes3D.columns(
-            centers=xpos[:, c], quaternions=np.array([_mat_to_xyzw(m) for m in xmat[:, c]])))
+        xyzw = self._body_quat[:k][:, :, [1, 2, 3, 0]]
+        for j, entity in enumerate(self.entities):
+            s.send_columns(entity, indexes=times, columns=rr.Transform3D.columns(
+                translation=self._body_pos[:k, j], quaternion=xyzw[:, j]))
 
     def step_callback(self, period_s: float = FRAME_PERIOD_S) -> Callable[[TrackPlant], None]:
         """``on_step`` callback for :meth:`TrackPlant.run` logging a frame every
