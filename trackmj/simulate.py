@@ -18,7 +18,9 @@ Architectures (same controller, weights, horizons, steps and references in all):
   no pressures (sensors see the equivalent head pressure), no supply limit.
 
 The solenoid delay lives in the hydraulic plugin (tp, tp-weak, dp-a); the valve logic then
-runs without its own delay so the delay is not counted twice.
+runs without its own delay so the delay is not counted twice. Runs are deterministic per
+seed: a controller solve that overruns its period is still applied (in a simulation the
+plant waits) and counted as ``controller_overruns``; only solver failures fall back.
 """
 
 from __future__ import annotations
@@ -187,7 +189,10 @@ def control_config(hyd: HydraulicParams, idler: EquivalentIdler, y0_m: float,
         tank_pressure_Pa=hyd.tank_pressure_Pa, stiffness_N_m=idler.stiffness_N_m,
         mass_kg=idler.mass_kg, damping_N_s_m=idler.damping_N_s_m, free_position_m=y0_m)
     valves = dataclasses.replace(cfg.valves, solenoid_delay_s=0.0)
-    return dataclasses.replace(cfg, plant=plant, valves=valves)
+    # a simulation must not depend on the wall clock: every finished solve is applied and
+    # overruns of the controller period are counted from the solve times instead
+    mpc = dataclasses.replace(cfg.mpc, time_budget_s=10.0)
+    return dataclasses.replace(cfg, plant=plant, valves=valves, mpc=mpc)
 
 
 def make_controller(name: str, model: ReducedModel, cfg: ControlConfig):
@@ -390,6 +395,7 @@ def _loop(run: _Run, controller_name: str, estimator_name: str, seed: int, durat
         result.metrics["friction_loss_J"] = tens.ledger.friction_J
         result.metrics["ledger_balance_error_J"] = tens.ledger.balance_error_J
     result.metrics["controller_fallbacks"] = float(getattr(controller, "fallbacks", 0))
+    result.metrics["controller_overruns"] = float(np.sum(np.array(solve_times) > period))
     if track is not None:
         result.metrics["mujoco_warnings"] = float(track.warning_count)
     if playback is not None:
