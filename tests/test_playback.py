@@ -170,6 +170,19 @@ def test_timeseries_values_in_display_units(recording: dict) -> None:
     np.testing.assert_allclose(np.sort(values), 12.0 + t, rtol=1e-12)  # kN, monotonic in t
 
 
+def test_recording_named_after_the_run_and_valve_drawn_as_steps(recording: dict) -> None:
+    from rerun.chunk import RrdReader
+
+    static = {}
+    for chunk in RrdReader(recording["path"]).stream():
+        if chunk.is_static:
+            for row in chunk.to_record_batch().to_pylist():
+                static.setdefault(chunk.entity_path, {}).update(row)
+    assert static["/__properties"]["RecordingInfo:name"] == ["W1 tp nmpc ekf seed 0"]
+    assert static["/plots/valve/mode"]["SeriesLines:interpolation_mode"] != \
+        static["/plots/valve/u"].get("SeriesLines:interpolation_mode")
+
+
 def test_failure_during_recording_leaves_no_file(plant: TrackPlant, tmp_path: Path) -> None:
     target = tmp_path / RUN_RRD
     with pytest.raises(RuntimeError, match="boom"), PlaybackRecorder(plant, target) as rec:

@@ -74,6 +74,8 @@ class Series:
     scale: float
     name: str
     color: tuple[int, int, int]
+    step: bool = False
+    """Discrete signal: drawn as steps (held until the next sample)."""
 
 
 SERIES: tuple[Series, ...] = (
@@ -83,7 +85,7 @@ SERIES: tuple[Series, ...] = (
     Series("plots/pressure/rod", "p_rod_Pa", 1e-6, "rod [MPa]", (30, 90, 200)),
     Series("plots/pressure/supply", "p_supply_Pa", 1e-6, "supply [MPa]", (90, 90, 90)),
     Series("plots/valve/mode", "valve_mode", 1.0, "valve mode [-1 release, 0 hold, +1 press]",
-           (120, 60, 160)),
+           (120, 60, 160), step=True),
     Series("plots/valve/u", "u", 1.0, "u [-]", (40, 150, 70)),
     Series("plots/energy/supply", "e_supply_J", 1e-3, "supply energy [kJ]", (200, 60, 40)),
     Series("plots/energy/p_work", "p_work_J", 1e-3, "∫Σp·A·v dt [kJ]", (30, 90, 200)),
@@ -149,11 +151,12 @@ class PlaybackRecorder:
 
     def __init__(self, plant: TrackPlant, path: str | Path, *,
                  tension_range_N: tuple[float, float] = (0.0, 25e3),
-                 frames_per_batch: int = 50,
-                 recording_name: str | None = None) -> None:
+                 frames_per_batch: int = 50) -> None:
         lo, hi = tension_range_N
         if not hi > lo:
             raise ValueError(f"tension_range_N must be increasing, got {tension_range_N}")
+        if frames_per_batch < 1:
+            raise ValueError(f"frames_per_batch must be >= 1, got {frames_per_batch}")
         self.path = Path(path)
         if self.path.suffix != ".rrd":
             raise ValueError(f"{self.path}: a Rerun recording needs the .rrd suffix")
@@ -162,8 +165,6 @@ class PlaybackRecorder:
         self._closed = False
         self._frames = 0
         self._geometry(plant)
-        if frames_per_batch < 1:
-            raise ValueError(f"frames_per_batch must be >= 1, got {frames_per_batch}")
         self._t = np.empty(frames_per_batch)
         self._pins = np.empty((frames_per_batch, len(self._pin_geoms), 3))
         self._body_pos = np.empty((frames_per_batch, len(self._bodies), 3))
@@ -180,8 +181,6 @@ class PlaybackRecorder:
             self.stream.set_log_tick_enabled(False)
             self.stream.set_log_time_enabled(False)
             self.stream.save(self._tmp, default_blueprint=self.blueprint())
-            if recording_name:
-                self.stream.send_recording_name(recording_name)
             self._log_static()
         except BaseException:
             self._tmp.unlink(missing_ok=True)
@@ -227,7 +226,7 @@ class PlaybackRecorder:
         half_axis = axes.reshape(-1, 3, 3)[:, :, 2] * m.geom_size[teeth, 1][:, None]
         self._teeth = np.stack([m.geom_pos[teeth] - half_axis, m.geom_pos[teeth] + half_axis],
                                axis=1)
-        self.tooth_radius_m = float(m.geom_size[teeth[0], 0]) if teeth else 0.0
+        self.tooth_radius_m = float(m.geom_size[teeth[0], 0])
         self._boxes = {"scene/chassis": m.geom("chassis_body").id,
                        "scene/idler_carrier": m.geom("idler_carrier_visual").id}
         self._ground = m.geom("ground").id
@@ -377,18 +376,24 @@ class PlaybackRecorder:
     # ------------------------------------------------------------------ time series
     def log_timeseries(self, result: Result) -> None:
         """Send the result's time-series columns (:data:`SERIES`) on the ``sim`` timeline
-        (``t_s`` [s]) in one columnar batch per series, with display names and colours."""
+        (``t_s`` [s]) in one columnar batch per series, with display names and colours; the
+        recording is named after the run (scenario, architecture, controller, seed)."""
         self._check_open()
         table = result.timeseries
         missing = [c for c in ("t_s", *(sr.column for sr in SERIES))
                    if c not in table.column_names]
         if missing:
             raise ValueError(f"result timeseries lacks column(s) {missing}")
+        meta = result.metadata
+        self.stream.send_recording_name(
+            " ".join(meta.get(k, "?") for k in ("scenario", "architecture", "controller",
+                                                 "estimator")) + f" seed {meta.get('seed', '?')}")
         times = rr.TimeColumn(TIMELINE, duration=table.column("t_s").to_numpy())
         for sr in SERIES:
             values = table.column(sr.column).to_numpy().astype(float) * sr.scale
-            self.stream.log(sr.entity, rr.SeriesLines(names=sr.name, colors=[sr.color]),
-                            static=True)
+            style = rr.SeriesLines(names=sr.name, colors=[sr.color],
+                                   interpolation_mode="StepAfter" if sr.step else None)
+            self.stream.log(sr.entity, style, static=True)
             self.stream.send_columns(sr.entity, indexes=[times],
                                      columns=rr.Scalars.columns(scalars=values))
 
@@ -404,9 +409,14 @@ class PlaybackRecorder:
         try:
             self._send_frames()
             self.stream.flush()
-            self.stream.disconnect()
-            umask = os.umask(0)
-            os.umask(umask)
+        except BaseException:
+            self._closed = False
+            self.discard()
+            raise
+        self.stream.disconnect()
+        umask = os.umask(0)
+        os.umask(umask)
+        try:
             os.chmod(self._tmp, 0o666 & ~umask)
             os.replace(self._tmp, self.path)
         except BaseException:
