@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import gc
 import subprocess
 import sys
 from pathlib import Path
@@ -188,6 +189,16 @@ def test_failure_during_recording_leaves_no_file(plant: TrackPlant, tmp_path: Pa
     with pytest.raises(RuntimeError, match="boom"), PlaybackRecorder(plant, target) as rec:
         rec.log_frame(0.0)
         raise RuntimeError("boom")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_recorder_dropped_without_close_leaves_no_file(plant: TrackPlant,
+                                                       tmp_path: Path) -> None:
+    rec = PlaybackRecorder(plant, tmp_path / RUN_RRD)
+    rec.log_frame(0.0)
+    assert len(list(tmp_path.iterdir())) == 1  # the hidden temporary
+    del rec
+    gc.collect()
     assert list(tmp_path.iterdir()) == []
 
 

@@ -33,6 +33,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -139,7 +140,8 @@ class PlaybackRecorder:
         with PlaybackRecorder(plant, out_dir / "run.rrd") as rec:
             plant.run(element, duration_s, on_step=rec.step_callback())
             rec.log_timeseries(result)
-        # rec.path now exists; an exception inside the block leaves no file
+        # rec.path now exists; an exception inside the block leaves no file, nor does a
+        # recorder that is dropped without close()
 
     Each recorder has its own ``rr.RecordingStream`` (never the global one), so several can
     coexist in one process. The plant supplies the geometry (model geoms) and, at every
@@ -176,6 +178,9 @@ class PlaybackRecorder:
                                    suffix=".tmp")
         os.close(fd)
         self._tmp = Path(tmp)
+        # a recorder dropped without close() (e.g. an exception in the caller's loop) leaves
+        # no partial file: the temporary is removed when the recorder is collected
+        weakref.finalize(self, self._tmp.unlink, missing_ok=True)
         try:
             self.stream = rr.RecordingStream(APPLICATION_ID)
             self.stream.set_log_tick_enabled(False)
