@@ -4,9 +4,10 @@ State X = [p_head Pa, p_rod Pa, y m, y_dot m/s] (pressures gauge; y = stroke, gr
 Input u in [-1, 1]: continuous equivalent valve opening (time average of the discrete modes):
 
 - u > 0 (pressurize): supply -> head open by fraction u; rod -> tank fully open (main valve at
-  rest, line B to tank).
+  rest, line B vents to tank through the main valve's edge, no restrictor).
 - u = 0 (hold): heads trapped (V_L, V_R closed), rod -> tank fully open.
-- u < 0 (release): head -> tank open by |u|; supply -> rod open by |u|, rod -> tank by 1 - |u|.
+- u < 0 (release): head -> tank open by |u|; supply -> rod open by |u| (through the line-B
+  feed restrictor), rod -> tank (vent) by 1 - |u|.
 
 At u in {-1, 0, +1} this is exactly the circuit of docs/sizing.md; in between it is the time
 average of the modes (what the sum-up-rounding valve logic realises). Orifices follow the
@@ -52,7 +53,9 @@ def _rhs_generic(
 
     pt = p.tank_pressure_Pa
     q_h = p.valve_area_head_m2 * (a_pos * orifice(p_s - ph) - a_neg * orifice(ph - pt))
-    q_r = p.valve_area_rod_m2 * (a_neg * orifice(p_s - pr) - (1.0 - a_neg) * orifice(pr - pt))
+    q_r = p.valve_area_rod_m2 * a_neg * orifice(p_s - pr) - p.vent_area_rod_m2 * (
+        1.0 - a_neg
+    ) * orifice(pr - pt)
     q_l = p.leakage_m3_s_Pa * (ph - pr)
     v_h = p.dead_volume_head_m3 + p.area_head_m2 * y
     v_r = p.dead_volume_rod_m3 + p.area_rod_m2 * (p.stroke_m - y)
@@ -108,8 +111,9 @@ class ReducedModel:
         o_rt, g_rt = orifice(pr - pt)
         q_h = p.valve_area_head_m2 * (a_pos * o_sh - a_neg * o_ht)
         dqh = -p.valve_area_head_m2 * (a_pos * g_sh + a_neg * g_ht)
-        q_r = p.valve_area_rod_m2 * (a_neg * o_sr - (1.0 - a_neg) * o_rt)
-        dqr = -p.valve_area_rod_m2 * (a_neg * g_sr + (1.0 - a_neg) * g_rt)
+        a_vent = p.vent_area_rod_m2 * (1.0 - a_neg)
+        q_r = p.valve_area_rod_m2 * a_neg * o_sr - a_vent * o_rt
+        dqr = -(p.valve_area_rod_m2 * a_neg * g_sr + a_vent * g_rt)
         cl = p.leakage_m3_s_Pa
         q_l = cl * (ph - pr)
         ah, ar, beta, m = p.area_head_m2, p.area_rod_m2, p.bulk_modulus_Pa, p.mass_kg

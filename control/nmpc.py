@@ -63,6 +63,10 @@ class _MpcBase:
                 }
             )
 
+    def _parameters(self, x0: NDArray[np.float64], ref: NDArray[np.float64]) -> NDArray[np.float64]:
+        """OCP parameter vector for initial state x0 (4,) and preview ref (N+1,) [N]."""
+        return parameter_vector(x0, ref, self.u_prev, self.theta, self.ctrl)
+
     def _solve(
         self, w0: NDArray[np.float64], p: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool, int]:
@@ -78,9 +82,7 @@ class _MpcBase:
         # gauge pressures below p_min are estimator noise; a hard bound at node 1 would make
         # the problem locally infeasible, so the initial state is projected onto p >= p_min
         x0[:2] = np.maximum(x0[:2], self.ctrl.pressure_min_Pa)
-        p = parameter_vector(
-            x0, np.asarray(reference_preview, float), self.u_prev, self.theta, self.ctrl
-        )
+        p = self._parameters(x0, np.asarray(reference_preview, float))
         w0 = self._shifted_guess(x0)
         t0 = time.perf_counter()
         try:

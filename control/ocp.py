@@ -9,7 +9,7 @@ Decision variables (scaled: pressures MPa, stroke mm, velocity 0.1 m/s; this sca
 the implicit-Euler Jacobian entries to O(1-10); with mm/s the QPs stalled, measured):
 w = [u_0 .. u_{nb-1}, s_1 .. s_N, X_{i,j} for i < N, j = 1..d], s_i >= 0 soft-band slacks.
 Parameters p = [x0 (4, SI), F_ref_0..N (N+1, N), u_prev, theta (p_s Pa, k_eq N/m, y0 m),
-F_min N, F_max N, p_min Pa, p_max Pa].
+F_min N, F_max N, p_min Pa, p_max Pa], and for the linear OCP the affine model (c, A, B).
 
 Cost: sum_i w_F (F_i - F_ref_i)^2 [kN^2] + sum_b L (w_u u_b^2 + w_du (u_b - u_{b-1})^2)
 + w_s s_i^2; constraints F_min - s_i <= F_i <= F_max + s_i (soft), p_min <= p <= p_max (hard)
@@ -63,33 +63,46 @@ def radau_matrices(d: int) -> tuple[list[float], NDArray[np.float64]]:
     return tau, c
 
 
+#: Number of linear-model parameters appended to p by ``build_ocp(linear=True)``:
+#: c (4), A (4x4, column-major), B (4) of xdot = c + A x + B u (SI).
+N_LINEAR = 24
+
+
+def linearisation_function(model: ReducedModel) -> ca.Function:
+    """CasADi Function (x_op (4,), u_op, theta (3,)) -> [c; vec(A); B] (24,) with
+    xdot ~ c + A x + B u the first-order Taylor model at (x_op, u_op) (SI)."""
+    xs, us, ths = ca.SX.sym("x", 4), ca.SX.sym("u"), ca.SX.sym("th", N_THETA)
+    fx = model.casadi_function()(xs, us, ths)
+    a, b = ca.jacobian(fx, xs), ca.jacobian(fx, us)
+    c = fx - ca.mtimes(a, xs) - b * us
+    return ca.Function("linearisation", [xs, us, ths], [ca.vertcat(c, ca.vec(a), b)])
+
+
 def build_ocp(
-    model: ReducedModel,
-    ctrl: ControllerParams,
-    mpc: MpcParams,
-    linearise_at: tuple[NDArray[np.float64], float, NDArray[np.float64]] | None = None,
+    model: ReducedModel, ctrl: ControllerParams, mpc: MpcParams, linear: bool = False
 ) -> Ocp:
-    """Build the OCP; with ``linearise_at = (x_op, u_op, theta_op)`` the dynamics are the
-    first-order Taylor model at that point (a QP in w), else the nonlinear reduced model."""
+    """Build the OCP on the nonlinear reduced model, or with ``linear`` on the affine model
+    xdot = c + A x + B u whose (c, A, B) are the last ``N_LINEAR`` parameters (a QP in w
+    whose linearisation point can change at every solve without rebuilding)."""
     n, d, nb = mpc.horizon_steps, mpc.collocation_degree, mpc.horizon_steps // mpc.block_steps
     h = ctrl.period_s
     _, cmat = radau_matrices(d)
     f_c = model.casadi_function()
-    if linearise_at is not None:
-        x_op, u_op, th_op = linearise_at
-        xs, us, ths = ca.SX.sym("x", 4), ca.SX.sym("u"), ca.SX.sym("th", N_THETA)
-        f_op = f_c(x_op, u_op, th_op)
-        a_op = ca.Function("a", [], [ca.jacobian(f_c(xs, u_op, th_op), xs)])()["o0"]
-        b_op = ca.Function("b", [], [ca.jacobian(f_c(x_op, us, th_op), us)])()["o0"]
-        f_lin = f_op + ca.mtimes(a_op, xs - x_op) + b_op * (us - u_op)
-        f_c = ca.Function("lin_rhs", [xs, us, ths], [f_lin])
+    extra = []
+    if linear:
+        lin_p = ca.SX.sym("lin", N_LINEAR)
+        extra = [lin_p]
+        a_mat = ca.reshape(lin_p[4:20], 4, 4)
+
+        def f_c(x: ca.SX, u_: ca.SX, _theta: ca.SX) -> ca.SX:
+            return lin_p[:4] + ca.mtimes(a_mat, x) + lin_p[20:] * u_
 
     x0 = ca.SX.sym("x0", 4)
     ref = ca.SX.sym("ref", n + 1)
     u_prev = ca.SX.sym("u_prev")
     theta = ca.SX.sym("theta", N_THETA)
     lim = ca.SX.sym("lim", 4)  # F_min, F_max, p_min, p_max (SI)
-    p = ca.vertcat(x0, ref, u_prev, theta, lim)
+    p = ca.vertcat(x0, ref, u_prev, theta, lim, *extra)
 
     u = ca.SX.sym("u", nb)
     s = ca.SX.sym("s", n)

@@ -35,6 +35,9 @@ class PlantParams:
     """Reduced model: one equivalent cylinder (both cylinders lumped) + idler mass-spring-damper.
 
     State X = [p_head Pa, p_rod Pa, y m, y_dot m/s]; y = stroke, grows outward (tensioning).
+    Areas [m^2] are effective full-opening path areas: valve_area_head_m2 supply<->heads and
+    heads->tank, valve_area_rod_m2 the release feed supply->rods, vent_area_rod_m2 rods->tank.
+    Defaults equal ``models/lf1352_control.toml``.
     """
 
     area_head_m2: float = 2.513e-3
@@ -45,17 +48,18 @@ class PlantParams:
     bulk_modulus_Pa: float = 1.4e9
     density_kg_m3: float = 860.0
     discharge_coefficient: float = 0.65
-    valve_area_head_m2: float = 2.2e-7
-    valve_area_rod_m2: float = 2.2e-7
+    valve_area_head_m2: float = 5.5e-8
+    valve_area_rod_m2: float = 5.5e-8
+    vent_area_rod_m2: float = 1.0e-5
     critical_pressure_Pa: float = 1.0e5
     opening_smoothing: float = 0.01
     supply_pressure_Pa: float = 12.0e6
     tank_pressure_Pa: float = 0.2e6
     leakage_m3_s_Pa: float = 1.0e-14
-    mass_kg: float = 80.0
-    stiffness_N_m: float = 1.0e6
-    damping_N_s_m: float = 5.0e3
-    free_position_m: float = 0.035
+    mass_kg: float = 474.0
+    stiffness_N_m: float = 9.4e6
+    damping_N_s_m: float = 1.3e5
+    free_position_m: float = 0.0484
 
     def __post_init__(self) -> None:
         _check(self, "area_head_m2", 0.0, 1.0, lo_open=True)
@@ -68,6 +72,7 @@ class PlantParams:
         _check(self, "discharge_coefficient", 0.0, 1.0, lo_open=True)
         _check(self, "valve_area_head_m2", 0.0, 1e-2, lo_open=True)
         _check(self, "valve_area_rod_m2", 0.0, 1e-2, lo_open=True)
+        _check(self, "vent_area_rod_m2", 0.0, 1e-2, lo_open=True)
         _check(self, "critical_pressure_Pa", 0.0, 5e6, lo_open=True)
         _check(self, "opening_smoothing", 0.0, 0.1, lo_open=True)
         _check(self, "supply_pressure_Pa", 0.0, 5e7, lo_open=True)
@@ -175,12 +180,12 @@ class MpcParams:
     block_steps: int = 3
     collocation_degree: int = 1
     weight_force_per_kN2: float = 1.0
-    weight_input: float = 0.05
-    weight_input_rate: float = 0.5
+    weight_input: float = 3.0
+    weight_input_rate: float = 2.0
     weight_force_slack_per_kN2: float = 1.0e3
     max_iter: int = 3
-    qp_max_iter: int = 4000
-    qp_tolerance: float = 1e-5
+    qp_max_iter: int = 100
+    qp_tolerance: float = 1e-4
     time_budget_s: float = 0.010
 
     def __post_init__(self) -> None:
