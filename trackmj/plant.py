@@ -115,10 +115,17 @@ class TrackPlant:
         self.link_count = n
         self._link_body = np.array([m.body(f"link_{k:02d}").id for k in range(n)])
         self._pin_geom = np.array([m.geom(f"link_{k:02d}_pin").id for k in range(n)])
+        # pin k joins link_{k-1} and link_k; its child in the tree is link_k on branch A
+        # (k <= 40), link_{k-1} on branch B (k >= 42) and link_81 for pin 0; the closure
+        # pin's entry is a placeholder (its force comes from the equality constraint)
+        child = [n - 1 if k == 0 else (k if k <= LOOP_CLOSURE_PIN else k - 1)
+                 for k in range(n)]
+        self._pin_child_body = self._link_body[child]
         self._closure_eq = m.equality("loop_closure").id
         self._closure_sites = (m.site("closure_a").id, m.site("closure_b").id)
         self._chassis_body = m.body("chassis").id
         self._sprocket_body = m.body("sprocket").id
+        self._carrier_body = m.body("idler_carrier").id
         self._tooth_geoms = {i for i in range(m.ngeom)
                              if m.geom(i).name.startswith("sprocket_tooth_")}
         self._group_of_body = self._contact_groups()
@@ -209,6 +216,13 @@ class TrackPlant:
             raise ValueError(f"track speed must be finite, got {speed_m_s!r}")
         self.data.ctrl[self._drive] = speed_m_s / self.params.sprocket_pitch_radius_m
 
+    def set_idler_load(self, load_N: float) -> None:
+        """Extra external load [N] on the idler carrier, along the slide, > 0 pulling the idler
+        inward like a higher track tension would (an equivalent load disturbance)."""
+        d = self.data
+        axis = d.xmat[self._carrier_body].reshape(3, 3)[:, 0]
+        d.xfrc_applied[self._carrier_body, :3] = -load_N * axis
+
     @property
     def chassis_pose(self) -> np.ndarray:
         """(x [m], z [m], pitch [rad]) of the chassis frame relative to its layout pose."""
@@ -250,26 +264,13 @@ class TrackPlant:
         (``cfrc_int`` after ``mj_rnePostConstraint``), projected on the child's axis;
         the closure pin from the ``loop_closure`` constraint force.
         """
-        m, d = self.model, self.data
-        mujoco.mj_rnePostConstraint(m, d)
-        n = self.link_count
-        tension = np.empty(n)
-        for k in range(n):
-            if k == 0 or k == LOOP_CLOSURE_PIN:
-                continue
-            # pin k joins link_{k-1} and link_k; the child in the tree is link_k for
-            # branch A (k <= 40) and link_{k-1} for branch B (k >= 42); pin 0: link_81
-            child = k if k < LOOP_CLOSURE_PIN else k - 1
-            tension[k] = self._child_tension(child)
-        tension[0] = self._child_tension(n - 1)
+        d = self.data
+        mujoco.mj_rnePostConstraint(self.model, d)
+        bodies = self._pin_child_body
+        axes = d.xmat[bodies, 0::3]   # first column of each body's rotation matrix
+        tension = -np.einsum("ij,ij->i", d.cfrc_int[bodies, 3:6], axes)
         tension[LOOP_CLOSURE_PIN] = self._closure_tension()
         return tension
-
-    def _child_tension(self, link: int) -> float:
-        body = self._link_body[link]
-        force_from_parent = self.data.cfrc_int[body, 3:6]
-        axis = self.data.xmat[body].reshape(3, 3)[:, 0]
-        return float(-force_from_parent @ axis)
 
     def _closure_tension(self) -> float:
         d = self.data

@@ -18,7 +18,14 @@ Architectures (same controller, weights, horizons, steps and references in all):
   no pressures (sensors see the equivalent head pressure), no supply limit.
 
 The solenoid delay lives in the hydraulic plugin (tp, tp-weak, dp-a); the valve logic then
-runs without its own delay so the delay is not counted twice. Runs are deterministic per
+runs without its own delay so the delay is not counted twice.
+
+W3's load pulses enter as an equivalent external load on the idler carrier (along the
+slide). A physical braking pulse was measured on the track in hold mode: a sprocket
+deceleration of 0.5 m/s² raises the idler load by ~2.1 kN, but an acceleration of 0.5 m/s²
+lowers it by only ~0.3 kN (the rear-drive tight side is the bottom strand), so the study's
+−1.5 kN pulse has no plausible drive-torque equivalent; both pulses therefore use the
+equivalent load (dp-a sees them through the replayed tp track load). Runs are deterministic per
 seed: a controller solve that overruns its period is still applied (in a simulation the
 plant waits) and counted as ``controller_overruns``; only solver failures fall back.
 """
@@ -336,6 +343,7 @@ def _loop(run: _Run, controller_name: str, estimator_name: str, seed: int, durat
     ref = sc.reference_N(t_grid) * var.pretension_scale
     supply_set = sc.supply_pressure_Pa(t_grid)
     speed = sc.track_speed_m_s(t_grid)
+    pulses = sc.load_pulse_N(t_grid - dt) if sc.load_pulses and track is not None else None
     acc_index = track.model.jnt_dofadr[track.model.joint("chassis_z").id] if track else None
     playback = None
     if rrd is not None and track is not None:
@@ -353,33 +361,40 @@ def _loop(run: _Run, controller_name: str, estimator_name: str, seed: int, durat
     u = 0.0
     mode = 0
     wall_start = time.perf_counter()
-    for k in range(steps):
-        t = k * dt
-        if k % ratio == 0:
-            preview = sc.reference_preview(t, horizon + 1, period) * var.pretension_scale
-            if set_params is not None:
-                set_params(supply_pressure_Pa=float(supply_set[k]))
-            out = controller(x_hat, preview, t)
-            u = out.u
-            solve_times.append(out.solve_time_s)
-            solve_ok.append(out.success)
-        mode = valves.step(u)
-        tens.set_mode(mode)
-        if track is not None:
-            track.set_track_speed(float(speed[k]))
-        mech.step(tens)
-        p_head, p_rod, p_supply, q_supply, e_supply, p_work, mech_work = _hydraulic_row(tens)
-        stroke, velocity = mech.stroke_m, mech.stroke_velocity_m_s
-        z = sensors.measure(np.array((p_head, p_rod, stroke, velocity)))
-        x_hat = est.step(z, float(mode), float(supply_set[k]))
-        acc_z = float(track.data.qacc[acc_index]) if track is not None else math.nan
-        closure = track.closure_error_m if track is not None else math.nan
-        rec.append(k, t + dt, mech.idler_force_N, ref[k], p_head, p_rod, p_supply, stroke,
-                   velocity, q_supply, mode, u, e_supply, p_work, mech_work, acc_z, closure)
-        if playback is not None and (k + 1) % FRAME_EVERY_STEPS == 0:
-            playback.log_frame(t + dt)
-        if bar is not None and k % 100 == 99:
-            bar.update(100)
+    try:
+        for k in range(steps):
+            t = k * dt
+            if k % ratio == 0:
+                preview = sc.reference_preview(t, horizon + 1, period) * var.pretension_scale
+                if set_params is not None:
+                    set_params(supply_pressure_Pa=float(supply_set[k]))
+                out = controller(x_hat, preview, t)
+                u = out.u
+                solve_times.append(out.solve_time_s)
+                solve_ok.append(out.success)
+            mode = valves.step(u)
+            tens.set_mode(mode)
+            if track is not None:
+                track.set_track_speed(float(speed[k]))
+                if pulses is not None:
+                    track.set_idler_load(float(pulses[k]))
+            mech.step(tens)
+            p_head, p_rod, p_supply, q_supply, e_supply, p_work, mech_work = _hydraulic_row(tens)
+            stroke, velocity = mech.stroke_m, mech.stroke_velocity_m_s
+            z = sensors.measure(np.array((p_head, p_rod, stroke, velocity)))
+            x_hat = est.step(z, float(mode), float(supply_set[k]))
+            acc_z = float(track.data.qacc[acc_index]) if track is not None else math.nan
+            closure = track.closure_error_m if track is not None else math.nan
+            rec.append(k, t + dt, mech.idler_force_N, ref[k], p_head, p_rod, p_supply, stroke,
+                       velocity, q_supply, mode, u, e_supply, p_work, mech_work, acc_z, closure)
+            if playback is not None and (k + 1) % FRAME_EVERY_STEPS == 0:
+                playback.log_frame(t + dt)
+            if bar is not None and k % 100 == 99:
+                bar.update(100)
+    except BaseException:
+        if playback is not None:
+            playback.discard()   # no half-written recording
+        raise
     wall = time.perf_counter() - wall_start
     if bar is not None:
         bar.close()
