@@ -195,6 +195,18 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_report(args: argparse.Namespace) -> int:
+    from trackmj.report import run_matrix, write_report
+
+    if args.seeds < 1 or args.seeds > 50:
+        raise ValueError(f"--seeds = {args.seeds}: allowed 1..50")
+    scenarios = args.scenarios.split(",")
+    results = run_matrix(scenarios, list(range(args.seeds)), args.duration, args.workers)
+    path = write_report(results, Path(args.out))
+    print(f"{len(results)} runs -> {path}")
+    return 0
+
+
 def _cmd_view(args: argparse.Namespace) -> int:
     from trackmj.playback import open_viewer
 
@@ -248,6 +260,14 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--controllers", help="comma list, e.g. nmpc,lmpc,pid")
     compare.add_argument("--workers", type=int, default=2, help="parallel processes")
     compare.set_defaults(func=_cmd_compare)
+
+    report = sub.add_parser("report", help="W1-W5 x architectures x seeds -> report.md")
+    report.add_argument("--scenarios", default="W1,W2,W3,W4,W5", help="comma list")
+    report.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 per case")
+    report.add_argument("--duration", type=float, help="simulated time per run [s]")
+    report.add_argument("--workers", type=int, default=2, help="parallel processes")
+    report.add_argument("--out", default="runs/report", help="output directory")
+    report.set_defaults(func=_cmd_report)
 
     view = sub.add_parser("view", help="open a run's Rerun recording in the viewer")
     view.add_argument("path", help="run directory or .rrd file")
