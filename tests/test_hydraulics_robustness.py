@@ -12,13 +12,18 @@ node is fed only through the metered P->B path and the same band is entered.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from trackmj.hydraulics import HydraulicTensioner
+from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
 
+# the trajectory was recorded with the stiff head column (no hose compliance, 1.5e-4 m^3)
+_P = load_hydraulic_params()
+STIFF = dataclasses.replace(_P, cylinder=dataclasses.replace(_P.cylinder,
+                                                             dead_volume_head_m3=1.5e-4))
 ROWS = np.load(Path(__file__).parent / "data" / "hold_failure_trajectory.npy")
 HEAD_PRESSURE_PA = 4757806.780200539  # home idler force of the MuJoCo plant in the heads
 
@@ -26,7 +31,7 @@ HEAD_PRESSURE_PA = 4757806.780200539  # home idler force of the MuJoCo plant in 
 @pytest.fixture(scope="module")
 def replay() -> tuple[HydraulicTensioner, list[tuple[float, float, int]]]:
     """Kinematic replay; per step (p_rod [Pa], p_head_L [Pa], Newton line-search halvings)."""
-    ht = HydraulicTensioner(stroke_m=ROWS[0, 1], head_pressure_Pa=HEAD_PRESSURE_PA,
+    ht = HydraulicTensioner(STIFF, stroke_m=ROWS[0, 1], head_pressure_Pa=HEAD_PRESSURE_PA,
                             supply_profile=lambda t: 1e6)   # a weak feed: 1 MPa supply
     ht.set_mode(-1)
     out = []

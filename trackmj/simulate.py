@@ -49,6 +49,7 @@ from trackmj.control.params import ControlConfig, load_config
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.hydraulics import HydraulicParams, HydraulicTensioner, load_hydraulic_params
+from trackmj.hydraulics.components import series_area
 from trackmj.identify import EquivalentIdler, identify_idler
 from trackmj.machine import machine
 from trackmj.metrics import compute_metrics
@@ -186,12 +187,18 @@ def scale_contact_stiffness(plant: TrackPlant, scale: float) -> None:
 
 def control_config(hyd: HydraulicParams, idler: EquivalentIdler, y0_m: float,
                    supply_Pa: float) -> ControlConfig:
-    """The controller's reduced model filled from the plugin's sizes and the identified
-    idler; valve logic without its own solenoid delay (the plugin applies it)."""
+    """The controller's reduced model filled from the plugin's sizes (lumped cylinders, the
+    valve and restrictor paths in series) and the identified idler; valve logic without its
+    own solenoid delay (the plugin applies it)."""
     cfg = load_config()
-    cyl = hyd.cylinder
+    cyl, met = hyd.cylinder, hyd.metering
+    head_path = 2.0 * series_area(hyd.switching_valves.open_area_m2, met.head_branch_area_m2)
+    rod_path = series_area(hyd.main_valve.open_area_m2, met.rod_feed_area_m2)
     plant = cfg.plant.replace(
         area_head_m2=2.0 * cyl.area_head_m2, area_rod_m2=2.0 * cyl.area_rod_m2,
+        dead_volume_head_m3=2.0 * cyl.dead_volume_head_m3,
+        dead_volume_rod_m3=2.0 * cyl.dead_volume_rod_m3 + hyd.lines.line_b_volume_m3,
+        valve_area_head_m2=head_path, valve_area_rod_m2=rod_path,
         bulk_modulus_Pa=hyd.fluid.bulk_modulus_Pa, supply_pressure_Pa=supply_Pa,
         tank_pressure_Pa=hyd.tank_pressure_Pa, stiffness_N_m=idler.stiffness_N_m,
         mass_kg=idler.mass_kg, damping_N_s_m=idler.damping_N_s_m, free_position_m=y0_m)
