@@ -199,6 +199,7 @@ def control_config(hyd: HydraulicParams, idler: EquivalentIdler, y0_m: float,
         dead_volume_head_m3=2.0 * cyl.dead_volume_head_m3,
         dead_volume_rod_m3=2.0 * cyl.dead_volume_rod_m3 + hyd.lines.line_b_volume_m3,
         valve_area_head_m2=head_path, valve_area_rod_m2=rod_path,
+        vent_area_rod_m2=hyd.main_valve.open_area_m2,
         bulk_modulus_Pa=hyd.fluid.bulk_modulus_Pa, supply_pressure_Pa=supply_Pa,
         tank_pressure_Pa=hyd.tank_pressure_Pa, stiffness_N_m=idler.stiffness_N_m,
         mass_kg=idler.mass_kg, damping_N_s_m=idler.damping_N_s_m, free_position_m=y0_m)
