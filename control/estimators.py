@@ -36,7 +36,8 @@ class _KalmanBase:
         self.x = np.array(x0, dtype=float).reshape(4)
         self.P = np.diag(np.square(params.initial_std))
         self.innovation = np.zeros(3)
-        self.S = self.R.copy()
+        self._r = tuple(float(v) for v in np.square(params.measurement_std))
+        self._s_inv = np.linalg.inv(self.P[:3, :3] + self.R)
         self._eye = np.eye(4)
         self._sum = np.zeros(4)
         self._count = 0
@@ -61,38 +62,76 @@ class _KalmanBase:
     def _discrete(
         self, x: NDArray[np.float64], u: float, p_s: float
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """One linearly-implicit trapezoidal step: (x+ (4,), transition matrix F (4, 4))."""
+        """One linearly-implicit trapezoidal step: (x+ (4,), transition matrix F (4, 4)).
+
+        M = I - c J with c = h/2; F = M^-1 (I + c J) = 2 M^-1 - I. M^-1 in closed form: row 2
+        of J is (0, 0, 0, 1) (dy/dt = v), so x2 = y2 + c x3 eliminates y and leaves a 3x3
+        system on (p_h, p_r, v) inverted by its adjugate (Python floats, no LAPACK call).
+        """
         h = self.dt
+        c = 0.5 * h
         f, jac = self.model.rhs_and_jacobian(x, u, p_s)
-        hj = (0.5 * h) * jac
-        m_inv = np.linalg.inv(self._eye - hj)
-        return x + m_inv @ (h * f), m_inv @ (self._eye + hj)
+        (j00, j01, j02, j03), (j10, j11, j12, j13), _, (j30, j31, j32, j33) = jac.tolist()
+        # reduced matrix N on (p_h, p_r, v): N[i] = (m_i0, m_i1, m_i3 + c m_i2), m = I - c J
+        n00, n01, n02 = 1.0 - c * j00, -c * j01, -c * j03 - c * c * j02
+        n10, n11, n12 = -c * j10, 1.0 - c * j11, -c * j13 - c * c * j12
+        n20, n21, n22 = -c * j30, -c * j31, 1.0 - c * j33 - c * c * j32
+        a00, a01, a02 = n11 * n22 - n12 * n21, n02 * n21 - n01 * n22, n01 * n12 - n02 * n11
+        a10, a11, a12 = n12 * n20 - n10 * n22, n00 * n22 - n02 * n20, n02 * n10 - n00 * n12
+        a20, a21, a22 = n10 * n21 - n11 * n20, n01 * n20 - n00 * n21, n00 * n11 - n01 * n10
+        r = 1.0 / (n00 * a00 + n01 * a10 + n02 * a20)
+        # column 2 of M^-1: -N^-1 (m_02, m_12, m_32) with m_i2 = -c j_i2
+        v0, v1, v2 = c * j02, c * j12, c * j32
+        k0 = (a00 * v0 + a01 * v1 + a02 * v2) * r
+        k1 = (a10 * v0 + a11 * v1 + a12 * v2) * r
+        k3 = (a20 * v0 + a21 * v1 + a22 * v2) * r
+        m_inv = np.array(
+            (
+                (a00 * r, a01 * r, k0, a02 * r),
+                (a10 * r, a11 * r, k1, a12 * r),
+                (c * a20 * r, c * a21 * r, 1.0 + c * k3, c * a22 * r),
+                (a20 * r, a21 * r, k3, a22 * r),
+            )
+        )
+        F = m_inv + m_inv
+        F -= self._eye
+        return x + np.dot(m_inv, h * f), F
 
     def _update(self, z: NDArray[np.float64]) -> None:
+        """Linear update with H = [I3 0]: gain K = P[:, :3] S^-1 (4, 3), S = P[:3, :3] + R.
+
+        S^-1 by the explicit symmetric 3x3 adjugate from Python floats (no LAPACK call, no
+        temporary S array): ~4x cheaper than np.linalg.inv at this size.
+        """
         P = self.P
-        self.innovation = z - self.x[:3]
-        S = P[:3, :3] + self.R
-        self.S = S
-        # explicit symmetric 3x3 inverse (adjugate): ~4x cheaper than a LAPACK call here
-        (a, b, c), (_, d, e), (_, _, f) = S.tolist()
+        innovation = z - self.x[:3]
+        self.innovation = innovation
+        (a, b, c, _), (_, d, e, _), (_, _, f, _), _ = P.tolist()
+        a += self._r[0]
+        d += self._r[1]
+        f += self._r[2]
         c0, c1, c2 = d * f - e * e, c * e - b * f, b * e - c * d
         r = 1.0 / (a * c0 + b * c1 + c * c2)
+        c4, c5 = (b * c - a * e) * r, (a * d - b * b) * r
         s_inv = np.array(
             (
                 (c0 * r, c1 * r, c2 * r),
-                (c1 * r, (a * f - c * c) * r, (b * c - a * e) * r),
-                (c2 * r, (b * c - a * e) * r, (a * d - b * b) * r),
+                (c1 * r, (a * f - c * c) * r, c4),
+                (c2 * r, c4, c5),
             )
         )
-        gain = P[:, :3] @ s_inv  # (4, 3)
-        self.x = self.x + gain @ self.innovation
-        P = P - gain @ P[:3, :]
-        self.P = 0.5 * (P + P.T)
+        self._s_inv = s_inv
+        gain = np.dot(P[:, :3], s_inv)  # (4, 3); np.dot: less overhead than @ at this size
+        self.x = self.x + np.dot(gain, innovation)
+        P = P - np.dot(gain, P[:3, :])
+        P += P.T  # symmetrise in place (numpy buffers the overlapping transpose)
+        P *= 0.5
+        self.P = P
 
     @property
     def nis(self) -> float:
         """Normalised innovation squared of the last update (chi-square, 3 dof)."""
-        return float(self.innovation @ np.linalg.solve(self.S, self.innovation))
+        return float(self.innovation @ self._s_inv @ self.innovation)
 
     def nees(self, x_true: NDArray[np.float64]) -> float:
         """Normalised estimation error squared against the true state (chi-square, 4 dof)."""
@@ -106,7 +145,9 @@ class ExtendedKalmanFilter(_KalmanBase):
 
     def step(self, z: NDArray[np.float64], u: float, p_s: float) -> NDArray[np.float64]:
         self.x, F = self._discrete(self.x, u, p_s)
-        self.P = F @ self.P @ F.T + self.Q
+        P = np.dot(np.dot(F, self.P), F.T)
+        P += self.Q
+        self.P = P
         self._update(z)
         self._accumulate()
         return self.x
