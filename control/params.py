@@ -183,7 +183,7 @@ class MpcParams:
     weight_input: float = 3.0
     weight_input_rate: float = 2.0
     weight_force_slack_per_kN2: float = 1.0e3
-    max_iter: int = 3
+    max_iter: int = 2
     qp_max_iter: int = 100
     qp_tolerance: float = 1e-4
     time_budget_s: float = 0.010
