@@ -209,18 +209,28 @@ class MpcParams:
 
 @dataclass(frozen=True, slots=True)
 class PidParams:
-    """PID tuning-rule inputs (SIMC on an integrating plant with dead time) [s]."""
+    """PID tuning-rule inputs (SIMC on an integrating plant with dead time) [s], error dead
+    band and conditional-integration band [N], output hysteresis thresholds on |u| [-]
+    (see ``trackmj.control.pid``)."""
 
     dead_time_s: float = 0.040
     closed_loop_time_s: float = 0.25
-    derivative_filter_N: float = 10.0
+    derivative_filter_N: float = 1.0
     back_calculation_gain: float = 1.0
+    error_dead_band_N: float = 150.0
+    integration_band_N: float = 600.0
+    output_on: float = 0.1
+    output_off: float = 0.05
 
     def __post_init__(self) -> None:
         _check(self, "dead_time_s", 0.0, 10.0)
         _check(self, "closed_loop_time_s", 0.0, 100.0, lo_open=True)
         _check(self, "derivative_filter_N", 1.0, 100.0)
         _check(self, "back_calculation_gain", 0.0, 100.0, lo_open=True)
+        _check(self, "error_dead_band_N", 0.0, 1e5)
+        _check(self, "integration_band_N", 0.0, 1e6)
+        _check(self, "output_on", 0.0, 1.0)
+        _check(self, "output_off", 0.0, self.output_on)
 
 
 @dataclass(frozen=True, slots=True)
