@@ -277,3 +277,22 @@ def load_config(path: str | Path | None = None) -> ControlConfig:
     if unknown:
         raise ValueError(f"unknown section(s) {sorted(unknown)}")
     return ControlConfig(**{k: _build(c, k, raw.get(k, {})) for k, c in _SECTIONS.items()})
+
+
+def control_config_with(
+    plant_overrides: dict[str, float], base: ControlConfig | None = None
+) -> ControlConfig:
+    """``base`` (default: the TOML file) with some ``PlantParams`` fields replaced, e.g. k_eq,
+    M, c, y0 from ``trackmj.identify`` and the supply pressure and areas from the hydraulic
+    plugin: ``control_config_with({"stiffness_N_m": idler.stiffness_N_m, ...})``.
+
+    Values SI (field names carry the unit). Raises ``ValueError`` naming unknown fields, and
+    the ``PlantParams`` range checks apply to the new values.
+    """
+    cfg = load_config() if base is None else base
+    known = {f.name for f in dataclasses.fields(PlantParams)}
+    unknown = set(plant_overrides) - known
+    if unknown:
+        raise ValueError(f"control_config_with: unknown plant parameter(s) {sorted(unknown)}")
+    plant = dataclasses.replace(cfg.plant, **{k: float(v) for k, v in plant_overrides.items()})
+    return dataclasses.replace(cfg, plant=plant)

@@ -81,3 +81,18 @@ def test_default_file_loads_and_rejects_unknown(tmp_path) -> None:
     bad.write_text("[plant]\nmass_kgg = 3.0\n")
     with pytest.raises(ValueError, match="mass_kgg"):
         load_config(bad)
+
+
+def test_control_config_with_overrides_plant_and_validates() -> None:
+    from trackmj.control.params import control_config_with
+
+    cfg = control_config_with({"stiffness_N_m": 5e6, "supply_pressure_Pa": 10e6})
+    assert cfg.plant.stiffness_N_m == 5e6 and cfg.plant.supply_pressure_Pa == 10e6
+    assert cfg.plant.mass_kg == load_config().plant.mass_kg and cfg.mpc == load_config().mpc
+    # the new stiffness changes the model's physics: equilibrium stroke for 15 kN
+    y5 = ReducedModel(cfg.plant).equilibrium(15e3)[2] - cfg.plant.free_position_m
+    assert y5 == pytest.approx(15e3 / 5e6)
+    with pytest.raises(ValueError, match="stiffnes_N_m"):
+        control_config_with({"stiffnes_N_m": 5e6})
+    with pytest.raises(ValueError, match="stiffness_N_m"):
+        control_config_with({"stiffness_N_m": -1.0})

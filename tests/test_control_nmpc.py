@@ -9,6 +9,7 @@ from trackmj.control.interface import steps_per_period
 from trackmj.control.loop import run_closed_loop, step_metrics
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
+from trackmj.control.ocp import X_SCALE
 from trackmj.control.params import load_config
 
 CFG = load_config()
@@ -70,3 +71,20 @@ def test_controller_period_must_be_multiple_of_step() -> None:
     bad = dataclasses.replace(CFG, controller=dataclasses.replace(CFG.controller, period_s=0.0025))
     with pytest.raises(ValueError, match="integer multiple"):
         run_closed_loop(bad, _nmpc(), lambda t: 12e3, 0.01, dt=1e-3)
+
+
+def test_online_stiffness_update_is_used_by_the_prediction() -> None:
+    """An NMPC built on k = 1e6 N/m and told the identified 9.4e6 online must, at the 9.4e6
+    rest state for 15 kN, plan hold and predict the stroke staying put (with k = 1e6 the
+    spring would be ~13 kN short there and the predicted idler would run out by mm)."""
+    soft = CFG.plant.replace(stiffness_N_m=1e6)
+    x = ReducedModel(CFG.plant).equilibrium(15e3)
+    ref = np.full(CFG.mpc.horizon_steps + 1, 15e3)
+    ctrl = NonlinearMpc(ReducedModel(soft), CFG.controller, CFG.mpc)
+    ctrl.set_parameters(stiffness_N_m=CFG.plant.stiffness_N_m)
+    out = ctrl(x, ref, 0.0)
+    n, nb = CFG.mpc.horizon_steps, ctrl.ocp.n_blocks
+    y_plan = ctrl._w[nb + n :].reshape(n, 4)[:, 2] * X_SCALE[2]
+    print(f"u {out.u:.3f}, planned stroke drift {1e3 * np.abs(y_plan - x[2]).max():.4f} mm")
+    assert out.success and abs(out.u) < 0.05
+    assert np.abs(y_plan - x[2]).max() < 0.05e-3
