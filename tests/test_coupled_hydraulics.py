@@ -85,3 +85,21 @@ def test_cycle_interface_work_balances() -> None:
     # the track's own account of the work matches the hydraulic ledger's mechanical work
     track_work = float(np.sum(rows[:, 5] * rows[:, 7]) * 1e-3)
     assert track_work == pytest.approx(ledger.mech_work_J, abs=1e-3 * exchanged)
+
+
+def test_full_opening_changes_tension_at_the_sized_rate() -> None:
+    """Sizing target on the real plugin and track (standing): pressurize or release at full
+    opening for 0.5 s changes the idler force by 1.5-5 kN, i.e. 3 kN takes ~0.3-1 s."""
+
+    def schedule(t: float) -> int:
+        return 1 if 0.5 <= t < 1.0 else (-1 if 1.5 <= t < 2.0 else 0)
+
+    _, _, rows = _coupled(schedule, 2.6, speed_m_s=0.0)
+    force, t = rows[:, 5], rows[:, 0]
+    before = force[(t > 0.4) & (t < 0.5)].mean()
+    pressurized = force[(t > 1.3) & (t < 1.5)].mean()
+    released = force[(t > 2.4) & (t < 2.6)].mean()
+    print(f"0.5 s pressurize: {pressurized - before:+.0f} N, "
+          f"0.5 s release: {released - pressurized:+.0f} N")
+    assert 1.5e3 < pressurized - before < 5e3
+    assert 1.5e3 < pressurized - released < 5e3

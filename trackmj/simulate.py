@@ -189,7 +189,9 @@ def control_config(hyd: HydraulicParams, idler: EquivalentIdler, y0_m: float,
                    supply_Pa: float) -> ControlConfig:
     """The controller's reduced model filled from the plugin's sizes (lumped cylinders, the
     valve and restrictor paths in series) and the identified idler; valve logic without its
-    own solenoid delay (the plugin applies it)."""
+    own solenoid delay (the plugin applies it). The rod vent keeps the control file's value:
+    the plugin's full main-valve edge would make the rod mode too fast for the estimator's
+    integrator, and the rod stays at tank pressure either way."""
     cfg = load_config()
     cyl, met = hyd.cylinder, hyd.metering
     head_path = 2.0 * series_area(hyd.switching_valves.open_area_m2, met.head_branch_area_m2)
@@ -199,7 +201,6 @@ def control_config(hyd: HydraulicParams, idler: EquivalentIdler, y0_m: float,
         dead_volume_head_m3=2.0 * cyl.dead_volume_head_m3,
         dead_volume_rod_m3=2.0 * cyl.dead_volume_rod_m3 + hyd.lines.line_b_volume_m3,
         valve_area_head_m2=head_path, valve_area_rod_m2=rod_path,
-        vent_area_rod_m2=hyd.main_valve.open_area_m2,
         bulk_modulus_Pa=hyd.fluid.bulk_modulus_Pa, supply_pressure_Pa=supply_Pa,
         tank_pressure_Pa=hyd.tank_pressure_Pa, stiffness_N_m=idler.stiffness_N_m,
         mass_kg=idler.mass_kg, damping_N_s_m=idler.damping_N_s_m, free_position_m=y0_m)
@@ -376,7 +377,7 @@ def _loop(run: _Run, controller_name: str, estimator_name: str, seed: int, durat
                 preview = sc.reference_preview(t, horizon + 1, period) * var.pretension_scale
                 if set_params is not None:
                     set_params(supply_pressure_Pa=float(supply_set[k]))
-                out = controller(x_hat, preview, t)
+                out = controller(est.period_mean(), preview, t)
                 u = out.u
                 solve_times.append(out.solve_time_s)
                 solve_ok.append(out.success)
