@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.model import ReducedModel
-from trackmj.control.nmpc import FEASIBILITY_TOL, _MpcBase
+from trackmj.control.nmpc import _MpcBase
 from trackmj.control.ocp import build_ocp, linearisation_function
 from trackmj.control.params import ControllerParams, MpcParams
 
@@ -66,23 +66,4 @@ class LinearMpc(_MpcBase):
     def _solve(
         self, w0: NDArray[np.float64], p: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool, int]:
-        lam0 = self._lam_g if self._lam_g is not None else 0.0
-        r = self.solver(
-            x0=w0,
-            p=p,
-            lbx=self.ocp.lbw,
-            ubx=self.ocp.ubw,
-            lbg=self.ocp.lbg,
-            ubg=self.ocp.ubg,
-            lam_g0=lam0,
-        )
-        st = self.solver.stats()
-        w, g = np.array(r["x"]).ravel(), np.array(r["g"]).ravel()
-        viol = max(
-            np.max(self.ocp.lbg - g, initial=0.0),
-            np.max(g - self.ocp.ubg, initial=0.0),
-            np.max(self.ocp.lbw - w, initial=0.0),
-            np.max(w - self.ocp.ubw, initial=0.0),
-        )
-        ok = bool(st.get("success", False)) and viol <= FEASIBILITY_TOL
-        return w, np.array(r["lam_g"]).ravel(), ok, int(st.get("iter_count", 0))
+        return self._call_solver(w0, p, lambda st: bool(st.get("success", False)))

@@ -7,6 +7,7 @@ the shifted previous plan (or hold) on failure or overrun and counts it, never r
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import casadi as ca
 import numpy as np
@@ -66,6 +67,25 @@ class _MpcBase:
     def _parameters(self, x0: NDArray[np.float64], ref: NDArray[np.float64]) -> NDArray[np.float64]:
         """OCP parameter vector for initial state x0 (4,) and preview ref (N+1,) [N]."""
         return parameter_vector(x0, ref, self.u_prev, self.theta, self.ctrl)
+
+    def _call_solver(
+        self, w0: NDArray[np.float64], p: NDArray[np.float64], converged: Callable[[dict], bool]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool, int]:
+        """Run ``self.solver`` warm-started; (w, lam_g, ok, iterations) where ok needs the
+        solver's own verdict (``converged(stats)``) and a plan within FEASIBILITY_TOL."""
+        lam0 = self._lam_g if self._lam_g is not None else 0.0
+        r = self.solver(x0=w0, p=p, lbx=self.ocp.lbw, ubx=self.ocp.ubw, lbg=self.ocp.lbg,
+                        ubg=self.ocp.ubg, lam_g0=lam0)
+        st = self.solver.stats()
+        w, g = np.array(r["x"]).ravel(), np.array(r["g"]).ravel()
+        viol = max(
+            np.max(self.ocp.lbg - g, initial=0.0),
+            np.max(g - self.ocp.ubg, initial=0.0),
+            np.max(self.ocp.lbw - w, initial=0.0),
+            np.max(w - self.ocp.ubw, initial=0.0),
+        )
+        ok = converged(st) and viol <= FEASIBILITY_TOL
+        return w, np.array(r["lam_g"]).ravel(), ok, int(st.get("iter_count", 0))
 
     def _solve(
         self, w0: NDArray[np.float64], p: NDArray[np.float64]
@@ -173,26 +193,7 @@ class NonlinearMpc(_MpcBase):
     def _solve(
         self, w0: NDArray[np.float64], p: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool, int]:
-        lam0 = self._lam_g if self._lam_g is not None else 0.0
-        r = self.solver(
-            x0=w0,
-            p=p,
-            lbx=self.ocp.lbw,
-            ubx=self.ocp.ubw,
-            lbg=self.ocp.lbg,
-            ubg=self.ocp.ubg,
-            lam_g0=lam0,
-        )
-        st = self.solver.stats()
-        w, g = np.array(r["x"]).ravel(), np.array(r["g"]).ravel()
         # a truncated SQP (few iterations per period) is accepted only if its plan is feasible
-        viol = max(
-            np.max(self.ocp.lbg - g, initial=0.0),
-            np.max(g - self.ocp.ubg, initial=0.0),
-            np.max(self.ocp.lbw - w, initial=0.0),
-            np.max(w - self.ocp.ubw, initial=0.0),
-        )
-        ok = (
-            bool(st["success"]) or st.get("return_status") == "Maximum_Iterations_Exceeded"
-        ) and viol <= FEASIBILITY_TOL
-        return w, np.array(r["lam_g"]).ravel(), ok, int(st.get("iter_count", 0))
+        return self._call_solver(
+            w0, p, lambda st: bool(st["success"])
+            or st.get("return_status") == "Maximum_Iterations_Exceeded")
