@@ -182,9 +182,6 @@ class ModelParams:
         return self.track.pitch_m / (2.0 * math.sin(math.pi / self.sprocket.tooth_count))
 
 
-_TABLES = {f.name: f.type for f in dataclasses.fields(ModelParams)}
-
-
 def load_model_params(path: str | Path | None = None) -> ModelParams:
     """Read and validate the model parameter file (default: packaged lf1352.toml)."""
     path = Path(path) if path is not None else default_param_path()

@@ -126,8 +126,6 @@ class TrackPlant:
         self._chassis_body = m.body("chassis").id
         self._sprocket_body = m.body("sprocket").id
         self._carrier_body = m.body("idler_carrier").id
-        self._tooth_geoms = {i for i in range(m.ngeom)
-                             if m.geom(i).name.startswith("sprocket_tooth_")}
         self._group_of_body = self._contact_groups()
         self.time_s = 0.0
         self.last_law: ForceLaw | None = None
@@ -307,12 +305,6 @@ class TrackPlant:
         radius = np.linalg.norm(self.pin_positions() - centre, axis=1)
         off = np.abs(radius - self.params.sprocket_pitch_radius_m)
         return int(np.count_nonzero(off < self.SEAT_TOLERANCE_M))
-
-    def sprocket_tooth_contacts(self) -> int:
-        d = self.data
-        return sum(1 for i in range(d.ncon)
-                   if d.contact[i].geom1 in self._tooth_geoms
-                   or d.contact[i].geom2 in self._tooth_geoms)
 
     # ------------------------------------------------------------------ derailment
     def _chassis_frame_pins(self) -> np.ndarray:
