@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.model import ReducedModel
-from trackmj.control.nmpc import _MpcBase
+from trackmj.control.nmpc import _MpcBase, osqp_options
 from trackmj.control.ocp import build_ocp, linearisation_function
 from trackmj.control.params import ControllerParams, MpcParams
 
@@ -40,17 +40,7 @@ class LinearMpc(_MpcBase):
         self._lin = linearisation_function(model)
         qp = {"x": self.ocp.w, "p": self.ocp.p, "f": self.ocp.f, "g": self.ocp.g}
         if qp_solver == "osqp":
-            opts: dict = {
-                "osqp": {
-                    "verbose": False,
-                    "eps_abs": mpc.qp_tolerance,
-                    "eps_rel": mpc.qp_tolerance,
-                    "max_iter": mpc.qp_max_iter,
-                    "polish": False,
-                },
-                "warm_start_primal": True,
-                "warm_start_dual": True,
-            }
+            opts: dict = osqp_options(mpc)
         else:
             opts = {"print_iter": False, "print_header": False, "max_iter": mpc.qp_max_iter}
         opts["error_on_fail"] = False

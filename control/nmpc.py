@@ -22,6 +22,22 @@ from trackmj.control.params import ControllerParams, MpcParams
 FEASIBILITY_TOL = 0.1
 
 
+def osqp_options(mpc: MpcParams) -> dict:
+    """CasADi qpsol options for OSQP, warm-started, capped at ``mpc.qp_max_iter`` iterations
+    with tolerance ``mpc.qp_tolerance`` (shared by the NMPC's SQP and the LMPC)."""
+    return {
+        "osqp": {
+            "verbose": False,
+            "eps_abs": mpc.qp_tolerance,
+            "eps_rel": mpc.qp_tolerance,
+            "max_iter": mpc.qp_max_iter,
+            "polish": False,
+        },
+        "warm_start_primal": True,
+        "warm_start_dual": True,
+    }
+
+
 class _MpcBase:
     """Warm start, fallback and statistics common to NMPC and LMPC."""
 
@@ -162,18 +178,7 @@ class NonlinearMpc(_MpcBase):
         )
         opts: dict = {
             "qpsol": "osqp",
-            "qpsol_options": {
-                "osqp": {
-                    "verbose": False,
-                    "eps_abs": mpc.qp_tolerance,
-                    "eps_rel": mpc.qp_tolerance,
-                    "max_iter": mpc.qp_max_iter,
-                    "polish": False,
-                },
-                "error_on_fail": False,
-                "warm_start_primal": True,
-                "warm_start_dual": True,
-            },
+            "qpsol_options": {**osqp_options(mpc), "error_on_fail": False},
             "hess_lag": hess_lag,
             "max_iter": mpc.max_iter,
             "print_header": False,
