@@ -158,6 +158,7 @@ class SolverParams:
     cone: str = "pyramidal"
     jacobian: str = "dense"
     warmstart: bool = False
+    midphase: bool = True   # per-body geom bounding-volume tree before the narrow phase
 
 
 @dataclass(frozen=True)
@@ -398,8 +399,10 @@ def build_mjcf(p: ModelParams, layout: Layout, home_qpos: np.ndarray | None = No
          gravity=_fmt(0, 0, -p.simulation.gravity_m_s2), integrator="implicitfast",
          solver="Newton", jacobian=p.solver.jacobian, iterations=str(p.solver.iterations),
          tolerance=_fmt(p.solver.tolerance), cone=p.solver.cone)
-    if not p.solver.warmstart:
-        _sub(root.find("option"), "flag", warmstart="disable")
+    flags = {name: "disable" for name, on in (("warmstart", p.solver.warmstart),
+                                                ("midphase", p.solver.midphase)) if not on}
+    if flags:
+        _sub(root.find("option"), "flag", **flags)
     _sub(root, "size", memory="16M")
     visual = _sub(root, "visual")
     _sub(visual, "global", offwidth="1280", offheight="720")
