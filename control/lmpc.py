@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.model import ReducedModel
-from trackmj.control.nmpc import _MpcBase, osqp_options
+from trackmj.control.nmpc import _MpcBase
 from trackmj.control.ocp import build_ocp, linearisation_function
 from trackmj.control.params import ControllerParams, MpcParams
 
@@ -24,6 +24,22 @@ from trackmj.control.params import ControllerParams, MpcParams
 #: benchmark): osqp converges on every QP; qrqp, the other solver shipped without
 #: compilation, is kept selectable for comparison.
 QP_SOLVER = "osqp"
+
+
+def osqp_options(mpc: MpcParams) -> dict:
+    """CasADi qpsol options for OSQP, warm-started, capped at ``mpc.qp_max_iter`` iterations
+    with tolerance ``mpc.qp_tolerance``."""
+    return {
+        "osqp": {
+            "verbose": False,
+            "eps_abs": mpc.qp_tolerance,
+            "eps_rel": mpc.qp_tolerance,
+            "max_iter": mpc.qp_max_iter,
+            "polish": False,
+        },
+        "warm_start_primal": True,
+        "warm_start_dual": True,
+    }
 
 
 class LinearMpc(_MpcBase):
