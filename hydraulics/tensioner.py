@@ -205,6 +205,9 @@ class HydraulicTensioner:
             raise ValueError("supply.mode = 'prescribed' needs a supply_profile")
         cyl, fl = prm.cylinder, prm.fluid
         self.Ah, self.Ar = cyl.area_head_m2, cyl.area_rod_m2
+        self._vol_A, self._vol_S = prm.lines.line_a_volume_m3, prm.supply.line_volume_m3
+        self._vol_dh, self._vol_dr = cyl.dead_volume_head_m3, cyl.dead_volume_rod_m3
+        self._vol_lb, self._s_max = prm.lines.line_b_volume_m3, cyl.stroke_max_m
         self.beta = fl.bulk_modulus_Pa
         self.pT = prm.tank_pressure_Pa
         self.pcr = prm.orifice.critical_pressure_Pa
@@ -236,7 +239,7 @@ class HydraulicTensioner:
         else:
             ps = prm.relief.crack_Pa if supply_pressure_Pa is None else supply_pressure_Pa
             self._check_input("supply_pressure_Pa", ps)
-        self.p = [ps, head_pressure_Pa, head_pressure_Pa, self.pT, ps]
+        self.p = (ps, head_pressure_Pa, head_pressure_Pa, self.pT, ps)
         self.V = self._volumes(stroke_m)
         self.ledger = EnergyLedger()
         self.step_ledger = EnergyLedger()
@@ -255,7 +258,7 @@ class HydraulicTensioner:
         self.carry_J = 0.0
         self._law = ForceLaw(self._pressure_force(self.p), 0.0)
         self._correction = 0.0
-        self._lin: tuple[list[float], list[float], float] | None = None
+        self._lin: tuple[tuple[float, ...], tuple[float, ...], float] | None = None
         self._calls = 0
         self._v_hold = 0.0
         self._s_hyd = stroke_m
@@ -292,7 +295,7 @@ class HydraulicTensioner:
             v_star = 2.0 * velocity_m_s - self._v_prev
             self._v_prev = velocity_m_s
             s1 = stroke_m + h * v_star
-            p1 = self._newton(h, s1, v_star, list(self.p))
+            p1 = self._newton(h, s1, v_star, self.p)
             dpdv = self._dpdv(p1)
             f_star, dfdv = self._force(p1, s1, v_star)
             z = (self.Ah * (dpdv[1] + dpdv[2]) - 2.0 * self.Ar * dpdv[3] + dfdv)
@@ -330,13 +333,13 @@ class HydraulicTensioner:
         else:
             if self.coupling == "weak":
                 self._set_gains(self.t, h)
-                p_guess = list(self.p)
+                p_guess = self.p
             else:
                 p_star, dpdv, v_star = self._lin
                 dv = v1 - v_star
-                p_guess = [p_star[0] + dpdv[0] * dv, p_star[1] + dpdv[1] * dv,
+                p_guess = (p_star[0] + dpdv[0] * dv, p_star[1] + dpdv[1] * dv,
                            p_star[2] + dpdv[2] * dv, p_star[3] + dpdv[3] * dv,
-                           p_star[4] + dpdv[4] * dv]
+                           p_star[4] + dpdv[4] * dv)
             p1 = self._newton(h, stroke_m, v1, p_guess)
             self._commit(p1, stroke_m, v1, h, accumulate=False)
             self._advance_valves(self.t, h)
@@ -371,13 +374,13 @@ class HydraulicTensioner:
             self._advance_valves(t_j, hs)
         return self.n_sub
 
-    def _substep_or_none(self, h: float, s1: float) -> list[float] | None:
+    def _substep_or_none(self, h: float, s1: float) -> tuple[float, ...] | None:
         """One multi-rate BE sub-step to stroke s1; None if the state left physics: a chamber
         volume ≤ 0, no Newton convergence, or a pressure below absolute vacuum."""
         if min(self._volumes(s1)) <= 0.0:
             return None
         try:
-            p1 = self._newton(h, s1, self._v_hold, list(self.p))
+            p1 = self._newton(h, s1, self._v_hold, self.p)
         except RuntimeError:
             return None
         if not all(math.isfinite(x) and x >= -self.p_atm for x in p1):
@@ -426,7 +429,7 @@ class HydraulicTensioner:
     @property
     def pressures(self) -> tuple[float, float, float, float, float]:
         """(p_A, p_head_L, p_head_R, p_rod, p_supply) [Pa gauge] now."""
-        return tuple(self.p)
+        return self.p
 
     # ----------------------------------------------------------------- internals
     @staticmethod
@@ -451,15 +454,13 @@ class HydraulicTensioner:
             raise ValueError(f"supply profile gave p_s = {ps!r} Pa at t = {t_s} s")
         return ps
 
-    def _volumes(self, s: float) -> list[float]:
-        prm = self.params
-        cyl = prm.cylinder
-        vh = cyl.dead_volume_head_m3 + self.Ah * s
-        vr = prm.lines.line_b_volume_m3 + 2.0 * (cyl.dead_volume_rod_m3
-                                                 + self.Ar * (cyl.stroke_max_m - s))
-        return [prm.lines.line_a_volume_m3, vh, vh, vr, prm.supply.line_volume_m3]
+    def _volumes(self, s: float) -> tuple[float, float, float, float, float]:
+        """Node volumes [m^3] (A, head L, head R, rod node, supply line) at stroke s [m]."""
+        vh = self._vol_dh + self.Ah * s
+        vr = self._vol_lb + 2.0 * (self._vol_dr + self.Ar * (self._s_max - s))
+        return (self._vol_A, vh, vh, vr, self._vol_S)
 
-    def _oil_energy(self, p: list[float], V: list[float]) -> float:
+    def _oil_energy(self, p: tuple[float, ...], V: tuple[float, ...]) -> float:
         n = 4 if self.prescribed else 5
         return sum(p[i] * p[i] * V[i] for i in range(n)) / (2.0 * self.beta)
 
@@ -478,10 +479,10 @@ class HydraulicTensioner:
                                   c.endstop_damping_N_s_m)
         return 2.0 * f, 2.0 * ds, 2.0 * dv
 
-    def _pressure_force(self, p: list[float]) -> float:
+    def _pressure_force(self, p: tuple[float, ...]) -> float:
         return self.Ah * (p[1] + p[2]) - 2.0 * self.Ar * p[3]
 
-    def _force(self, p: list[float], s1: float, v: float) -> tuple[float, float]:
+    def _force(self, p: tuple[float, ...], s1: float, v: float) -> tuple[float, float]:
         """Cylinder force [N] at pressures p, end stroke s1, velocity v, and its explicit
         dF/dv (friction + end stop through s1 = s_k + h·v; pressures held)."""
         ff, dff = self._friction(v)
@@ -530,22 +531,20 @@ class HydraulicTensioner:
         f, df = orifice_flow(self.pT - p, self.K_mu, self.pcr)
         return s * f, -ds / self.mu_width * f - s * df
 
-    def _relief(self, ps: float, pT: float, pcr2: float) -> tuple[float, float]:
-        """Relief valve S -> T at p_S > crack: (Q, dQ/dp_S); callers take 0 below."""
-        w = self.rel_width
-        x = (ps - self.rel_crack) / w
-        s, ds = (1.0, 0.0) if x >= 1.0 else (x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) / w)
-        d = ps - pT
-        r = d * d + pcr2
-        r4 = sqrt(sqrt(r))
-        f = self.K_rel * d / r4
-        return s * f, ds * f + s * self.K_rel * (0.5 * d * d + pcr2) / (r * r4)
+    def _eval(self, h: float, c: tuple[float, ...], v: float,
+              p: tuple[float, ...]) -> tuple[tuple, tuple, tuple, tuple]:
+        """Linearise the step at pressures p: (R, d, F, flows).
 
-    def _eval(self, h: float, c: tuple[float, ...], v: float, p: list[float]) -> tuple:
-        """Flows, residual R/h (5) [m^3/s] and Jacobian entries of R/h at pressures p (see class
-        docstring); c = V_i(s_{k+1})/(β·h) [m^3/(s·Pa)] of the five nodes."""
+        R: residual R/h of the five nodes [m^3/s] (see class docstring); d = J⁻¹·R [Pa], so
+        the Newton step is p − d; F: the factorised Jacobian for ``_dpdv``; flows: the twelve
+        FLOW_NAMES flows [m^3/s]. c = V_i(s_{k+1})/(β·h) [m^3/(s·Pa)] of the five nodes. J is
+        solved with the circuit's sparsity: heads eliminated by Schur complement, then the
+        supply node, leaving 2x2 in (p_A, p_B); the head rows couple to the rod node only
+        through the leakage (J_HB = J_BH = −leak).
+        """
         pA, pHL, pHR, pB, pS = p
-        if self.prescribed:
+        prescribed = self.prescribed
+        if prescribed:
             pS = self.ps_next
         pT, pcr2, leak, fb, mo = self.pT, self.pcr2, self.leak, self._lim_top, self.mu_open
         KPA, KAT, KPB, KBT, KVL, KVR = self.K
@@ -592,61 +591,56 @@ class HydraulicTensioner:
         qmL, dmL = (0.0, 0.0) if pHL >= mo else self._makeup(pHL)
         qmR, dmR = (0.0, 0.0) if pHR >= mo else self._makeup(pHR)
         qmB, dmB = (0.0, 0.0) if pB >= mo else self._makeup(pB)
-        p0 = self.p
+        p0A, p0HL, p0HR, p0B, p0S = self.p
         cA, cHL, cHR, cB, cS = c
         Ahv, Arv2 = self.Ah * v, 2.0 * self.Ar * v
-        R = [cA * (pA - p0[0]) - qPA + qAT + qVL + qVR,
-             cHL * (pHL - p0[1]) - qVL + qlL - qmL + Ahv,
-             cHR * (pHR - p0[2]) - qVR + qlR - qmR + Ahv,
-             cB * (pB - p0[3]) - qPB + qBT - qlL - qlR - qmB - Arv2,
-             0.0]
-        J = [cA - aPA_A + aAT_A + aVL_A + aVR_A, aVL_H, aVR_H, 0.0, -aPA_S,
-             cHL - aVL_H - dmL + leak, -aVL_A, -leak,
-             cHR - aVR_H - dmR + leak, -aVR_A, -leak,
-             cB - aPB_B + aBT_B - dmB + 2.0 * leak, -leak, -leak, -aPB_S,
-             1.0, 0.0, 0.0]
-        qrel = 0.0
-        if not self.prescribed:
-            qrel, drel = (0.0, 0.0) if pS <= self.rel_crack else self._relief(pS, pT, pcr2)
+        rA = cA * (pA - p0A) - qPA + qAT + qVL + qVR
+        rHL = cHL * (pHL - p0HL) - qVL + qlL - qmL + Ahv
+        rHR = cHR * (pHR - p0HR) - qVR + qlR - qmR + Ahv
+        rB = cB * (pB - p0B) - qPB + qBT - qlL - qlR - qmB - Arv2
+        if prescribed:
+            qrel, rS, JSS, JSA, JSB = 0.0, 0.0, 1.0, 0.0, 0.0
+        else:
+            qrel = drel = 0.0
+            if pS > self.rel_crack:  # relief S -> T, opening over rel_width (smoothstep)
+                w = self.rel_width
+                x = (pS - self.rel_crack) / w
+                s, ds = ((1.0, 0.0) if x >= 1.0
+                         else (x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) / w))
+                d = pS - pT
+                r = d * d + pcr2
+                r4 = sqrt(sqrt(r))
+                f = self.K_rel * d / r4
+                qrel, drel = s * f, ds * f + s * self.K_rel * (0.5 * d * d + pcr2) / (r * r4)
             voil1, dvoil = self.acc.oil_volume(pS)
             ih = 1.0 / h
-            R[4] = (cS * (pS - p0[4]) + (voil1 - self._voil0) * ih
-                    - self.Q_pump + qPA + qPB + qrel)
-            J[15] = cS + dvoil * ih + aPA_S + aPB_S + drel
-            J[16] = aPA_A
-            J[17] = aPB_B
-        flows = (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR)
-        return R, J, flows
-
-    @staticmethod
-    def _solve(J: list[float], r: list[float]) -> list[float]:
-        """Solve J·x = r with the circuit's sparsity (heads eliminated first)."""
-        (JAA, JAHL, JAHR, JAB, JAS, JHH, JHA, JHB, JRR, JRA, JRB, JBB, JBHL, JBHR, JBS,
-         JSS, JSA, JSB) = J
-        rA, rHL, rHR, rB, rS = r
-        iH, iR = 1.0 / JHH, 1.0 / JRR
-        a11 = JAA - JAHL * JHA * iH - JAHR * JRA * iR
-        a12 = JAB - JAHL * JHB * iH - JAHR * JRB * iR
-        b1 = rA - JAHL * rHL * iH - JAHR * rHR * iR
-        a21 = -JBHL * JHA * iH - JBHR * JRA * iR
-        a22 = JBB - JBHL * JHB * iH - JBHR * JRB * iR
-        b2 = rB - JBHL * rHL * iH - JBHR * rHR * iR
-        # 3x3 [[a11 a12 JAS] [a21 a22 JBS] [JSA JSB JSS]] by elimination on the S row
-        iS = 1.0 / JSS
-        a11 -= JAS * JSA * iS
-        a12 -= JAS * JSB * iS
-        b1 -= JAS * rS * iS
-        a21 -= JBS * JSA * iS
-        a22 -= JBS * JSB * iS
-        b2 -= JBS * rS * iS
+            rS = (cS * (pS - p0S) + (voil1 - self._voil0) * ih
+                  - self.Q_pump + qPA + qPB + qrel)
+            JSS = cS + dvoil * ih + aPA_S + aPB_S + drel
+            JSA, JSB = aPA_A, aPB_B
+        JAA = cA - aPA_A + aAT_A + aVL_A + aVR_A
+        JAHL, JAHR, JAS = aVL_H, aVR_H, -aPA_S
+        JHH, JHA = cHL - aVL_H - dmL + leak, -aVL_A
+        JRR, JRA = cHR - aVR_H - dmR + leak, -aVR_A
+        JBB, JBS = cB - aPB_B + aBT_B - dmB + 2.0 * leak, -aPB_S
+        nl = -leak  # J_HB = J_RB = J_BHL = J_BHR
+        iH, iR, iS = 1.0 / JHH, 1.0 / JRR, 1.0 / JSS
+        a11 = JAA - JAHL * JHA * iH - JAHR * JRA * iR - JAS * JSA * iS
+        a12 = 0.0 - JAHL * nl * iH - JAHR * nl * iR - JAS * JSB * iS
+        a21 = -nl * JHA * iH - nl * JRA * iR - JBS * JSA * iS
+        a22 = JBB - nl * nl * iH - nl * nl * iR - JBS * JSB * iS
+        b1 = rA - JAHL * rHL * iH - JAHR * rHR * iR - JAS * rS * iS
+        b2 = rB - nl * rHL * iH - nl * rHR * iR - JBS * rS * iS
         det = a11 * a22 - a12 * a21
         xA = (b1 * a22 - a12 * b2) / det
         xB = (a11 * b2 - a21 * b1) / det
-        xS = (rS - JSA * xA - JSB * xB) * iS
-        return [xA, (rHL - JHA * xA - JHB * xB) * iH, (rHR - JRA * xA - JRB * xB) * iR, xB,
-                xS]
+        return ((rA, rHL, rHR, rB, rS),
+                (xA, (rHL - JHA * xA - nl * xB) * iH, (rHR - JRA * xA - nl * xB) * iR, xB,
+                 (rS - JSA * xA - JSB * xB) * iS),
+                (iH, iR, iS, a11, a12, a21, a22, det, JAHL, JAHR, JHA, JRA, JSA, JSB),
+                (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR))
 
-    def _newton(self, h: float, s1: float, v: float, p: list[float]) -> list[float]:
+    def _newton(self, h: float, s1: float, v: float, p: tuple[float, ...]) -> tuple[float, ...]:
         """Backward-Euler step: damped Newton on R(p) = 0 from the guess p; returns p_{k+1}.
 
         Globalised by an Armijo backtracking line search on f = Σ(β·R_i/V_i)² (the residual
@@ -661,89 +655,107 @@ class HydraulicTensioner:
         bh = self.beta * h  # the residual is evaluated divided by h: weights β·h/V_i
         w0, w1, w2, w3, w4 = bh / V[0], bh / V[1], bh / V[2], bh / V[3], bh / V[4]
         c = (1.0 / w0, 1.0 / w1, 1.0 / w2, 1.0 / w3, 1.0 / w4)
-        R, J, flows = self._eval(h, c, v, p)
-        r0, r1, r2, r3, r4 = R[0] * w0, R[1] * w1, R[2] * w2, R[3] * w3, R[4] * w4
-        f = r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3 + r4 * r4
+        R, d, F, flows = self._eval(h, c, v, p)
+        f = -1.0  # Σ(β·R_i/V_i)² at p, computed when a line search needs it
+        pA, pHL, pHR, pB, pS = p
         backtracks = 0
         it = 0
         n_prev, full = math.inf, False
         for it in range(1, self._max_iter + 1):  # noqa: B007 (count reported)
-            dx = self._solve(J, [-R[0], -R[1], -R[2], -R[3], -R[4]])
-            n = max(abs(dx[0]), abs(dx[1]), abs(dx[2]), abs(dx[3]), abs(dx[4]))
+            d0, d1, d2, d3, d4 = d
+            n = max(abs(d0), abs(d1), abs(d2), abs(d3), abs(d4))
             if n < tol or (full and n < n_prev and n * n < tol * (n_prev - n)):
-                p = [p[0] + dx[0], p[1] + dx[1], p[2] + dx[2], p[3] + dx[3], p[4] + dx[4]]
+                p = (pA - d0, pHL - d1, pHR - d2, pB - d3, pS - d4)
                 break
+            if f < 0.0:
+                r0, r1, r2, r3, r4 = R[0] * w0, R[1] * w1, R[2] * w2, R[3] * w3, R[4] * w4
+                f = r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3 + r4 * r4
             alpha = 1.0
             while True:
-                pt = [p[0] + alpha * dx[0], p[1] + alpha * dx[1], p[2] + alpha * dx[2],
-                      p[3] + alpha * dx[3], p[4] + alpha * dx[4]]
-                Rt, Jt, flt = self._eval(h, c, v, pt)
-                r0, r1, r2, r3, r4 = Rt[0] * w0, Rt[1] * w1, Rt[2] * w2, Rt[3] * w3, Rt[4] * w4
+                p = (pA - alpha * d0, pHL - alpha * d1, pHR - alpha * d2, pB - alpha * d3,
+                     pS - alpha * d4)
+                R, dt, Ft, flt = self._eval(h, c, v, p)
+                r0, r1, r2, r3, r4 = R[0] * w0, R[1] * w1, R[2] * w2, R[3] * w3, R[4] * w4
                 ft = r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3 + r4 * r4
                 if ft <= (1.0 - 1e-4 * alpha) * f or alpha < _MIN_STEP:
                     break
                 alpha *= 0.5
                 backtracks += 1
-            p, R, J, flows, f = pt, Rt, Jt, flt, ft
+            pA, pHL, pHR, pB, pS = p
+            d, F, flows, f = dt, Ft, flt, ft
             n_prev, full = n, alpha == 1.0
         else:
             raise RuntimeError(f"hydraulic Newton did not converge in {self._max_iter} "
                                f"iterations (t = {self.t} s, last |dp| = {n} Pa)")
         if self.prescribed:
-            p[4] = self.ps_next
-        self._iters, self._J, self._flows, self._V1 = it, J, flows, V
+            p = (p[0], p[1], p[2], p[3], self.ps_next)
+        self._iters, self._F, self._flows, self._V1 = it, F, flows, V
         self._backtracks += backtracks
         return p
 
-    def _dpdv(self, p: list[float]) -> list[float]:
-        """dp_{k+1}/dv from −R_p⁻¹·R_v with the last Newton Jacobian (both of R/h)."""
-        p0, ib = self.p, 1.0 / self.beta
-        ah, ar2 = self.Ah, 2.0 * self.Ar
-        rv = [0.0, -ah * (ib * (p[1] - p0[1]) + 1.0), -ah * (ib * (p[2] - p0[2]) + 1.0),
-              ar2 * (ib * (p[3] - p0[3]) + 1.0), 0.0]
-        return self._solve(self._J, rv)
+    def _dpdv(self, p: tuple[float, ...]) -> tuple[float, ...]:
+        """dp_{k+1}/dv [Pa·s/m] = −R_p⁻¹·R_v with the last Newton Jacobian (both of R/h);
+        −R_v is nonzero on the heads and the rod node only (chamber volumes depend on v)."""
+        iH, iR, iS, a11, a12, a21, a22, det, JAHL, JAHR, JHA, JRA, JSA, JSB = self._F
+        p0, ib, nl = self.p, 1.0 / self.beta, -self.leak
+        rHL = -self.Ah * (ib * (p[1] - p0[1]) + 1.0)
+        rHR = -self.Ah * (ib * (p[2] - p0[2]) + 1.0)
+        rB = 2.0 * self.Ar * (ib * (p[3] - p0[3]) + 1.0)
+        b1 = -JAHL * rHL * iH - JAHR * rHR * iR
+        b2 = rB - nl * rHL * iH - nl * rHR * iR
+        xA = (b1 * a22 - a12 * b2) / det
+        xB = (a11 * b2 - a21 * b1) / det
+        return (xA, (rHL - JHA * xA - nl * xB) * iH, (rHR - JRA * xA - nl * xB) * iR, xB,
+                (-JSA * xA - JSB * xB) * iS)
 
-    def _commit(self, p1: list[float], s1: float, v: float, h: float, accumulate: bool) -> None:
+    def _commit(self, p1: tuple[float, ...], s1: float, v: float, h: float,
+                accumulate: bool) -> None:
         """Take p1 as the new state and book the step's hydraulic energy terms (added to the
         step ledger's terms when ``accumulate``, else replacing them)."""
-        sl = self.step_ledger
-        keep = 1.0 if accumulate else 0.0
         qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR = self._flows
         pA, pHL, pHR, pB, pS = p1
-        pT = self.pT
+        pT, prescribed = self.pT, self.prescribed
         p0, V0, V1 = self.p, self.V, self._V1
-        sl.supply_J = keep * sl.supply_J + h * (pS * (qPA + qPB) if self.prescribed
-                                                else pS * self.Q_pump)
-        sl.to_tank_J = keep * sl.to_tank_J + h * pT * (qAT + qBT + qrel - qmL - qmR - qmB)
-        sl.throttle_main_J = keep * sl.throttle_main_J + h * (
-            (pS - pA) * qPA + (pA - pT) * qAT + (pS - pB) * qPB + (pB - pT) * qBT)
-        sl.throttle_VL_J = keep * sl.throttle_VL_J + h * (pA - pHL) * qVL
-        sl.throttle_VR_J = keep * sl.throttle_VR_J + h * (pA - pHR) * qVR
-        sl.throttle_relief_J = keep * sl.throttle_relief_J + h * (pS - pT) * qrel
-        sl.throttle_makeup_J = keep * sl.throttle_makeup_J + h * (
-            (pT - pHL) * qmL + (pT - pHR) * qmR + (pT - pB) * qmB)
-        sl.leakage_J = keep * sl.leakage_J + h * ((pHL - pB) * qlL + (pHR - pB) * qlR)
         ib2 = 0.5 / self.beta
-        n = 4 if self.prescribed else 5
-        num = vol = oil = 0.0
-        for i in range(n):
-            d = p1[i] - p0[i]
-            num += V1[i] * d * d
-            vol += (V1[i] - V0[i]) * p0[i] * p0[i]
-            oil += p1[i] * p1[i] * V1[i]
+        d0, d1, d2, d3 = pA - p0[0], pHL - p0[1], pHR - p0[2], pB - p0[3]
+        num = V1[0] * d0 * d0 + V1[1] * d1 * d1 + V1[2] * d2 * d2 + V1[3] * d3 * d3
+        vol = ((V1[0] - V0[0]) * p0[0] * p0[0] + (V1[1] - V0[1]) * p0[1] * p0[1]
+               + (V1[2] - V0[2]) * p0[2] * p0[2] + (V1[3] - V0[3]) * p0[3] * p0[3])
+        oil = pA * pA * V1[0] + pHL * pHL * V1[1] + pHR * pHR * V1[2] + pB * pB * V1[3]
+        gas = 0.0
+        if not prescribed:
+            d4 = pS - p0[4]
+            num += V1[4] * d4 * d4
+            vol += (V1[4] - V0[4]) * p0[4] * p0[4]
+            oil += pS * pS * V1[4]
         num *= ib2
         vol *= -ib2
         oil *= ib2
-        gas = 0.0
-        if not self.prescribed:
+        if not prescribed:
             voil = self.acc.oil_volume(pS)[0]
             gas = self.acc.energy(pS, voil)
             num += pS * (voil - self._voil0) - (gas - self.ledger.gas_energy_J)
             self._voil0 = voil
-        sl.numerical_J = keep * sl.numerical_J + num
-        sl.volume_term_J = keep * sl.volume_term_J + vol
-        sl.piston_work_J = keep * sl.piston_work_J + h * v * (
-            self.Ah * (pHL + pHR) - 2.0 * self.Ar * pB)
+        terms = (h * (pS * (qPA + qPB) if prescribed else pS * self.Q_pump),
+                 h * pT * (qAT + qBT + qrel - qmL - qmR - qmB),
+                 h * ((pS - pA) * qPA + (pA - pT) * qAT + (pS - pB) * qPB + (pB - pT) * qBT),
+                 h * (pA - pHL) * qVL,
+                 h * (pA - pHR) * qVR,
+                 h * (pS - pT) * qrel,
+                 h * ((pT - pHL) * qmL + (pT - pHR) * qmR + (pT - pB) * qmB),
+                 h * ((pHL - pB) * qlL + (pHR - pB) * qlR),
+                 num,
+                 vol,
+                 h * v * (self.Ah * (pHL + pHR) - 2.0 * self.Ar * pB))
+        sl = self.step_ledger
+        if accumulate:
+            terms = tuple(a + b for a, b in zip(terms, (
+                sl.supply_J, sl.to_tank_J, sl.throttle_main_J, sl.throttle_VL_J,
+                sl.throttle_VR_J, sl.throttle_relief_J, sl.throttle_makeup_J, sl.leakage_J,
+                sl.numerical_J, sl.volume_term_J, sl.piston_work_J), strict=True))
+        (sl.supply_J, sl.to_tank_J, sl.throttle_main_J, sl.throttle_VL_J, sl.throttle_VR_J,
+         sl.throttle_relief_J, sl.throttle_makeup_J, sl.leakage_J, sl.numerical_J,
+         sl.volume_term_J, sl.piston_work_J) = terms
         sl.oil_energy_J, sl.gas_energy_J = oil, gas
         self.ledger.oil_energy_J, self.ledger.gas_energy_J = oil, gas
         self.p, self.V = p1, V1
