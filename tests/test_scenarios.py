@@ -52,8 +52,15 @@ def test_w4_supply_drop_profile() -> None:
 
 def test_w3_load_pulses() -> None:
     s = load_scenario("W3")
-    t = np.array([5.9, 6.0, 7.9, 8.0, 12.0, 18.5, 20.5])
-    np.testing.assert_allclose(s.load_pulse_N(t), [0, 2e3, 2e3, 0, 0, -1.5e3, 0])
+    t = np.array([5.9, 6.05, 7.9, 8.05, 12.0, 18.5, 20.5])
+    np.testing.assert_allclose(s.load_pulse_N(t), [0, 1e3, 2e3, 1e3, 0, -1.5e3, 0])
+    pull, down = s.hitch_force_N(t)
+    push, tow = s.load_pulses[0].hitch_N, s.load_pulses[1].hitch_N
+    assert push < 0.0 < tow            # braking pulse pushes, drive pulse tows
+    cos30, sin30 = np.cos(np.radians(30.0)), 0.5
+    np.testing.assert_allclose(pull, [0, push * cos30 / 2, push * cos30, push * cos30 / 2, 0,
+                                      tow * cos30, 0])
+    np.testing.assert_allclose(down, pull * sin30 / cos30)
     assert s.track_speed_m_s(0.5) == pytest.approx(0.75) and s.track_speed_m_s(9.0) == 1.5
     assert s.metric_windows().disturbances == ((6.0, 8.0), (18.0, 20.0))
     assert load_scenario("W1").load_pulse_N(7.0) == 0.0

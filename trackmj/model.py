@@ -85,6 +85,8 @@ class ChassisParams:
     length_m: float = param(0.1, 20.0)
     height_m: float = param(0.05, 5.0)
     ride_height_m: float = param(0.05, 3.0, doc="chassis origin above ground [m]")
+    hitch_x_m: float = param(-10.0, 10.0, doc="rear hitch, chassis frame x [m]")
+    hitch_z_m: float = param(0.0, 5.0, doc="rear hitch height above ground at layout [m]")
 
 
 @dataclass(frozen=True)
@@ -458,6 +460,8 @@ def build_mjcf(p: ModelParams, layout: Layout, home_qpos: np.ndarray | None = No
          pos=_fmt(0, -0.5, 0.25),
          size=_fmt(p.chassis.length_m / 2, 0.3, p.chassis.height_m / 2), rgba="0.9 0.6 0.1 1")
     _sub(chassis, "site", name="chassis_imu", pos="0 0 0.15", size="0.02")
+    _sub(chassis, "site", name="rear_hitch",
+         pos=_fmt(p.chassis.hitch_x_m, 0, p.chassis.hitch_z_m - ride), size="0.03")
 
     half_w = width / 2.0
     sx, sz = layout.sprocket_center

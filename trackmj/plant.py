@@ -124,6 +124,7 @@ class TrackPlant:
         self._closure_eq = m.equality("loop_closure").id
         self._closure_sites = (m.site("closure_a").id, m.site("closure_b").id)
         self._chassis_body = m.body("chassis").id
+        self._hitch_site = m.site("rear_hitch").id
         self._sprocket_body = m.body("sprocket").id
         self._carrier_body = m.body("idler_carrier").id
         self._group_of_body = self._contact_groups()
@@ -214,12 +215,21 @@ class TrackPlant:
             raise ValueError(f"track speed must be finite, got {speed_m_s!r}")
         self.data.ctrl[self._drive] = speed_m_s / self.params.sprocket_pitch_radius_m
 
-    def set_idler_load(self, load_N: float) -> None:
-        """Extra external load [N] on the idler carrier, along the slide, > 0 pulling the idler
-        inward like a higher track tension would (an equivalent load disturbance)."""
-        d = self.data
-        axis = d.xmat[self._carrier_body].reshape(3, 3)[:, 0]
-        d.xfrc_applied[self._carrier_body, :3] = -load_N * axis
+    def set_hitch_force(self, pull_N: float, down_N: float) -> None:
+        """Load on the rear hitch (site ``rear_hitch``) in the chassis frame: ``pull_N`` [N]
+        rearward along the chassis x axis, ``down_N`` [N] downward along its z axis.
+
+        A towed load (pull_N > 0) makes the speed-servoed sprocket drive harder; a pushing
+        load (pull_N < 0) makes it brake. Applied as a force and a moment about the chassis
+        centre of mass (``xfrc_applied``).
+        """
+        if not (math.isfinite(pull_N) and math.isfinite(down_N)):
+            raise ValueError(f"hitch force ({pull_N!r}, {down_N!r}) N must be finite")
+        d, body = self.data, self._chassis_body
+        force = d.xmat[body].reshape(3, 3) @ np.array((-pull_N, 0.0, -down_N))
+        arm = d.site_xpos[self._hitch_site] - d.xipos[body]
+        d.xfrc_applied[body, :3] = force
+        d.xfrc_applied[body, 3:] = np.cross(arm, force)
 
     @property
     def chassis_pose(self) -> np.ndarray:

@@ -15,7 +15,7 @@ File layout (every table optional except ``[scenario]`` and ``[reference]``)::
     [supply]      mode, nominal_Pa; [[supply.drops]] start_s, end_s, pressure_Pa, transition_s
     [terrain]     kind, road_class, n_min_cycles_m, n_max_cycles_m, dx_m, x_start_m,
                   flat_until_m, taper_m, margin_m
-    [[load_pulses]] start_s, end_s, delta_N, rise_s
+    [[load_pulses]] start_s, end_s, delta_N, hitch_N, pull_angle_deg, rise_s
     [[variants]]  name, bulk_modulus_scale, friction_scale, contact_stiffness_scale,
                   pretension_scale
     [limits]      force_min_N, force_max_N
@@ -25,6 +25,7 @@ File layout (every table optional except ``[scenario]`` and ``[reference]``)::
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from importlib.resources import files
 from pathlib import Path
@@ -130,12 +131,18 @@ _TERRAIN_DEFAULTS = {"n_min_cycles_m": 0.011, "n_max_cycles_m": 2.83, "dx_m": 0.
 
 @dataclass(frozen=True)
 class LoadPulse:
-    """Target change delta_N [N] of the hold-mode idler load from start_s to end_s [s],
-    with linear edges of rise_s [s]; applied physically (sprocket torque) by the runner."""
+    """Load disturbance from start_s to end_s [s] with linear edges of rise_s [s], applied
+    physically as a force hitch_N [N] on the rear hitch along a line pull_angle_deg [deg]
+    below the horizontal, rearward (> 0: a towed load, the sprocket drives harder and the
+    rear is loaded; < 0: a pushing load, the sprocket brakes and the rear is unloaded; see
+    :meth:`~trackmj.plant.TrackPlant.set_hitch_force`). delta_N [N] is the change of the
+    hold-mode idler load the pulse is calibrated to (``experiments/calibrate_w3.py``)."""
 
     start_s: float = param(0.0, None)
     end_s: float = param(0.0, None)
     delta_N: float = param(-20e3, 20e3)
+    hitch_N: float = param(-30e3, 30e3)
+    pull_angle_deg: float = param(0.0, 60.0)
     rise_s: float = param(0.0, 1.0)
 
 
@@ -228,10 +235,21 @@ class Scenario:
 
     def load_pulse_N(self, t_s: np.ndarray | float) -> np.ndarray:
         """Target idler-load change ΔF(t) [N] of the load pulses (trapezoids), shape of t_s."""
+        return self._pulses(t_s, lambda p: p.delta_N)
+
+    def hitch_force_N(self, t_s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """Rear-hitch load (pull rearward [N], push down [N]) in the chassis frame that
+        applies the load pulses; each of shape of t_s."""
+        pull = self._pulses(t_s, lambda p: p.hitch_N * math.cos(math.radians(p.pull_angle_deg)))
+        down = self._pulses(t_s, lambda p: p.hitch_N * math.sin(math.radians(p.pull_angle_deg)))
+        return pull, down
+
+    def _pulses(self, t_s: np.ndarray | float,
+                amplitude: Callable[[LoadPulse], float]) -> np.ndarray:
         t = np.asarray(t_s, dtype=float)
         f = np.zeros(t.shape)
         for p in self.load_pulses:
-            f = f + p.delta_N * (_edge(t, p.start_s, p.rise_s) - _edge(t, p.end_s, p.rise_s))
+            f = f + amplitude(p) * (_edge(t, p.start_s, p.rise_s) - _edge(t, p.end_s, p.rise_s))
         return f
 
     def terrain_profile(self, seed: int, duration_s: float | None = None) -> RoadProfile | None:

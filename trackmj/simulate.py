@@ -20,14 +20,15 @@ Architectures (same controller, weights, horizons, steps and references in all):
 The solenoid delay lives in the hydraulic plugin (tp, tp-weak, dp-a); the valve logic then
 runs without its own delay so the delay is not counted twice.
 
-W3's load pulses enter as an equivalent external load on the idler carrier (along the
-slide). A physical braking pulse was measured on the track in hold mode: a sprocket
-deceleration of 0.5 m/s² raises the idler load by ~2.1 kN, but an acceleration of 0.5 m/s²
-lowers it by only ~0.3 kN (the rear-drive tight side is the bottom strand), so the study's
-−1.5 kN pulse has no plausible drive-torque equivalent; both pulses therefore use the
-equivalent load (dp-a sees them through the replayed tp track load). Runs are deterministic per
-seed: a controller solve that overruns its period is still applied (in a simulation the
-plant waits) and counted as ``controller_overruns``; only solver failures fall back.
+W3's load pulses enter physically: a load on the rear hitch (a towed or pushing load along a
+chain 30° below the horizontal) while the sprocket servo holds the track speed, so the track
+sees sprocket drive/brake torque pulses and a pitch load. Amplitudes are calibrated to the
+target hold-mode idler-load changes (:mod:`trackmj.calibration`); dp-a sees them through the
+replayed tp track load.
+
+Runs are deterministic per seed: a controller solve that overruns its period is still
+applied (in a simulation the plant waits) and counted as ``controller_overruns``; only
+solver failures fall back.
 """
 
 from __future__ import annotations
@@ -251,6 +252,14 @@ def _initial_track(scenario: Scenario, seed: int, variant: Variant,
     return plant
 
 
+def build_hold_mode_run(scenario: Scenario, seed: int = 0) -> tuple[TrackPlant,
+                                                                     HydraulicTensioner]:
+    """The tp plant of ``scenario`` (nominal variant) settled at its initial reference, with
+    the hydraulic plugin in hold mode: the open-loop rig of the W3 pulse calibration."""
+    run = _build(scenario, "tp", scenario.variant("nominal"), seed, None)
+    return run.mechanics, run.tensioner
+
+
 # --------------------------------------------------------------------------- simulate
 
 def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
@@ -352,7 +361,7 @@ def _loop(run: _Run, controller_name: str, estimator_name: str, seed: int, durat
     ref = sc.reference_N(t_grid) * var.pretension_scale
     supply_set = sc.supply_pressure_Pa(t_grid)
     speed = sc.track_speed_m_s(t_grid)
-    pulses = sc.load_pulse_N(t_grid - dt) if sc.load_pulses and track is not None else None
+    hitch = sc.hitch_force_N(t_grid - dt) if sc.load_pulses and track is not None else None
     acc_index = track.model.jnt_dofadr[track.model.joint("chassis_z").id] if track else None
     playback = None
     if rrd is not None and track is not None:
@@ -385,8 +394,8 @@ def _loop(run: _Run, controller_name: str, estimator_name: str, seed: int, durat
             tens.set_mode(mode)
             if track is not None:
                 track.set_track_speed(float(speed[k]))
-                if pulses is not None:
-                    track.set_idler_load(float(pulses[k]))
+                if hitch is not None:
+                    track.set_hitch_force(float(hitch[0][k]), float(hitch[1][k]))
             mech.step(tens)
             p_head, p_rod, p_supply, q_supply, e_supply, p_work, mech_work = _hydraulic_row(tens)
             stroke, velocity = mech.stroke_m, mech.stroke_velocity_m_s
