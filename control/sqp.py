@@ -12,10 +12,10 @@ from [u, s, X] (80 variables, 60 equalities at N = 15, d = 1) to a dense QP in [
 transposed (backward) recursion, so the merit penalty is sqpmethod's too.
 
 All symbolic work (Jacobian blocks, E_i^-1, the recursion, the condensed matrices) happens in
-three SX functions built once; they and the QP solver are called through CasADi's
-``Function.buffer`` on preallocated numpy arrays (~0.2 us per call instead of ~15-30 us for a
-``Function.__call__`` with numpy conversion). Measured on the recorded closed-loop problems:
-iterates equal ``sqpmethod`` with an exact QP solver to 1e-14.
+three SX functions built once; they and the QP solver are called through
+:class:`~trackmj.control.fastcall.BufferedFunction` on preallocated numpy arrays. Measured
+on 3000 recorded closed-loop problems: iterates equal ``sqpmethod`` with an exact QP solver
+(qpOASES) to 1e-14.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
+from trackmj.control.fastcall import BufferedFunction
 from trackmj.control.ocp import Ocp
 
 #: sqpmethod defaults: line-search trials, backtracking factor, Armijo constant, smallest step.
@@ -62,31 +63,6 @@ def _violations(w: ca.SX, lbw: NDArray[np.float64], ubw: NDArray[np.float64], g:
             if np.isfinite(ub[i]):
                 terms.append(ca.fmax(z[i] - ub[i], 0.0))
     return ca.vertcat(*terms)
-
-
-class _Buffered:
-    """A CasADi Function evaluated through ``Function.buffer`` on fixed numpy arrays."""
-
-    def __init__(self, fn: ca.Function, args: list[NDArray[np.float64]]) -> None:
-        self.args = args  # the buffer holds raw pointers: keep the bound arrays alive
-        self.res = [np.zeros(fn.nnz_out(i)) for i in range(fn.n_out())]
-        self._buf, self._eval = fn.buffer()
-        for i, a in enumerate(args):
-            if a.dtype != np.float64 or not a.flags.c_contiguous or a.size != fn.nnz_in(i):
-                raise ValueError(f"{fn.name()}: argument {i} must be a contiguous float64 "
-                                 f"array of {fn.nnz_in(i)} values")
-            self._buf.set_arg(i, memoryview(a))
-        for i, r in enumerate(self.res):
-            self._buf.set_res(i, memoryview(r))
-
-    def __call__(self) -> int:
-        """Evaluate in place; returns CasADi's status flag (0 = success)."""
-        self._eval()
-        return self._buf.ret()
-
-    def stats(self) -> dict:
-        """Statistics of the last evaluation (the solver's verdict for a conic)."""
-        return self._buf.stats()
 
 
 class CondensedSqp:
@@ -207,15 +183,15 @@ class CondensedSqp:
         self.w, self.p = np.zeros(nw), np.zeros(p.numel())
         self.lam_g, self.lam_x = np.zeros(ng), np.zeros(nw)
         self._t = np.zeros(1)
-        self._qp_data = _Buffered(qp_data, [self.w, self.p, self.lam_g, self.lam_x])
+        self._qp_data = BufferedFunction(qp_data, [self.w, self.p, self.lam_g, self.lam_x])
         h, gq, aq, lba, uba, lbz, ubz, c_v, s_v, e_v, g_v, self._scal = self._qp_data.res
         zero_z, zero_a = np.zeros(nz), np.zeros(ineq.size)
-        self._qp = _Buffered(qp, [h, gq, aq, lba, uba, lbz, ubz, zero_z.copy(), zero_z,
+        self._qp = BufferedFunction(qp, [h, gq, aq, lba, uba, lbz, ubz, zero_z.copy(), zero_z,
                                   zero_a, np.zeros(0), np.zeros(0)][: qp.n_in()])
         z_qp, _, lam_a, lam_z = self._qp.res
-        self._step = _Buffered(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v])
+        self._step = BufferedFunction(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v])
         self.dx, self.dlam_g, self.dlam_x, self._step_scal = self._step.res
-        self._merit = _Buffered(merit, [self.w, self.dx, self._t, self.p])
+        self._merit = BufferedFunction(merit, [self.w, self.dx, self._t, self.p])
 
     def solve(self, w0: NDArray[np.float64], p: NDArray[np.float64],
               lam_g0: NDArray[np.float64] | float) -> SqpResult:
