@@ -378,29 +378,36 @@ def _loop(run: _Run, controller_name: str, estimator_name: str, seed: int, durat
     solve_ok: list[bool] = []
     u = 0.0
     mode = 0
+    # per-step inputs as Python floats and every period's reference preview, computed once
+    # (reference_N is elementwise: the same values as one reference_preview per period)
+    supply_list, speed_list = supply_set.tolist(), speed.tolist()
+    t_ctrl = dt * np.arange(0, steps, ratio)
+    previews = (sc.reference_N(t_ctrl[:, None] + period * np.arange(horizon + 1))
+                * var.pretension_scale)
+    speed_set = math.nan
     wall_start = time.perf_counter()
     try:
         for k in range(steps):
             t = k * dt
             if k % ratio == 0:
-                preview = sc.reference_preview(t, horizon + 1, period) * var.pretension_scale
                 if set_params is not None:
-                    set_params(supply_pressure_Pa=float(supply_set[k]))
-                out = controller(est.period_mean(), preview, t)
+                    set_params(supply_pressure_Pa=supply_list[k])
+                out = controller(est.period_mean(), previews[k // ratio], t)
                 u = out.u
                 solve_times.append(out.solve_time_s)
                 solve_ok.append(out.success)
             mode = valves.step(u)
             tens.set_mode(mode)
             if track is not None:
-                track.set_track_speed(float(speed[k]))
+                if speed_list[k] != speed_set:   # the servo keeps its command
+                    speed_set = speed_list[k]
+                    track.set_track_speed(speed_set)
                 if hitch is not None:
                     track.set_hitch_force(float(hitch[0][k]), float(hitch[1][k]))
             mech.step(tens)
             p_head, p_rod, p_supply, q_supply, e_supply, p_work, mech_work = _hydraulic_row(tens)
             stroke, velocity = mech.stroke_m, mech.stroke_velocity_m_s
-            z = sensors.measure(np.array((p_head, p_rod, stroke, velocity)))
-            x_hat = est.step(z, float(mode), float(supply_set[k]))
+            est.step(sensors.measure((p_head, p_rod, stroke)), float(mode), supply_list[k])
             acc_z = float(track.data.qacc[acc_index]) if track is not None else math.nan
             closure = track.closure_error_m if track is not None else math.nan
             rec.append(k, t + dt, mech.idler_force_N, ref[k], p_head, p_rod, p_supply, stroke,
