@@ -37,7 +37,3 @@ class BufferedFunction:
         """Evaluate in place; returns CasADi's status flag (0 = success)."""
         self._eval()
         return self._buf.ret()
-
-    def stats(self) -> dict:
-        """Statistics of the last evaluation (the solver's verdict for a conic)."""
-        return self._buf.stats()

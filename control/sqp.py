@@ -20,6 +20,7 @@ on 3000 recorded closed-loop problems: iterates equal ``sqpmethod`` with an exac
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import casadi as ca
@@ -34,6 +35,9 @@ MAX_ITER_LS = 3
 BETA = 0.8
 C1 = 1e-4
 MIN_STEP = 1e-10
+#: Largest constraint violation of an accepted QP solution (scaled units; DAQP's own primal
+#: tolerance is 1e-6, its optimal solutions on recorded closed-loop QPs violate < 1e-17).
+QP_FEASIBILITY_TOL = 1e-5
 
 
 @dataclass(frozen=True)
@@ -148,7 +152,15 @@ class CondensedSqp:
         zs, la, lz = ca.SX.sym("z", nz), ca.SX.sym("lam_a", ineq.size), ca.SX.sym("lam_z", nz)
         cs, ss = ca.SX.sym("c", nx), ca.SX.sym("S", nx, nb)
         es, gs = ca.SX.sym("e_inv", nxb * nxb * n), ca.SX.sym("grad", nw)
-        dx = ca.vertcat(zs, cs + ca.mtimes(ss, zs[:nb]))
+        bnd = [ca.SX.sym(name, k) for name, k in
+               (("lba", ineq.size), ("uba", ineq.size), ("lbz", nz), ("ubz", nz))]
+        s_du = ca.mtimes(ss, zs[:nb])
+        dx = ca.vertcat(zs, cs + s_du)
+        # primal feasibility of the QP solution: DAQP is a dual active-set method, so a
+        # feasible return is optimal and an infeasible QP or an aborted solve is not feasible
+        a_z = ca.mtimes(ca.DM(jin), ca.vertcat(zs, s_du))
+        qp_viol = ca.mmax(ca.vertcat(ca.fmax(a_z - bnd[1], 0), ca.fmax(bnd[0] - a_z, 0),
+                                     ca.fmax(zs - bnd[3], 0), ca.fmax(bnd[2] - zs, 0)))
         resid = ca.mtimes(ca.DM(hess), dx) + gs + ca.mtimes(ca.DM(jin).T, la)
         lam_eq = [None] * n
         nxt = None
@@ -164,10 +176,10 @@ class CondensedSqp:
         dlam_g[ineq.tolist()] = la
         dlam_x = ca.vertcat(lz, ca.SX(nx, 1))
         step = ca.Function(
-            "sqp_step", [zs, la, lz, cs, ss, es, gs],
+            "sqp_step", [zs, la, lz, cs, ss, es, gs, *bnd],
             [d(dx), d(dlam_g), d(dlam_x),
              ca.vertcat(ca.fmax(ca.norm_inf(dlam_g), ca.norm_inf(lz)), ca.dot(gs, dx),
-                        ca.norm_inf(dx))], fopts)
+                        ca.norm_inf(dx), qp_viol)], fopts)
 
         # merit at a trial point w + t dx
         ws, dxs, ts = ca.SX.sym("w", nw), ca.SX.sym("dx", nw), ca.SX.sym("t")
@@ -189,7 +201,8 @@ class CondensedSqp:
         self._qp = BufferedFunction(qp, [h, gq, aq, lba, uba, lbz, ubz, zero_z.copy(), zero_z,
                                   zero_a, np.zeros(0), np.zeros(0)][: qp.n_in()])
         z_qp, _, lam_a, lam_z = self._qp.res
-        self._step = BufferedFunction(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v])
+        self._step = BufferedFunction(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v,
+                                             lba, uba, lbz, ubz])
         self.dx, self.dlam_g, self.dlam_x, self._step_scal = self._step.res
         self._merit = BufferedFunction(merit, [self.w, self.dx, self._t, self.p])
 
@@ -206,19 +219,19 @@ class CondensedSqp:
         step_inf = 0.0
         while True:
             if self._qp_data():
-                return SqpResult(w.copy(), lam_g.copy(), np.inf, it, False)
-            f_k, l1_infeas, max_viol, du_inf = self._scal
+                return self._result(np.inf, it, False)
+            f_k, l1_infeas, max_viol, du_inf = self._scal.tolist()
             if max_viol < self.tol_pr and du_inf < self.tol_du:
-                return SqpResult(w.copy(), lam_g.copy(), float(max_viol), it, True)
+                return self._result(max_viol, it, True)
             if it >= 1 and step_inf <= MIN_STEP:
-                return SqpResult(w.copy(), lam_g.copy(), float(max_viol), it, False)
+                return self._result(max_viol, it, False)
             it += 1
-            # an infeasible QP (sqpmethod: elastic mode) or a solver failure -> not ok; the
-            # conic's flag is 0 even then, only its stats (~9 us) tell
-            if self._qp() or not self._qp.stats()["success"]:
-                return SqpResult(w.copy(), lam_g.copy(), float(max_viol), it, False)
-            self._step()
-            dlam_inf, slope, dx_inf = self._step_scal
+            if self._qp() or self._step():
+                return self._result(max_viol, it, False)
+            dlam_inf, slope, dx_inf, qp_viol = self._step_scal.tolist()
+            if not (qp_viol <= QP_FEASIBILITY_TOL and math.isfinite(slope)):
+                # infeasible QP (sqpmethod would switch to elastic mode) or solver failure
+                return self._result(max_viol, it, False)
             sigma = max(sigma, 1.01 * dlam_inf)
             l1 = f_k + sigma * l1_infeas
             tl1 = slope - sigma * l1_infeas
@@ -226,17 +239,25 @@ class CondensedSqp:
             for ls in range(1, MAX_ITER_LS + 1):
                 self._t[0] = t
                 self._merit()
-                f_c, viol_c, max_viol = self._merit.res[0]
+                f_c, viol_c, max_viol = self._merit.res[0].tolist()
                 if f_c + sigma * viol_c <= l1 + t * C1 * tl1 or ls == MAX_ITER_LS:
                     break
                 t *= BETA
-            lam_g *= 1.0 - t
-            lam_g += t * self.dlam_g
-            lam_x *= 1.0 - t
-            lam_x += t * self.dlam_x
-            w += t * self.dx
+            if t == 1.0:  # full step: the blended multipliers are the QP's
+                lam_g[:] = self.dlam_g
+                lam_x[:] = self.dlam_x
+                w += self.dx
+            else:
+                lam_g *= 1.0 - t
+                lam_g += t * self.dlam_g
+                lam_x *= 1.0 - t
+                lam_x += t * self.dlam_x
+                w += t * self.dx
             step_inf = t * dx_inf
             if it >= self.max_iter:
                 # sqpmethod would re-linearise here only to test convergence; success and
                 # the iteration limit are both accepted, so the merit call's violation suffices
-                return SqpResult(w.copy(), lam_g.copy(), float(max_viol), it, True)
+                return self._result(max_viol, it, True)
+
+    def _result(self, max_violation: float, iterations: int, ok: bool) -> SqpResult:
+        return SqpResult(self.w.copy(), self.lam_g.copy(), max_violation, iterations, ok)
