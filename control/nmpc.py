@@ -103,7 +103,11 @@ class _MpcBase:
         x0 = np.array(estimate, dtype=float)
         # gauge pressures below p_min are estimator noise; a hard bound at node 1 would make
         # the problem locally infeasible, so the initial state is projected onto p >= p_min
-        x0[:2] = np.maximum(x0[:2], self.ctrl.pressure_min_Pa)
+        p_min = self.ctrl.pressure_min_Pa
+        if x0[0] < p_min:
+            x0[0] = p_min
+        if x0[1] < p_min:
+            x0[1] = p_min
         p = self._parameters(x0, np.asarray(reference_preview, float))
         w0 = self._shifted_guess(x0)
         t0 = time.perf_counter()
@@ -114,13 +118,13 @@ class _MpcBase:
         dt = time.perf_counter() - t0
         self.solve_times.append(dt)
         overrun = dt > self.mpc.time_budget_s
-        ok = ok and bool(np.all(np.isfinite(w)))
+        ok = ok and bool(np.isfinite(w).all())
         if ok:
             self._w, self._lam_g = w, lam_g
         if ok and not overrun:
             self._plan = np.repeat(w[: self.ocp.n_blocks], lb)
             self._plan_age = 0
-            u = float(np.clip(self._plan[0], self.ctrl.u_min, self.ctrl.u_max))
+            u = min(max(float(w[0]), self.ctrl.u_min), self.ctrl.u_max)
         else:
             self.failures += not ok
             self.overruns += overrun
@@ -134,13 +138,13 @@ class _MpcBase:
         n, d, nb = self.mpc.horizon_steps, self.mpc.collocation_degree, self.ocp.n_blocks
         if self._w is None:
             return initial_guess(n, d, nb, x0)
-        w = self._w.copy()
-        xs = w[nb + n :].reshape(n, 4 * d)
-        xs[:-1] = xs[1:].copy()
-        w[nb + n :] = xs.ravel()
-        w[nb : nb + n - 1] = w[nb + 1 : nb + n]
+        prev, k = self._w, 4 * d
+        w = prev.copy()
+        # slacks and collocation blocks move one interval forward, the last ones are kept
+        w[nb : nb + n - 1] = prev[nb + 1 : nb + n]
+        w[nb + n + k : nb + n + (n - 1) * k] = prev[nb + n + 2 * k :]
         # the first collocation block is re-anchored at the new measurement
-        w[nb + n : nb + n + 4 * d] = np.tile(x0 / X_SCALE, d)
+        w[nb + n : nb + n + k].reshape(d, 4)[:] = x0 / X_SCALE
         return w
 
 
