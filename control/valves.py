@@ -33,11 +33,14 @@ class ValveLogic:
         self.error_integral = 0.0
         self.switches = 0
         self._pipeline: deque[int] = deque([0] * self.delay_steps)
+        # per-step constants as plain attributes (this runs every 1 ms step)
+        self._dead_zone, self._sigma_delta = params.dead_zone, params.sigma_delta
+        self._horizon = self.hold_steps * dt  # [s] integral bound and look-ahead
 
     def step(self, u: float) -> int:
         """Advance one step with command u in [-1, 1]; return the mode applied at the valves."""
         u = min(1.0, max(-1.0, float(u)))
-        if abs(u) < self.p.dead_zone:
+        if abs(u) < self._dead_zone:
             u = 0.0
             self.error_integral = 0.0
         if self.steps_in_mode >= self.hold_steps:
@@ -47,19 +50,19 @@ class ValveLogic:
                 self.steps_in_mode = 0
                 self.switches += 1
         self.steps_in_mode += 1
-        if self.p.sigma_delta:
-            horizon = self.hold_steps * self.dt
-            self.error_integral += (u - self.mode) * self.dt
-            self.error_integral = min(horizon, max(-horizon, self.error_integral))
+        if self._sigma_delta:
+            horizon = self._horizon
+            integral = self.error_integral + (u - self.mode) * self.dt
+            self.error_integral = min(horizon, max(-horizon, integral))
         if not self._pipeline:
             return self.mode
         self._pipeline.append(self.mode)
         return self._pipeline.popleft()
 
     def _choose(self, u: float) -> int:
-        if not self.p.sigma_delta:
+        if not self._sigma_delta:
             return 0 if u == 0.0 else (1 if u > 0.0 else -1)
-        horizon = self.hold_steps * self.dt
+        horizon = self._horizon
         best = self.mode
         best_err = abs(self.error_integral + (u - self.mode) * horizon)
         for m in MODES:
