@@ -15,10 +15,19 @@ class Sensors:
 
     Noise is Gaussian with the standard deviations of ``params`` drawn from a seeded
     ``numpy.random.Generator``; quantisation (step > 0) rounds to the nearest multiple.
+    ``block`` samples' noise is drawn at a time: the same numbers in the same order as one
+    draw per sample, so use block > 1 only when nothing else draws from ``rng``.
     """
 
-    def __init__(self, params: SensorParams, rng: np.random.Generator | int | None = 0) -> None:
+    def __init__(
+        self, params: SensorParams, rng: np.random.Generator | int | None = 0, block: int = 1
+    ) -> None:
+        if block < 1:
+            raise ValueError(f"block = {block} must be >= 1")
         self.p = params
+        self.block = block
+        self._noise: list[list[float]] = []
+        self._next = 0
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.std = np.array(
             (params.pressure_noise_std_Pa, params.pressure_noise_std_Pa, params.stroke_noise_std_m)
@@ -41,7 +50,11 @@ class Sensors:
     def measure(self, x: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:
         """Noisy sample z (3,) of the true state x (its first three entries: p_head, p_rod,
         y); Python scalars per channel (cheaper than small-array numpy at 1 kHz)."""
-        n0, n1, n2 = self.rng.standard_normal(3).tolist()
+        if self._next == len(self._noise):
+            self._noise = self.rng.standard_normal((self.block, 3)).tolist()
+            self._next = 0
+        n0, n1, n2 = self._noise[self._next]
+        self._next += 1
         (b0, b1, b2), (s0, s1, s2) = self._bias, self._std
         z = [x[0] + b0 + s0 * n0, x[1] + b1 + s1 * n1, x[2] + b2 + s2 * n2]
         for i, q in self._quanta:

@@ -346,7 +346,8 @@ def _loop(run: _Run, controller_name: str, estimator_name: str, seed: int, durat
     steps = round(duration / dt)
     controller = make_controller(controller_name, model, cfg)
     set_params = getattr(controller, "set_parameters", None)
-    sensors = Sensors(cfg.sensors, np.random.default_rng([seed, 1]))
+    # the run owns this generator: its noise can be drawn a second ahead (same numbers)
+    sensors = Sensors(cfg.sensors, np.random.default_rng([seed, 1]), block=1000)
     x_hat = np.array((0.0, 0.0, mech.stroke_m, 0.0))
     x_hat[:2] = _pressures(tens)
     est_cls = ExtendedKalmanFilter if estimator_name == "ekf" else UnscentedKalmanFilter
