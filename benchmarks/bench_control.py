@@ -3,9 +3,10 @@
 Prints median/p99/max wall time per call of NMPC, LMPC, PID, EKF and UKF, the number of
 controller calls over 5 ms, the garbage-collector pauses inside the loop, and the machine.
 
-Run: ``taskset -c 0 python benchmarks/bench_control.py``; the SQP/OSQP settings can be
-overridden (e.g. the previous ``--sqp-iter 3 --qp-max-iter 4000 --qp-tol 1e-5``), and
-``--no-gc`` disables the cyclic garbage collector during the loops.
+Run: ``taskset -c 0 python benchmarks/bench_control.py``; the NMPC's SQP iterations and the
+LMPC's OSQP settings can be overridden (e.g. ``--sqp-iter 3 --qp-max-iter 4000 --qp-tol
+1e-5``; the NMPC solves its condensed QPs exactly), and ``--no-gc`` disables the cyclic
+garbage collector during the loops.
 """
 
 from __future__ import annotations
@@ -53,8 +54,8 @@ class GcPauses:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sqp-iter", type=int, help="SQP iterations per period (NMPC)")
-    ap.add_argument("--qp-max-iter", type=int, help="OSQP iteration cap")
-    ap.add_argument("--qp-tol", type=float, help="OSQP eps_abs = eps_rel")
+    ap.add_argument("--qp-max-iter", type=int, help="OSQP iteration cap (LMPC)")
+    ap.add_argument("--qp-tol", type=float, help="OSQP eps_abs = eps_rel (LMPC)")
     ap.add_argument("--no-gc", action="store_true", help="gc.disable() during the loops")
     ap.add_argument("--duration", type=float, default=30.0, help="loop length [s]")
     args = ap.parse_args()

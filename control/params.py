@@ -172,8 +172,9 @@ class ControllerParams:
 class MpcParams:
     """NMPC/LMPC horizon (steps of the controller period), blocking, weights, SQP settings.
 
-    max_iter: SQP iterations per period (1 = real-time iteration); qp_max_iter: OSQP
-    iteration cap per QP; qp_tolerance: OSQP eps_abs = eps_rel (scaled units).
+    max_iter: NMPC SQP iterations per period (1 = real-time iteration; its condensed QPs
+    are solved exactly); qp_max_iter: the LMPC's OSQP iteration cap per QP; qp_tolerance:
+    its OSQP eps_abs = eps_rel (scaled units).
     """
 
     horizon_steps: int = 15
