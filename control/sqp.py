@@ -146,7 +146,10 @@ class CondensedSqp:
              d(ocp.lbg[ineq] - r_in), d(ocp.ubg[ineq] - r_in),
              d(ocp.lbw[:nz] - w[:nz]), d(ocp.ubw[:nz] - w[:nz]),
              d(c_all), d(s_all), d(ca.vertcat(*[ca.vec(e) for e in e_inv])), d(grad),
-             ca.vertcat(f, ca.sum1(viol), ca.mmax(viol), du_inf)], fopts)
+             ca.vertcat(f, ca.sum1(viol), ca.mmax(viol))], fopts)
+        # dual infeasibility, only needed once the iterate is primal feasible (~8 % of the
+        # QP-data instructions, so a separate function)
+        du_fn = ca.Function("sqp_du_inf", [w, p, lam_g, lam_x], [du_inf], fopts)
 
         # step: expand the QP solution, recover the collocation multipliers backwards
         zs, la, lz = ca.SX.sym("z", nz), ca.SX.sym("lam_a", ineq.size), ca.SX.sym("lam_z", nz)
@@ -201,6 +204,7 @@ class CondensedSqp:
         self._qp = BufferedFunction(qp, [h, gq, aq, lba, uba, lbz, ubz, zero_z.copy(), zero_z,
                                   zero_a, np.zeros(0), np.zeros(0)][: qp.n_in()])
         z_qp, _, lam_a, lam_z = self._qp.res
+        self._du_inf = BufferedFunction(du_fn, [self.w, self.p, self.lam_g, self.lam_x])
         self._step = BufferedFunction(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v,
                                              lba, uba, lbz, ubz])
         self.dx, self.dlam_g, self.dlam_x, self._step_scal = self._step.res
@@ -220,9 +224,11 @@ class CondensedSqp:
         while True:
             if self._qp_data():
                 return self._result(np.inf, it, False)
-            f_k, l1_infeas, max_viol, du_inf = self._scal.tolist()
-            if max_viol < self.tol_pr and du_inf < self.tol_du:
-                return self._result(max_viol, it, True)
+            f_k, l1_infeas, max_viol = self._scal.tolist()
+            if max_viol < self.tol_pr:
+                self._du_inf()
+                if self._du_inf.res[0][0] < self.tol_du:
+                    return self._result(max_viol, it, True)
             if it >= 1 and step_inf <= MIN_STEP:
                 return self._result(max_viol, it, False)
             it += 1
