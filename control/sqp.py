@@ -12,7 +12,7 @@ from [u, s, X] (80 variables, 60 equalities at N = 15, d = 1) to a dense QP in [
 transposed (backward) recursion, so the merit penalty is sqpmethod's too.
 
 All symbolic work (Jacobian blocks, E_i^-1, the recursion, the condensed matrices) happens in
-three SX functions built once; they and the QP solver are called through
+SX functions built once; they and the QP solver are called through
 :class:`~trackmj.control.fastcall.BufferedFunction` on preallocated numpy arrays. Measured
 on 3000 recorded closed-loop problems: iterates equal ``sqpmethod`` with an exact QP solver
 (qpOASES) to 1e-14.
@@ -75,14 +75,13 @@ class CondensedSqp:
     Layout required (as built by :func:`trackmj.control.ocp.build_ocp`):
     w = [u (n_blocks), s (n), X_0..X_{n-1} (4d each)], g = per step [4d collocation
     equations, then rows linear in w]; the cost is quadratic in w; the states have no
-    bounds. ``qp_solver`` is a CasADi conic plugin for dense QPs: DAQP (dual active set for
-    small dense QPs; qpOASES gave the same iterates, ~30 % slower, and prints a banner per
-    instance); ``function_options`` go to the three SX functions (e.g. JIT).
+    bounds. The condensed QPs go to DAQP (dual active set for small dense QPs, through
+    CasADi's conic; qpOASES gave the same iterates, ~30 % slower, and prints a banner per
+    instance); ``function_options`` go to the SX functions (e.g. JIT).
     """
 
     def __init__(self, ocp: Ocp, n_steps: int, degree: int, max_iter: int, tol_pr: float,
-                 tol_du: float, qp_solver: str = "daqp",
-                 function_options: dict | None = None) -> None:
+                 tol_du: float, function_options: dict | None = None) -> None:
         self.max_iter, self.tol_pr, self.tol_du = max_iter, tol_pr, tol_du
         w, p, f, g = ocp.w, ocp.p, ocp.f, ocp.g
         nb, n, nxb = ocp.n_blocks, n_steps, 4 * degree
@@ -190,7 +189,7 @@ class CondensedSqp:
         merit = ca.Function("sqp_merit", [ws, dxs, ts, p],
                             [ca.vertcat(trial[0], ca.sum1(trial[1]), ca.mmax(trial[1]))], fopts)
 
-        qp = ca.conic("sqp_qp", qp_solver,
+        qp = ca.conic("sqp_qp", "daqp",
                       {"h": ca.Sparsity.dense(nz, nz), "a": ca.Sparsity.dense(ineq.size, nz)},
                       {"error_on_fail": False})
 
