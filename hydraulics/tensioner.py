@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from math import sqrt
 from typing import Literal, NamedTuple
 
 from trackmj.ports import ForceLaw
@@ -40,6 +39,7 @@ MODES: dict[int, tuple[float, float, float]] = {
 }
 _MAX_BACKTRACKS = 12  # line-search halvings per Newton iteration (alpha >= 2^-12)
 _MIN_STEP = 2.0 ** -_MAX_BACKTRACKS
+_MAX_CHORD = 3  # chord corrections in complete_step before falling back to full Newton
 FLOW_NAMES = ("main_PA", "main_AT", "main_PB", "main_BT", "V_L", "V_R", "relief",
               "makeup_L", "makeup_R", "makeup_rod", "leak_L", "leak_R")
 
@@ -122,6 +122,27 @@ def _orf(pa: float, pb: float, k: float, pcr2: float, la: float, dla: float, lb:
     return q0 * lb, g * lb, -g * lb + q0 * dlb
 
 
+def _absmax(a: float, b: float, c: float, d: float, e: float) -> float:
+    """max(|a|, |b|, |c|, |d|, |e|) (a third of the builtins' cost)."""
+    if a < 0.0:
+        a = -a
+    if b < 0.0:
+        b = -b
+    if b > a:
+        a = b
+    if c < 0.0:
+        c = -c
+    if c > a:
+        a = c
+    if d < 0.0:
+        d = -d
+    if d > a:
+        a = d
+    if e < 0.0:
+        e = -e
+    return e if e > a else a
+
+
 class HydraulicTensioner:
     """Two-cylinder hydraulic tensioner implementing ``trackmj.ports.TensionerElement``.
 
@@ -150,8 +171,11 @@ class HydraulicTensioner:
     dp/dv = −R_p⁻¹·R_v (same Jacobian) and
     F(v) ≈ F(v*) + Z·(v − v*), Z = dF/dv = Σ ∂F/∂p·dp/dv − dF_fric/dv + dF_es/dv (< 0:
     the oil spring over one step, ≈ −h·ΣβA²/V, plus friction). Returned law:
-    ForceLaw(F(v*) − Z·v* + δF, Z). ``complete_step(t_{k+1}, s_{k+1}, v_{k+1})``: full Newton
-    from the linear predictor p* + dp/dv·(v_{k+1} − v*), then the step residual
+    ForceLaw(F(v*) − Z·v* + δF, Z). ``complete_step(t_{k+1}, s_{k+1}, v_{k+1})``: from the
+    linear predictor p* + dp/dv·(v_{k+1} − v*) (off by O((v_{k+1} − v*)²), typically
+    0.01–20 Pa), chord corrections with force_law's factorised Jacobian until one is below
+    newton_tol_Pa (usually two; none of a full Newton's Jacobian evaluations), full Newton
+    if they stop contracting; then the step residual
     r_k = F_hyd(v_{k+1})·v_{k+1}·h − law.at(v_{k+1})·v_{k+1}·h, F_hyd = piston force at the
     converged pressures − friction + end stop. NEPCE-style carry: E_c = Σ r (the cumulative
     interface error, which already contains the work the correction delivered); the next law
@@ -333,14 +357,16 @@ class HydraulicTensioner:
         else:
             if self.coupling == "weak":
                 self._set_gains(self.t, h)
-                p_guess = self.p
-            else:
+                p1 = self._newton(h, stroke_m, v1, self.p)
+            else:  # from the linear predictor, with force_law's Jacobian
                 p_star, dpdv, v_star = self._lin
                 dv = v1 - v_star
                 p_guess = (p_star[0] + dpdv[0] * dv, p_star[1] + dpdv[1] * dv,
                            p_star[2] + dpdv[2] * dv, p_star[3] + dpdv[3] * dv,
                            p_star[4] + dpdv[4] * dv)
-            p1 = self._newton(h, stroke_m, v1, p_guess)
+                p1 = self._chord(h, stroke_m, v1, p_guess, self._F)
+                if p1 is None:
+                    p1 = self._newton(h, stroke_m, v1, p_guess)
             self._commit(p1, stroke_m, v1, h, accumulate=False)
             self._advance_valves(self.t, h)
             self.s, self.v, self.t = stroke_m, v1, t_s
@@ -531,17 +557,19 @@ class HydraulicTensioner:
         f, df = orifice_flow(self.pT - p, self.K_mu, self.pcr)
         return s * f, -ds / self.mu_width * f - s * df
 
-    def _eval(self, h: float, c: tuple[float, ...], v: float,
-              p: tuple[float, ...]) -> tuple[tuple, tuple, tuple, tuple]:
+    def _eval(self, h: float, c: tuple[float, ...], v: float, p: tuple[float, ...],
+              F: tuple[float, ...] | None = None) -> tuple[tuple, tuple, tuple, tuple]:
         """Linearise the step at pressures p: (R, d, F, flows).
 
         R: residual R/h of the five nodes [m^3/s] (see class docstring); d = J⁻¹·R [Pa], so
-        the Newton step is p − d; F: the factorised Jacobian for ``_dpdv``; flows: the twelve
-        FLOW_NAMES flows [m^3/s]. c = V_i(s_{k+1})/(β·h) [m^3/(s·Pa)] of the five nodes. J is
-        solved with the circuit's sparsity: heads eliminated by Schur complement, then the
-        supply node, leaving 2x2 in (p_A, p_B); the head rows couple to the rod node only
-        through the leakage (J_HB = J_BH = −leak).
+        the Newton step is p − d; F: the factorised Jacobian (for ``_dpdv`` and chord steps);
+        flows: the twelve FLOW_NAMES flows [m^3/s]. c = V_i(s_{k+1})/(β·h) [m^3/(s·Pa)] of the
+        five nodes. J is solved with the circuit's sparsity: heads eliminated by Schur
+        complement, then the supply node, leaving 2x2 in (p_A, p_B); the head rows couple to
+        the rod node only through the leakage (J_HB = J_BH = −leak). Given F (of a nearby
+        point), J is not evaluated: d is the chord step with F, which is returned as is.
         """
+        jac = F is None
         pA, pHL, pHR, pB, pS = p
         prescribed = self.prescribed
         if prescribed:
@@ -549,33 +577,49 @@ class HydraulicTensioner:
         pT, pcr2, leak, fb, mo = self.pT, self.pcr2, self.leak, self._lim_top, self.mu_open
         KPA, KAT, KPB, KBT, KVL, KVR = self.K
         if pA >= fb and pHL >= fb and pHR >= fb and pB >= fb:
-            # no node near the cavitation floor: plain orifices Q = K·Δp/(Δp²+p_cr²)^¼,
-            # dQ/dΔp = K·(Δp²/2 + p_cr²)/(Δp²+p_cr²)^(5/4) (inlined components.orifice_flow)
-            d = pS - pA
-            r = d * d + pcr2
-            r4 = sqrt(sqrt(r))
-            qPA, aPA_S = KPA * d / r4, KPA * (0.5 * d * d + pcr2) / (r * r4)
-            d = pA - pT
-            r = d * d + pcr2
-            r4 = sqrt(sqrt(r))
-            qAT, aAT_A = KAT * d / r4, KAT * (0.5 * d * d + pcr2) / (r * r4)
-            d = pS - pB
-            r = d * d + pcr2
-            r4 = sqrt(sqrt(r))
-            qPB, aPB_S = KPB * d / r4, KPB * (0.5 * d * d + pcr2) / (r * r4)
-            d = pB - pT
-            r = d * d + pcr2
-            r4 = sqrt(sqrt(r))
-            qBT, aBT_B = KBT * d / r4, KBT * (0.5 * d * d + pcr2) / (r * r4)
-            d = pA - pHL
-            r = d * d + pcr2
-            r4 = sqrt(sqrt(r))
-            qVL, aVL_A = KVL * d / r4, KVL * (0.5 * d * d + pcr2) / (r * r4)
-            d = pA - pHR
-            r = d * d + pcr2
-            r4 = sqrt(sqrt(r))
-            qVR, aVR_A = KVR * d / r4, KVR * (0.5 * d * d + pcr2) / (r * r4)
-            aPA_A, aPB_B, aVL_H, aVR_H = -aPA_S, -aPB_S, -aVL_A, -aVR_A
+            # no node near the cavitation floor: plain orifices (components.orifice_flow)
+            # Q = u·Δp, dQ/dΔp = u·(Δp²/2 + p_cr²)/r with r = Δp² + p_cr², u = K·r^(−1/4)
+            d1 = pS - pA
+            e1 = d1 * d1
+            r1 = e1 + pcr2
+            u1 = KPA * r1 ** -0.25
+            qPA = u1 * d1
+            d2 = pA - pT
+            e2 = d2 * d2
+            r2 = e2 + pcr2
+            u2 = KAT * r2 ** -0.25
+            qAT = u2 * d2
+            d3 = pS - pB
+            e3 = d3 * d3
+            r3 = e3 + pcr2
+            u3 = KPB * r3 ** -0.25
+            qPB = u3 * d3
+            d4 = pB - pT
+            e4 = d4 * d4
+            r4 = e4 + pcr2
+            u4 = KBT * r4 ** -0.25
+            qBT = u4 * d4
+            d5 = pA - pHL
+            e5 = d5 * d5
+            r5 = e5 + pcr2
+            u5 = KVL * r5 ** -0.25
+            qVL = u5 * d5
+            if pHR == pHL and KVR == KVL:  # heads alike (V_L and V_R commanded together)
+                e6, r6, u6, qVR = e5, r5, u5, qVL
+            else:
+                d6 = pA - pHR
+                e6 = d6 * d6
+                r6 = e6 + pcr2
+                u6 = KVR * r6 ** -0.25
+                qVR = u6 * d6
+            if jac:
+                aPA_S = u1 * (0.5 * e1 + pcr2) / r1
+                aAT_A = u2 * (0.5 * e2 + pcr2) / r2
+                aPB_S = u3 * (0.5 * e3 + pcr2) / r3
+                aBT_B = u4 * (0.5 * e4 + pcr2) / r4
+                aVL_A = u5 * (0.5 * e5 + pcr2) / r5
+                aVR_A = u6 * (0.5 * e6 + pcr2) / r6
+                aPA_A, aPB_B, aVL_H, aVR_H = -aPA_S, -aPB_S, -aVL_A, -aVR_A
         else:
             lA, dlA = (1.0, 0.0) if pA >= fb else self._lim(pA)
             lHL, dlHL = (1.0, 0.0) if pHL >= fb else self._lim(pHL)
@@ -608,36 +652,42 @@ class HydraulicTensioner:
                 s, ds = ((1.0, 0.0) if x >= 1.0
                          else (x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x) / w))
                 d = pS - pT
-                r = d * d + pcr2
-                r4 = sqrt(sqrt(r))
-                f = self.K_rel * d / r4
-                qrel, drel = s * f, ds * f + s * self.K_rel * (0.5 * d * d + pcr2) / (r * r4)
+                e = d * d
+                r = e + pcr2
+                u = self.K_rel * r ** -0.25
+                f = u * d
+                qrel, drel = s * f, ds * f + s * u * (0.5 * e + pcr2) / r
             voil1, dvoil = self.acc.oil_volume(pS)
             ih = 1.0 / h
             rS = (cS * (pS - p0S) + (voil1 - self._voil0) * ih
                   - self.Q_pump + qPA + qPB + qrel)
-            JSS = cS + dvoil * ih + aPA_S + aPB_S + drel
-            JSA, JSB = aPA_A, aPB_B
-        JAA = cA - aPA_A + aAT_A + aVL_A + aVR_A
-        JAHL, JAHR, JAS = aVL_H, aVR_H, -aPA_S
-        JHH, JHA = cHL - aVL_H - dmL + leak, -aVL_A
-        JRR, JRA = cHR - aVR_H - dmR + leak, -aVR_A
-        JBB, JBS = cB - aPB_B + aBT_B - dmB + 2.0 * leak, -aPB_S
+            if jac:
+                JSS = cS + dvoil * ih + aPA_S + aPB_S + drel
+                JSA, JSB = aPA_A, aPB_B
         nl = -leak  # J_HB = J_RB = J_BHL = J_BHR
-        iH, iR, iS = 1.0 / JHH, 1.0 / JRR, 1.0 / JSS
-        a11 = JAA - JAHL * JHA * iH - JAHR * JRA * iR - JAS * JSA * iS
-        a12 = 0.0 - JAHL * nl * iH - JAHR * nl * iR - JAS * JSB * iS
-        a21 = -nl * JHA * iH - nl * JRA * iR - JBS * JSA * iS
-        a22 = JBB - nl * nl * iH - nl * nl * iR - JBS * JSB * iS
+        if jac:
+            JAA = cA - aPA_A + aAT_A + aVL_A + aVR_A
+            JAHL, JAHR, JAS = aVL_H, aVR_H, -aPA_S
+            JHH, JHA = cHL - aVL_H - dmL + leak, -aVL_A
+            JRR, JRA = cHR - aVR_H - dmR + leak, -aVR_A
+            JBB, JBS = cB - aPB_B + aBT_B - dmB + 2.0 * leak, -aPB_S
+            iH, iR, iS = 1.0 / JHH, 1.0 / JRR, 1.0 / JSS
+            a11 = JAA - JAHL * JHA * iH - JAHR * JRA * iR - JAS * JSA * iS
+            a12 = 0.0 - JAHL * nl * iH - JAHR * nl * iR - JAS * JSB * iS
+            a21 = -nl * JHA * iH - nl * JRA * iR - JBS * JSA * iS
+            a22 = JBB - nl * nl * iH - nl * nl * iR - JBS * JSB * iS
+            det = a11 * a22 - a12 * a21
+            F = (iH, iR, iS, a11, a12, a21, a22, det, JAHL, JAHR, JHA, JRA, JSA, JSB, JAS, JBS)
+        else:
+            iH, iR, iS, a11, a12, a21, a22, det, JAHL, JAHR, JHA, JRA, JSA, JSB, JAS, JBS = F
         b1 = rA - JAHL * rHL * iH - JAHR * rHR * iR - JAS * rS * iS
         b2 = rB - nl * rHL * iH - nl * rHR * iR - JBS * rS * iS
-        det = a11 * a22 - a12 * a21
         xA = (b1 * a22 - a12 * b2) / det
         xB = (a11 * b2 - a21 * b1) / det
         return ((rA, rHL, rHR, rB, rS),
                 (xA, (rHL - JHA * xA - nl * xB) * iH, (rHR - JRA * xA - nl * xB) * iR, xB,
                  (rS - JSA * xA - JSB * xB) * iS),
-                (iH, iR, iS, a11, a12, a21, a22, det, JAHL, JAHR, JHA, JRA, JSA, JSB),
+                F,
                 (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR))
 
     def _newton(self, h: float, s1: float, v: float, p: tuple[float, ...]) -> tuple[float, ...]:
@@ -652,9 +702,8 @@ class HydraulicTensioner:
         """
         tol = self._tol
         V = self._volumes(s1)
-        bh = self.beta * h  # the residual is evaluated divided by h: weights β·h/V_i
-        w0, w1, w2, w3, w4 = bh / V[0], bh / V[1], bh / V[2], bh / V[3], bh / V[4]
-        c = (1.0 / w0, 1.0 / w1, 1.0 / w2, 1.0 / w3, 1.0 / w4)
+        bh = self.beta * h  # the residual is evaluated divided by h
+        c = (V[0] / bh, V[1] / bh, V[2] / bh, V[3] / bh, V[4] / bh)
         R, d, F, flows = self._eval(h, c, v, p)
         f = -1.0  # Σ(β·R_i/V_i)² at p, computed when a line search needs it
         pA, pHL, pHR, pB, pS = p
@@ -663,11 +712,12 @@ class HydraulicTensioner:
         n_prev, full = math.inf, False
         for it in range(1, self._max_iter + 1):  # noqa: B007 (count reported)
             d0, d1, d2, d3, d4 = d
-            n = max(abs(d0), abs(d1), abs(d2), abs(d3), abs(d4))
+            n = _absmax(d0, d1, d2, d3, d4)
             if n < tol or (full and n < n_prev and n * n < tol * (n_prev - n)):
                 p = (pA - d0, pHL - d1, pHR - d2, pB - d3, pS - d4)
                 break
-            if f < 0.0:
+            if f < 0.0:  # first line search: weights β·h/V_i make R_i a pressure error
+                w0, w1, w2, w3, w4 = bh / V[0], bh / V[1], bh / V[2], bh / V[3], bh / V[4]
                 r0, r1, r2, r3, r4 = R[0] * w0, R[1] * w1, R[2] * w2, R[3] * w3, R[4] * w4
                 f = r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3 + r4 * r4
             alpha = 1.0
@@ -693,10 +743,36 @@ class HydraulicTensioner:
         self._backtracks += backtracks
         return p
 
+    def _chord(self, h: float, s1: float, v: float, p: tuple[float, ...],
+               F: tuple[float, ...]) -> tuple[float, ...] | None:
+        """Backward-Euler step by chord (simplified Newton) corrections from a guess p close
+        to the solution, with the factorised Jacobian F of a nearby solve: p_{k+1} once a
+        correction |dx|∞ is below newton_tol_Pa (applied), or None if the corrections stop
+        contracting or _MAX_CHORD do not converge."""
+        tol = self._tol
+        V = self._volumes(s1)
+        bh = self.beta * h
+        c = (V[0] / bh, V[1] / bh, V[2] / bh, V[3] / bh, V[4] / bh)
+        n_prev = math.inf
+        for it in range(1, _MAX_CHORD + 1):
+            _, d, _, flows = self._eval(h, c, v, p, F)
+            d0, d1, d2, d3, d4 = d
+            n = _absmax(d0, d1, d2, d3, d4)
+            if n >= n_prev:
+                return None
+            p = (p[0] - d0, p[1] - d1, p[2] - d2, p[3] - d3, p[4] - d4)
+            if n < tol:
+                if self.prescribed:
+                    p = (p[0], p[1], p[2], p[3], self.ps_next)
+                self._iters, self._flows, self._V1 = it, flows, V
+                return p
+            n_prev = n
+        return None
+
     def _dpdv(self, p: tuple[float, ...]) -> tuple[float, ...]:
         """dp_{k+1}/dv [Pa·s/m] = −R_p⁻¹·R_v with the last Newton Jacobian (both of R/h);
         −R_v is nonzero on the heads and the rod node only (chamber volumes depend on v)."""
-        iH, iR, iS, a11, a12, a21, a22, det, JAHL, JAHR, JHA, JRA, JSA, JSB = self._F
+        iH, iR, iS, a11, a12, a21, a22, det, JAHL, JAHR, JHA, JRA, JSA, JSB, _, _ = self._F
         p0, ib, nl = self.p, 1.0 / self.beta, -self.leak
         rHL = -self.Ah * (ib * (p[1] - p0[1]) + 1.0)
         rHR = -self.Ah * (ib * (p[2] - p0[2]) + 1.0)
