@@ -40,6 +40,7 @@ MODES: dict[int, tuple[float, float, float]] = {
 _MAX_BACKTRACKS = 12  # line-search halvings per Newton iteration (alpha >= 2^-12)
 _MIN_STEP = 2.0 ** -_MAX_BACKTRACKS
 _MAX_CHORD = 3  # chord corrections in complete_step before falling back to full Newton
+_tuple_new = tuple.__new__  # LogRow(...) without NamedTuple's keyword-capable __new__
 FLOW_NAMES = ("main_PA", "main_AT", "main_PB", "main_BT", "V_L", "V_R", "relief",
               "makeup_L", "makeup_R", "makeup_rod", "leak_L", "leak_R")
 
@@ -232,6 +233,7 @@ class HydraulicTensioner:
         self._vol_A, self._vol_S = prm.lines.line_a_volume_m3, prm.supply.line_volume_m3
         self._vol_dh, self._vol_dr = cyl.dead_volume_head_m3, cyl.dead_volume_rod_m3
         self._vol_lb, self._s_max = prm.lines.line_b_volume_m3, cyl.stroke_max_m
+        self._cyl = cyl
         self.beta = fl.bulk_modulus_Pa
         self.pT = prm.tank_pressure_Pa
         self.pcr = prm.orifice.critical_pressure_Pa
@@ -321,8 +323,12 @@ class HydraulicTensioner:
             s1 = stroke_m + h * v_star
             p1 = self._newton(h, s1, v_star, self.p)
             dpdv = self._dpdv(p1)
-            f_star, dfdv = self._force(p1, s1, v_star)
-            z = (self.Ah * (dpdv[1] + dpdv[2]) - 2.0 * self.Ar * dpdv[3] + dfdv)
+            # F(v*) and Z = dF/dv: pressures through dp/dv, friction, end stop (s1 = s_k + h·v)
+            ah, ar2 = self.Ah, 2.0 * self.Ar
+            ff, dff = self._friction(v_star)
+            fes, dfes_ds, dfes_dv = self._endstop(s1, v_star)
+            f_star = ah * (p1[1] + p1[2]) - ar2 * p1[3] - ff + fes
+            z = ah * (dpdv[1] + dpdv[2]) - ar2 * dpdv[3] - dff + dfes_ds * h + dfes_dv
             self._lin = (p1, dpdv, v_star)
             corr = 0.0
             if abs(velocity_m_s) >= self._v_corr:
@@ -374,7 +380,7 @@ class HydraulicTensioner:
         fes = self._endstop(stroke_m, v1)[0]
         sl.friction_J = ff * v1 * h
         sl.endstop_J = -fes * v1 * h
-        sl.mech_work_J = law.at(v1) * v1 * h
+        sl.mech_work_J = (law.force_N + law.damping_N_s_m * v1) * v1 * h  # law.at(v1)
         sl.interface_residual_J = (sl.piston_work_J - sl.friction_J - sl.endstop_J
                                    - sl.mech_work_J)
         self.carry_J += sl.interface_residual_J
@@ -448,9 +454,10 @@ class HydraulicTensioner:
             raise RuntimeError("no step completed yet")
         t, _, _, ff, fes = self._rec
         p, fl, led = self.p, self._flows, self.ledger
-        return LogRow(t, 0.5 * (p[1] + p[2]), p[3], p[4], fl[0] + fl[2],
-                      self.Ah * (p[1] + p[2]) - 2.0 * self.Ar * p[3] - ff + fes,
-                      led.supply_J, led.piston_work_J, led.mech_work_J)
+        ph = p[1] + p[2]
+        return _tuple_new(LogRow, (t, 0.5 * ph, p[3], p[4], fl[0] + fl[2],
+                                   self.Ah * ph - 2.0 * self.Ar * p[3] - ff + fes,
+                                   led.supply_J, led.piston_work_J, led.mech_work_J))
 
     @property
     def pressures(self) -> tuple[float, float, float, float, float]:
@@ -494,26 +501,23 @@ class HydraulicTensioner:
         return 0.0 if self.prescribed else self.acc.energy(ps)
 
     def _friction(self, v: float) -> tuple[float, float]:
-        c = self.params.cylinder
+        """Friction of both cylinders [N] (opposes motion) and its dF/dv [N·s/m]."""
+        c = self._cyl
         f, d = friction_force(v, c.coulomb_friction_N, c.coulomb_velocity_m_s,
                               c.viscous_friction_N_s_m)
         return 2.0 * f, 2.0 * d
 
     def _endstop(self, s: float, v: float) -> tuple[float, float, float]:
-        c = self.params.cylinder
+        """End-stop force of both cylinders [N] (> 0 outward), dF/ds, dF/dv; 0 inside."""
+        if 0.0 <= s <= self._s_max:
+            return 0.0, 0.0, 0.0
+        c = self._cyl
         f, ds, dv = endstop_force(s, v, c.stroke_max_m, c.endstop_stiffness_N_m,
                                   c.endstop_damping_N_s_m)
         return 2.0 * f, 2.0 * ds, 2.0 * dv
 
     def _pressure_force(self, p: tuple[float, ...]) -> float:
         return self.Ah * (p[1] + p[2]) - 2.0 * self.Ar * p[3]
-
-    def _force(self, p: tuple[float, ...], s1: float, v: float) -> tuple[float, float]:
-        """Cylinder force [N] at pressures p, end stroke s1, velocity v, and its explicit
-        dF/dv (friction + end stop through s1 = s_k + h·v; pressures held)."""
-        ff, dff = self._friction(v)
-        fes, dfes_ds, dfes_dv = self._endstop(s1, v)
-        return (self._pressure_force(p) - ff + fes, -dff + dfes_ds * self.dt + dfes_dv)
 
     def _set_gains(self, t_s: float, h: float) -> None:
         """Valve positions at t_s + h (not committed) -> orifice gains of the step.
@@ -541,9 +545,13 @@ class HydraulicTensioner:
                       g(series_area(a_r, met.head_branch_area_m2)))
 
     def _advance_valves(self, t_s: float, h: float) -> None:
-        for sol in (self.main, self.vl, self.vr):
-            if sol.moving:
-                sol.advance(t_s, h)
+        main, vl, vr = self.main, self.vl, self.vr
+        if main.moving:
+            main.advance(t_s, h)
+        if vl.moving:
+            vl.advance(t_s, h)
+        if vr.moving:
+            vr.advance(t_s, h)
 
     def _lim(self, p: float) -> tuple[float, float]:
         """Cavitation limiter below floor + band: (l, dl/dp); callers take (1, 0) above."""
@@ -576,6 +584,9 @@ class HydraulicTensioner:
             pS = self.ps_next
         pT, pcr2, leak, fb, mo = self.pT, self.pcr2, self.leak, self._lim_top, self.mu_open
         KPA, KAT, KPB, KBT, KVL, KVR = self.K
+        p0A, p0HL, p0HR, p0B, p0S = self.p
+        # heads alike (V_L and V_R commanded together): the R head's terms are the L head's
+        alike = pHR == pHL and p0HR == p0HL and KVR == KVL
         if pA >= fb and pHL >= fb and pHR >= fb and pB >= fb:
             # no node near the cavitation floor: plain orifices (components.orifice_flow)
             # Q = u·Δp, dQ/dΔp = u·(Δp²/2 + p_cr²)/r with r = Δp² + p_cr², u = K·r^(−1/4)
@@ -604,7 +615,7 @@ class HydraulicTensioner:
             r5 = e5 + pcr2
             u5 = KVL * r5 ** -0.25
             qVL = u5 * d5
-            if pHR == pHL and KVR == KVL:  # heads alike (V_L and V_R commanded together)
+            if alike:
                 e6, r6, u6, qVR = e5, r5, u5, qVL
             else:
                 d6 = pA - pHR
@@ -631,16 +642,19 @@ class HydraulicTensioner:
             qBT, aBT_B, _ = _orf(pB, pT, KBT, pcr2, lB, dlB, 1.0, 0.0)
             qVL, aVL_A, aVL_H = _orf(pA, pHL, KVL, pcr2, lA, dlA, lHL, dlHL)
             qVR, aVR_A, aVR_H = _orf(pA, pHR, KVR, pcr2, lA, dlA, lHR, dlHR)
-        qlL, qlR = leak * (pHL - pB), leak * (pHR - pB)
+        qlL = leak * (pHL - pB)
         qmL, dmL = (0.0, 0.0) if pHL >= mo else self._makeup(pHL)
-        qmR, dmR = (0.0, 0.0) if pHR >= mo else self._makeup(pHR)
+        if alike:
+            qlR, qmR, dmR = qlL, qmL, dmL
+        else:
+            qlR = leak * (pHR - pB)
+            qmR, dmR = (0.0, 0.0) if pHR >= mo else self._makeup(pHR)
         qmB, dmB = (0.0, 0.0) if pB >= mo else self._makeup(pB)
-        p0A, p0HL, p0HR, p0B, p0S = self.p
         cA, cHL, cHR, cB, cS = c
         Ahv, Arv2 = self.Ah * v, 2.0 * self.Ar * v
         rA = cA * (pA - p0A) - qPA + qAT + qVL + qVR
         rHL = cHL * (pHL - p0HL) - qVL + qlL - qmL + Ahv
-        rHR = cHR * (pHR - p0HR) - qVR + qlR - qmR + Ahv
+        rHR = rHL if alike else cHR * (pHR - p0HR) - qVR + qlR - qmR + Ahv
         rB = cB * (pB - p0B) - qPB + qBT - qlL - qlR - qmB - Arv2
         if prescribed:
             qrel, rS, JSS, JSA, JSB = 0.0, 0.0, 1.0, 0.0, 0.0
@@ -668,25 +682,31 @@ class HydraulicTensioner:
         if jac:
             JAA = cA - aPA_A + aAT_A + aVL_A + aVR_A
             JAHL, JAHR, JAS = aVL_H, aVR_H, -aPA_S
-            JHH, JHA = cHL - aVL_H - dmL + leak, -aVL_A
-            JRR, JRA = cHR - aVR_H - dmR + leak, -aVR_A
             JBB, JBS = cB - aPB_B + aBT_B - dmB + 2.0 * leak, -aPB_S
-            iH, iR, iS = 1.0 / JHH, 1.0 / JRR, 1.0 / JSS
-            a11 = JAA - JAHL * JHA * iH - JAHR * JRA * iR - JAS * JSA * iS
-            a12 = 0.0 - JAHL * nl * iH - JAHR * nl * iR - JAS * JSB * iS
-            a21 = -nl * JHA * iH - nl * JRA * iR - JBS * JSA * iS
-            a22 = JBB - nl * nl * iH - nl * nl * iR - JBS * JSB * iS
-            det = a11 * a22 - a12 * a21
-            F = (iH, iR, iS, a11, a12, a21, a22, det, JAHL, JAHR, JHA, JRA, JSA, JSB, JAS, JBS)
-        else:
-            iH, iR, iS, a11, a12, a21, a22, det, JAHL, JAHR, JHA, JRA, JSA, JSB, JAS, JBS = F
-        b1 = rA - JAHL * rHL * iH - JAHR * rHR * iR - JAS * rS * iS
-        b2 = rB - nl * rHL * iH - nl * rHR * iR - JBS * rS * iS
-        xA = (b1 * a22 - a12 * b2) / det
-        xB = (a11 * b2 - a21 * b1) / det
+            # rows H, R, S divided by their diagonal: x_H = y_H − hA·x_A − hB·x_B etc.
+            iH, iS = 1.0 / (cHL - aVL_H - dmL + leak), 1.0 / JSS
+            hA, hB, sA, sB = -aVL_A * iH, nl * iH, JSA * iS, JSB * iS
+            if alike:
+                iR, kA, kB = iH, hA, hB
+            else:
+                iR = 1.0 / (cHR - aVR_H - dmR + leak)
+                kA, kB = -aVR_A * iR, nl * iR
+            a11 = JAA - JAHL * hA - JAHR * kA - JAS * sA
+            a12 = -JAHL * hB - JAHR * kB - JAS * sB
+            a21 = -nl * (hA + kA) - JBS * sA
+            a22 = JBB - nl * (hB + kB) - JBS * sB
+            F = (iH, iR, iS, hA, hB, kA, kB, sA, sB, a11, a12, a21, a22,
+                 1.0 / (a11 * a22 - a12 * a21), JAHL, JAHR, JAS, JBS)
+        iH, iR, iS, hA, hB, kA, kB, sA, sB, a11, a12, a21, a22, idet, JAHL, JAHR, JAS, JBS = F
+        yH, yS = rHL * iH, rS * iS
+        yR = yH if alike else rHR * iR
+        b1 = rA - JAHL * yH - JAHR * yR - JAS * yS
+        b2 = rB - nl * (yH + yR) - JBS * yS
+        xA = (b1 * a22 - a12 * b2) * idet
+        xB = (a11 * b2 - a21 * b1) * idet
+        xH = yH - hA * xA - hB * xB
         return ((rA, rHL, rHR, rB, rS),
-                (xA, (rHL - JHA * xA - nl * xB) * iH, (rHR - JRA * xA - nl * xB) * iR, xB,
-                 (rS - JSA * xA - JSB * xB) * iS),
+                (xA, xH, xH if alike else yR - kA * xA - kB * xB, xB, yS - sA * xA - sB * xB),
                 F,
                 (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR))
 
@@ -772,17 +792,15 @@ class HydraulicTensioner:
     def _dpdv(self, p: tuple[float, ...]) -> tuple[float, ...]:
         """dp_{k+1}/dv [Pa·s/m] = −R_p⁻¹·R_v with the last Newton Jacobian (both of R/h);
         −R_v is nonzero on the heads and the rod node only (chamber volumes depend on v)."""
-        iH, iR, iS, a11, a12, a21, a22, det, JAHL, JAHR, JHA, JRA, JSA, JSB, _, _ = self._F
-        p0, ib, nl = self.p, 1.0 / self.beta, -self.leak
-        rHL = -self.Ah * (ib * (p[1] - p0[1]) + 1.0)
-        rHR = -self.Ah * (ib * (p[2] - p0[2]) + 1.0)
-        rB = 2.0 * self.Ar * (ib * (p[3] - p0[3]) + 1.0)
-        b1 = -JAHL * rHL * iH - JAHR * rHR * iR
-        b2 = rB - nl * rHL * iH - nl * rHR * iR
-        xA = (b1 * a22 - a12 * b2) / det
-        xB = (a11 * b2 - a21 * b1) / det
-        return (xA, (rHL - JHA * xA - nl * xB) * iH, (rHR - JRA * xA - nl * xB) * iR, xB,
-                (-JSA * xA - JSB * xB) * iS)
+        iH, iR, _, hA, hB, kA, kB, sA, sB, a11, a12, a21, a22, idet, JAHL, JAHR, _, _ = self._F
+        p0, ib = self.p, 1.0 / self.beta
+        yH = -self.Ah * (ib * (p[1] - p0[1]) + 1.0) * iH
+        yR = -self.Ah * (ib * (p[2] - p0[2]) + 1.0) * iR
+        b1 = -JAHL * yH - JAHR * yR
+        b2 = 2.0 * self.Ar * (ib * (p[3] - p0[3]) + 1.0) + self.leak * (yH + yR)
+        xA = (b1 * a22 - a12 * b2) * idet
+        xB = (a11 * b2 - a21 * b1) * idet
+        return (xA, yH - hA * xA - hB * xB, yR - kA * xA - kB * xB, xB, -sA * xA - sB * xB)
 
     def _commit(self, p1: tuple[float, ...], s1: float, v: float, h: float,
                 accumulate: bool) -> None:
@@ -793,16 +811,16 @@ class HydraulicTensioner:
         pT, prescribed = self.pT, self.prescribed
         p0, V0, V1 = self.p, self.V, self._V1
         ib2 = 0.5 / self.beta
+        # Σ over nodes; V_HL = V_HR, and V_A, V_S do not change with the stroke
         d0, d1, d2, d3 = pA - p0[0], pHL - p0[1], pHR - p0[2], pB - p0[3]
-        num = V1[0] * d0 * d0 + V1[1] * d1 * d1 + V1[2] * d2 * d2 + V1[3] * d3 * d3
-        vol = ((V1[0] - V0[0]) * p0[0] * p0[0] + (V1[1] - V0[1]) * p0[1] * p0[1]
-               + (V1[2] - V0[2]) * p0[2] * p0[2] + (V1[3] - V0[3]) * p0[3] * p0[3])
-        oil = pA * pA * V1[0] + pHL * pHL * V1[1] + pHR * pHR * V1[2] + pB * pB * V1[3]
+        num = V1[0] * d0 * d0 + V1[1] * (d1 * d1 + d2 * d2) + V1[3] * d3 * d3
+        vol = ((V1[1] - V0[1]) * (p0[1] * p0[1] + p0[2] * p0[2])
+               + (V1[3] - V0[3]) * p0[3] * p0[3])
+        oil = pA * pA * V1[0] + (pHL * pHL + pHR * pHR) * V1[1] + pB * pB * V1[3]
         gas = 0.0
         if not prescribed:
             d4 = pS - p0[4]
             num += V1[4] * d4 * d4
-            vol += (V1[4] - V0[4]) * p0[4] * p0[4]
             oil += pS * pS * V1[4]
         num *= ib2
         vol *= -ib2
@@ -818,7 +836,8 @@ class HydraulicTensioner:
                  h * (pA - pHL) * qVL,
                  h * (pA - pHR) * qVR,
                  h * (pS - pT) * qrel,
-                 h * ((pT - pHL) * qmL + (pT - pHR) * qmR + (pT - pB) * qmB),
+                 (h * ((pT - pHL) * qmL + (pT - pHR) * qmR + (pT - pB) * qmB)
+                  if qmL or qmR or qmB else 0.0),
                  h * ((pHL - pB) * qlL + (pHR - pB) * qlR),
                  num,
                  vol,
