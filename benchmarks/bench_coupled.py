@@ -1,8 +1,9 @@
 """Coupled step (MuJoCo track + hydraulic plugin, strong coupling) vs the bare MuJoCo step.
 
 Both run in one process on the same spun-up state (driving at 1.5 m/s, hold mode), so the
-ratio is measured, not assembled from separate runs. Also times the plugin alone
-(force_law + complete_step) inside the coupled loop. Best of three alternating blocks.
+ratio is measured, not assembled from separate runs. The coupled step logs the plugin's
+per-step values as ``trackmj run`` does (``log()``); the plugin alone (force_law +
+complete_step + log) is timed inside the coupled loop. Best of three alternating blocks.
 Run: ``python benchmarks/bench_coupled.py [--seconds 3]``.
 """
 
@@ -34,6 +35,11 @@ class _TimedElement:
     def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
         start = time.perf_counter()
         self.inner.complete_step(t_s, stroke_m, velocity_m_s)
+        self.seconds += time.perf_counter() - start
+
+    def log(self) -> None:
+        start = time.perf_counter()
+        self.inner.log()
         self.seconds += time.perf_counter() - start
 
 
@@ -76,6 +82,7 @@ def main() -> None:
         start = time.perf_counter()
         for _ in range(steps):
             plant.step(element)
+            element.log()
         return (time.perf_counter() - start) / steps, element.seconds / steps
 
     bare_t, coupled_t, plugin_t = [], [], []

@@ -1,4 +1,4 @@
-"""Microbenchmark: µs per force_law + complete_step pair of the hydraulic tensioner.
+"""Microbenchmark: µs per step of the hydraulic tensioner (force_law + complete_step + log).
 
 Drives the plugin with a mass-spring idler (80 kg, 1e6 N/m) through a pressurize / hold /
 release / hold cycle at 1 ms, so valve switching and Newton re-convergence are included.
@@ -15,7 +15,7 @@ from trackmj.hydraulics import HydraulicTensioner
 
 def bench(coupling: str, steps: int = 6000, profile: object = None, repeats: int = 5,
           element: type = HydraulicTensioner) -> float:
-    """Per-step cost [µs] of force_law + complete_step: the best of ``repeats`` run means
+    """Per-step cost [µs] of force_law + complete_step + log(): the best of ``repeats`` run means
     (the minimum is the least disturbed by other load on the machine; timeit's advice)."""
     h, m, k, c = 1e-3, 80.0, 1e6, 5e3
     runs = []
@@ -35,6 +35,7 @@ def bench(coupling: str, steps: int = 6000, profile: object = None, repeats: int
             s += h * v
             t2 = time.perf_counter()
             ht.complete_step((i + 1) * h, s, v)
+            ht.log()
             spent += (t1 - t0) + (time.perf_counter() - t2)
         runs.append(spent / steps * 1e6)
     return min(runs)
