@@ -53,8 +53,9 @@ class StepRecord:
     "main_BT" = rod node->T, "V_L"/"V_R" = A->head, "relief" = S->T, "makeup_*" = T->chamber,
     "leak_*" = head->rod). p_rod_L_Pa == p_rod_R_Pa (one rod node). dF_dp_m2 maps a chamber
     to ∂F/∂p (A_head or −A_rod); dv_dQ_1_m2 maps it to ∂v/∂Q for flow INTO that chamber
-    (1/A_head, −1/A_rod), per cylinder. newton_iterations: of the last solve;
-    newton_backtracks: line-search halvings in all solves of the step.
+    (1/A_head, −1/A_rod), per cylinder. newton_iterations: corrections (Newton, or chord in
+    a strong complete_step) of the last solve; newton_backtracks: line-search halvings in
+    all solves of the step.
     """
 
     t_s: float
