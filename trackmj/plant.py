@@ -254,7 +254,8 @@ class TrackPlant:
     def closure_error_m(self) -> float:
         """Gap between the two ends of the loop at the closure pin [m]."""
         a, b = self._closure_sites
-        return float(np.linalg.norm(self.data.site_xpos[a] - self.data.site_xpos[b]))
+        xpos = self.data.site_xpos
+        return math.dist(xpos[a], xpos[b])
 
     @property
     def warning_count(self) -> int:
