@@ -67,17 +67,3 @@ def test_lmpc_respects_pressure_bound_in_its_plan() -> None:
     assert free.u > 0.5
     assert 0.0 <= out.u < 0.5 * free.u
     assert planned[:, 0].max() <= p_max + 5e3  # OSQP eps 1e-4 (relative, MPa units)
-
-
-def test_forced_infeasible_falls_back_and_counts() -> None:
-    """p_max below the current head pressure: no plan can satisfy it -> fallback, no raise."""
-    ctrl = _lmpc()
-    x = ReducedModel(CFG.plant).equilibrium(15e3)
-    ref = np.full(CFG.mpc.horizon_steps + 1, 15e3)
-    first = ctrl(x, ref, 0.0)
-    assert first.success and not first.fallback
-    ctrl.set_parameters(pressure_max_Pa=2e6)
-    outs = [ctrl(x, ref, 0.01 * k) for k in range(1, 4)]
-    assert all(o.fallback and not o.success for o in outs)
-    assert ctrl.fallbacks == 3 and ctrl.failures == 3
-    assert all(CFG.controller.u_min <= o.u <= CFG.controller.u_max for o in outs)

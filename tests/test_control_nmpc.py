@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from trackmj.control.interface import steps_per_period
+from trackmj.control.lmpc import LinearMpc
 from trackmj.control.loop import run_closed_loop, step_metrics
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
@@ -50,9 +51,11 @@ def test_supply_drop_keeps_tension_in_band_and_still_tracks() -> None:
     assert m["settling_s"] <= 2.0
 
 
-def test_forced_infeasible_falls_back_and_counts() -> None:
-    """p_max below the current head pressure: no plan can satisfy it -> fallback, no raise."""
-    ctrl = _nmpc()
+@pytest.mark.parametrize("mpc_class", [NonlinearMpc, LinearMpc])
+def test_forced_infeasible_falls_back_and_counts(mpc_class: type) -> None:
+    """p_max below the current head pressure: no plan can satisfy it -> fallback, no raise
+    (the shared MPC base, so checked for both the NMPC and the LMPC)."""
+    ctrl = mpc_class(ReducedModel(CFG.plant), CFG.controller, CFG.mpc)
     x = ReducedModel(CFG.plant).equilibrium(15e3)
     ref = np.full(CFG.mpc.horizon_steps + 1, 15e3)
     first = ctrl(x, ref, 0.0)
