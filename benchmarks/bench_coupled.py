@@ -12,11 +12,10 @@ from __future__ import annotations
 import argparse
 import time
 
-import mujoco
+from driving import DrivingSnapshot
 
 from trackmj.hydraulics import HydraulicTensioner
 from trackmj.machine import machine
-from trackmj.plant import PassiveTensioner, TrackPlant
 
 
 class _TimedElement:
@@ -49,31 +48,12 @@ def main() -> None:
     args = parser.parse_args()
     steps = round(args.seconds / 1e-3)
 
-    plant = TrackPlant.load()
-    passive = PassiveTensioner.from_params(plant.params)
-    plant.run(passive, 1.5, lambda t: 1.5 * min(1.0, t))
-    m, d = plant.model, plant.data
-    state = (d.qpos.copy(), d.qvel.copy(), d.act.copy(), plant.time_s)
+    snapshot = DrivingSnapshot()
+    plant = snapshot.plant
     force = plant.idler_force_N
-    tensioner_id = m.actuator("tensioner").id
-
-    def restore() -> None:
-        d.qpos[:], d.qvel[:], d.act[:] = state[:3]
-        plant.time_s = state[3]
-        mujoco.mj_forward(m, d)
-
-    def bare() -> float:
-        restore()
-        law = passive.force_law(plant.time_s, plant.stroke_m, plant.stroke_velocity_m_s)
-        d.ctrl[tensioner_id] = law.force_N
-        m.actuator_biasprm[tensioner_id, 2] = law.damping_N_s_m
-        start = time.perf_counter()
-        for _ in range(steps):
-            mujoco.mj_step(m, d)
-        return (time.perf_counter() - start) / steps
 
     def coupled() -> tuple[float, float]:
-        restore()
+        snapshot.restore()
         probe = HydraulicTensioner(stroke_m=plant.stroke_m)
         head = (force + 2 * probe.Ar * probe.pT) / (2 * probe.Ah)
         element = _TimedElement(HydraulicTensioner(stroke_m=plant.stroke_m,
@@ -87,7 +67,7 @@ def main() -> None:
 
     bare_t, coupled_t, plugin_t = [], [], []
     for _ in range(3):
-        bare_t.append(bare())
+        bare_t.append(snapshot.bare_step_s(steps))
         total, plugin = coupled()
         coupled_t.append(total)
         plugin_t.append(plugin)

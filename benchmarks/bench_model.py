@@ -13,14 +13,9 @@ import time
 
 import mujoco
 import numpy as np
+from driving import DrivingSnapshot
 
 from trackmj.machine import machine
-from trackmj.plant import PassiveTensioner, TrackPlant
-
-
-def _reset_timers(d: mujoco.MjData) -> None:
-    for timer in d.timer:
-        timer.duration, timer.number = 0.0, 0
 
 
 def main() -> None:
@@ -29,32 +24,12 @@ def main() -> None:
     args = parser.parse_args()
     steps = round(args.seconds / 1e-3)
 
-    plant = TrackPlant.load()
-    element = PassiveTensioner.from_params(plant.params)
-    plant.run(element, 1.5, lambda t: 1.5 * min(1.0, t))   # spin up to 1.5 m/s
-    state = (plant.data.qpos.copy(), plant.data.qvel.copy(), plant.data.act.copy())
+    snapshot = DrivingSnapshot()
+    plant, element = snapshot.plant, snapshot.passive
     m, d = plant.model, plant.data
 
-    def restore() -> None:
-        d.qpos[:], d.qvel[:], d.act[:] = state
-        mujoco.mj_forward(m, d)
-
-    tensioner = m.actuator("tensioner").id
-
-    def bare_run() -> float:
-        """mj_step with the affine law fixed (preload + implicit damping), no Python."""
-        restore()
-        law = element.force_law(0.0, plant.stroke_m, plant.stroke_velocity_m_s)
-        d.ctrl[tensioner] = law.force_N
-        m.actuator_biasprm[tensioner, 2] = law.damping_N_s_m
-        _reset_timers(d)
-        start = time.perf_counter()
-        for _ in range(steps):
-            mujoco.mj_step(m, d)
-        return (time.perf_counter() - start) / steps
-
     def coupled_run() -> float:
-        restore()
+        snapshot.restore()
         start = time.perf_counter()
         for _ in range(steps):
             plant.step(element)
@@ -63,7 +38,7 @@ def main() -> None:
     # alternate the two cases and keep each one's best of three (load noise only adds)
     bare_times, coupled_times = [], []
     for _ in range(3):
-        bare_times.append(bare_run())
+        bare_times.append(snapshot.bare_step_s(steps))
         timers = {name: d.timer[int(getattr(mujoco.mjtTimer, name))].duration / steps
                   for name in ("mjTIMER_STEP", "mjTIMER_POS_COLLISION", "mjTIMER_CONSTRAINT",
                                "mjTIMER_POS_KINEMATICS", "mjTIMER_POS_INERTIA")}
