@@ -53,7 +53,8 @@ def test_w4_supply_drop_profile() -> None:
 def test_w3_load_pulses() -> None:
     s = load_scenario("W3")
     t = np.array([5.9, 6.05, 7.9, 8.05, 12.0, 18.5, 20.5])
-    np.testing.assert_allclose(s.load_pulse_N(t), [0, 1e3, 2e3, 1e3, 0, -1.5e3, 0])
+    assert [(p.start_s, p.end_s, p.delta_N) for p in s.load_pulses] == [
+        (6.0, 8.0, 2e3), (18.0, 20.0, -1.5e3)]
     pull, down = s.hitch_force_N(t)
     push, tow = s.load_pulses[0].hitch_N, s.load_pulses[1].hitch_N
     assert push < 0.0 < tow            # braking pulse pushes, drive pulse tows
@@ -63,7 +64,7 @@ def test_w3_load_pulses() -> None:
     np.testing.assert_allclose(down, pull * sin30 / cos30)
     assert s.track_speed_m_s(0.5) == pytest.approx(0.75) and s.track_speed_m_s(9.0) == 1.5
     assert s.metric_windows().disturbances == ((6.0, 8.0), (18.0, 20.0))
-    assert load_scenario("W1").load_pulse_N(7.0) == 0.0
+    assert load_scenario("W1").hitch_force_N(7.0) == (0.0, 0.0)
 
 
 def test_w2_road_band_maps_to_1_20_hz_and_is_seeded() -> None:

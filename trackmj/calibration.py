@@ -29,6 +29,7 @@ import math
 import numpy as np
 
 from trackmj.scenarios import LoadPulse, Scenario
+from trackmj.simulate import build_hold_mode_run
 
 START_S = 3.0
 """Pulse onset in the calibration runs [s], after the 1 s speed ramp has settled."""
@@ -39,8 +40,6 @@ SETTLE_ALLOWANCE_S = 0.5
 def idler_force_history(scenario: Scenario, pulse: LoadPulse) -> np.ndarray:
     """F_ten [N] at 1 kHz of a hold-mode tp run of ``scenario`` (its speed profile, nominal
     variant) with the one hitch ``pulse``, until the pulse ends; shape (steps,)."""
-    from trackmj.simulate import build_hold_mode_run  # local: simulate imports scenarios
-
     plant, tensioner = build_hold_mode_run(scenario)
     pulsed = dataclasses.replace(scenario, load_pulses=(pulse,))
     steps = round(pulse.end_s / 1e-3)

@@ -233,10 +233,6 @@ class Scenario:
         t = np.asarray(t_s, dtype=float)
         return self.track.speed_m_s * _edge(t, 0.0, self.track.ramp_s)
 
-    def load_pulse_N(self, t_s: np.ndarray | float) -> np.ndarray:
-        """Target idler-load change ΔF(t) [N] of the load pulses (trapezoids), shape of t_s."""
-        return self._pulses(t_s, lambda p: p.delta_N)
-
     def hitch_force_N(self, t_s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Rear-hitch load (pull rearward [N], push down [N]) in the chassis frame that
         applies the load pulses; each of shape of t_s."""
