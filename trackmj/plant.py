@@ -102,9 +102,14 @@ class TrackPlant:
                              f"{COUPLING_STEP_S} s coupling step")
         self.substeps = round(ratio)
         m = model
-        self._slide_q = m.jnt_qposadr[m.joint("idler_slide").id]
-        self._slide_v = m.jnt_dofadr[m.joint("idler_slide").id]
-        self._sprocket_v = m.jnt_dofadr[m.joint("sprocket_hinge").id]
+        # views into the MjData/MjModel buffers, kept to spare the bindings' attribute
+        # look-ups in the 1 kHz loop (the buffers live as long as data and model)
+        self._qpos, self._qvel, self._ctrl = self.data.qpos, self.data.qvel, self.data.ctrl
+        self._biasprm = m.actuator_biasprm
+        self._stroke_offset_m = params.idler.stroke_at_layout_m
+        self._slide_q = int(m.jnt_qposadr[m.joint("idler_slide").id])
+        self._slide_v = int(m.jnt_dofadr[m.joint("idler_slide").id])
+        self._sprocket_v = int(m.jnt_dofadr[m.joint("sprocket_hinge").id])
         self._chassis_q = np.array([m.jnt_qposadr[m.joint(n).id]
                                     for n in ("chassis_x", "chassis_z", "chassis_pitch")])
         self._chassis_v = np.array([m.jnt_dofadr[m.joint(n).id]
@@ -184,12 +189,12 @@ class TrackPlant:
     @property
     def stroke_m(self) -> float:
         """Cylinder stroke [m] (outward positive)."""
-        return self.params.idler.stroke_at_layout_m + float(self.data.qpos[self._slide_q])
+        return self._stroke_offset_m + float(self._qpos[self._slide_q])
 
     @property
     def stroke_velocity_m_s(self) -> float:
         """Cylinder stroke velocity [m/s]."""
-        return float(self.data.qvel[self._slide_v])
+        return float(self._qvel[self._slide_v])
 
     @property
     def idler_force_N(self) -> float:
@@ -213,7 +218,7 @@ class TrackPlant:
         """Command the sprocket velocity servo to a pitch-line speed [m/s]."""
         if not math.isfinite(speed_m_s):
             raise ValueError(f"track speed must be finite, got {speed_m_s!r}")
-        self.data.ctrl[self._drive] = speed_m_s / self.params.sprocket_pitch_radius_m
+        self._ctrl[self._drive] = speed_m_s / self.params.sprocket_pitch_radius_m
 
     def set_hitch_force(self, pull_N: float, down_N: float) -> None:
         """Load on the rear hitch (site ``rear_hitch``) in the chassis frame: ``pull_N`` [N]
@@ -371,21 +376,25 @@ class TrackPlant:
         exchanged consistent with the stroke change.
         """
         m, d = self.model, self.data
-        stroke0 = self.stroke_m
-        law = element.force_law(self.time_s, stroke0, self.stroke_velocity_m_s)
-        if not (math.isfinite(law.force_N) and math.isfinite(law.damping_N_s_m)):
+        qpos, qvel, q_slide, v_slide = self._qpos, self._qvel, self._slide_q, self._slide_v
+        stroke0 = self._stroke_offset_m + float(qpos[q_slide])
+        law = element.force_law(self.time_s, stroke0, float(qvel[v_slide]))
+        force, damping = law.force_N, law.damping_N_s_m
+        if not (math.isfinite(force) and math.isfinite(damping)):
             raise ValueError(f"tensioner returned a non-finite force law {law}")
-        d.ctrl[self._tensioner] = law.force_N
-        m.actuator_biasprm[self._tensioner, 2] = law.damping_N_s_m
-        for _ in range(self.substeps):
-            mujoco.mj_step(m, d)
-        self.time_s += COUPLING_STEP_S
+        self._ctrl[self._tensioner] = force
+        self._biasprm[self._tensioner, 2] = damping
         if self.substeps == 1:
-            velocity = self.stroke_velocity_m_s
+            mujoco.mj_step(m, d)
+            stroke, velocity = self._stroke_offset_m + float(qpos[q_slide]), float(qvel[v_slide])
         else:
-            velocity = (self.stroke_m - stroke0) / COUPLING_STEP_S
+            for _ in range(self.substeps):
+                mujoco.mj_step(m, d)
+            stroke = self._stroke_offset_m + float(qpos[q_slide])
+            velocity = (stroke - stroke0) / COUPLING_STEP_S
+        self.time_s += COUPLING_STEP_S
         self.last_law = law
-        element.complete_step(self.time_s, self.stroke_m, velocity)
+        element.complete_step(self.time_s, stroke, velocity)
         return law
 
     def run(self, element: TensionerElement, duration_s: float,
