@@ -1,4 +1,4 @@
-"""Hydraulic tensioning circuit (pure numpy/scipy; never imports mujoco).
+"""Hydraulic tensioning circuit (numpy, numba-compiled kernels; never imports mujoco).
 
 Public API: :class:`HydraulicTensioner` (a ``trackmj.ports.TensionerElement``),
 :class:`StepRecord`, :class:`LogRow`, :class:`EnergyLedger`, :func:`load_hydraulic_params`

@@ -1,7 +1,11 @@
-"""Scalar component laws of the tensioning circuit (pure Python floats, SI, gauge Pa).
+"""Scalar component laws of the tensioning circuit (SI, gauge Pa).
 
 Flow sign convention: a branch flow Q [m^3/s] is positive from its first node ``a`` to its
 second node ``b``; Δp = p_a − p_b [Pa].
+
+The laws the per-step solve evaluates (orifice, smoothstep, friction, end stop, gas
+accumulator) are compiled in :mod:`.kernels` and re-exported here (callable from Python
+with floats); the laws below set up a step's orifice gains and valve positions in Python.
 """
 
 from __future__ import annotations
@@ -9,7 +13,19 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from .params import Accumulator, Valve
+from .kernels import (
+    accumulator_energy,
+    accumulator_oil_volume,
+    endstop_force,
+    friction_force,
+    orifice_flow,
+    smoothstep,
+)
+from .params import Valve
+
+__all__ = ["Solenoid", "accumulator_energy", "accumulator_oil_volume", "endstop_force",
+           "friction_force", "orifice_flow", "orifice_gain", "series_area", "smoothstep",
+           "valve_area"]
 
 SQRT2 = math.sqrt(2.0)
 _ARRIVED = 1e-9  # a solenoid this close to its command [normalised travel] has arrived
@@ -27,25 +43,6 @@ def series_area(a1_m2: float, a2_m2: float) -> float:
     return a1_m2 * a2_m2 / math.sqrt(a1_m2 * a1_m2 + a2_m2 * a2_m2)
 
 
-def orifice_flow(dp_Pa: float, gain: float, p_cr_Pa: float) -> tuple[float, float]:
-    """Regularised orifice Q = K·Δp/(Δp²+p_cr²)^(1/4) and dQ/dΔp [m^3/s, m^3/(s·Pa)].
-
-    Tends to K·sign(Δp)·sqrt|Δp| for |Δp| >> p_cr and is linear (K/sqrt(p_cr)) near 0.
-    """
-    r = dp_Pa * dp_Pa + p_cr_Pa * p_cr_Pa
-    r4 = math.sqrt(math.sqrt(r))
-    return gain * dp_Pa / r4, gain * (0.5 * dp_Pa * dp_Pa + p_cr_Pa * p_cr_Pa) / (r * r4)
-
-
-def smoothstep(x: float) -> tuple[float, float]:
-    """C1 step s(x) = 3x²−2x³ clamped to [0, 1], and ds/dx."""
-    if x <= 0.0:
-        return 0.0, 0.0
-    if x >= 1.0:
-        return 1.0, 0.0
-    return x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x)
-
-
 def valve_area(position: float, valve: Valve) -> float:
     """Opening area [m^2] of a valve edge at normalised position (0 closed, 1 open).
 
@@ -54,65 +51,6 @@ def valve_area(position: float, valve: Valve) -> float:
     u = (position - valve.overlap) / (1.0 - valve.overlap)
     u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else u)
     return valve.leak_area_m2 + (valve.open_area_m2 - valve.leak_area_m2) * u
-
-
-def friction_force(v_m_s: float, coulomb_N: float, v_s_m_s: float,
-                   viscous_N_s_m: float) -> tuple[float, float]:
-    """Cylinder friction F_f = F_c·tanh(v/v_s) + b·v [N] (opposes motion) and dF_f/dv."""
-    th = math.tanh(v_m_s / v_s_m_s)
-    return coulomb_N * th + viscous_N_s_m * v_m_s, coulomb_N * (1.0 - th * th) / v_s_m_s \
-        + viscous_N_s_m
-
-
-def endstop_force(s_m: float, v_m_s: float, stroke_max_m: float, k_N_m: float,
-                  c_N_s_m: float) -> tuple[float, float, float]:
-    """End-stop force [N] (> 0 pushes outward), dF/ds and dF/dv; zero inside [0, stroke_max]."""
-    if s_m < 0.0:
-        return -k_N_m * s_m - c_N_s_m * v_m_s, -k_N_m, -c_N_s_m
-    if s_m > stroke_max_m:
-        return -k_N_m * (s_m - stroke_max_m) - c_N_s_m * v_m_s, -k_N_m, -c_N_s_m
-    return 0.0, 0.0, 0.0
-
-
-class GasAccumulator:
-    """Polytropic gas accumulator: p_abs·V_gas^n = const above precharge, empty below.
-
-    Oil volume V_oil(p) = V0 − V_gas(p) [m^3] for p above precharge (gauge Pa), else 0.
-    Energy (gauge basis) E(p) = (p_abs·V_gas − p0_abs·V0)/(n−1) − p_atm·V_oil [J], zero at
-    precharge, so that dE = p·dV_oil with p gauge.
-    """
-
-    __slots__ = ("_inv_n", "n", "p0", "p0_abs", "p_atm", "v0")
-
-    def __init__(self, acc: Accumulator) -> None:
-        self.v0 = acc.gas_volume_m3
-        self.p0 = acc.precharge_Pa
-        self.p_atm = acc.atmospheric_pressure_Pa_abs
-        self.p0_abs = acc.precharge_Pa + acc.atmospheric_pressure_Pa_abs
-        self.n = acc.polytropic_exponent
-        self._inv_n = 1.0 / acc.polytropic_exponent
-
-    def oil_volume(self, p_Pa: float) -> tuple[float, float]:
-        """Oil volume in the accumulator [m^3] and dV_oil/dp [m^3/Pa] at gauge pressure p."""
-        if p_Pa <= self.p0:
-            return 0.0, 0.0
-        p_abs = p_Pa + self.p_atm
-        vg = self.v0 * (self.p0_abs / p_abs) ** self._inv_n
-        return self.v0 - vg, vg * self._inv_n / p_abs
-
-    def gas_volume(self, p_Pa: float) -> float:
-        """Gas volume [m^3] at gauge pressure p."""
-        return self.v0 - self.oil_volume(p_Pa)[0]
-
-    def energy(self, p_Pa: float, v_oil_m3: float | None = None) -> float:
-        """Stored energy [J] relative to the precharged, empty state (gauge basis); pass
-        ``v_oil_m3 = oil_volume(p_Pa)[0]`` when already known."""
-        if p_Pa <= self.p0:
-            return 0.0
-        v_oil = self.oil_volume(p_Pa)[0] if v_oil_m3 is None else v_oil_m3
-        p_abs = p_Pa + self.p_atm
-        return ((p_abs * (self.v0 - v_oil) - self.p0_abs * self.v0) / (self.n - 1.0)
-                - self.p_atm * v_oil)
 
 
 class Solenoid:

@@ -11,10 +11,26 @@ evaluated from the state (p²V/(2β) per node, accumulator gas energy), not from
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from . import kernels as k
+from .kernels import LEDGER_FIELDS, N_FLOW_TERMS, N_LEDGER
 
 
-@dataclass(slots=True)
+def _term(index: int) -> property:
+    """The ledger term at ``index`` of the backing array, as a Python float [J]."""
+
+    def get(self: EnergyLedger) -> float:
+        return self.terms.item(index)
+
+    def set_(self: EnergyLedger, value: float) -> None:
+        self.terms[index] = value
+
+    return property(get, set_, doc=f"{LEDGER_FIELDS[index]} [J]")
+
+
 class EnergyLedger:
     """Energy terms [J]. Positive = energy leaving the oil circuit's budget as named.
 
@@ -33,27 +49,51 @@ class EnergyLedger:
     mech_work_J: ForceLaw.at(v)·v·h received by the track.
     interface_residual_J: piston work − friction − end stop − mech work.
     oil_energy_J / gas_energy_J: stored energies now; *_start_J at the ledger start.
+
+    The terms live in ``terms``, a float64 array of length 19 in ``kernels.LEDGER_FIELDS``
+    order (the first 15 are the flow terms that ``add`` accumulates). ``EnergyLedger.view``
+    wraps an existing array: the tensioner's ledgers are views of its state array, so they
+    show the current values at any time.
     """
 
-    supply_J: float = 0.0
-    to_tank_J: float = 0.0
-    throttle_main_J: float = 0.0
-    throttle_VL_J: float = 0.0
-    throttle_VR_J: float = 0.0
-    throttle_relief_J: float = 0.0
-    throttle_makeup_J: float = 0.0
-    leakage_J: float = 0.0
-    friction_J: float = 0.0
-    endstop_J: float = 0.0
-    numerical_J: float = 0.0
-    volume_term_J: float = 0.0
-    piston_work_J: float = 0.0
-    mech_work_J: float = 0.0
-    interface_residual_J: float = 0.0
-    oil_energy_J: float = 0.0
-    gas_energy_J: float = 0.0
-    oil_energy_start_J: float = 0.0
-    gas_energy_start_J: float = 0.0
+    __slots__ = ("terms",)
+
+    def __init__(self, **terms: float) -> None:
+        self.terms = np.zeros(N_LEDGER)
+        for name, value in terms.items():
+            if name not in LEDGER_FIELDS:
+                raise TypeError(f"EnergyLedger has no term {name!r}")
+            self.terms[LEDGER_FIELDS.index(name)] = value
+
+    @classmethod
+    def view(cls, terms: np.ndarray) -> EnergyLedger:
+        """A ledger reading and writing ``terms`` (float64, shape (19,)) in place."""
+        if terms.shape != (N_LEDGER,) or terms.dtype != np.float64:
+            raise ValueError(f"terms must be float64 of shape ({N_LEDGER},), got "
+                             f"{terms.dtype} {terms.shape}")
+        ledger = cls.__new__(cls)
+        ledger.terms = terms
+        return ledger
+
+    supply_J = _term(k.L_SUPPLY)
+    to_tank_J = _term(k.L_TO_TANK)
+    throttle_main_J = _term(k.L_THROTTLE_MAIN)
+    throttle_VL_J = _term(k.L_THROTTLE_VL)
+    throttle_VR_J = _term(k.L_THROTTLE_VR)
+    throttle_relief_J = _term(k.L_THROTTLE_RELIEF)
+    throttle_makeup_J = _term(k.L_THROTTLE_MAKEUP)
+    leakage_J = _term(k.L_LEAKAGE)
+    friction_J = _term(k.L_FRICTION)
+    endstop_J = _term(k.L_ENDSTOP)
+    numerical_J = _term(k.L_NUMERICAL)
+    volume_term_J = _term(k.L_VOLUME_TERM)
+    piston_work_J = _term(k.L_PISTON_WORK)
+    mech_work_J = _term(k.L_MECH_WORK)
+    interface_residual_J = _term(k.L_INTERFACE_RESIDUAL)
+    oil_energy_J = _term(k.L_OIL_ENERGY)
+    gas_energy_J = _term(k.L_GAS_ENERGY)
+    oil_energy_start_J = _term(k.L_OIL_ENERGY_START)
+    gas_energy_start_J = _term(k.L_GAS_ENERGY_START)
 
     @property
     def throttle_J(self) -> float:
@@ -81,27 +121,25 @@ class EnergyLedger:
 
     def add(self, other: EnergyLedger) -> None:
         """Accumulate the flow terms of ``other`` and take its end stored energies."""
-        self.supply_J += other.supply_J
-        self.to_tank_J += other.to_tank_J
-        self.throttle_main_J += other.throttle_main_J
-        self.throttle_VL_J += other.throttle_VL_J
-        self.throttle_VR_J += other.throttle_VR_J
-        self.throttle_relief_J += other.throttle_relief_J
-        self.throttle_makeup_J += other.throttle_makeup_J
-        self.leakage_J += other.leakage_J
-        self.friction_J += other.friction_J
-        self.endstop_J += other.endstop_J
-        self.numerical_J += other.numerical_J
-        self.volume_term_J += other.volume_term_J
-        self.piston_work_J += other.piston_work_J
-        self.mech_work_J += other.mech_work_J
-        self.interface_residual_J += other.interface_residual_J
+        self.terms[:N_FLOW_TERMS] += other.terms[:N_FLOW_TERMS]
         self.oil_energy_J = other.oil_energy_J
         self.gas_energy_J = other.gas_energy_J
 
     def as_dict(self) -> dict[str, float]:
         """All fields and derived totals as a plain dict [J]."""
-        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        d = dict(zip(LEDGER_FIELDS, self.terms.tolist(), strict=True))
         d.update(throttle_J=self.throttle_J, stored_change_J=self.stored_change_J,
                  losses_J=self.losses_J, balance_error_J=self.balance_error_J)
         return d
+
+    def __eq__(self, other: Any) -> bool:
+        if not isinstance(other, EnergyLedger):
+            return NotImplemented
+        return bool(np.array_equal(self.terms, other.terms))
+
+    __hash__ = None  # type: ignore[assignment]  (mutable, as the dataclass it replaces)
+
+    def __repr__(self) -> str:
+        terms = ", ".join(f"{k}={v!r}" for k, v in zip(LEDGER_FIELDS, self.terms.tolist(),
+                                                        strict=True))
+        return f"EnergyLedger({terms})"

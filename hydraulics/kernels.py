@@ -1,0 +1,697 @@
+"""Compiled numeric core of the hydraulic tensioner (numba ``njit``; SI, gauge Pa).
+
+Everything the per-step solve computes lives here, once: the scalar component laws, the
+backward-Euler residual with its analytic Jacobian, Newton with an Armijo line search, chord
+corrections, dp/dv, the force law and the energy bookkeeping. ``HydraulicTensioner`` keeps
+the Python side (input checks, valve solenoids, supply profile, records) and calls one
+kernel per ``force_law`` and one per ``complete_step``. Under ``NUMBA_DISABLE_JIT=1`` the
+same source runs as plain Python (slowly), and ``kernel.py_func`` is the uncompiled kernel.
+
+The laws and kernels share this one file on purpose: numba's on-disk cache (``cache=True``)
+is invalidated by a change of the file that defines a function, not by changes of functions
+or globals it uses from other files; the array layouts below are such globals (compile-time
+constants).
+
+Kernels read a constants array ``const`` (float64[N_CONST], filled once by the tensioner)
+and read and write a state array ``state`` (float64[N_STATE]); they return an int status
+(OK, NOT_CONVERGED: Newton hit newton_max_iter, the last |dp|∞ [Pa] in state[LAST_DP];
+LEFT_PHYSICS: a multi-rate sub-step emptied a chamber, did not converge or went below
+absolute vacuum). Node order everywhere: (A, head L, head R, rod node, supply) = line-A
+node, the two head chambers, line B + both rod chambers, supply node.
+
+``const`` layout (index: value [unit]):
+
+====================  ===========================================================
+C_AH, C_AR            head / rod annulus area per cylinder [m^2]
+C_VOL_A, C_VOL_S      line-A node, supply-line volume [m^3]
+C_VOL_DH, C_VOL_DR    head / rod dead volume per cylinder [m^3]
+C_VOL_LB, C_S_MAX     line-B hose volume [m^3], stroke of a cylinder [m]
+C_BETA, C_PT          bulk modulus [Pa], tank pressure [Pa]
+C_PCR, C_LEAK         orifice critical pressure [Pa], head->rod leakage [m^3/(s·Pa)]
+C_FLOOR, C_BAND       cavitation limiter: 0 at floor, 1 at floor + band [Pa]
+C_MU_OPEN, C_MU_WIDTH make-up check valves: crack pressure p_t − crack [Pa], opening band [Pa]
+C_K_MU                make-up valve orifice gain [m^3/(s·Pa^0.5)]
+C_REL_CRACK, C_REL_WIDTH, C_K_REL  relief S->T: crack [Pa], opening band [Pa], gain
+C_Q_PUMP              pump flow into the supply node [m^3/s] (0 with a prescribed supply)
+C_ACC_V0, C_ACC_P0    accumulator gas volume at precharge [m^3], precharge [Pa]
+C_P_ATM, C_ACC_N      atmospheric pressure [Pa abs], polytropic exponent [-]
+C_FRIC_C, C_FRIC_VS, C_FRIC_B  per-cylinder Coulomb force [N], tanh velocity [m/s],
+                      viscous coefficient [N·s/m]
+C_ES_K, C_ES_C        per-cylinder end-stop stiffness [N/m], damping [N·s/m]
+C_TOL, C_MAX_ITER     Newton tolerance on |dp|∞ [Pa], iteration limit [-]
+C_V_CORR, C_MAX_CORR  NEPCE correction: min |v| [m/s], bound [N]
+C_PRESCRIBED          1.0 with a prescribed supply pressure, 0.0 with pump + accumulator
+====================  ===========================================================
+
+``state`` layout (offset, length: content [unit]):
+
+=====================  ==========================================================
+P, 5                   node pressures p^k of the last completed step [Pa]
+VOL, 5                 node volumes V^k at the last completed stroke [m^3]
+VOIL, 1                accumulator oil volume V_oil,acc(p_S^k) [m^3]
+GAIN, 6                orifice gains of the step [m^3/(s·Pa^0.5)]: main P->A, A->T, P->B
+                       (with the rod-feed restrictor), B->T, V_L, V_R (with restrictors)
+PS_NEXT, 1             prescribed supply pressure at the end of the step [Pa]
+V_PREV, 1              start velocity of the previous force_law [m/s]
+CARRY, 1               cumulative interface residual E_c [J]
+LAW, 2                 force law of the step: F0 [N], Z [N·s/m]
+CORRECTION, 1          NEPCE correction δF in the law [N]
+P_STAR, 5              strong: pressures solved at the predicted velocity v* [Pa]
+DPDV, 5                strong: dp/dv at v* [Pa·s/m]
+V_STAR, 1              strong: predicted end-of-step velocity v* [m/s]
+JAC, 18                factorised Jacobian of the last Newton solve (see ``_factorise``)
+FLOWS, 12              flows of the last completed step, FLOW_NAMES order [m^3/s]
+ITERS, 1               corrections of the last solve (Newton or chord) [-]
+BACKTRACKS, 1          line-search halvings since the last force_law [-]
+STEP_BACKTRACKS, 1     halvings in all solves of the last completed step [-]
+BACKTRACKS_TOTAL, 1    halvings of all completed steps [-]
+LAST_DP, 1             |dp|∞ of the last Newton iteration of a failed solve [Pa]
+REC, 6                 last completed step: t [s], stroke [m], velocity [m/s], friction
+                       [N] (opposes motion), end-stop force [N] (> 0 outward), piston
+                       force A_h(p_HL + p_HR) − 2·A_r·p_B [N]
+LOG, 9                 LogRow of the last completed step (see ``tensioner.LogRow``)
+STEP_LEDGER, 19        energy terms of the last step [J], LEDGER_FIELDS order
+LEDGER, 19             cumulative energy terms [J], LEDGER_FIELDS order
+=====================  ==========================================================
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# --------------------------------------------------------------------- layouts
+(C_AH, C_AR, C_VOL_A, C_VOL_S, C_VOL_DH, C_VOL_DR, C_VOL_LB, C_S_MAX, C_BETA, C_PT, C_PCR,
+ C_LEAK, C_FLOOR, C_BAND, C_MU_OPEN, C_MU_WIDTH, C_K_MU, C_REL_CRACK, C_REL_WIDTH, C_K_REL,
+ C_Q_PUMP, C_ACC_V0, C_ACC_P0, C_P_ATM, C_ACC_N, C_FRIC_C, C_FRIC_VS, C_FRIC_B, C_ES_K,
+ C_ES_C, C_TOL, C_MAX_ITER, C_V_CORR, C_MAX_CORR, C_PRESCRIBED) = range(35)
+N_CONST = 35
+
+LEDGER_FIELDS = ("supply_J", "to_tank_J", "throttle_main_J", "throttle_VL_J",
+                 "throttle_VR_J", "throttle_relief_J", "throttle_makeup_J", "leakage_J",
+                 "friction_J", "endstop_J", "numerical_J", "volume_term_J", "piston_work_J",
+                 "mech_work_J", "interface_residual_J", "oil_energy_J", "gas_energy_J",
+                 "oil_energy_start_J", "gas_energy_start_J")
+"""EnergyLedger fields in array order; the first N_FLOW_TERMS accumulate step by step."""
+(L_SUPPLY, L_TO_TANK, L_THROTTLE_MAIN, L_THROTTLE_VL, L_THROTTLE_VR, L_THROTTLE_RELIEF,
+ L_THROTTLE_MAKEUP, L_LEAKAGE, L_FRICTION, L_ENDSTOP, L_NUMERICAL, L_VOLUME_TERM,
+ L_PISTON_WORK, L_MECH_WORK, L_INTERFACE_RESIDUAL, L_OIL_ENERGY, L_GAS_ENERGY,
+ L_OIL_ENERGY_START, L_GAS_ENERGY_START) = range(19)
+N_LEDGER = 19
+N_FLOW_TERMS = 15
+
+P, VOL, VOIL, GAIN, PS_NEXT, V_PREV, CARRY, LAW, CORRECTION = 0, 5, 10, 11, 17, 18, 19, 20, 22
+P_STAR, DPDV, V_STAR, JAC, FLOWS, ITERS = 23, 28, 33, 34, 52, 64
+BACKTRACKS, STEP_BACKTRACKS, BACKTRACKS_TOTAL, LAST_DP, REC, LOG = 65, 66, 67, 68, 69, 75
+STEP_LEDGER, LEDGER = 84, 103
+N_STATE = 122
+
+OK, NOT_CONVERGED, LEFT_PHYSICS = 0, 1, 2
+MAX_BACKTRACKS = 12  # line-search halvings per Newton iteration (alpha >= 2^-12)
+_MIN_STEP = 2.0 ** -MAX_BACKTRACKS
+MAX_CHORD = 3  # chord corrections in a strong complete_step before full Newton
+
+
+# --------------------------------------------------------------- component laws
+@njit(cache=True)
+def orifice_flow(dp_Pa: float, gain: float, p_cr_Pa: float) -> tuple[float, float]:
+    """Regularised orifice Q = K·Δp/(Δp²+p_cr²)^(1/4) and dQ/dΔp [m^3/s, m^3/(s·Pa)].
+
+    Tends to K·sign(Δp)·sqrt|Δp| for |Δp| >> p_cr and is linear (K/sqrt(p_cr)) near 0.
+    """
+    r = dp_Pa * dp_Pa + p_cr_Pa * p_cr_Pa
+    r4 = math.sqrt(math.sqrt(r))
+    return gain * dp_Pa / r4, gain * (0.5 * dp_Pa * dp_Pa + p_cr_Pa * p_cr_Pa) / (r * r4)
+
+
+@njit(cache=True)
+def smoothstep(x: float) -> tuple[float, float]:
+    """C1 step s(x) = 3x²−2x³ clamped to [0, 1], and ds/dx."""
+    if x <= 0.0:
+        return 0.0, 0.0
+    if x >= 1.0:
+        return 1.0, 0.0
+    return x * x * (3.0 - 2.0 * x), 6.0 * x * (1.0 - x)
+
+
+@njit(cache=True)
+def friction_force(v_m_s: float, coulomb_N: float, v_s_m_s: float,
+                   viscous_N_s_m: float) -> tuple[float, float]:
+    """Cylinder friction F_f = F_c·tanh(v/v_s) + b·v [N] (opposes motion) and dF_f/dv."""
+    th = math.tanh(v_m_s / v_s_m_s)
+    return (coulomb_N * th + viscous_N_s_m * v_m_s,
+            coulomb_N * (1.0 - th * th) / v_s_m_s + viscous_N_s_m)
+
+
+@njit(cache=True)
+def endstop_force(s_m: float, v_m_s: float, stroke_max_m: float, k_N_m: float,
+                  c_N_s_m: float) -> tuple[float, float, float]:
+    """End-stop force [N] (> 0 pushes outward), dF/ds and dF/dv; zero inside [0, stroke_max]."""
+    if s_m < 0.0:
+        return -k_N_m * s_m - c_N_s_m * v_m_s, -k_N_m, -c_N_s_m
+    if s_m > stroke_max_m:
+        return -k_N_m * (s_m - stroke_max_m) - c_N_s_m * v_m_s, -k_N_m, -c_N_s_m
+    return 0.0, 0.0, 0.0
+
+
+@njit(cache=True)
+def accumulator_oil_volume(p_Pa: float, v0_m3: float, p0_Pa: float, p_atm_Pa_abs: float,
+                           n: float) -> tuple[float, float]:
+    """Polytropic gas accumulator (p_abs·V_gas^n = const above the precharge p0, empty
+    below): oil volume V_oil = V0 − V_gas(p) [m^3] and dV_oil/dp [m^3/Pa] at gauge p."""
+    if p_Pa <= p0_Pa:
+        return 0.0, 0.0
+    p_abs = p_Pa + p_atm_Pa_abs
+    inv_n = 1.0 / n
+    vg = v0_m3 * ((p0_Pa + p_atm_Pa_abs) / p_abs) ** inv_n
+    return v0_m3 - vg, vg * inv_n / p_abs
+
+
+@njit(cache=True)
+def accumulator_energy(p_Pa: float, v_oil_m3: float, v0_m3: float, p0_Pa: float,
+                       p_atm_Pa_abs: float, n: float) -> float:
+    """Accumulator energy [J] relative to the precharged, empty state (gauge basis,
+    E = (p_abs·V_gas − p0_abs·V0)/(n−1) − p_atm·V_oil, so dE = p·dV_oil with p gauge);
+    v_oil_m3 = accumulator_oil_volume(p_Pa, ...)[0]."""
+    if p_Pa <= p0_Pa:
+        return 0.0
+    return (((p_Pa + p_atm_Pa_abs) * (v0_m3 - v_oil_m3) - (p0_Pa + p_atm_Pa_abs) * v0_m3)
+            / (n - 1.0) - p_atm_Pa_abs * v_oil_m3)
+
+
+@njit(cache=True)
+def _limited_orifice(pa: float, pb: float, k: float, pcr: float, la: float, dla: float,
+                     lb: float, dlb: float) -> tuple[float, float, float]:
+    """Orifice a->b with the upstream cavitation limiter l (value, dl/dp) scaling Q:
+    (Q [m^3/s], dQ/dp_a, dQ/dp_b [m^3/(s·Pa)])."""
+    q0, g = orifice_flow(pa - pb, k, pcr)
+    if pa >= pb:
+        return q0 * la, g * la + q0 * dla, -g * la
+    return q0 * lb, g * lb, -g * lb + q0 * dlb
+
+
+@njit(cache=True)
+def _limiter(const: np.ndarray, p: float) -> tuple[float, float]:
+    """Cavitation limiter of a node's outflow: (l, dl/dp), 1 above floor + band."""
+    if p >= const[C_FLOOR] + const[C_BAND]:
+        return 1.0, 0.0
+    s, ds = smoothstep((p - const[C_FLOOR]) / const[C_BAND])
+    return s, ds / const[C_BAND]
+
+
+@njit(cache=True)
+def _makeup(const: np.ndarray, p: float) -> tuple[float, float]:
+    """Make-up check valve T -> chamber: (Q [m^3/s], dQ/dp); 0 above its crack pressure."""
+    if p >= const[C_MU_OPEN]:
+        return 0.0, 0.0
+    w = const[C_MU_WIDTH]
+    s, ds = smoothstep((const[C_MU_OPEN] - p) / w)
+    f, df = orifice_flow(const[C_PT] - p, const[C_K_MU], const[C_PCR])
+    return s * f, -ds / w * f - s * df
+
+
+@njit(cache=True)
+def _friction(const: np.ndarray, v: float) -> tuple[float, float]:
+    """Friction of both cylinders [N] (opposes motion) and its dF/dv [N·s/m]."""
+    f, d = friction_force(v, const[C_FRIC_C], const[C_FRIC_VS], const[C_FRIC_B])
+    return 2.0 * f, 2.0 * d
+
+
+@njit(cache=True)
+def _endstop(const: np.ndarray, s: float, v: float) -> tuple[float, float, float]:
+    """End-stop force of both cylinders [N] (> 0 outward), dF/ds, dF/dv; 0 inside."""
+    f, ds, dv = endstop_force(s, v, const[C_S_MAX], const[C_ES_K], const[C_ES_C])
+    return 2.0 * f, 2.0 * ds, 2.0 * dv
+
+
+@njit(cache=True)
+def _volumes(const: np.ndarray, s: float) -> tuple[float, float, float, float, float]:
+    """Node volumes [m^3] at stroke s [m]: V_HL = V_HR = V_dh + A_h·s,
+    V_B = V_lineB + 2(V_dr + A_r(s_max − s))."""
+    vh = const[C_VOL_DH] + const[C_AH] * s
+    vr = const[C_VOL_LB] + 2.0 * (const[C_VOL_DR] + const[C_AR] * (const[C_S_MAX] - s))
+    return const[C_VOL_A], vh, vh, vr, const[C_VOL_S]
+
+
+@njit(cache=True)
+def _pressures(state: np.ndarray, at: int) -> tuple[float, float, float, float, float]:
+    return state[at], state[at + 1], state[at + 2], state[at + 3], state[at + 4]
+
+
+@njit(cache=True)
+def _oil_energy(const: np.ndarray, p: tuple, V: tuple) -> float:
+    """Stored oil energy Σ p²V/(2β) [J] (the supply node only with an accumulator)."""
+    e = p[0] * p[0] * V[0] + (p[1] * p[1] + p[2] * p[2]) * V[1] + p[3] * p[3] * V[3]
+    if const[C_PRESCRIBED] == 0.0:
+        e += p[4] * p[4] * V[4]
+    return e * (0.5 / const[C_BETA])
+
+
+# ----------------------------------------------------------- residual and solve
+@njit(cache=True)
+def _evaluate(const: np.ndarray, state: np.ndarray, h: float, c: tuple, v: float,
+              p: tuple) -> tuple[tuple, tuple, tuple]:
+    """Backward-Euler residual at pressures p: (R, J, flows).
+
+    R: R/h of the five nodes [m^3/s]; c = V_i(s_{k+1})/(β·h) [m^3/(s·Pa)]. J: the nonzero
+    Jacobian entries ∂R/∂p (JAA, JAHL, JAHR, JAS, JHA, JHH, JRA, JRR, JBB, JBS, JSS, JSA,
+    JSB) besides J_HB = J_RB = J_BH = J_BR = −leak (H, R = heads L, R). flows: the twelve
+    FLOW_NAMES flows [m^3/s]. With a prescribed supply the supply row is p_S = p_S(t_{k+1}).
+    """
+    pA, pHL, pHR, pB, pS = p
+    prescribed = const[C_PRESCRIBED] != 0.0
+    if prescribed:
+        pS = state[PS_NEXT]
+    pT, pcr, leak = const[C_PT], const[C_PCR], const[C_LEAK]
+    KPA, KAT, KPB, KBT = state[GAIN], state[GAIN + 1], state[GAIN + 2], state[GAIN + 3]
+    KVL, KVR = state[GAIN + 4], state[GAIN + 5]
+    lA, dlA = _limiter(const, pA)
+    lHL, dlHL = _limiter(const, pHL)
+    lHR, dlHR = _limiter(const, pHR)
+    lB, dlB = _limiter(const, pB)
+    qPA, aPA_S, aPA_A = _limited_orifice(pS, pA, KPA, pcr, 1.0, 0.0, lA, dlA)
+    qAT, aAT_A, _ = _limited_orifice(pA, pT, KAT, pcr, lA, dlA, 1.0, 0.0)
+    qPB, aPB_S, aPB_B = _limited_orifice(pS, pB, KPB, pcr, 1.0, 0.0, lB, dlB)
+    qBT, aBT_B, _ = _limited_orifice(pB, pT, KBT, pcr, lB, dlB, 1.0, 0.0)
+    qVL, aVL_A, aVL_H = _limited_orifice(pA, pHL, KVL, pcr, lA, dlA, lHL, dlHL)
+    qVR, aVR_A, aVR_H = _limited_orifice(pA, pHR, KVR, pcr, lA, dlA, lHR, dlHR)
+    qlL = leak * (pHL - pB)
+    qlR = leak * (pHR - pB)
+    qmL, dmL = _makeup(const, pHL)
+    qmR, dmR = _makeup(const, pHR)
+    qmB, dmB = _makeup(const, pB)
+    cA, cHL, cHR, cB, cS = c
+    Ahv, Arv2 = const[C_AH] * v, 2.0 * const[C_AR] * v
+    rA = cA * (pA - state[P]) - qPA + qAT + qVL + qVR
+    rHL = cHL * (pHL - state[P + 1]) - qVL + qlL - qmL + Ahv
+    rHR = cHR * (pHR - state[P + 2]) - qVR + qlR - qmR + Ahv
+    rB = cB * (pB - state[P + 3]) - qPB + qBT - qlL - qlR - qmB - Arv2
+    qrel = 0.0
+    if prescribed:
+        rS, JSS, JSA, JSB = 0.0, 1.0, 0.0, 0.0
+    else:
+        drel = 0.0
+        if pS > const[C_REL_CRACK]:  # relief S -> T, opening over its band (smoothstep)
+            w = const[C_REL_WIDTH]
+            s, ds = smoothstep((pS - const[C_REL_CRACK]) / w)
+            f, df = orifice_flow(pS - pT, const[C_K_REL], pcr)
+            qrel, drel = s * f, ds / w * f + s * df
+        voil1, dvoil = accumulator_oil_volume(pS, const[C_ACC_V0], const[C_ACC_P0],
+                                              const[C_P_ATM], const[C_ACC_N])
+        ih = 1.0 / h
+        rS = (cS * (pS - state[P + 4]) + (voil1 - state[VOIL]) * ih
+              - const[C_Q_PUMP] + qPA + qPB + qrel)
+        JSS = cS + dvoil * ih + aPA_S + aPB_S + drel
+        JSA, JSB = aPA_A, aPB_B
+    J = (cA - aPA_A + aAT_A + aVL_A + aVR_A, aVL_H, aVR_H, -aPA_S,
+         -aVL_A, cHL - aVL_H - dmL + leak, -aVR_A, cHR - aVR_H - dmR + leak,
+         cB - aPB_B + aBT_B - dmB + 2.0 * leak, -aPB_S, JSS, JSA, JSB)
+    return ((rA, rHL, rHR, rB, rS), J,
+            (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR))
+
+
+@njit(cache=True)
+def _factorise(J: tuple, leak: float) -> tuple:
+    """Factorise J with the circuit's sparsity: the head rows and the supply row divided by
+    their diagonal (x_H = y_H − hA·x_A − hB·x_B, x_R likewise with kA, kB, x_S with sA, sB)
+    and eliminated, leaving the 2x2 Schur complement [[a11, a12], [a21, a22]] in (p_A, p_B).
+    Returns (iH, iR, iS, hA, hB, kA, kB, sA, sB, a11, a12, a21, a22, 1/det, JAHL, JAHR, JAS,
+    JBS); the head rows couple to the rod node only through the leakage."""
+    JAA, JAHL, JAHR, JAS, JHA, JHH, JRA, JRR, JBB, JBS, JSS, JSA, JSB = J
+    nl = -leak
+    iH, iR, iS = 1.0 / JHH, 1.0 / JRR, 1.0 / JSS
+    hA, hB, kA, kB, sA, sB = JHA * iH, nl * iH, JRA * iR, nl * iR, JSA * iS, JSB * iS
+    a11 = JAA - JAHL * hA - JAHR * kA - JAS * sA
+    a12 = -JAHL * hB - JAHR * kB - JAS * sB
+    a21 = -nl * (hA + kA) - JBS * sA
+    a22 = JBB - nl * (hB + kB) - JBS * sB
+    return (iH, iR, iS, hA, hB, kA, kB, sA, sB, a11, a12, a21, a22,
+            1.0 / (a11 * a22 - a12 * a21), JAHL, JAHR, JAS, JBS)
+
+
+@njit(cache=True)
+def _solve(F, R: tuple, leak: float) -> tuple[float, float, float, float, float]:
+    """d = J⁻¹·R [Pa] with the factorised Jacobian F (a tuple or the state's JAC slice)."""
+    nl = -leak
+    yH, yR, yS = R[1] * F[0], R[2] * F[1], R[4] * F[2]
+    b1 = R[0] - F[14] * yH - F[15] * yR - F[16] * yS
+    b2 = R[3] - nl * (yH + yR) - F[17] * yS
+    xA = (b1 * F[12] - F[10] * b2) * F[13]
+    xB = (F[9] * b2 - F[11] * b1) * F[13]
+    return (xA, yH - F[3] * xA - F[4] * xB, yR - F[5] * xA - F[6] * xB, xB,
+            yS - F[7] * xA - F[8] * xB)
+
+
+@njit(cache=True)
+def _absmax(d: tuple) -> float:
+    """max |d_i| (NaN propagates from d[0] only; a NaN elsewhere is not a maximum)."""
+    n = abs(d[0])
+    for i in range(1, 5):
+        a = abs(d[i])
+        if a > n:
+            n = a
+    return n
+
+
+@njit(cache=True)
+def _weighted_norm2(R: tuple, w: tuple) -> float:
+    """Σ(w_i·R_i)² (left to right)."""
+    f = 0.0
+    for i in range(5):
+        r = R[i] * w[i]
+        f += r * r
+    return f
+
+
+@njit(cache=True)
+def _newton(const: np.ndarray, state: np.ndarray, h: float, s1: float, v: float, p: tuple):
+    """Backward-Euler step to stroke s1 at velocity v: damped Newton on R(p) = 0 from p.
+
+    Globalised by an Armijo backtracking line search on f = Σ(β·h·R_i/V_i)² (the residual
+    of each node as a pressure error [Pa]; the Newton direction is a descent direction of
+    f). Converged when the Newton correction |dx|∞ is below newton_tol_Pa, or, after a full
+    (undamped) step, when the estimated remaining error θ/(1−θ)·|dx|, θ = |dx_k|/|dx_{k−1}|
+    < 1, is below it (Hairer & Wanner, Solving ODEs II, IV.8); the correction is applied in
+    both cases. Returns (converged, p_{k+1}, iterations, backtracks, F, flows, V(s1),
+    last |dx|∞).
+    """
+    tol, leak = const[C_TOL], const[C_LEAK]
+    V = _volumes(const, s1)
+    bh = const[C_BETA] * h  # the residual is evaluated divided by h
+    c = (V[0] / bh, V[1] / bh, V[2] / bh, V[3] / bh, V[4] / bh)
+    w = (bh / V[0], bh / V[1], bh / V[2], bh / V[3], bh / V[4])
+    R, J, flows = _evaluate(const, state, h, c, v, p)
+    F = _factorise(J, leak)
+    d = _solve(F, R, leak)
+    f = -1.0  # Σ(w_i·R_i)² at p, computed when a line search needs it
+    backtracks = 0
+    it = 0
+    n = math.inf
+    n_prev, full, converged = math.inf, False, False
+    for it in range(1, int(const[C_MAX_ITER]) + 1):  # noqa: B007 (count reported)
+        n = _absmax(d)
+        if n < tol or (full and n < n_prev and n * n < tol * (n_prev - n)):
+            p = (p[0] - d[0], p[1] - d[1], p[2] - d[2], p[3] - d[3], p[4] - d[4])
+            converged = True
+            break
+        if f < 0.0:
+            f = _weighted_norm2(R, w)
+        alpha = 1.0
+        while True:
+            pt = (p[0] - alpha * d[0], p[1] - alpha * d[1], p[2] - alpha * d[2],
+                  p[3] - alpha * d[3], p[4] - alpha * d[4])
+            R, J, flows = _evaluate(const, state, h, c, v, pt)
+            ft = _weighted_norm2(R, w)
+            if ft <= (1.0 - 1e-4 * alpha) * f or alpha < _MIN_STEP:
+                break
+            alpha *= 0.5
+            backtracks += 1
+        p, f = pt, ft
+        F = _factorise(J, leak)
+        d = _solve(F, R, leak)
+        n_prev, full = n, alpha == 1.0
+    if const[C_PRESCRIBED] != 0.0:
+        p = (p[0], p[1], p[2], p[3], state[PS_NEXT])
+    return converged, p, it, backtracks, F, flows, V, n
+
+
+@njit(cache=True)
+def _chord(const: np.ndarray, state: np.ndarray, h: float, s1: float, v: float, p: tuple):
+    """Backward-Euler step by chord (simplified Newton) corrections from a guess p close to
+    the solution, with the factorised Jacobian in state[JAC] (of force_law's solve).
+    Returns (converged, p_{k+1}, corrections, flows, V(s1)); converged once a correction
+    |dx|∞ is below newton_tol_Pa (applied), not if the corrections stop contracting or
+    MAX_CHORD do not converge."""
+    tol, leak = const[C_TOL], const[C_LEAK]
+    F = state[JAC:JAC + 18]
+    V = _volumes(const, s1)
+    bh = const[C_BETA] * h
+    c = (V[0] / bh, V[1] / bh, V[2] / bh, V[3] / bh, V[4] / bh)
+    n_prev = math.inf
+    for it in range(1, MAX_CHORD + 1):
+        R, _, flows = _evaluate(const, state, h, c, v, p)
+        d = _solve(F, R, leak)
+        n = _absmax(d)
+        if n >= n_prev:
+            return False, p, it, flows, V
+        p = (p[0] - d[0], p[1] - d[1], p[2] - d[2], p[3] - d[3], p[4] - d[4])
+        if n < tol:
+            if const[C_PRESCRIBED] != 0.0:
+                p = (p[0], p[1], p[2], p[3], state[PS_NEXT])
+            return True, p, it, flows, V
+        n_prev = n
+    return False, p, MAX_CHORD, flows, V
+
+
+@njit(cache=True)
+def _dpdv(const: np.ndarray, state: np.ndarray, F: tuple, p: tuple) -> tuple:
+    """dp_{k+1}/dv [Pa·s/m] = −R_p⁻¹·R_v with the factorised Jacobian F (both of R/h);
+    −R_v is nonzero on the heads and the rod node only (chamber volumes depend on v)."""
+    iH, iR, _, hA, hB, kA, kB, sA, sB, a11, a12, a21, a22, idet, JAHL, JAHR, _, _ = F
+    ib = 1.0 / const[C_BETA]
+    yH = -const[C_AH] * (ib * (p[1] - state[P + 1]) + 1.0) * iH
+    yR = -const[C_AH] * (ib * (p[2] - state[P + 2]) + 1.0) * iR
+    b1 = -JAHL * yH - JAHR * yR
+    b2 = 2.0 * const[C_AR] * (ib * (p[3] - state[P + 3]) + 1.0) + const[C_LEAK] * (yH + yR)
+    xA = (b1 * a22 - a12 * b2) * idet
+    xB = (a11 * b2 - a21 * b1) * idet
+    return (xA, yH - hA * xA - hB * xB, yR - kA * xA - kB * xB, xB, -sA * xA - sB * xB)
+
+
+# -------------------------------------------------------------- bookkeeping
+@njit(cache=True)
+def _enter(state: np.ndarray, i: int, x: float, accumulate: bool) -> None:
+    """state[i] = state[i] + x if accumulate, else x."""
+    state[i] = state[i] + x if accumulate else x
+
+
+@njit(cache=True)
+def _commit(const: np.ndarray, state: np.ndarray, p1: tuple, V1: tuple, flows: tuple,
+            v: float, h: float, accumulate: bool) -> None:
+    """Take p1, V1 as the new state and book the step's hydraulic energy terms into the step
+    ledger (added to its terms when ``accumulate``, else replacing them)."""
+    qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR = flows
+    pA, pHL, pHR, pB, pS = p1
+    pT, prescribed = const[C_PT], const[C_PRESCRIBED] != 0.0
+    p0 = _pressures(state, P)
+    V0 = _pressures(state, VOL)
+    ib2 = 0.5 / const[C_BETA]
+    # Σ over nodes; V_HL = V_HR, and V_A, V_S do not change with the stroke
+    d0, d1, d2, d3 = pA - p0[0], pHL - p0[1], pHR - p0[2], pB - p0[3]
+    num = V1[0] * d0 * d0 + V1[1] * (d1 * d1 + d2 * d2) + V1[3] * d3 * d3
+    vol = ((V1[1] - V0[1]) * (p0[1] * p0[1] + p0[2] * p0[2])
+           + (V1[3] - V0[3]) * p0[3] * p0[3])
+    oil = _oil_energy(const, p1, V1)
+    gas = 0.0
+    if not prescribed:
+        d4 = pS - p0[4]
+        num += V1[4] * d4 * d4
+    num *= ib2
+    vol *= -ib2
+    if not prescribed:
+        v0, pc, pa, n = const[C_ACC_V0], const[C_ACC_P0], const[C_P_ATM], const[C_ACC_N]
+        voil = accumulator_oil_volume(pS, v0, pc, pa, n)[0]
+        gas = accumulator_energy(pS, voil, v0, pc, pa, n)
+        num += pS * (voil - state[VOIL]) - (gas - state[LEDGER + L_GAS_ENERGY])
+        state[VOIL] = voil
+    makeup = 0.0
+    if qmL != 0.0 or qmR != 0.0 or qmB != 0.0:
+        makeup = h * ((pT - pHL) * qmL + (pT - pHR) * qmR + (pT - pB) * qmB)
+    sl, a = STEP_LEDGER, accumulate
+    _enter(state, sl + L_SUPPLY, h * (pS * (qPA + qPB) if prescribed else pS * const[C_Q_PUMP]),
+           a)
+    _enter(state, sl + L_TO_TANK, h * pT * (qAT + qBT + qrel - qmL - qmR - qmB), a)
+    _enter(state, sl + L_THROTTLE_MAIN,
+           h * ((pS - pA) * qPA + (pA - pT) * qAT + (pS - pB) * qPB + (pB - pT) * qBT), a)
+    _enter(state, sl + L_THROTTLE_VL, h * (pA - pHL) * qVL, a)
+    _enter(state, sl + L_THROTTLE_VR, h * (pA - pHR) * qVR, a)
+    _enter(state, sl + L_THROTTLE_RELIEF, h * (pS - pT) * qrel, a)
+    _enter(state, sl + L_THROTTLE_MAKEUP, makeup, a)
+    _enter(state, sl + L_LEAKAGE, h * ((pHL - pB) * qlL + (pHR - pB) * qlR), a)
+    _enter(state, sl + L_NUMERICAL, num, a)
+    _enter(state, sl + L_VOLUME_TERM, vol, a)
+    _enter(state, sl + L_PISTON_WORK,
+           h * v * (const[C_AH] * (pHL + pHR) - 2.0 * const[C_AR] * pB), a)
+    state[sl + L_OIL_ENERGY] = state[LEDGER + L_OIL_ENERGY] = oil
+    state[sl + L_GAS_ENERGY] = state[LEDGER + L_GAS_ENERGY] = gas
+    for i in range(5):
+        state[P + i] = p1[i]
+        state[VOL + i] = V1[i]
+    for i in range(12):
+        state[FLOWS + i] = flows[i]
+
+
+@njit(cache=True)
+def _book_step(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1: float,
+               v1: float) -> None:
+    """Close the step ending at (t1, s1, v1): mechanical terms of the step ledger, interface
+    residual and its carry, cumulative ledger, line-search count, record and log values."""
+    ff = _friction(const, v1)[0]
+    fes = _endstop(const, s1, v1)[0]
+    sl, led = STEP_LEDGER, LEDGER
+    state[sl + L_FRICTION] = ff * v1 * h
+    state[sl + L_ENDSTOP] = -fes * v1 * h
+    state[sl + L_MECH_WORK] = (state[LAW] + state[LAW + 1] * v1) * v1 * h  # law.at(v1)
+    state[sl + L_INTERFACE_RESIDUAL] = (state[sl + L_PISTON_WORK] - state[sl + L_FRICTION]
+                                        - state[sl + L_ENDSTOP] - state[sl + L_MECH_WORK])
+    state[CARRY] += state[sl + L_INTERFACE_RESIDUAL]
+    for i in range(N_FLOW_TERMS):
+        state[led + i] += state[sl + i]
+    state[STEP_BACKTRACKS] = state[BACKTRACKS]
+    state[BACKTRACKS_TOTAL] += state[BACKTRACKS]
+    ph = state[P + 1] + state[P + 2]
+    fp = const[C_AH] * ph - 2.0 * const[C_AR] * state[P + 3]
+    state[REC], state[REC + 1], state[REC + 2] = t1, s1, v1
+    state[REC + 3], state[REC + 4], state[REC + 5] = ff, fes, fp
+    state[LOG], state[LOG + 1], state[LOG + 2], state[LOG + 3] = (t1, 0.5 * ph, state[P + 3],
+                                                                  state[P + 4])
+    state[LOG + 4] = state[FLOWS] + state[FLOWS + 2]
+    state[LOG + 5] = fp - ff + fes
+    state[LOG + 6] = state[led + L_SUPPLY]
+    state[LOG + 7] = state[led + L_PISTON_WORK]
+    state[LOG + 8] = state[led + L_MECH_WORK]
+
+
+# ------------------------------------------------------------------ kernels
+@njit(cache=True)
+def initialise(const: np.ndarray, state: np.ndarray, stroke_m: float) -> None:
+    """Fill the volumes, accumulator oil volume, stored energies (both ledgers' start and
+    current values) and the static force law from the pressures in state[P]."""
+    p = _pressures(state, P)
+    V = _volumes(const, stroke_m)
+    gas = 0.0
+    if const[C_PRESCRIBED] == 0.0:
+        v0, pc, pa, n = const[C_ACC_V0], const[C_ACC_P0], const[C_P_ATM], const[C_ACC_N]
+        state[VOIL] = accumulator_oil_volume(p[4], v0, pc, pa, n)[0]
+        gas = accumulator_energy(p[4], state[VOIL], v0, pc, pa, n)
+    oil = _oil_energy(const, p, V)
+    for i in range(5):
+        state[VOL + i] = V[i]
+    state[LEDGER + L_OIL_ENERGY] = state[LEDGER + L_OIL_ENERGY_START] = oil
+    state[LEDGER + L_GAS_ENERGY] = state[LEDGER + L_GAS_ENERGY_START] = gas
+    state[LAW] = const[C_AH] * (p[1] + p[2]) - 2.0 * const[C_AR] * p[3]
+    state[LAW + 1] = 0.0
+
+
+@njit(cache=True)
+def strong_force_law(const: np.ndarray, state: np.ndarray, h: float, s: float,
+                     v: float) -> int:
+    """Strong coupling's law for the step from (s, v) (see ``HydraulicTensioner``): solve at
+    v* = 2v − v_prev, dp/dv, F(v*) and Z = dF/dv, NEPCE correction; writes state[LAW]."""
+    state[BACKTRACKS] = 0.0
+    v_star = 2.0 * v - state[V_PREV]
+    state[V_PREV] = v
+    s1 = s + h * v_star
+    ok, p1, it, bt, F, _, _, n = _newton(const, state, h, s1, v_star, _pressures(state, P))
+    if not ok:
+        state[LAST_DP] = n
+        return NOT_CONVERGED
+    state[BACKTRACKS] += bt
+    state[ITERS] = it
+    dpdv = _dpdv(const, state, F, p1)
+    for i in range(18):
+        state[JAC + i] = F[i]
+    for i in range(5):
+        state[P_STAR + i] = p1[i]
+        state[DPDV + i] = dpdv[i]
+    state[V_STAR] = v_star
+    # F(v*) and Z = dF/dv: pressures through dp/dv, friction, end stop (s1 = s_k + h·v)
+    ah, ar2 = const[C_AH], 2.0 * const[C_AR]
+    ff, dff = _friction(const, v_star)
+    fes, dfes_ds, dfes_dv = _endstop(const, s1, v_star)
+    f_star = ah * (p1[1] + p1[2]) - ar2 * p1[3] - ff + fes
+    z = ah * (dpdv[1] + dpdv[2]) - ar2 * dpdv[3] - dff + dfes_ds * h + dfes_dv
+    corr = 0.0
+    if abs(v) >= const[C_V_CORR]:
+        cmax = const[C_MAX_CORR]
+        corr = max(-cmax, min(cmax, state[CARRY] / (h * v)))
+    state[CORRECTION] = corr
+    state[LAW] = f_star - z * v_star + corr
+    state[LAW + 1] = z
+    return OK
+
+
+@njit(cache=True)
+def strong_complete(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1: float,
+                    v1: float) -> int:
+    """Strong coupling's completion: from the linear predictor p* + dp/dv·(v1 − v*), chord
+    corrections with force_law's Jacobian, full Newton if they stop contracting; commit,
+    book the step."""
+    dv = v1 - state[V_STAR]
+    guess = (state[P_STAR] + state[DPDV] * dv, state[P_STAR + 1] + state[DPDV + 1] * dv,
+             state[P_STAR + 2] + state[DPDV + 2] * dv, state[P_STAR + 3] + state[DPDV + 3] * dv,
+             state[P_STAR + 4] + state[DPDV + 4] * dv)
+    ok, p1, it, flows, V1 = _chord(const, state, h, s1, v1, guess)
+    if not ok:
+        ok, p1, it, bt, F, flows, V1, n = _newton(const, state, h, s1, v1, guess)
+        if not ok:
+            state[LAST_DP] = n
+            return NOT_CONVERGED
+        state[BACKTRACKS] += bt
+        for i in range(18):
+            state[JAC + i] = F[i]
+    state[ITERS] = it
+    _commit(const, state, p1, V1, flows, v1, h, False)
+    _book_step(const, state, t1, h, s1, v1)
+    return OK
+
+
+@njit(cache=True)
+def held_force_law(const: np.ndarray, state: np.ndarray, s: float, v: float) -> None:
+    """Weak / multi-rate law from the last completed pressures: pressure force + end stop at
+    (s, v), friction linearised at v (Z = −dF_fric/dv); writes state[LAW]."""
+    ff, dff = _friction(const, v)
+    fes = _endstop(const, s, v)[0]
+    state[LAW] = (const[C_AH] * (state[P + 1] + state[P + 2]) - 2.0 * const[C_AR] * state[P + 3]
+                  - (ff - dff * v) + fes)
+    state[LAW + 1] = -dff
+
+
+@njit(cache=True)
+def weak_complete(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1: float,
+                  v1: float) -> int:
+    """Weak coupling's completion: Newton from the last pressures at (s1, v1), commit, book."""
+    ok, p1, it, bt, F, flows, V1, n = _newton(const, state, h, s1, v1, _pressures(state, P))
+    if not ok:
+        state[LAST_DP] = n
+        return NOT_CONVERGED
+    state[BACKTRACKS] += bt
+    state[ITERS] = it
+    for i in range(18):
+        state[JAC + i] = F[i]
+    _commit(const, state, p1, V1, flows, v1, h, False)
+    _book_step(const, state, t1, h, s1, v1)
+    return OK
+
+
+@njit(cache=True)
+def multirate_substep(const: np.ndarray, state: np.ndarray, h: float, s1: float, v: float,
+                      accumulate: bool) -> int:
+    """One multi-rate BE sub-step of length h to stroke s1 at the held velocity v, committed
+    (its energy terms added to the step ledger's when ``accumulate``); LEFT_PHYSICS, state
+    untouched, if a chamber volume is ≤ 0, Newton does not converge or a pressure falls
+    below absolute vacuum."""
+    V = _volumes(const, s1)
+    if min(V[0], V[1], V[2], V[3], V[4]) <= 0.0:
+        return LEFT_PHYSICS
+    ok, p1, it, bt, F, flows, V1, _ = _newton(const, state, h, s1, v, _pressures(state, P))
+    if not ok:
+        return LEFT_PHYSICS
+    for x in p1:
+        if not (math.isfinite(x) and x >= -const[C_P_ATM]):
+            return LEFT_PHYSICS
+    state[BACKTRACKS] += bt
+    state[ITERS] = it
+    for i in range(18):
+        state[JAC + i] = F[i]
+    _commit(const, state, p1, V1, flows, v, h, accumulate)
+    return OK
+
+
+@njit(cache=True)
+def book_step(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1: float,
+              v1: float) -> None:
+    """Close a multi-rate step ending at (t1, s1, v1) (see ``_book_step``)."""
+    _book_step(const, state, t1, h, s1, v1)
