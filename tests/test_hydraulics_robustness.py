@@ -71,3 +71,16 @@ def test_replay_ledger_closes(replay) -> None:
     led = ht.ledger
     scale = abs(led.supply_J) + abs(led.piston_work_J) + abs(led.oil_energy_J)
     assert abs(led.balance_error_J) <= 1e-6 * scale
+
+
+@pytest.mark.parametrize("coupling", ["strong", "weak"])
+def test_newton_failure_raises_naming_the_iteration_limit(coupling: str) -> None:
+    """A solve that cannot reach the tolerance in newton_max_iter iterations raises (the
+    compiled kernel returns a status; the element turns it into the RuntimeError)."""
+    prm = dataclasses.replace(_P, coupling=dataclasses.replace(_P.coupling, newton_max_iter=1,
+                                                               newton_tol_Pa=1e-9))
+    ht = HydraulicTensioner(prm, coupling=coupling)
+    ht.set_mode(1)
+    with pytest.raises(RuntimeError, match=r"did not converge in 1 iterations \(t = 0.0 s"):
+        ht.force_law(0.0, 0.05, 0.01)
+        ht.complete_step(1e-3, 0.05001, 0.01)
