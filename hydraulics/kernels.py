@@ -236,7 +236,8 @@ def _volumes(const: np.ndarray, s: float) -> tuple[float, float, float, float, f
 
 
 @njit(cache=True)
-def _pressures(state: np.ndarray, at: int) -> tuple[float, float, float, float, float]:
+def _nodes(state: np.ndarray, at: int) -> tuple[float, float, float, float, float]:
+    """The five node values state[at:at + 5] (pressures, volumes) as a tuple."""
     return state[at], state[at + 1], state[at + 2], state[at + 3], state[at + 4]
 
 
@@ -475,8 +476,8 @@ def _commit(const: np.ndarray, state: np.ndarray, p1: tuple, V1: tuple, flows: t
     qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR = flows
     pA, pHL, pHR, pB, pS = p1
     pT, prescribed = const[C_PT], const[C_PRESCRIBED] != 0.0
-    p0 = _pressures(state, P)
-    V0 = _pressures(state, VOL)
+    p0 = _nodes(state, P)
+    V0 = _nodes(state, VOL)
     ib2 = 0.5 / const[C_BETA]
     # Σ over nodes; V_HL = V_HR, and V_A, V_S do not change with the stroke
     d0, d1, d2, d3 = pA - p0[0], pHL - p0[1], pHR - p0[2], pB - p0[3]
@@ -524,10 +525,11 @@ def _commit(const: np.ndarray, state: np.ndarray, p1: tuple, V1: tuple, flows: t
 
 
 @njit(cache=True)
-def _book_step(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1: float,
-               v1: float) -> None:
+def book_step(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1: float,
+              v1: float) -> None:
     """Close the step ending at (t1, s1, v1): mechanical terms of the step ledger, interface
-    residual and its carry, cumulative ledger, line-search count, record and log values."""
+    residual and its carry, cumulative ledger, line-search count, record and log values.
+    The strong and weak completions end with it; multi-rate calls it after its sub-steps."""
     ff = _friction(const, v1)[0]
     fes = _endstop(const, s1, v1)[0]
     sl, led = STEP_LEDGER, LEDGER
@@ -559,7 +561,7 @@ def _book_step(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1: fl
 def initialise(const: np.ndarray, state: np.ndarray, stroke_m: float) -> None:
     """Fill the volumes, accumulator oil volume, stored energies (both ledgers' start and
     current values) and the static force law from the pressures in state[P]."""
-    p = _pressures(state, P)
+    p = _nodes(state, P)
     V = _volumes(const, stroke_m)
     gas = 0.0
     if const[C_PRESCRIBED] == 0.0:
@@ -584,7 +586,7 @@ def strong_force_law(const: np.ndarray, state: np.ndarray, h: float, s: float,
     v_star = 2.0 * v - state[V_PREV]
     state[V_PREV] = v
     s1 = s + h * v_star
-    ok, p1, it, bt, F, _, _, n = _newton(const, state, h, s1, v_star, _pressures(state, P))
+    ok, p1, it, bt, F, _, _, n = _newton(const, state, h, s1, v_star, _nodes(state, P))
     if not ok:
         state[LAST_DP] = n
         return NOT_CONVERGED
@@ -634,7 +636,7 @@ def strong_complete(const: np.ndarray, state: np.ndarray, t1: float, h: float, s
             state[JAC + i] = F[i]
     state[ITERS] = it
     _commit(const, state, p1, V1, flows, v1, h, False)
-    _book_step(const, state, t1, h, s1, v1)
+    book_step(const, state, t1, h, s1, v1)
     return OK
 
 
@@ -653,7 +655,7 @@ def held_force_law(const: np.ndarray, state: np.ndarray, s: float, v: float) -> 
 def weak_complete(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1: float,
                   v1: float) -> int:
     """Weak coupling's completion: Newton from the last pressures at (s1, v1), commit, book."""
-    ok, p1, it, bt, F, flows, V1, n = _newton(const, state, h, s1, v1, _pressures(state, P))
+    ok, p1, it, bt, F, flows, V1, n = _newton(const, state, h, s1, v1, _nodes(state, P))
     if not ok:
         state[LAST_DP] = n
         return NOT_CONVERGED
@@ -662,7 +664,7 @@ def weak_complete(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1:
     for i in range(18):
         state[JAC + i] = F[i]
     _commit(const, state, p1, V1, flows, v1, h, False)
-    _book_step(const, state, t1, h, s1, v1)
+    book_step(const, state, t1, h, s1, v1)
     return OK
 
 
@@ -676,7 +678,7 @@ def multirate_substep(const: np.ndarray, state: np.ndarray, h: float, s1: float,
     V = _volumes(const, s1)
     if min(V[0], V[1], V[2], V[3], V[4]) <= 0.0:
         return LEFT_PHYSICS
-    ok, p1, it, bt, F, flows, V1, _ = _newton(const, state, h, s1, v, _pressures(state, P))
+    ok, p1, it, bt, F, flows, V1, _ = _newton(const, state, h, s1, v, _nodes(state, P))
     if not ok:
         return LEFT_PHYSICS
     for x in p1:
@@ -688,10 +690,3 @@ def multirate_substep(const: np.ndarray, state: np.ndarray, h: float, s1: float,
         state[JAC + i] = F[i]
     _commit(const, state, p1, V1, flows, v, h, accumulate)
     return OK
-
-
-@njit(cache=True)
-def book_step(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1: float,
-              v1: float) -> None:
-    """Close a multi-rate step ending at (t1, s1, v1) (see ``_book_step``)."""
-    _book_step(const, state, t1, h, s1, v1)
