@@ -578,6 +578,16 @@ def initialise(const: np.ndarray, state: np.ndarray, stroke_m: float) -> None:
 
 
 @njit(cache=True)
+def _keep_solve(state: np.ndarray, iterations: int, backtracks: int, F: tuple) -> None:
+    """Book a converged Newton solve: its iterations and halvings, its factorised Jacobian
+    in state[JAC] (for dp/dv and the chord corrections)."""
+    state[BACKTRACKS] += backtracks
+    state[ITERS] = iterations
+    for i in range(18):
+        state[JAC + i] = F[i]
+
+
+@njit(cache=True)
 def strong_force_law(const: np.ndarray, state: np.ndarray, h: float, s: float,
                      v: float) -> int:
     """Strong coupling's law for the step from (s, v) (see ``HydraulicTensioner``): solve at
@@ -590,11 +600,8 @@ def strong_force_law(const: np.ndarray, state: np.ndarray, h: float, s: float,
     if not ok:
         state[LAST_DP] = n
         return NOT_CONVERGED
-    state[BACKTRACKS] += bt
-    state[ITERS] = it
+    _keep_solve(state, it, bt, F)
     dpdv = _dpdv(const, state, F, p1)
-    for i in range(18):
-        state[JAC + i] = F[i]
     for i in range(5):
         state[P_STAR + i] = p1[i]
         state[DPDV + i] = dpdv[i]
@@ -631,10 +638,9 @@ def strong_complete(const: np.ndarray, state: np.ndarray, t1: float, h: float, s
         if not ok:
             state[LAST_DP] = n
             return NOT_CONVERGED
-        state[BACKTRACKS] += bt
-        for i in range(18):
-            state[JAC + i] = F[i]
-    state[ITERS] = it
+        _keep_solve(state, it, bt, F)
+    else:
+        state[ITERS] = it
     _commit(const, state, p1, V1, flows, v1, h, False)
     book_step(const, state, t1, h, s1, v1)
     return OK
@@ -659,10 +665,7 @@ def weak_complete(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1:
     if not ok:
         state[LAST_DP] = n
         return NOT_CONVERGED
-    state[BACKTRACKS] += bt
-    state[ITERS] = it
-    for i in range(18):
-        state[JAC + i] = F[i]
+    _keep_solve(state, it, bt, F)
     _commit(const, state, p1, V1, flows, v1, h, False)
     book_step(const, state, t1, h, s1, v1)
     return OK
@@ -684,9 +687,6 @@ def multirate_substep(const: np.ndarray, state: np.ndarray, h: float, s1: float,
     for x in p1:
         if not (math.isfinite(x) and x >= -const[C_P_ATM]):
             return LEFT_PHYSICS
-    state[BACKTRACKS] += bt
-    state[ITERS] = it
-    for i in range(18):
-        state[JAC + i] = F[i]
+    _keep_solve(state, it, bt, F)
     _commit(const, state, p1, V1, flows, v, h, accumulate)
     return OK
