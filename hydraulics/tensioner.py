@@ -315,13 +315,7 @@ class HydraulicTensioner:
                 status = k.strong_complete(c, st, t_s, h, stroke_m, velocity_m_s)
             if status != k.OK:
                 self._not_converged()
-            main, vl, vr = self.main, self.vl, self.vr
-            if main.moving:
-                main.advance(self.t, h)
-            if vl.moving:
-                vl.advance(self.t, h)
-            if vr.moving:
-                vr.advance(self.t, h)
+            self._advance_valves(self.t, h)
             self.s, self.v, self.t = stroke_m, velocity_m_s, t_s
         self._completed = True
 
@@ -338,9 +332,7 @@ class HydraulicTensioner:
                 self.diverged, self.divergence_time_s = True, t_j
                 return j
             self._s_hyd = s_next
-            for valve in (self.main, self.vl, self.vr):
-                if valve.moving:
-                    valve.advance(t_j, hs)
+            self._advance_valves(t_j, hs)
         return self.n_sub
 
     @property
@@ -422,6 +414,16 @@ class HydraulicTensioner:
         if not (math.isfinite(ps) and ps >= 0.0):
             raise ValueError(f"supply profile gave p_s = {ps!r} Pa at t = {t_s} s")
         return ps
+
+    def _advance_valves(self, t_s: float, h: float) -> None:
+        """Commit the solenoids' motion over [t_s, t_s + h] (those at rest stay put)."""
+        main, vl, vr = self.main, self.vl, self.vr
+        if main.moving:
+            main.advance(t_s, h)
+        if vl.moving:
+            vl.advance(t_s, h)
+        if vr.moving:
+            vr.advance(t_s, h)
 
     def _set_gains(self, t_s: float, h: float) -> None:
         """Valve positions at t_s + h (not committed) -> orifice gains of the step; with a
