@@ -376,21 +376,19 @@ class TrackPlant:
         exchanged consistent with the stroke change.
         """
         m, d = self.model, self.data
-        qpos, qvel, q_slide, v_slide = self._qpos, self._qvel, self._slide_q, self._slide_v
-        stroke0 = self._stroke_offset_m + float(qpos[q_slide])
-        law = element.force_law(self.time_s, stroke0, float(qvel[v_slide]))
+        stroke0 = self.stroke_m
+        law = element.force_law(self.time_s, stroke0, self.stroke_velocity_m_s)
         force, damping = law.force_N, law.damping_N_s_m
         if not (math.isfinite(force) and math.isfinite(damping)):
             raise ValueError(f"tensioner returned a non-finite force law {law}")
         self._ctrl[self._tensioner] = force
         self._biasprm[self._tensioner, 2] = damping
-        if self.substeps == 1:
+        for _ in range(self.substeps):
             mujoco.mj_step(m, d)
-            stroke, velocity = self._stroke_offset_m + float(qpos[q_slide]), float(qvel[v_slide])
+        stroke = self.stroke_m
+        if self.substeps == 1:
+            velocity = self.stroke_velocity_m_s
         else:
-            for _ in range(self.substeps):
-                mujoco.mj_step(m, d)
-            stroke = self._stroke_offset_m + float(qpos[q_slide])
             velocity = (stroke - stroke0) / COUPLING_STEP_S
         self.time_s += COUPLING_STEP_S
         self.last_law = law
