@@ -11,11 +11,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.estimators import ExtendedKalmanFilter, UnscentedKalmanFilter
-from trackmj.control.interface import ControlOutput, steps_per_period
 from trackmj.control.model import ReducedModel, ReducedPlant
 from trackmj.control.params import ControlConfig
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
+from trackmj.ports import ControlOutput, steps_per_period
 
 Controller = Callable[[NDArray[np.float64], NDArray[np.float64], float], ControlOutput]
 

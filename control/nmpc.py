@@ -14,11 +14,11 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from trackmj.control.interface import ControlOutput
 from trackmj.control.model import ReducedModel
 from trackmj.control.ocp import X_SCALE, Ocp, build_ocp, initial_guess, parameter_vector
 from trackmj.control.params import ControllerParams, MpcParams
 from trackmj.control.sqp import CondensedSqp
+from trackmj.ports import ControlOutput
 
 #: Largest constraint violation (scaled units: MPa, mm, kN, ...) accepted from a truncated SQP.
 FEASIBILITY_TOL = 0.1

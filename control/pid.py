@@ -21,9 +21,9 @@ import math
 
 from numpy.typing import NDArray
 
-from trackmj.control.interface import ControlOutput
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControllerParams, PidParams
+from trackmj.ports import ControlOutput
 
 
 class PidController:

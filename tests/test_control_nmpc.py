@@ -5,13 +5,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from trackmj.control.interface import steps_per_period
 from trackmj.control.lmpc import LinearMpc
 from trackmj.control.loop import run_closed_loop, step_metrics
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.ocp import X_SCALE
 from trackmj.control.params import load_config
+from trackmj.ports import steps_per_period
 
 CFG = load_config()
 

@@ -18,6 +18,7 @@ from trackmj.model import (
 )
 from trackmj.plant import PassiveTensioner, TrackPlant
 from trackmj.ports import ForceLaw
+from trackmj.terrain import RoadProfile
 
 
 def _named(model: mujoco.MjModel, obj: mujoco.mjtObj, count: int) -> list[str]:
@@ -206,7 +207,7 @@ def test_runs_are_bit_identical() -> None:
     assert np.array_equal(_trajectory(), _trajectory())
 
 
-def _chassis_heights(terrain: tuple[float, float, np.ndarray]) -> np.ndarray:
+def _chassis_heights(terrain: RoadProfile) -> np.ndarray:
     plant = TrackPlant.load(terrain=terrain)
     element = PassiveTensioner.from_params(plant.params)
     heights: list[float] = []
@@ -219,13 +220,13 @@ def _chassis_heights(terrain: tuple[float, float, np.ndarray]) -> np.ndarray:
 def test_heightfield_terrain() -> None:
     """A flat heightfield behaves like the plane; a 50 mm step lifts the chassis by it."""
     x = np.arange(0.0, 60.0, 0.05) - 10.0
-    flat = _chassis_heights((-10.0, 0.05, np.zeros_like(x)))
+    flat = _chassis_heights(RoadProfile(-10.0, 0.05, np.zeros_like(x)))
     plane_plant = TrackPlant.load()
     plane: list[float] = []
     plane_plant.run(PassiveTensioner.from_params(plane_plant.params), 4.0,
                     lambda t: 1.5 * min(1.0, t), lambda pl: plane.append(pl.chassis_pose[1]))
     np.testing.assert_allclose(flat, plane, atol=1e-3)
     # a 0.5 m long, 50 mm high plateau under the path: the chassis rises about that much
-    bump = _chassis_heights((-10.0, 0.05, np.where((x > 3.0) & (x < 3.5), 0.05, 0.0)))
+    bump = _chassis_heights(RoadProfile(-10.0, 0.05, np.where((x > 3.0) & (x < 3.5), 0.05, 0.0)))
     rise = bump.max() - flat.max()
     assert 0.02 < rise < 0.06, rise

@@ -27,10 +27,8 @@ from trackmj.model import (
     load_model_params,
     with_heightfield,
 )
-from trackmj.ports import ForceLaw, TensionerElement
-
-COUPLING_STEP_S = 1e-3
-"""Fixed exchange step between mechanics, hydraulics and sensors [s]."""
+from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElement
+from trackmj.terrain import RoadProfile
 
 
 @dataclass
@@ -105,6 +103,7 @@ class TrackPlant:
         # views into the MjData/MjModel buffers, kept to spare the bindings' attribute
         # look-ups in the 1 kHz loop (the buffers live as long as data and model)
         self._qpos, self._qvel, self._ctrl = self.data.qpos, self.data.qvel, self.data.ctrl
+        self._qacc = self.data.qacc
         self._biasprm = m.actuator_biasprm
         self._stroke_offset_m = params.idler.stroke_at_layout_m
         self._slide_q = int(m.jnt_qposadr[m.joint("idler_slide").id])
@@ -142,11 +141,11 @@ class TrackPlant:
     @classmethod
     def load(cls, xml_path: str | Path | None = None,
              param_path: str | Path | None = None,
-             terrain: tuple[float, float, np.ndarray] | None = None) -> TrackPlant:
+             terrain: RoadProfile | None = None) -> TrackPlant:
         """Load the committed model (default ``models/lf1352.xml``) and its parameters.
 
-        terrain: optional road profile ``(x_start_m, dx_m, heights_m)`` replacing the flat
-        ground by a heightfield (see :func:`trackmj.model.with_heightfield`).
+        terrain: optional road profile replacing the flat ground by a heightfield (see
+        :func:`trackmj.model.with_heightfield`).
         """
         path = Path(xml_path) if xml_path is not None else default_xml_path()
         if not path.is_file():
@@ -155,7 +154,7 @@ class TrackPlant:
             if terrain is None:
                 model = mujoco.MjModel.from_xml_path(str(path))
             else:
-                mjcf = with_heightfield(path.read_text(), *terrain)
+                mjcf = with_heightfield(path.read_text(), terrain)
                 model = mujoco.MjModel.from_xml_string(mjcf)
         except ValueError as exc:
             raise ValueError(f"{path}: MuJoCo could not load the model: {exc}") from None
@@ -171,6 +170,8 @@ class TrackPlant:
         self.data.ctrl[self._drive] = 0.0
         self.time_s = 0.0
         self.last_law = None
+        self._speed_command = 0.0
+        self._hitch_loaded = False
         mujoco.mj_forward(self.model, self.data)
 
     def _contact_groups(self) -> dict[int, str]:
@@ -235,6 +236,38 @@ class TrackPlant:
         arm = d.site_xpos[self._hitch_site] - d.xipos[body]
         d.xfrc_applied[body, :3] = force
         d.xfrc_applied[body, 3:] = np.cross(arm, force)
+
+    def apply(self, inputs: StepInputs) -> None:
+        """Set one step's scenario inputs: the sprocket speed command (only when it changes:
+        the servo keeps it) and the rear-hitch load (re-evaluated every step while it is not
+        zero, because it acts in the rotating chassis frame)."""
+        if inputs.track_speed_m_s != self._speed_command:
+            self.set_track_speed(inputs.track_speed_m_s)
+            self._speed_command = inputs.track_speed_m_s
+        hitch = (inputs.hitch_pull_N, inputs.hitch_down_N)
+        if hitch != (0.0, 0.0) or self._hitch_loaded:
+            self.set_hitch_force(*hitch)
+            self._hitch_loaded = hitch != (0.0, 0.0)
+
+    def scale_contact_stiffness(self, scale: float) -> None:
+        """Scale the stiffness of every track contact by ``scale`` [-] (W5 perturbation):
+        the ground foundation's direct stiffness (solref[0] < 0) linearly, the time
+        constant of the others (solref[0] > 0, stiffness ∝ 1/τ²) by 1/sqrt(scale)."""
+        if not (math.isfinite(scale) and scale > 0.0):
+            raise ValueError(f"contact stiffness scale must be > 0, got {scale!r}")
+        m = self.model
+        for g in range(m.ngeom):
+            if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0:
+                continue
+            if m.geom_solref[g, 0] < 0.0:
+                m.geom_solref[g, 0] *= scale
+            else:
+                m.geom_solref[g, 0] /= math.sqrt(scale)
+
+    @property
+    def chassis_acc_z_m_s2(self) -> float:
+        """Vertical chassis acceleration over the last step [m/s²] (``qacc`` of chassis_z)."""
+        return float(self._qacc[self._chassis_v[1]])
 
     @property
     def chassis_pose(self) -> np.ndarray:

@@ -46,7 +46,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 from rerun.components import TensorDataBatch
 
-from trackmj.plant import COUPLING_STEP_S, TrackPlant
+from trackmj.plant import TrackPlant
+from trackmj.ports import COUPLING_STEP_S
 from trackmj.results import Result
 
 APPLICATION_ID = "trackmj"

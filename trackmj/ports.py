@@ -1,14 +1,21 @@
-"""Named interfaces ("ports") between the blocks of trackmj. No mujoco import here.
+"""Named interfaces ("ports") between the blocks of trackmj: the leaf every block imports.
 
-Tensioner port (mechanics <-> tensioner force element), one exchange per 1 ms step:
+No import of anything else of trackmj, nor of mujoco, casadi or numba, happens here.
 
-1. Before the mechanical step the plant calls ``element.force_law(t, stroke, velocity)``
+Data flows one way per 1 ms coupling step (:data:`COUPLING_STEP_S`):
+
+    controller (every period) -> valve logic -> plant [tensioner element -> mechanics]
+    -> sensors -> estimator -> observers
+
+Tensioner port (mechanics <-> tensioner force element), one exchange per step:
+
+1. Before the mechanical step the mechanics calls ``element.force_law(t, stroke, velocity)``
    with the state at the start of the step (t_k, s_k, v_k).
 2. The element returns a :class:`ForceLaw` ``F(v) = force_N + damping_N_s_m * v``.
-   The plant hands it to MuJoCo as an affine actuator (``ctrl = force_N``,
+   The track hands it to MuJoCo as an affine actuator (``ctrl = force_N``,
    ``biasprm[2] = damping_N_s_m``); MuJoCo's ``implicitfast`` integrator then applies
    exactly ``F(v_{k+1})`` over the step, with ``v_{k+1}`` the end-of-step velocity.
-3. After the step the plant calls ``element.complete_step(t_{k+1}, s_{k+1}, v_{k+1})``
+3. After the step the mechanics calls ``element.complete_step(t_{k+1}, s_{k+1}, v_{k+1})``
    so the element can finish its own (implicit) update with the velocity the mechanics
    actually produced.
 
@@ -16,12 +23,33 @@ Sign convention: stroke s [m] grows when the idler carrier moves outward (tensio
 track); velocity v = ds/dt [m/s]; force F [N] > 0 pushes the idler outward. The
 mechanical work received by the track over one step is ``F(v_{k+1}) * v_{k+1} * h``
 (MuJoCo's semi-implicit Euler moves the position by ``h * v_{k+1}``).
+
+Valve modes: +1 pressurize, 0 hold, -1 release (see ``docs/sizing.md``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import NamedTuple, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+COUPLING_STEP_S = 1e-3
+"""Fixed exchange step between controller, valves, hydraulics, mechanics and sensors [s]."""
+
+
+def steps_per_period(period_s: float, dt_s: float = COUPLING_STEP_S) -> int:
+    """Whole steps of ``dt_s`` [s] in one ``period_s`` [s] (e.g. 10 for a 10 ms controller at
+    1 ms); ValueError unless the period is a positive integer multiple of the step."""
+    if not (dt_s > 0.0 and period_s > 0.0):
+        raise ValueError(f"period_s = {period_s} and dt_s = {dt_s} must be > 0")
+    ratio = period_s / dt_s
+    k = round(ratio)
+    if k < 1 or abs(ratio - k) > 1e-9 * max(1.0, ratio):
+        raise ValueError(f"period {period_s} s must be an integer multiple of the step {dt_s} s")
+    return k
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,6 +68,68 @@ class ForceLaw:
         return self.force_N + self.damping_N_s_m * velocity_m_s
 
 
+@dataclass(frozen=True, slots=True)
+class ControlOutput:
+    """Controller result: valve opening u in [-1, 1] [-], success flag, solve wall time [s],
+    iterations [-], and whether a fallback plan was applied."""
+
+    u: float
+    success: bool = True
+    solve_time_s: float = 0.0
+    iterations: int = 0
+    fallback: bool = False
+
+
+class StepInputs(NamedTuple):
+    """Scenario inputs of one step (what the operator and the environment impose).
+
+    track_speed_m_s: sprocket pitch-line speed command [m/s]; hitch_pull_N, hitch_down_N:
+    rear-hitch load in the chassis frame [N] (rearward, downward); supply_set_Pa: supply
+    pressure set value (the prescribed profile, or the nominal pressure) [Pa gauge].
+    """
+
+    track_speed_m_s: float
+    hitch_pull_N: float
+    hitch_down_N: float
+    supply_set_Pa: float
+
+
+class Readout(NamedTuple):
+    """What the plant shows after a completed step, SI; NaN where a plant has no such
+    quantity (no supply node in dp-b, no chassis in dp-a or the reduced plant).
+
+    t_s: end of the step [s]; tension_N: F_ten, the tensioner force on the idler carrier
+    [N]; p_head_Pa / p_rod_Pa: mean head / rod chamber pressure [Pa gauge]; p_supply_Pa:
+    supply node [Pa gauge]; stroke_m [m], stroke_velocity_m_s [m/s]; q_supply_m3_s: flow
+    out of the supply through the main valve [m³/s]; e_supply_J, p_work_J (∫Σp·A·v dt),
+    mech_work_J (∫F·v dt): cumulative energies [J]; chassis_acc_z_m_s2 [m/s²];
+    closure_error_m: track loop closure gap [m].
+    """
+
+    t_s: float
+    tension_N: float
+    p_head_Pa: float
+    p_rod_Pa: float
+    p_supply_Pa: float
+    stroke_m: float
+    stroke_velocity_m_s: float
+    q_supply_m3_s: float
+    e_supply_J: float
+    p_work_J: float
+    mech_work_J: float
+    chassis_acc_z_m_s2: float
+    closure_error_m: float
+
+
+READOUT_UNITS: dict[str, str] = {
+    "t_s": "s", "tension_N": "N", "p_head_Pa": "Pa", "p_rod_Pa": "Pa", "p_supply_Pa": "Pa",
+    "stroke_m": "m", "stroke_velocity_m_s": "m/s", "q_supply_m3_s": "m^3/s",
+    "e_supply_J": "J", "p_work_J": "J", "mech_work_J": "J", "chassis_acc_z_m_s2": "m/s^2",
+    "closure_error_m": "m",
+}
+"""Unit of every :class:`Readout` field ("1": dimensionless)."""
+
+
 @runtime_checkable
 class TensionerElement(Protocol):
     """A tensioner force element acting on the idler carrier (see module docstring)."""
@@ -51,3 +141,82 @@ class TensionerElement(Protocol):
     def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
         """Finish the step with the end-of-step state the mechanics produced."""
         ...
+
+
+class Mechanics(Protocol):
+    """The mechanics the tensioner acts on (the MuJoCo track, or an equivalent idler).
+
+    ``apply(inputs)`` sets the step's scenario inputs, ``step(element)`` advances one
+    coupling step through the tensioner port and returns the law applied; the named
+    readouts are attributes (stroke [m], stroke velocity [m/s], idler force [N] of the
+    last step, chassis vertical acceleration [m/s²], closure error [m], time [s]).
+    """
+
+    time_s: float
+
+    @property
+    def stroke_m(self) -> float: ...
+
+    @property
+    def stroke_velocity_m_s(self) -> float: ...
+
+    @property
+    def idler_force_N(self) -> float: ...
+
+    @property
+    def chassis_acc_z_m_s2(self) -> float: ...
+
+    @property
+    def closure_error_m(self) -> float: ...
+
+    def apply(self, inputs: StepInputs) -> None: ...
+
+    def step(self, element: TensionerElement) -> ForceLaw: ...
+
+
+class Plant(Protocol):
+    """Everything between the valve command and the sensors: ``step(mode, inputs)``
+    applies valve mode +1/0/-1 and the step's inputs, advances one coupling step and
+    returns its :class:`Readout`."""
+
+    def step(self, mode: int, inputs: StepInputs) -> Readout: ...
+
+
+class Sensors(Protocol):
+    """Measurement z = (p_head [Pa], p_rod [Pa], stroke [m]) of the true values, noisy."""
+
+    def measure(self, x: Sequence[float]) -> NDArray[np.float64]: ...
+
+
+class Estimator(Protocol):
+    """State estimate X = (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s]) from 1 kHz samples."""
+
+    def step(self, z: NDArray[np.float64], mode: float, p_s: float) -> NDArray[np.float64]: ...
+
+    def period_mean(self) -> NDArray[np.float64]: ...
+
+
+class Controller(Protocol):
+    """``controller(estimate (4,), reference preview F_ref(t + i·period), i = 0..N [N], t [s])
+    -> ControlOutput``, told the supply pressure [Pa] each period by ``set_parameters``."""
+
+    period_s: float
+    horizon_steps: int
+
+    def __call__(self, estimate: NDArray[np.float64], reference_preview: NDArray[np.float64],
+                 t: float) -> ControlOutput: ...
+
+    def set_parameters(self, *, supply_pressure_Pa: float | None = None) -> None: ...
+
+
+class ValveLogic(Protocol):
+    """Continuous opening u in [-1, 1] -> applied valve mode (+1, 0, -1) every step."""
+
+    def step(self, u: float) -> int: ...
+
+
+class Observer(Protocol):
+    """Sees every completed step: its index k, the plant's readout and the command in
+    force; raising stops the run (e.g. a physics guard)."""
+
+    def on_step(self, k: int, readout: Readout, command: ControlOutput) -> None: ...

@@ -44,7 +44,6 @@ from pathlib import Path
 import numpy as np
 
 from trackmj.control.estimators import ExtendedKalmanFilter, UnscentedKalmanFilter
-from trackmj.control.interface import steps_per_period
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig, load_config
 from trackmj.control.sensors import Sensors
@@ -54,8 +53,8 @@ from trackmj.hydraulics.components import series_area
 from trackmj.identify import EquivalentIdler, identify_idler
 from trackmj.machine import machine
 from trackmj.metrics import compute_metrics
-from trackmj.plant import COUPLING_STEP_S, TrackPlant
-from trackmj.ports import ForceLaw
+from trackmj.plant import TrackPlant
+from trackmj.ports import COUPLING_STEP_S, ForceLaw, steps_per_period
 from trackmj.results import Result, TimeseriesRecorder, run_metadata
 from trackmj.scenarios import Scenario, Variant, load_scenario
 
@@ -173,19 +172,6 @@ def hydraulic_params_for(variant: Variant) -> HydraulicParams:
     return dataclasses.replace(base, fluid=fluid, cylinder=cylinder)
 
 
-def scale_contact_stiffness(plant: TrackPlant, scale: float) -> None:
-    """Scale every track contact's stiffness by ``scale``: the ground foundation's direct
-    stiffness (solref[0] < 0) linearly, the others' time constant by 1/sqrt(scale)."""
-    m = plant.model
-    for g in range(m.ngeom):
-        if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0:
-            continue
-        if m.geom_solref[g, 0] < 0.0:
-            m.geom_solref[g, 0] *= scale
-        else:
-            m.geom_solref[g, 0] /= math.sqrt(scale)
-
-
 def control_config(hyd: HydraulicParams, idler: EquivalentIdler, y0_m: float,
                    supply_Pa: float) -> ControlConfig:
     """The controller's reduced model filled from the plugin's sizes (lumped cylinders, the
@@ -244,9 +230,9 @@ class _Run:
 def _initial_track(scenario: Scenario, seed: int, variant: Variant,
                    force_N: float) -> TrackPlant:
     profile = scenario.terrain_profile(seed)
-    plant = TrackPlant.load(terrain=None if profile is None else profile.as_plant_terrain())
+    plant = TrackPlant.load(terrain=profile)
     if variant.contact_stiffness_scale != 1.0:
-        scale_contact_stiffness(plant, variant.contact_stiffness_scale)
+        plant.scale_contact_stiffness(variant.contact_stiffness_scale)
     plant.run(_SettleForce(force_N), SETTLE_S)
     plant.time_s = 0.0
     return plant

@@ -62,10 +62,6 @@ class RoadProfile:
         """Grid positions [m], shape (n,)."""
         return self.x_start_m + self.dx_m * np.arange(len(self.z_m))
 
-    def as_plant_terrain(self) -> tuple[float, float, np.ndarray]:
-        """``(x_start_m, dx_m, heights_m)`` as taken by ``TrackPlant.load(terrain=...)``."""
-        return self.x_start_m, self.dx_m, self.z_m
-
 
 def road_profile(length_m: float, dx_m: float, road_class: str,
                  rng: np.random.Generator | int, *, n_min: float = 0.011, n_max: float = 2.83,

@@ -1,0 +1,25 @@
+"""Generator of the LF1352 track-side MuJoCo model (``models/lf1352.xml``).
+
+Subpackages, each a stage of the model: :mod:`.params` (the validated parameter file),
+:mod:`.layout` (pin positions that close the loop), :mod:`.mjcf` (one builder per subtree,
+the heightfield terrain), :mod:`.generate` (settled ``home`` keyframe, the committed file).
+Nothing here imports the plant.
+"""
+
+from trackmj.model.generate import generate_mjcf, write_model
+from trackmj.model.layout import Layout, compute_layout
+from trackmj.model.mjcf import build_mjcf, ground_solref, with_heightfield
+from trackmj.model.params import (
+    LOOP_CLOSURE_PIN,
+    MODEL_NAME,
+    ModelParams,
+    default_param_path,
+    default_xml_path,
+    load_model_params,
+    models_dir,
+)
+
+__all__ = ["LOOP_CLOSURE_PIN", "MODEL_NAME", "Layout", "ModelParams", "build_mjcf",
+           "compute_layout", "default_param_path", "default_xml_path", "generate_mjcf",
+           "ground_solref", "load_model_params", "models_dir", "with_heightfield",
+           "write_model"]

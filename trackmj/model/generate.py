@@ -1,0 +1,66 @@
+"""Generation of ``models/lf1352.xml``: layout, a check of the initial state, and the
+``home`` keyframe found by settling under gravity with the passive tensioner preload.
+
+Settling uses MuJoCo alone (no plant): the passive spring-damper
+F = preload − k·(s − s_layout) − c·v is the tensioner actuator's affine bias
+(``ctrl = preload``, ``biasprm = (0, −k, −c)``; the slide position is s − s_layout), which
+``implicitfast`` integrates with the damping implicit.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from trackmj.io import write_text_atomic
+from trackmj.model.layout import compute_layout
+from trackmj.model.mjcf import build_mjcf
+from trackmj.model.params import ModelParams, default_xml_path, load_model_params
+from trackmj.params import ParameterError
+
+SETTLE_DURATION_S = 3.0
+MAX_INITIAL_PENETRATION_M = 1e-3
+
+
+def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> mujoco.MjData:
+    """State after ``duration_s`` [s] from the layout, standing (sprocket servo at 0 rad/s),
+    under the passive tensioner of ``params``; RuntimeError on MuJoCo warnings."""
+    data = mujoco.MjData(model)
+    tensioner = model.actuator("tensioner").id
+    t = params.tensioner
+    model.actuator_biasprm[tensioner, :3] = (0.0, -t.stiffness_N_m, -t.damping_N_s_m)
+    data.ctrl[tensioner] = t.preload_N
+    mujoco.mj_forward(model, data)
+    worst = min((c.dist for c in data.contact[: data.ncon]), default=0.0)
+    if worst < -MAX_INITIAL_PENETRATION_M:
+        raise ParameterError(f"initial layout penetrates by {-worst * 1e3:.2f} mm "
+                             f"(limit {MAX_INITIAL_PENETRATION_M * 1e3:.1f} mm): check radii "
+                             "and positions in lf1352.toml")
+    steps = round(duration_s / model.opt.timestep)
+    for _ in range(steps):
+        mujoco.mj_step(model, data)
+    if sum(w.number for w in data.warning):
+        raise RuntimeError("MuJoCo warnings while settling the home keyframe")
+    return data
+
+
+def generate_mjcf(params: ModelParams | None = None) -> str:
+    """Full MJCF of the model with the settled ``home`` keyframe.
+
+    Keyframe values are rounded to 1e-6 so the committed file does not depend on the
+    last bits of floating-point arithmetic.
+    """
+    params = params or load_model_params()
+    layout = compute_layout(params)
+    model = mujoco.MjModel.from_xml_string(build_mjcf(params, layout))
+    data = settle(model, params, SETTLE_DURATION_S)
+    return build_mjcf(params, layout, home_qpos=np.round(data.qpos, 6))
+
+
+def write_model(path: str | Path | None = None, params: ModelParams | None = None) -> Path:
+    """Generate the model and write it atomically (default: packaged lf1352.xml)."""
+    path = Path(path) if path is not None else default_xml_path()
+    write_text_atomic(path, generate_mjcf(params))
+    return path

@@ -1,0 +1,196 @@
+"""Mechanical parameters of the LF1352 track side (``models/lf1352.toml``) as frozen dataclasses.
+
+Units are SI (m, kg, N, s, rad); each field declares its allowed range with
+:func:`trackmj.params.param`, and :func:`load_model_params` refuses unknown keys, wrong types
+and out-of-range values naming the file, the table and the key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+from trackmj.params import ParameterError, load_table, param, read_toml
+from trackmj.ports import COUPLING_STEP_S
+
+MODEL_NAME = "lf1352"
+LOOP_CLOSURE_PIN = 41
+
+
+def models_dir() -> Path:
+    """Directory holding the packaged model files."""
+    return Path(str(resources.files("trackmj.models")))
+
+
+def default_param_path() -> Path:
+    return models_dir() / f"{MODEL_NAME}.toml"
+
+
+def default_xml_path() -> Path:
+    return models_dir() / f"{MODEL_NAME}.xml"
+
+
+@dataclass(frozen=True)
+class SimulationParams:
+    timestep_s: float = param(1e-5, 1e-3, doc="MuJoCo timestep [s]; divides the 1 ms step")
+    gravity_m_s2: float = param(0.0, 20.0, doc="gravitational acceleration [m/s²]")
+
+
+@dataclass(frozen=True)
+class TrackParams:
+    link_count: int = param(20, 200, doc="number of links [-]")
+    pitch_m: float = param(0.02, 0.3, open_low=True, doc="pin-to-pin distance [m]")
+    link_mass_kg: float = param(0.1, 100.0, doc="mass of one link with its shoe [kg]")
+    rail_radius_m: float = param(0.002, 0.05, doc="rail capsule radius [m]")
+    pin_radius_m: float = param(0.002, 0.05, doc="pin sphere radius [m]")
+    link_width_m: float = param(0.05, 1.5, doc="shoe width [m], visual and inertia")
+    ground_friction: float = param(0.0, 2.0, doc="Coulomb coefficient pin-ground [-]")
+
+
+@dataclass(frozen=True)
+class ChassisParams:
+    mass_kg: float = param(10.0, 1e5)
+    pitch_inertia_kg_m2: float = param(1.0, 1e6)
+    length_m: float = param(0.1, 20.0)
+    height_m: float = param(0.05, 5.0)
+    ride_height_m: float = param(0.05, 3.0, doc="chassis origin above ground [m]")
+    hitch_x_m: float = param(-10.0, 10.0, doc="rear hitch, chassis frame x [m]")
+    hitch_z_m: float = param(0.0, 5.0, doc="rear hitch height above ground at layout [m]")
+
+
+@dataclass(frozen=True)
+class SprocketParams:
+    tooth_count: int = param(6, 40)
+    x_m: float = param(-10.0, 10.0)
+    z_m: float = param(0.0, 5.0)
+    tooth_radius_m: float = param(0.002, 0.1)
+    tooth_radial_offset_m: float = param(-0.05, 0.05)
+    mass_kg: float = param(0.1, 1e4)
+    inertia_kg_m2: float = param(1e-4, 1e4)
+    drive_gain_N_m_s: float = param(1.0, 1e8, doc="velocity servo gain [N·m·s/rad]")
+    drive_torque_limit_N_m: float = param(1.0, 1e7)
+
+
+@dataclass(frozen=True)
+class IdlerParams:
+    radius_m: float = param(0.02, 1.0)
+    x_m: float = param(-10.0, 10.0)
+    z_m: float = param(0.0, 5.0)
+    mass_kg: float = param(0.1, 1e4)
+    carrier_mass_kg: float = param(0.1, 1e4)
+    slide_range_m: tuple[float, float] = param(-1.0, 1.0)
+    stroke_at_layout_m: float = param(0.0, 1.0, doc="cylinder stroke at slide q = 0 [m]")
+
+
+@dataclass(frozen=True)
+class RoadWheelParams:
+    count: int = param(1, 12)
+    radius_m: float = param(0.02, 1.0)
+    x_m: tuple[float, ...] = param(-10.0, 10.0)
+    mass_kg: float = param(0.1, 1e4)
+    suspension_stiffness_N_m: float = param(1.0, 1e9)
+    suspension_damping_N_s_m: float = param(0.0, 1e8)
+    suspension_range_m: tuple[float, float] = param(-1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class ReturnRollerParams:
+    radius_m: float = param(0.01, 1.0)
+    x_m: tuple[float, ...] = param(-10.0, 10.0)
+    z_m: float = param(0.0, 5.0)
+
+
+@dataclass(frozen=True)
+class GroundParams:
+    stiffness_N_m: float = param(1e3, 1e10, doc="Kelvin-Voigt stiffness per pin contact [N/m]")
+    damping_N_s_m: float = param(0.0, 1e8, doc="Kelvin-Voigt damping per pin contact [N·s/m]")
+    reference_mass_kg: float = param(0.01, 1e4, doc="effective mass for solref conversion [kg]")
+    impedance: float = param(0.5, 0.999, doc="constant MuJoCo impedance d [-]")
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    rail_solref: tuple[float, float] = param(0.0, 10.0)
+    tooth_solref: tuple[float, float] = param(0.0, 10.0)
+    closure_solref: tuple[float, float] = param(0.0, 10.0)
+
+
+@dataclass(frozen=True)
+class PassiveTensionerParams:
+    preload_N: float = param(0.0, 1e6, doc="force at the layout stroke [N]")
+    stiffness_N_m: float = param(0.0, 1e9)
+    damping_N_s_m: float = param(0.0, 1e8)
+
+
+@dataclass(frozen=True)
+class SolverParams:
+    iterations: int = param(1, 1000)
+    tolerance: float = param(0.0, 1e-2)
+    cone: str = "pyramidal"
+    jacobian: str = "dense"
+    warmstart: bool = False
+    midphase: bool = True   # per-body geom bounding-volume tree before the narrow phase
+
+
+@dataclass(frozen=True)
+class ModelParams:
+    """All mechanical parameters of one track side (SI units, see lf1352.toml)."""
+
+    simulation: SimulationParams
+    track: TrackParams
+    chassis: ChassisParams
+    sprocket: SprocketParams
+    idler: IdlerParams
+    road_wheels: RoadWheelParams
+    return_rollers: ReturnRollerParams
+    ground: GroundParams
+    contacts: ContactParams
+    tensioner: PassiveTensionerParams
+    solver: SolverParams
+
+    @property
+    def sprocket_pitch_radius_m(self) -> float:
+        """Pitch radius p / (2 sin(pi/N)) on which the pins seat [m]."""
+        return self.track.pitch_m / (2.0 * math.sin(math.pi / self.sprocket.tooth_count))
+
+
+def load_model_params(path: str | Path | None = None) -> ModelParams:
+    """Read and validate the model parameter file (default: packaged lf1352.toml)."""
+    path = Path(path) if path is not None else default_param_path()
+    data = read_toml(path)
+    tables = {}
+    classes = {f.name: globals()[f.type] if isinstance(f.type, str) else f.type
+               for f in dataclasses.fields(ModelParams)}
+    for name, cls in classes.items():
+        if name not in data:
+            raise ParameterError(f"{path.name}: missing table [{name}]")
+        tables[name] = load_table(cls, data[name], f"{path.name} [{name}]")
+    params = ModelParams(**tables)
+    _check_consistency(params, path.name)
+    return params
+
+
+def _check_consistency(p: ModelParams, where: str) -> None:
+    if p.track.link_count != 82:
+        raise ParameterError(f"{where} [track].link_count = {p.track.link_count}: the LF1352 "
+                             "model (names link_00..link_81) needs exactly 82")
+    if len(p.road_wheels.x_m) != p.road_wheels.count:
+        raise ParameterError(f"{where} [road_wheels].x_m has {len(p.road_wheels.x_m)} entries, "
+                             f"count = {p.road_wheels.count}")
+    if p.solver.jacobian not in ("dense", "sparse", "auto"):
+        raise ParameterError(f"{where} [solver].jacobian = {p.solver.jacobian!r}: allowed "
+                             "'dense', 'sparse' or 'auto'")
+    if p.solver.cone not in ("pyramidal", "elliptic"):
+        raise ParameterError(f"{where} [solver].cone = {p.solver.cone!r}: allowed "
+                             "'pyramidal' or 'elliptic'")
+    lo, hi = p.idler.slide_range_m
+    if not lo < 0.0 < hi:
+        raise ParameterError(f"{where} [idler].slide_range_m = {p.idler.slide_range_m}: "
+                             "must bracket 0 (low < 0 < high)")
+    if COUPLING_STEP_S / p.simulation.timestep_s % 1.0 > 1e-9:
+        raise ParameterError(f"{where} [simulation].timestep_s = {p.simulation.timestep_s}: "
+                             "must divide the 1 ms coupling step")
+
