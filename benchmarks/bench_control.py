@@ -12,6 +12,7 @@ garbage collector during the loops.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import gc
 import subprocess
@@ -19,12 +20,13 @@ import time
 
 import numpy as np
 
+from trackmj.control.estimators import ExtendedKalmanFilter, UnscentedKalmanFilter
 from trackmj.control.lmpc import LinearMpc
-from trackmj.control.loop import run_closed_loop, step_metrics
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.params import load_config
 from trackmj.control.pid import PidController
+from trackmj.sim.reduced import run_closed_loop, step_metrics
 
 
 def reference(t: float) -> float:
@@ -49,6 +51,25 @@ class GcPauses:
             self._t0 = time.perf_counter()
         else:
             self.pauses.append(time.perf_counter() - self._t0)
+
+
+@contextlib.contextmanager
+def timed(cls: type, method: str, times: list[float]):
+    """Record the wall time [s] of every call of ``cls.method`` while inside the block."""
+    original = getattr(cls, method)
+
+    def wrapper(self, *args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return original(self, *args, **kwargs)
+        finally:
+            times.append(time.perf_counter() - start)
+
+    setattr(cls, method, wrapper)
+    try:
+        yield
+    finally:
+        setattr(cls, method, original)
 
 
 def main() -> None:
@@ -85,12 +106,17 @@ def main() -> None:
         gc.callbacks.append(gc_log)
         if args.no_gc:
             gc.disable()
+        ctrl_times: list[float] = []
+        est_times: list[float] = []
+        est_cls = ExtendedKalmanFilter if est == "ekf" else UnscentedKalmanFilter
         try:
-            res = run_closed_loop(cfg, ctrl, reference, args.duration, estimator=est, seed=3)
+            with timed(type(ctrl), "__call__", ctrl_times), timed(est_cls, "step", est_times):
+                res = run_closed_loop(cfg, ctrl, reference, args.duration, estimator=est,
+                                      seed=3)
         finally:
             gc.enable()
             gc.callbacks.remove(gc_log)
-        ct, et = res.controller_times * 1e3, res.estimator_times * 1e6
+        ct, et = np.array(ctrl_times) * 1e3, np.array(est_times) * 1e6
         gp = np.array(gc_log.pauses or [0.0]) * 1e3
         rmse = np.sqrt(np.mean((res.force - res.ref) ** 2))
         m = step_metrics(res, 3.0, 15e3)

@@ -20,8 +20,9 @@ from trackmj.control.sensors import Sensors
 from trackmj.hydraulics import HydraulicTensioner
 from trackmj.machine import machine
 from trackmj.plant import TrackPlant
-from trackmj.results import TimeseriesRecorder
-from trackmj.simulate import equivalent_idler, simulate
+from trackmj.sim.config import load_idler
+from trackmj.sim.observers import Recorder
+from trackmj.sim.run import simulate
 
 SPENT: dict[str, float] = defaultdict(float)
 CALLS: dict[str, int] = defaultdict(int)
@@ -31,7 +32,7 @@ BLOCKS = ((TrackPlant, "step", "plant step (MuJoCo + plugin)"),
           (Sensors, "measure", "sensors + estimator"),
           (ExtendedKalmanFilter, "step", "sensors + estimator"),
           (NonlinearMpc, "__call__", "controller (NMPC)"),
-          (TimeseriesRecorder, "append", "logging"),
+          (Recorder, "on_step", "logging"),
           (HydraulicTensioner, "log", "logging"))
 
 
@@ -72,7 +73,7 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
     parser.add_argument("--repeat", type=int, default=1, help="runs of each kind (best kept)")
     args = parser.parse_args()
-    equivalent_idler()   # identification is cached per process; keep it out of the timing
+    load_idler()   # identification is cached per process; keep it out of the timing
     plain = []
     for _ in range(args.repeat):
         start = time.perf_counter()

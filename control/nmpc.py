@@ -31,6 +31,8 @@ class _MpcBase:
         self, model: ReducedModel, ctrl: ControllerParams, mpc: MpcParams, ocp: Ocp
     ) -> None:
         self.model, self.ctrl, self.mpc, self.ocp = model, ctrl, mpc, ocp
+        self.period_s = ctrl.period_s
+        self.horizon_steps = mpc.horizon_steps
         self.theta = np.array(
             (model.p.supply_pressure_Pa, model.p.stiffness_N_m, model.p.free_position_m)
         )

@@ -37,7 +37,8 @@ class PidController:
         operating_force_N: float = 13.5e3,
     ) -> None:
         self.model, self.ctrl, self.pid = model, ctrl, pid
-        self.dt = ctrl.period_s
+        self.dt = self.period_s = ctrl.period_s
+        self.horizon_steps = 0  # the PID acts on the current reference only
         k_rate = model.tension_rate_gain(operating_force_N)  # [N/s per unit u]
         lam = pid.closed_loop_time_s + pid.dead_time_s
         self.kc = 1.0 / (k_rate * lam)  # [1/N]
@@ -48,6 +49,10 @@ class PidController:
         self.integral = 0.0
         self.f_filtered: float | None = None
         self.u = 0.0
+
+    def set_parameters(self, *, supply_pressure_Pa: float | None = None) -> None:
+        """The controller port's parameter update; the PID's gains are fixed by its tuning
+        rule at the operating force, so the supply pressure does not change them."""
 
     def __call__(self, estimate: NDArray, reference_preview: NDArray, t: float) -> ControlOutput:
         f = self.model.force(estimate)

@@ -3,12 +3,12 @@
 import numpy as np
 
 from trackmj.control.lmpc import LinearMpc
-from trackmj.control.loop import run_closed_loop, step_metrics
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.ocp import X_SCALE
 from trackmj.control.params import load_config
 from trackmj.control.pid import PidController
+from trackmj.sim.reduced import run_closed_loop, step_metrics
 
 CFG = load_config()
 

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from trackmj.control.lmpc import LinearMpc
-from trackmj.control.loop import run_closed_loop, step_metrics
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.ocp import X_SCALE
 from trackmj.control.params import load_config
 from trackmj.ports import steps_per_period
+from trackmj.sim.reduced import run_closed_loop, step_metrics
 
 CFG = load_config()
 
@@ -72,8 +72,9 @@ def test_controller_period_must_be_multiple_of_step() -> None:
     with pytest.raises(ValueError, match="integer multiple"):
         steps_per_period(0.0105, 0.001)
     bad = dataclasses.replace(CFG, controller=dataclasses.replace(CFG.controller, period_s=0.0025))
+    ctrl = NonlinearMpc(ReducedModel(bad.plant), bad.controller, bad.mpc)
     with pytest.raises(ValueError, match="integer multiple"):
-        run_closed_loop(bad, _nmpc(), lambda t: 12e3, 0.01, dt=1e-3)
+        run_closed_loop(bad, ctrl, lambda t: 12e3, 0.01)
 
 
 def test_online_stiffness_update_is_used_by_the_prediction() -> None:

@@ -1,9 +1,9 @@
 """PID baseline on the same closed loop; figures reported beside the NMPC's."""
 
-from trackmj.control.loop import run_closed_loop, step_metrics
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import load_config
 from trackmj.control.pid import PidController
+from trackmj.sim.reduced import run_closed_loop, step_metrics
 
 CFG = load_config()
 

@@ -22,7 +22,7 @@ from trackmj.playback import (
     resolve_rrd,
     tension_colors,
 )
-from trackmj.results import COLUMN_UNITS, Result, TimeseriesRecorder, run_metadata
+from trackmj.results import COLUMN_UNITS, Result, make_table, run_metadata
 
 DURATION_S = 0.2
 N_FRAMES = round(DURATION_S / FRAME_PERIOD_S)
@@ -30,16 +30,15 @@ N_FRAMES = round(DURATION_S / FRAME_PERIOD_S)
 
 def synthetic_result(n_steps: int) -> Result:
     """1 kHz contract table with simple known signals (t = 1 ms ... n ms)."""
-    rec = TimeseriesRecorder(n_steps)
-    for i in range(n_steps):
-        t = (i + 1) * 1e-3
-        row = dict.fromkeys(COLUMN_UNITS, 0.0)
-        row |= {"t_s": t, "tension_N": 12e3 + 1e3 * t, "tension_ref_N": 12e3,
-                "p_head_Pa": 10e6, "p_rod_Pa": 1e6, "p_supply_Pa": 12e6,
-                "valve_mode": float(i % 3 - 1), "u": 0.5, "e_supply_J": 100.0 * t}
-        rec.append(i, *(row[c] for c in rec.columns))
+    t = np.arange(1, n_steps + 1) * 1e-3
+    cols = {name: np.zeros(n_steps) for name in COLUMN_UNITS}
+    cols |= {"t_s": t, "tension_N": 12e3 + 1e3 * t, "tension_ref_N": np.full(n_steps, 12e3),
+             "p_head_Pa": np.full(n_steps, 10e6), "p_rod_Pa": np.full(n_steps, 1e6),
+             "p_supply_Pa": np.full(n_steps, 12e6),
+             "valve_mode": (np.arange(n_steps) % 3 - 1).astype(float),
+             "u": np.full(n_steps, 0.5), "e_supply_J": 100.0 * t}
     meta = run_metadata("W1", "tp", "nmpc", "ekf", 0, machine="test")
-    return Result(rec.table(meta))
+    return Result(make_table(cols, COLUMN_UNITS, meta))
 
 
 @pytest.fixture(scope="module")

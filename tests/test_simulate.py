@@ -10,7 +10,7 @@ import pytest
 from trackmj.cli import main
 from trackmj.results import COLUMN_UNITS, read_result, write_result
 from trackmj.scenarios import load_scenario
-from trackmj.simulate import simulate
+from trackmj.sim.run import simulate
 
 DURATION_S = 2.0
 
@@ -85,7 +85,8 @@ def test_results_written_with_units(tp_run, tmp_path) -> None:
     back = read_result(out)
     assert back.units["tension_N"] == "N" and back.units["p_head_Pa"] == "Pa"
     assert back.metrics["rmse_N"] == pytest.approx(tp_run.metrics["rmse_N"])
-    assert (out / "timeseries.csv").read_text().startswith("# units:")
+    assert (out / "timeseries.csv").read_text().startswith('"t_s","tension_N"')
+    assert json.loads((out / "units.json").read_text())["tension_N"] == "N"
 
 
 def test_bad_scenario_file_gives_clear_error_and_writes_nothing(tmp_path, capsys) -> None:

@@ -28,8 +28,12 @@ import math
 
 import numpy as np
 
+from trackmj.hydraulics import HydraulicTensioner
+from trackmj.plant import TrackPlant
+from trackmj.ports import COUPLING_STEP_S, StepInputs
 from trackmj.scenarios import LoadPulse, Scenario
-from trackmj.simulate import build_hold_mode_run
+from trackmj.sim.architectures import build_tp
+from trackmj.sim.setup import prepare
 
 START_S = 3.0
 """Pulse onset in the calibration runs [s], after the 1 s speed ramp has settled."""
@@ -37,19 +41,25 @@ SETTLE_ALLOWANCE_S = 0.5
 """Time after the pulse's rise excluded from the mean [s] (about three chassis heave periods)."""
 
 
+def hold_mode_run(scenario: Scenario) -> tuple[TrackPlant, HydraulicTensioner]:
+    """The tp track of ``scenario`` (nominal variant, seed 0) settled at its initial
+    reference, with the hydraulic plugin in hold mode: the open-loop calibration rig."""
+    asm = build_tp(prepare(scenario))
+    return asm.track, asm.element
+
+
 def idler_force_history(scenario: Scenario, pulse: LoadPulse) -> np.ndarray:
     """F_ten [N] at 1 kHz of a hold-mode tp run of ``scenario`` (its speed profile, nominal
     variant) with the one hitch ``pulse``, until the pulse ends; shape (steps,)."""
-    plant, tensioner = build_hold_mode_run(scenario)
+    plant, tensioner = hold_mode_run(scenario)
     pulsed = dataclasses.replace(scenario, load_pulses=(pulse,))
-    steps = round(pulse.end_s / 1e-3)
-    t = 1e-3 * np.arange(steps)
+    steps = round(pulse.end_s / COUPLING_STEP_S)
+    t = COUPLING_STEP_S * np.arange(steps)
     speed = pulsed.track_speed_m_s(t)
     pull, down = pulsed.hitch_force_N(t)
     force = np.empty(steps)
     for k in range(steps):
-        plant.set_track_speed(float(speed[k]))
-        plant.set_hitch_force(float(pull[k]), float(down[k]))
+        plant.apply(StepInputs(float(speed[k]), float(pull[k]), float(down[k]), math.nan))
         plant.step(tensioner)
         force[k] = plant.idler_force_N
     return force
@@ -74,7 +84,7 @@ def load_change_N(scenario: Scenario, hitch_N: float, pull_angle_deg: float, *,
             scenario, calibration_pulse(0.0, pull_angle_deg, rise_s, plateau_s))
     pulsed = idler_force_history(
         scenario, calibration_pulse(hitch_N, pull_angle_deg, rise_s, plateau_s))
-    first = round((START_S + rise_s + SETTLE_ALLOWANCE_S) / 1e-3)
+    first = round((START_S + rise_s + SETTLE_ALLOWANCE_S) / COUPLING_STEP_S)
     return float(np.mean(pulsed[first:] - reference[first:]))
 
 

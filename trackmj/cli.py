@@ -132,27 +132,34 @@ def _summary_table(results: list, title: str) -> str:
 
 
 def _run_one(kwargs: dict):
-    from trackmj.simulate import simulate
+    from trackmj.sim.run import simulate
 
     return simulate(**kwargs)
 
 
+def _files(args: argparse.Namespace) -> dict:
+    """The parameter files given on the command line (None: the packaged ones)."""
+    return dict(model=args.model, hydraulics=args.hydraulics, control=args.control)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from trackmj.figures import run_figure
-    from trackmj.results import write_result
-    from trackmj.scenarios import load_scenario
+    from trackmj.playback import RUN_RRD
+    from trackmj.results import ResultWriter
+    from trackmj.sim.run import run
+    from trackmj.sim.setup import prepare
 
-    scenario = load_scenario(args.scenario)
-    controller = args.controller or scenario.controller
-    out = Path(args.out or f"runs/{scenario.name}-{args.arch}-{controller}-s{args.seed}")
-    result = _run_one(dict(scenario=scenario, architecture=args.arch,
-                           controller=args.controller, estimator=args.estimator,
-                           seed=args.seed, duration=args.duration, variant=args.variant,
-                           rrd=out / "run.rrd" if args.rrd else None, progress=True))
-    write_result(result, out, csv=args.csv)
-    run_figure(result, out / "timeseries.png")
-    print(f"{scenario.name} ({scenario.title}), {result.architecture}, {result.controller}/"
-          f"{result.estimator}, seed {result.seed} -> {out}")
+    setup = prepare(args.scenario, architecture=args.arch, controller=args.controller,
+                    estimator=args.estimator, seed=args.seed, duration=args.duration,
+                    variant=args.variant, **_files(args))
+    out = Path(args.out or f"runs/{setup.scenario.name}-{setup.architecture}-"
+                           f"{setup.controller}-s{setup.seed}")
+    with ResultWriter(out) as writer:
+        result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True)
+        writer.commit(result, csv=args.csv,
+                      extras={"timeseries.png": lambda path: run_figure(result, path)})
+    print(f"{setup.scenario.name} ({setup.scenario.title}), {result.architecture}, "
+          f"{result.controller}/{result.estimator}, seed {result.seed} -> {out}")
     print(_summary_table([result], "{r.architecture}"))
     return 0
 
@@ -162,22 +169,24 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
     from trackmj.figures import compare_figure
     from trackmj.io import write_text_atomic
-    from trackmj.results import write_result
-    from trackmj.scenarios import load_scenario
+    from trackmj.results import check_output_dir, write_result
+    from trackmj.sim.setup import prepare
 
-    scenario = load_scenario(args.scenario)
-    out = Path(args.out or f"runs/compare-{scenario.name}")
     controllers = args.controllers.split(",") if args.controllers else [None]
+    setups = [prepare(args.scenario, controller=c, estimator=args.estimator, seed=args.seed,
+                      duration=args.duration, **_files(args)) for c in controllers]
+    scenario = setups[0].scenario
+    out = check_output_dir(Path(args.out or f"runs/compare-{scenario.name}"))
     base = dict(scenario=scenario, estimator=args.estimator, seed=args.seed,
-                duration=args.duration)
+                duration=args.duration, **_files(args))
     cases = [dict(base, architecture=a, controller=c) for c in controllers
              for a in ("tp", "tp-weak", "dp-b")]
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         results = list(pool.map(_run_one, cases))
         tp = {r.controller: r for r in results if r.architecture == "tp"}
         dpa = list(pool.map(_run_one, [dict(base, architecture="dp-a", controller=c,
-                                             tp_result=tp[c or scenario.controller])
-                                        for c in controllers]))
+                                             tp_result=tp[s.controller])
+                                        for c, s in zip(controllers, setups, strict=True)]))
     results += dpa
     order = {"tp": 0, "tp-weak": 1, "dp-a": 2, "dp-b": 3}
     results.sort(key=lambda r: (r.controller, order[r.architecture]))
@@ -215,6 +224,8 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS, choices
+
     parser = argparse.ArgumentParser(prog="trackmj", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -239,17 +250,27 @@ def build_parser() -> argparse.ArgumentParser:
     drive.add_argument("--preload", type=float, help="tensioner preload [kN]")
     drive.set_defaults(func=_cmd_drive)
 
+    def file_args(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--model", metavar="FILE",
+                       help="model parameter TOML (default: packaged models/lf1352.toml)")
+        p.add_argument("--hydraulics", metavar="FILE", help="hydraulic parameter TOML "
+                       "(default: packaged models/lf1352_hydraulics.toml)")
+        p.add_argument("--control", metavar="FILE", help="control parameter TOML "
+                       "(default: packaged models/lf1352_control.toml)")
+
     def run_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("scenario", help="W1..W5 or a scenario TOML file")
-        p.add_argument("--estimator", choices=("ekf", "ukf"), help="default: the scenario's")
+        p.add_argument("--estimator", choices=choices(ESTIMATORS),
+                       help="default: the scenario's")
         p.add_argument("--seed", type=int, default=0, help="noise and terrain seed")
         p.add_argument("--duration", type=float, help="simulated time [s] (default: scenario)")
         p.add_argument("--out", help="output directory")
+        file_args(p)
 
     run = sub.add_parser("run", help="one closed-loop run of a scenario")
     run_args(run)
-    run.add_argument("--arch", default="tp", choices=("tp", "tp-weak", "dp-a", "dp-b"))
-    run.add_argument("--controller", choices=("nmpc", "lmpc", "pid"))
+    run.add_argument("--arch", default="tp", choices=choices(ARCHITECTURES))
+    run.add_argument("--controller", choices=choices(CONTROLLERS))
     run.add_argument("--variant", default="nominal", help="W5 variant name")
     run.add_argument("--csv", action="store_true", help="also write timeseries.csv")
     run.add_argument("--rrd", action="store_true", help="also write a Rerun recording")
@@ -277,11 +298,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     from trackmj.params import ParameterError
+    from trackmj.results import ResultDirectoryError
+    from trackmj.sim.observers import PhysicsError
 
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ParameterError, FileNotFoundError, ValueError, KeyError) as exc:
+    except KeyboardInterrupt:
+        print("trackmj: interrupted; earlier results were left as they were", file=sys.stderr)
+        return 130
+    except PhysicsError as exc:
+        print(f"trackmj: stopped: {exc}", file=sys.stderr)
+        return 3
+    except (ParameterError, ResultDirectoryError, FileNotFoundError, ValueError,
+            KeyError) as exc:
         print(f"trackmj: error: {exc}", file=sys.stderr)
         return 2
 

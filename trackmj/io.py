@@ -1,10 +1,28 @@
-"""Atomic file output: a result is either complete on disk or absent."""
+"""Atomic file output: a file is either complete on disk or absent."""
 
 from __future__ import annotations
 
 import os
 import tempfile
 from pathlib import Path
+
+
+def current_umask() -> int:
+    """The process umask (read without changing it for longer than the call)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
+def install(tmp: str | Path, path: str | Path) -> None:
+    """Give the finished temporary file ``tmp`` the permissions of a new file and rename it
+    onto ``path`` (atomic on one file system); ``tmp`` is removed if that fails."""
+    try:
+        os.chmod(tmp, 0o666 & ~current_umask())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def write_bytes_atomic(path: str | Path, payload: bytes) -> None:
@@ -17,14 +35,12 @@ def write_bytes_atomic(path: str | Path, payload: bytes) -> None:
             fh.write(payload)
             fh.flush()
             os.fsync(fh.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    install(tmp, path)
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:
+    """UTF-8 text version of :func:`write_bytes_atomic`."""
     write_bytes_atomic(path, text.encode("utf-8"))

@@ -46,6 +46,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 from rerun.components import TensorDataBatch
 
+from trackmj.io import install
 from trackmj.plant import TrackPlant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.results import Result
@@ -420,14 +421,7 @@ class PlaybackRecorder:
             self.discard()
             raise
         self.stream.disconnect()
-        umask = os.umask(0)
-        os.umask(umask)
-        try:
-            os.chmod(self._tmp, 0o666 & ~umask)
-            os.replace(self._tmp, self.path)
-        except BaseException:
-            self._tmp.unlink(missing_ok=True)
-            raise
+        install(self._tmp, self.path)
         return self.path
 
     def discard(self) -> None:

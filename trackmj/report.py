@@ -64,7 +64,7 @@ def _display(metric: str) -> tuple[float, str]:
 
 
 def _run(kwargs: dict) -> Result:
-    from trackmj.simulate import simulate
+    from trackmj.sim.run import simulate
 
     return simulate(**kwargs)
 

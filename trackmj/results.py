@@ -1,37 +1,46 @@
-"""Run results: the 1 kHz timeseries table, its recorder, and the on-disk format.
+"""Run results: the timeseries table, and result directories written whole or not at all.
 
-Timeseries contract (SI; each column's unit in its Arrow field metadata under ``unit``):
+Timeseries contract of a closed-loop run (SI; each column's unit in its Arrow field metadata
+under ``unit``), in this order (:data:`COLUMN_UNITS`):
 
     t_s [s], tension_N [N] (F_ten, cylinder force on the idler carrier), tension_ref_N [N],
     p_head_Pa, p_rod_Pa, p_supply_Pa [Pa gauge], stroke_m [m], stroke_velocity_m_s [m/s],
     q_supply_m3_s [m³/s], valve_mode (int8: −1 release, 0 hold, +1 pressurize), u [-],
     e_supply_J (cumulative supply energy), p_work_J (cumulative ∫Σp·A·v dt),
-    mech_work_J (cumulative ∫F·v dt) [J], chassis_acc_z_m_s2 [m/s²];
+    mech_work_J (cumulative ∫F·v dt) [J], chassis_acc_z_m_s2 [m/s²], closure_error_m [m];
 
-plus optional extra columns with their units. Table metadata (strings): scenario,
-architecture, controller, estimator, seed, trackmj_version, machine, plus any extras.
+NaN where an architecture has no such quantity. Table metadata (strings): scenario,
+architecture, controller, estimator, seed, trackmj_version, machine, plus extras.
 
-Result directory (written by :func:`write_result`, read by :func:`read_result`):
+Result directory (:class:`ResultWriter`, :func:`write_result`; read by :func:`read_result`):
 
 - ``timeseries.parquet``: the table, units in the column metadata;
-- ``timeseries.csv`` (optional): first line ``# units: s,N,...`` (one unit per column, same
-  order), then a header of column names, then the rows; read it with a CSV reader that
-  skips ``#`` comment lines;
-- ``metrics.json``: ``{"run": {table metadata}, "metrics": {name: value}}``; non-finite
-  metric values are written as ``null`` and read back as NaN.
+- ``timeseries.csv`` (optional): one header row of column names, then the rows (plain CSV
+  for any reader); the units are in ``units.json``;
+- ``units.json``: column name -> unit of the timeseries;
+- ``metrics.json``: ``{"run": {table metadata}, "metrics": {name: value}}``; values are
+  numbers or tables (nested objects); non-finite numbers are written as ``null`` and read
+  back as NaN;
+- whatever the writer of the run adds (figures, ``run.rrd``).
 
-Writing is all-or-nothing: the files are staged in a temporary sibling directory and moved
-into place, ``metrics.json`` last; a failure leaves no partial output.
+A directory is replaced whole: everything is staged in a hidden sibling directory and
+swapped in with one atomic exchange (Linux ``renameat2(RENAME_EXCHANGE)``; elsewhere two
+renames), so the directory always holds one complete run, never a mix of two. A lock beside
+the directory refuses a second writer for as long as the first one runs; an interrupted
+run (exception, Ctrl-C) leaves the previous result untouched.
 """
 
 from __future__ import annotations
 
+import ctypes
+import errno
+import fcntl
 import json
 import math
 import os
 import shutil
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,7 +51,7 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from trackmj import __version__
-from trackmj.io import write_bytes_atomic, write_text_atomic
+from trackmj.io import current_umask
 
 COLUMN_UNITS: dict[str, str] = {
     "t_s": "s",
@@ -60,35 +69,37 @@ COLUMN_UNITS: dict[str, str] = {
     "p_work_J": "J",
     "mech_work_J": "J",
     "chassis_acc_z_m_s2": "m/s^2",
+    "closure_error_m": "m",
 }
-"""Contract columns in order, with their units ("1": dimensionless)."""
+"""Contract columns of a closed-loop run in order, with their units ("1": dimensionless)."""
 
 INT_COLUMNS = {"valve_mode": pa.int8()}
 RUN_KEYS = ("scenario", "architecture", "controller", "estimator", "seed", "trackmj_version",
             "machine")
 TIMESERIES = "timeseries.parquet"
 CSV = "timeseries.csv"
+UNITS = "units.json"
 METRICS = "metrics.json"
+
+
+class ResultDirectoryError(OSError):
+    """An output directory cannot take a result (a file, not writable, someone else's
+    directory, or locked by another writer); the message says which and why."""
 
 
 def make_table(columns: Mapping[str, np.ndarray], units: Mapping[str, str],
                metadata: Mapping[str, Any]) -> pa.Table:
     """Arrow table from 1-D arrays of equal length with ``units[name]`` in each field's metadata.
 
-    All contract columns (:data:`COLUMN_UNITS`) are required; extras need a unit. Columns
-    are float64 except ``valve_mode`` (int8). ``metadata`` needs :data:`RUN_KEYS`; values
-    are stored as strings.
+    Columns named in :data:`COLUMN_UNITS` come first in its order, the others after them in
+    the order given; every column needs a unit. Columns are float64 except ``valve_mode``
+    (int8). Metadata values are stored as strings.
     """
-    missing = [c for c in COLUMN_UNITS if c not in columns]
-    if missing:
-        raise ValueError(f"timeseries lacks contract column(s) {missing}")
-    no_unit = [c for c in columns if c not in units and c not in COLUMN_UNITS]
+    no_unit = [c for c in columns if c not in units]
     if no_unit:
-        raise ValueError(f"extra column(s) {no_unit} need a unit")
-    absent = [k for k in RUN_KEYS if k not in metadata]
-    if absent:
-        raise ValueError(f"run metadata lacks {absent}")
-    order = list(COLUMN_UNITS) + [c for c in columns if c not in COLUMN_UNITS]
+        raise ValueError(f"column(s) {no_unit} need a unit")
+    order = [c for c in COLUMN_UNITS if c in columns] + [c for c in columns
+                                                          if c not in COLUMN_UNITS]
     arrays, fields = [], []
     for name in order:
         dtype = INT_COLUMNS.get(name, pa.float64())
@@ -96,15 +107,15 @@ def make_table(columns: Mapping[str, np.ndarray], units: Mapping[str, str],
         if dtype == pa.int8():
             values = np.rint(values).astype(np.int8)
         arrays.append(pa.array(values, type=dtype))
-        unit = units.get(name, COLUMN_UNITS.get(name))
-        fields.append(pa.field(name, dtype, metadata={"unit": unit}))
+        fields.append(pa.field(name, dtype, metadata={"unit": units[name]}))
     meta = {str(k): str(v) for k, v in metadata.items()}
     return pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata=meta))
 
 
 def run_metadata(scenario: str, architecture: str, controller: str, estimator: str, seed: int,
                  machine: str | None = None, **extra: Any) -> dict[str, str]:
-    """Table metadata of a run; ``machine`` defaults to :func:`trackmj.machine.machine`."""
+    """Table metadata of a run; ``machine`` defaults to :func:`trackmj.machine.machine`;
+    extras that are not strings are stored as JSON."""
     if machine is None:
         from trackmj.machine import machine as describe
 
@@ -112,50 +123,17 @@ def run_metadata(scenario: str, architecture: str, controller: str, estimator: s
     meta = {"scenario": scenario, "architecture": architecture, "controller": controller,
             "estimator": estimator, "seed": str(int(seed)), "trackmj_version": __version__,
             "machine": machine}
-    return meta | {k: str(v) for k, v in extra.items()}
-
-
-class TimeseriesRecorder:
-    """Preallocated per-step recorder for the timeseries contract (plus extras).
-
-    ``rec.append(i, t_s, tension_N, ..., chassis_acc_z_m_s2, *extras)`` writes row ``i``
-    (0-based, rows written in order) with the values in :attr:`columns` order, one tuple
-    assignment into a preallocated (n_steps, n_columns) float64 array. :meth:`table` builds
-    the Arrow table of the rows written so far.
-    """
-
-    def __init__(self, n_steps: int, extra_units: Mapping[str, str] | None = None) -> None:
-        extra = dict(extra_units or {})
-        clash = set(extra) & set(COLUMN_UNITS)
-        if clash:
-            raise ValueError(f"extra columns {sorted(clash)} clash with the contract")
-        self.units: dict[str, str] = COLUMN_UNITS | extra
-        self.columns: tuple[str, ...] = tuple(self.units)
-        self.index: dict[str, int] = {c: k for k, c in enumerate(self.columns)}
-        self.data = np.full((n_steps, len(self.columns)), np.nan)
-        self.rows = 0
-
-    def append(self, i: int, *values: float) -> None:
-        """Write row ``i``: one value per column in :attr:`columns` order."""
-        self.data[i] = values
-        self.rows = i + 1
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Column name -> view of the rows written, shape (rows,)."""
-        return {c: self.data[: self.rows, k] for k, c in enumerate(self.columns)}
-
-    def table(self, metadata: Mapping[str, Any]) -> pa.Table:
-        """Arrow table of the rows written, with units and ``metadata`` (see run_metadata)."""
-        return make_table(self.arrays(), self.units, metadata)
+    return meta | {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True)
+                   for k, v in extra.items()}
 
 
 @dataclass
 class Result:
-    """One run: ``timeseries`` (Arrow table, contract above) and ``metrics`` (name -> value,
-    names carry their units). Run identity is read from the table metadata."""
+    """One run: ``timeseries`` (Arrow table, contract above) and ``metrics`` (name -> value
+    or table; names carry their units). Run identity is read from the table metadata."""
 
     timeseries: pa.Table
-    metrics: dict[str, float] = field(default_factory=dict)
+    metrics: dict[str, Any] = field(default_factory=dict)
 
     @property
     def metadata(self) -> dict[str, str]:
@@ -194,6 +172,8 @@ class Result:
         return {n: self.timeseries.column(n).to_numpy() for n in self.timeseries.column_names}
 
 
+# ----------------------------------------------------------------------------- writing
+
 def _parquet_bytes(table: pa.Table) -> bytes:
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, compression="zstd")
@@ -201,65 +181,171 @@ def _parquet_bytes(table: pa.Table) -> bytes:
 
 
 def _csv_bytes(table: pa.Table) -> bytes:
-    units = [(f.metadata or {}).get(b"unit", b"").decode() for f in table.schema]
     sink = pa.BufferOutputStream()
-    pacsv.write_csv(table, sink, pacsv.WriteOptions(include_header=False, quoting_style="none"))
-    head = "# units: " + ",".join(units) + "\n" + ",".join(table.column_names) + "\n"
-    return head.encode() + sink.getvalue().to_pybytes()
+    pacsv.write_csv(table, sink, pacsv.WriteOptions(quoting_style="none"))
+    return sink.getvalue().to_pybytes()
 
 
-def _metrics_json(result: Result) -> str:
-    clean = {k: (float(v) if math.isfinite(float(v)) else None)
-             for k, v in result.metrics.items()}
-    return json.dumps({"run": result.metadata, "metrics": clean}, indent=2,
-                      sort_keys=True, allow_nan=False) + "\n"
+def _json_ready(value: Any) -> Any:
+    """Metrics as JSON: non-finite numbers -> None, tables recursively, numpy scalars -> float."""
+    if isinstance(value, Mapping):
+        return {str(k): _json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [_json_ready(v) for v in value]
+    if isinstance(value, str | bool) or value is None:
+        return value
+    number = float(value)
+    return number if math.isfinite(number) else None
 
 
-def write_result(result: Result, out_dir: str | Path, *, csv: bool = False) -> Path:
-    """Write ``result`` to ``out_dir`` (see the module docstring); returns the directory.
+def _json_read(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _json_read(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_json_read(v) for v in value]
+    if value is None:
+        return math.nan
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) \
+        else value
 
-    All files are staged in a temporary sibling directory. A new ``out_dir`` appears by one
-    rename; in an existing one (e.g. holding figures) the old ``metrics.json`` is removed
-    first, the data files are replaced and the new ``metrics.json`` moved in last, so a
-    directory with a ``metrics.json`` always holds one complete result.
-    """
-    out = Path(out_dir)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+
+def metrics_json(result: Result) -> str:
+    """The text of ``metrics.json`` for ``result``."""
+    return json.dumps({"run": result.metadata, "metrics": _json_ready(result.metrics)},
+                      indent=2, sort_keys=True, allow_nan=False) + "\n"
+
+
+def _write(path: Path, payload: bytes) -> None:
+    with open(path, "wb") as fh:
+        fh.write(payload)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Atomically swap directories ``a`` and ``b`` (Linux renameat2); False if unsupported."""
     try:
-        names = [TIMESERIES]
-        write_bytes_atomic(stage / TIMESERIES, _parquet_bytes(result.timeseries))
+        renameat2 = ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError):
+        return False
+    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p,
+                          ctypes.c_uint]
+    if renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):
+        return False
+    raise OSError(code, os.strerror(code), str(b))
+
+
+def check_output_dir(out: Path) -> Path:
+    """``out`` resolved, or ResultDirectoryError if it cannot take a result: an existing file,
+    a directory that holds something other than a trackmj result, or a parent that cannot be
+    created or written. Nothing is created but the parent directories."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ResultDirectoryError(f"--out {out}: is a file, not a directory")
+    if out.is_dir() and any(out.iterdir()) and not (out / METRICS).is_file():
+        raise ResultDirectoryError(f"--out {out}: an existing directory that holds no trackmj "
+                                   f"result ({METRICS} missing); refusing to replace it")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ResultDirectoryError(f"--out {out}: cannot create {out.parent}: "
+                                   f"{exc.strerror}") from None
+    if not os.access(out.parent, os.W_OK | os.X_OK):
+        raise ResultDirectoryError(f"--out {out}: {out.parent} is not writable")
+    return out
+
+
+class ResultWriter:
+    """Writes one result directory whole: ``with ResultWriter(out) as w:`` takes the lock and
+    a staging directory ``w.stage`` (a run may write e.g. its Rerun recording there while it
+    runs); ``w.commit(result, ...)`` writes the result files into the stage and swaps it in.
+    Leaving the block without a commit (an exception, Ctrl-C) removes the stage and leaves
+    ``out`` as it was. A second writer of the same ``out`` is refused while the lock is held.
+    """
+
+    def __init__(self, out: str | Path) -> None:
+        self.out = check_output_dir(Path(out))
+        self.stage: Path | None = None
+        self.committed = False
+        self._lock: Any = None
+
+    def __enter__(self) -> ResultWriter:
+        out = self.out
+        self._lock = open(out.parent / f".{out.name}.lock", "a")  # held until __exit__
+        try:
+            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self._lock.close()
+            raise ResultDirectoryError(
+                f"--out {out}: another trackmj process is writing this directory; wait for it "
+                "or choose another --out") from None
+        for stale in out.parent.glob(f".{out.name}.stage-*"):  # left by a killed writer
+            shutil.rmtree(stale, ignore_errors=True)
+        self.stage = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.stage-"))
+        return self
+
+    def commit(self, result: Result, *, csv: bool = False,
+               extras: Mapping[str, Callable[[Path], Any]] | None = None) -> Path:
+        """Write ``result`` (parquet, units, metrics, optional CSV) and each ``extras`` entry
+        (file name -> writer(path)) into the stage, then swap the stage in as ``out``."""
+        stage = self.stage
+        if stage is None or self.committed:
+            raise RuntimeError("commit() needs an open, uncommitted ResultWriter")
+        table = result.timeseries
+        _write(stage / TIMESERIES, _parquet_bytes(table))
+        _write(stage / UNITS, (json.dumps(result.units, indent=2) + "\n").encode())
         if csv:
-            write_bytes_atomic(stage / CSV, _csv_bytes(result.timeseries))
-            names.append(CSV)
-        write_text_atomic(stage / METRICS, _metrics_json(result))
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(stage, 0o777 & ~umask)
-        if not out.exists():
-            os.rename(stage, out)
-            return out
-        (out / METRICS).unlink(missing_ok=True)
-        if not csv:
-            (out / CSV).unlink(missing_ok=True)
-        for name in [*names, METRICS]:
-            os.replace(stage / name, out / name)
-        stage.rmdir()
-        return out
-    except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
+            _write(stage / CSV, _csv_bytes(table))
+        for name, writer in (extras or {}).items():
+            writer(stage / name)
+        _write(stage / METRICS, metrics_json(result).encode())
+        os.chmod(stage, 0o777 & ~current_umask())
+        if not self.out.exists():
+            os.rename(stage, self.out)
+        elif _exchange(stage, self.out):
+            shutil.rmtree(stage)   # now the previous result
+        else:
+            old = stage.with_name(stage.name + ".old")
+            os.rename(self.out, old)
+            os.rename(stage, self.out)
+            shutil.rmtree(old)
+        self.committed = True
+        self.stage = None
+        return self.out
+
+    def __exit__(self, *exc: object) -> None:
+        if self.stage is not None:
+            shutil.rmtree(self.stage, ignore_errors=True)
+            self.stage = None
+        if self._lock is not None:
+            fcntl.flock(self._lock, fcntl.LOCK_UN)
+            self._lock.close()
+            self._lock = None
+
+
+def write_result(result: Result, out_dir: str | Path, *, csv: bool = False,
+                 extras: Mapping[str, Callable[[Path], Any]] | None = None) -> Path:
+    """Write ``result`` as the whole directory ``out_dir`` (see :class:`ResultWriter`)."""
+    with ResultWriter(out_dir) as writer:
+        return writer.commit(result, csv=csv, extras=extras)
 
 
 def read_result(run_dir: str | Path) -> Result:
     """Read a result directory written by :func:`write_result`.
 
-    FileNotFoundError if ``metrics.json`` (written last) or the Parquet file is absent.
+    FileNotFoundError if ``metrics.json`` or the Parquet file is absent.
     """
     run_dir = Path(run_dir)
     if not (run_dir / METRICS).is_file():
         raise FileNotFoundError(f"{run_dir}: no {METRICS}; not a complete result directory")
     doc = json.loads((run_dir / METRICS).read_text())
     table = pq.read_table(run_dir / TIMESERIES)
-    metrics = {k: (math.nan if v is None else float(v)) for k, v in doc["metrics"].items()}
-    return Result(timeseries=table, metrics=metrics)
+    return Result(timeseries=table, metrics=_json_read(doc["metrics"]))
+

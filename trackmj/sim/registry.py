@@ -7,6 +7,7 @@ when called, so importing this module stays cheap.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -14,10 +15,22 @@ from typing import Any
 
 @dataclass(frozen=True)
 class Entry:
-    """One registered block: a one-line description and its builder."""
+    """One registered block: a one-line description, its builder, and (architectures) whether
+    it replays the track load of a tp run of the same case."""
 
     description: str
     build: Callable[..., Any]
+    replays_tp: bool = False
+
+
+def _lazy(module: str, name: str) -> Callable[..., Any]:
+    """A builder that imports ``module`` and calls its ``name`` when first used."""
+
+    def build(*args: Any, **kwargs: Any) -> Any:
+        return getattr(importlib.import_module(module), name)(*args, **kwargs)
+
+    build.__name__ = name
+    return build
 
 
 def _nmpc(model: Any, cfg: Any) -> Any:
@@ -63,8 +76,18 @@ ESTIMATORS: dict[str, Entry] = {
 }
 """Estimator builders ``build(reduced_model, control_config, dt_s, x0) -> Estimator``."""
 
-ARCHITECTURE_NAMES: tuple[str, ...] = ("tp", "tp-weak", "dp-a", "dp-b")
-"""Coupling architectures (their builders live in :mod:`trackmj.sim.architectures`)."""
+_ARCH = "trackmj.sim.architectures"
+ARCHITECTURES: dict[str, Entry] = {
+    "tp": Entry("track + hydraulic plugin, strong coupling", _lazy(_ARCH, "build_tp")),
+    "tp-weak": Entry("track + hydraulic plugin, weak (explicit) coupling",
+                     _lazy(_ARCH, "build_tp_weak")),
+    "dp-a": Entry("hydraulics on the identified equivalent idler, tp track load replayed",
+                  _lazy(_ARCH, "build_dp_a"), replays_tp=True),
+    "dp-b": Entry("track with an ideal force source instead of the hydraulics",
+                  _lazy(_ARCH, "build_dp_b")),
+}
+"""Coupling architectures ``build(setup, tp_result) -> Assembly`` (see
+:mod:`trackmj.sim.architectures`)."""
 
 
 def choices(registry: dict[str, Entry]) -> tuple[str, ...]:

@@ -1,0 +1,167 @@
+"""Coupling architectures: each registry entry builds the plant of one run from its setup.
+
+Same controller, weights, horizons, steps and references in all:
+
+* ``tp``: MuJoCo track + hydraulic plugin, strong coupling (affine law, implicit dF/dv).
+* ``tp-weak``: the same with the weak coupling (force of the previous step held, no dF/dv).
+* ``dp-a``: hydraulics + control on the equivalent idler mass-spring-damper identified from
+  the track (:mod:`trackmj.identify`); the track's load is replayed from a ``tp`` run of the
+  same condition and seed as the part of the tp tension the equivalent spring does not
+  explain, d(t) = F_tp − k(y_tp − y0) − c·ẏ_tp. The coupling is one-way.
+* ``dp-b``: MuJoCo track + control; the hydraulics replaced by an ideal force source: the
+  valve mode integrates a force command at the hydraulic tension-rate gain, applied through
+  a first-order lag (a quarter period of the oil column) with the cylinders' viscous
+  damping; no pressures (sensors see the equivalent head pressure), no supply limit.
+
+The solenoid delay lives in the hydraulic plugin (tp, tp-weak, dp-a); the valve logic then
+runs without its own delay so the delay is not counted twice (dp-b has no solenoid).
+
+W3's load pulses enter physically: a load on the rear hitch (a towed or pushing load along a
+chain below the horizontal) while the sprocket servo holds the track speed, so the track
+sees sprocket drive/brake torque pulses and a pitch load (:mod:`trackmj.calibration`);
+dp-a sees them through the replayed tp track load.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from trackmj.control.model import ReducedModel
+from trackmj.control.params import ControlConfig
+from trackmj.elements import ConstantForce, IdealForceSource
+from trackmj.hydraulics import HydraulicTensioner
+from trackmj.plant import TrackPlant
+from trackmj.ports import Mechanics
+from trackmj.results import Result
+from trackmj.sim.config import reduced_plant_params
+from trackmj.sim.plants import CoupledPlant, EquivalentIdlerMechanics, ValvedElement
+from trackmj.sim.setup import RunSetup
+
+SETTLE_S = 1.0
+"""Standing settle under the initial reference force before t = 0 [s]."""
+SETTLE_DAMPING_N_S_M = 2e4
+"""Implicit damping of the settling load [N·s/m]: brings the track to rest in the settle."""
+
+
+@dataclass
+class Assembly:
+    """One run's plant and the controller's view of it.
+
+    plant: the ``ports.Plant`` of the loop; mechanics, element: its parts; track: the MuJoCo
+    plant (None for dp-a); control: the control configuration of the run (plant derived from
+    the hydraulics and the idler); model: the reduced prediction model; initial_estimate:
+    (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s]) the estimator starts from.
+    """
+
+    plant: CoupledPlant
+    mechanics: Mechanics
+    element: ValvedElement
+    track: TrackPlant | None
+    control: ControlConfig
+    model: ReducedModel
+    initial_estimate: NDArray[np.float64]
+
+
+def _settled_track(setup: RunSetup, force_N: float) -> TrackPlant:
+    """The track of the run (terrain of the seed, W5 contact scale), settled standing under
+    ``force_N`` [N] on the idler for SETTLE_S, with its clock reset to 0."""
+    model = mujoco.MjModel.from_xml_string(setup.mjcf(setup.scenario.terrain_profile(
+        setup.seed, setup.duration_s)))
+    plant = TrackPlant(model, setup.model)
+    if setup.variant.contact_stiffness_scale != 1.0:
+        plant.scale_contact_stiffness(setup.variant.contact_stiffness_scale)
+    plant.run(ConstantForce(force_N, SETTLE_DAMPING_N_S_M), SETTLE_S)
+    plant.time_s = 0.0
+    return plant
+
+
+def _control(setup: RunSetup, free_position_m: float) -> tuple[ControlConfig, ReducedModel]:
+    """Control configuration with the reduced plant derived from the hydraulics and the
+    identified idler, valve logic without its own solenoid delay (the plugin applies it),
+    and no wall-clock budget (every finished solve is applied; overruns are counted)."""
+    cfg = setup.control
+    plant = reduced_plant_params(setup.hydraulics, setup.idler, cfg,
+                                 supply_pressure_Pa=setup.supply0_Pa,
+                                 free_position_m=free_position_m)
+    cfg = dataclasses.replace(
+        cfg, plant=plant, valves=dataclasses.replace(cfg.valves, solenoid_delay_s=0.0),
+        mpc=dataclasses.replace(cfg.mpc, time_budget_s=10.0))
+    return cfg, ReducedModel(plant)
+
+
+def _hydraulic_element(setup: RunSetup, stroke_m: float, coupling: str) -> HydraulicTensioner:
+    hyd, sc = setup.hydraulics, setup.scenario
+    prescribed = sc.supply.mode == "prescribed"
+    element = HydraulicTensioner(
+        hyd, stroke_m=stroke_m, head_pressure_Pa=setup.head_pressure0_Pa,
+        supply_profile=(lambda t: float(sc.supply_pressure_Pa(t))) if prescribed else None,
+        supply_pressure_Pa=None if prescribed else setup.supply0_Pa, coupling=coupling)
+    element.set_mode(0)
+    return element
+
+
+def _estimate0(setup: RunSetup, stroke_m: float) -> NDArray[np.float64]:
+    """Initial estimate: at rest, heads at the pressure of the initial force, rods at tank
+    (the state both the plugin and the ideal force source start from)."""
+    return np.array((setup.head_pressure0_Pa, setup.hydraulics.tank_pressure_Pa, stroke_m, 0.0))
+
+
+def _track_with_hydraulics(setup: RunSetup, coupling: str) -> Assembly:
+    track = _settled_track(setup, setup.force0_N)
+    cfg, model = _control(setup, track.stroke_m - setup.force0_N / setup.idler.stiffness_N_m)
+    element = _hydraulic_element(setup, track.stroke_m, coupling)
+    return Assembly(CoupledPlant(track, element), track, element, track, cfg, model,
+                    _estimate0(setup, track.stroke_m))
+
+
+def build_tp(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
+    """tp: the track with the hydraulic plugin, strong coupling."""
+    return _track_with_hydraulics(setup, "strong")
+
+
+def build_tp_weak(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
+    """tp-weak: the track with the hydraulic plugin, weak coupling."""
+    return _track_with_hydraulics(setup, "weak")
+
+
+def build_dp_a(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
+    """dp-a: the plugin on the equivalent idler loaded by ``tp_result``'s track load."""
+    if tp_result is None:
+        raise ValueError("dp-a replays the track load of a tp run: pass tp_result")
+    idler = setup.idler
+    cols = tp_result.columns()
+    if len(cols["t_s"]) < setup.steps:
+        raise ValueError(f"dp-a needs a tp run at least {setup.duration_s:g} s long, got "
+                         f"{cols['t_s'][-1]:g} s")
+    stroke_tp = cols["stroke_m"]
+    y0 = float(stroke_tp[0] - cols["tension_N"][0] / idler.stiffness_N_m)
+    # the load acting over step k is the one the tp run had at the end of step k
+    load = (cols["tension_N"] - idler.stiffness_N_m * (stroke_tp - y0)
+            - idler.damping_N_s_m * cols["stroke_velocity_m_s"])
+    mechanics = EquivalentIdlerMechanics(idler, y0, float(stroke_tp[0]), load)
+    cfg, model = _control(setup, y0)
+    element = _hydraulic_element(setup, mechanics.stroke_m, "strong")
+    return Assembly(CoupledPlant(mechanics, element), mechanics, element, None, cfg, model,
+                    _estimate0(setup, mechanics.stroke_m))
+
+
+def build_dp_b(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
+    """dp-b: the track with the ideal force source."""
+    hyd, idler = setup.hydraulics, setup.idler
+    track = _settled_track(setup, setup.force0_N)
+    cfg, model = _control(setup, track.stroke_m - setup.force0_N / idler.stiffness_N_m)
+    two_ah, two_ar = 2.0 * hyd.cylinder.area_head_m2, 2.0 * hyd.cylinder.area_rod_m2
+    volume = 2.0 * hyd.cylinder.dead_volume_head_m3 + two_ah * track.stroke_m
+    oil_k = hyd.fluid.bulk_modulus_Pa * two_ah ** 2 / volume
+    lag = 2.0 * math.pi / math.sqrt(oil_k / idler.mass_kg) / 4.0
+    element = IdealForceSource(setup.force0_N, model.tension_rate_gain(setup.force0_N), lag,
+                               2.0 * hyd.cylinder.viscous_friction_N_s_m, two_ah, two_ar,
+                               hyd.tank_pressure_Pa)
+    return Assembly(CoupledPlant(track, element), track, element, track, cfg, model,
+                    _estimate0(setup, track.stroke_m))

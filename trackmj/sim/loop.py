@@ -1,0 +1,91 @@
+"""The one closed loop: every architecture, and the reduced plant of the control tests.
+
+Per 1 ms coupling step k (t = k·h), data flows one way through the ports of
+:mod:`trackmj.ports`:
+
+    controller (every period) -> valve logic -> plant (tensioner element -> mechanics)
+    -> sensors -> estimator -> observers
+
+The controller sees the estimator's mean posterior over the past period and the reference
+preview F_ref(t + i·period), i = 0..N; it is told the supply pressure of the step
+(a supply-pressure transducer). The loop never asks which plant, controller or estimator it
+has.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from trackmj.ports import (
+    COUPLING_STEP_S,
+    Controller,
+    ControlOutput,
+    Estimator,
+    Observer,
+    Plant,
+    Sensors,
+    StepInputs,
+    ValveLogic,
+    steps_per_period,
+)
+
+
+class Command(NamedTuple):
+    """What drives the valves at a step: applied ``mode`` (+1/0/−1), the opening ``u`` [-]
+    in force, and ``solved``, the controller's output when it ran at this step (else None)."""
+
+    mode: int
+    u: float
+    solved: ControlOutput | None
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The scenario as the loop consumes it.
+
+    inputs: one :class:`~trackmj.ports.StepInputs` per step, shape (steps,);
+    previews: reference preview per controller period [N], shape (periods, N + 1), row j
+    for t = j·period; reference_N: F_ref at the end of every step [N], shape (steps,).
+    t_s: end of every step, (k + 1)·h [s], shape (steps,).
+    """
+
+    inputs: Sequence[StepInputs]
+    previews: NDArray[np.float64]
+    reference_N: NDArray[np.float64]
+
+    @property
+    def t_s(self) -> NDArray[np.float64]:
+        return COUPLING_STEP_S * np.arange(1, len(self.inputs) + 1)
+
+    @property
+    def steps(self) -> int:
+        return len(self.inputs)
+
+
+def run_loop(schedule: Schedule, *, controller: Controller, valves: ValveLogic, plant: Plant,
+             sensors: Sensors, estimator: Estimator, observers: Sequence[Observer]) -> None:
+    """Run ``schedule.steps`` coupling steps of the closed loop (see the module docstring).
+
+    An observer that raises (a physics guard, Ctrl-C) ends the run; nothing is caught here.
+    """
+    h = COUPLING_STEP_S
+    ratio = steps_per_period(controller.period_s, h)
+    u = 0.0
+    for k, inputs in enumerate(schedule.inputs):
+        solved = None
+        if k % ratio == 0:
+            controller.set_parameters(supply_pressure_Pa=inputs.supply_set_Pa)
+            solved = controller(estimator.period_mean(), schedule.previews[k // ratio], k * h)
+            u = solved.u
+        mode = valves.step(u)
+        readout = plant.step(mode, inputs)
+        z = sensors.measure((readout.p_head_Pa, readout.p_rod_Pa, readout.stroke_m))
+        estimator.step(z, float(mode), inputs.supply_set_Pa)
+        command = Command(mode, u, solved)
+        for observer in observers:
+            observer.on_step(k, readout, command)

@@ -1,0 +1,185 @@
+"""Observers of the closed loop (``ports.Observer``): they see every completed step.
+
+* :class:`Recorder`: the run's timeseries, column by name with its unit.
+* :class:`PhysicsGuard`: stops a run that leaves physics, with the time and the value.
+* :class:`Progress`: a progress bar over simulated seconds.
+* :class:`PlaybackFrames`: scene frames for the Rerun recording.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import mujoco
+import numpy as np
+import pyarrow as pa
+
+from trackmj.ports import COUPLING_STEP_S, READOUT_UNITS, Readout
+from trackmj.results import make_table
+from trackmj.sim.loop import Command, Schedule
+
+COMMAND_UNITS = {"valve_mode": "1", "u": "1"}
+"""Columns the recorder takes from the command (valve mode −1/0/+1, opening u [-])."""
+REFERENCE_UNITS = {"tension_ref_N": "N"}
+"""Column the recorder takes from the schedule (F_ref at the end of each step)."""
+
+
+class Recorder:
+    """Records every step's readout and command into preallocated arrays.
+
+    Columns are the :class:`~trackmj.ports.Readout` fields (units in
+    :data:`~trackmj.ports.READOUT_UNITS`), ``valve_mode`` and ``u``, plus, from the
+    schedule, the reference ``tension_ref_N`` and the time grid ``t_s`` = (k + 1)·h (exact,
+    where the plant's clock accumulates steps); the controller's solves (wall time [s],
+    success) are kept in :attr:`solve_times_s` and :attr:`solve_success`.
+    """
+
+    def __init__(self, schedule: Schedule) -> None:
+        self._n_readout = len(Readout._fields)
+        self.names: tuple[str, ...] = (*Readout._fields, *COMMAND_UNITS)
+        self.units: dict[str, str] = READOUT_UNITS | COMMAND_UNITS | REFERENCE_UNITS
+        self._reference, self._time = schedule.reference_N, schedule.t_s
+        self.data = np.full((schedule.steps, len(self.names)), np.nan)
+        self.rows = 0
+        self.solve_times_s: list[float] = []
+        self.solve_success: list[bool] = []
+
+    def on_step(self, k: int, readout: Readout, command: Command) -> None:
+        row = self.data[k]
+        row[: self._n_readout] = readout
+        row[self._n_readout] = command.mode
+        row[self._n_readout + 1] = command.u
+        self.rows = k + 1
+        if command.solved is not None:
+            self.solve_times_s.append(command.solved.solve_time_s)
+            self.solve_success.append(command.solved.success)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Column name -> values of the steps recorded so far, shape (rows,)."""
+        cols = {name: self.data[: self.rows, i] for i, name in enumerate(self.names)}
+        cols["tension_ref_N"] = self._reference[: self.rows]
+        cols["t_s"] = self._time[: self.rows]
+        return cols
+
+    def table(self, metadata: Mapping[str, Any]) -> pa.Table:
+        """The recorded steps as an Arrow table with units and run ``metadata``."""
+        return make_table(self.columns(), self.units, metadata)
+
+
+_STATE = ("tension_N", "p_head_Pa", "p_rod_Pa", "stroke_m", "stroke_velocity_m_s")
+"""Readout fields that must stay finite in every architecture."""
+
+
+class PhysicsError(RuntimeError):
+    """A run left physics; the message names the time, the quantity and its value."""
+
+
+@dataclass(frozen=True)
+class PhysicsLimits:
+    """Bounds of a physical run (SI).
+
+    vacuum_Pa: lowest admissible gauge pressure (absolute zero, −p_atm) [Pa];
+    stroke_range_m: cylinder travel with the end stops' allowed penetration [m];
+    closure_max_m: largest track loop closure gap [m] before the loop counts as broken.
+    """
+
+    vacuum_Pa: float
+    stroke_range_m: tuple[float, float]
+    closure_max_m: float = 5e-3
+
+
+class PhysicsGuard:
+    """Raises :class:`PhysicsError` at the first step that leaves physics: a MuJoCo warning
+    (from ``warnings``, filled by :func:`capture_mujoco_warnings`), a non-finite readout,
+    a chamber or supply pressure below vacuum, a stroke outside the travel the end stops
+    must hold, or a loop closure gap beyond ``closure_max_m``.
+
+    pressures: optional callable returning every node pressure of the element [Pa gauge]
+    (the readout's head pressure is the mean of the two heads).
+    """
+
+    def __init__(self, limits: PhysicsLimits, warnings: Sequence[str],
+                 pressures: Callable[[], Sequence[float]] | None = None) -> None:
+        self.limits = limits
+        self.warnings = warnings
+        self.pressures = pressures
+        self._lo, self._hi = limits.stroke_range_m
+
+    def _fail(self, r: Readout, what: str) -> None:
+        raise PhysicsError(f"t = {r.t_s:.3f} s: {what}; the run left physics and was stopped")
+
+    def on_step(self, k: int, r: Readout, command: Command) -> None:
+        if self.warnings:
+            self._fail(r, f"MuJoCo warning: {self.warnings[0]}")
+        if not math.isfinite(r.tension_N + r.p_head_Pa + r.p_rod_Pa + r.stroke_m
+                             + r.stroke_velocity_m_s):
+            bad = [f"{name} = {getattr(r, name)!r}" for name in _STATE
+                   if not math.isfinite(getattr(r, name))]
+            self._fail(r, "non-finite state (" + ", ".join(bad) + ")")
+        if not self._lo <= r.stroke_m <= self._hi:
+            self._fail(r, f"stroke {r.stroke_m * 1e3:.1f} mm outside the travel "
+                          f"[{self._lo * 1e3:.1f}, {self._hi * 1e3:.1f}] mm the end stops "
+                          "must hold")
+        if r.closure_error_m > self.limits.closure_max_m:
+            self._fail(r, f"track loop closure gap {r.closure_error_m * 1e3:.1f} mm exceeds "
+                          f"{self.limits.closure_max_m * 1e3:.1f} mm")
+        vacuum = self.limits.vacuum_Pa
+        lowest = min(r.p_head_Pa, r.p_rod_Pa)
+        if self.pressures is not None:
+            lowest = min(lowest, *self.pressures())
+        if lowest < vacuum or r.p_supply_Pa < vacuum:
+            self._fail(r, f"pressure {min(lowest, r.p_supply_Pa) / 1e6:.3f} MPa gauge below "
+                          f"vacuum ({vacuum / 1e6:.3f} MPa gauge)")
+
+
+@contextlib.contextmanager
+def capture_mujoco_warnings() -> Iterator[list[str]]:
+    """Collect MuJoCo's warning messages into a list instead of its default handler (which
+    prints and writes MUJOCO_LOG.TXT into the working directory); the previous handler is
+    restored on exit. MuJoCo reports each kind of warning once per MjData."""
+    messages: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(messages.append)
+    try:
+        yield messages
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+class Progress:
+    """Progress bar over the run's simulated time (unit "simulated s"), updated every 0.1 s."""
+
+    UPDATE_STEPS = 100
+
+    def __init__(self, duration_s: float, description: str) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=round(duration_s, 3), unit="simulated s", desc=description,
+                        leave=False, mininterval=0.5,
+                        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} "
+                                   "simulated s [{elapsed}<{remaining}]")
+
+    def on_step(self, k: int, readout: Readout, command: Command) -> None:
+        if (k + 1) % self.UPDATE_STEPS == 0:
+            self.bar.update(self.UPDATE_STEPS * COUPLING_STEP_S)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+class PlaybackFrames:
+    """Logs a scene frame of ``recorder`` (a ``playback.PlaybackRecorder``) every
+    ``every_steps`` steps (20 ms by default)."""
+
+    def __init__(self, recorder: Any, every_steps: int = 20) -> None:
+        self.recorder = recorder
+        self.every = every_steps
+
+    def on_step(self, k: int, readout: Readout, command: Command) -> None:
+        if (k + 1) % self.every == 0:
+            self.recorder.log_frame(readout.t_s)
+

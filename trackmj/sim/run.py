@@ -1,0 +1,192 @@
+"""One closed-loop run of an operating condition: :func:`simulate`.
+
+A run is assembled from its validated :class:`~trackmj.sim.setup.RunSetup`: the architecture
+builds the plant, the registries the controller and estimator, and the one loop
+(:func:`trackmj.sim.loop.run_loop`) moves the data; the recorder, the physics guard, the
+progress bar and the Rerun playback watch it as observers.
+
+Runs are deterministic per seed: the sensor noise is drawn from ``default_rng([seed, 1])``,
+the terrain from ``default_rng([seed, 8608])``; a controller solve that overruns its period
+is still applied (in a simulation the plant waits) and counted as ``controller_overruns``;
+only solver failures fall back.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+
+from trackmj.control.sensors import Sensors
+from trackmj.control.valves import ValveLogic
+from trackmj.hydraulics import HydraulicTensioner
+from trackmj.machine import machine
+from trackmj.metrics import compute_metrics
+from trackmj.ports import COUPLING_STEP_S, StepInputs, steps_per_period
+from trackmj.results import Result, run_metadata
+from trackmj.scenarios import Scenario
+from trackmj.sim.loop import Schedule, run_loop
+from trackmj.sim.observers import (
+    PhysicsGuard,
+    PhysicsLimits,
+    PlaybackFrames,
+    Progress,
+    Recorder,
+    capture_mujoco_warnings,
+)
+from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS
+from trackmj.sim.setup import RunSetup, prepare
+
+END_STOP_ALLOWANCE_M = 5e-3
+"""End-stop penetration a physical run may reach beyond the cylinder travel [m] (50 kN per
+cylinder on the 1e7 N/m stops): beyond it the stops are not holding the stroke."""
+FRAME_EVERY_STEPS = 20
+"""Rerun scene frames every 20 ms of simulated time."""
+
+
+def schedule(setup: RunSetup, horizon_steps: int, period_s: float) -> Schedule:
+    """The scenario's per-step inputs and per-period reference previews for ``setup``."""
+    sc, h, steps = setup.scenario, COUPLING_STEP_S, setup.steps
+    scale = setup.variant.pretension_scale
+    t_end = h * np.arange(1, steps + 1)        # end of each step
+    t_start = t_end - h
+    speed = sc.track_speed_m_s(t_end)
+    pull, down = sc.hitch_force_N(t_start)
+    supply = sc.supply_pressure_Pa(t_end)
+    inputs = [StepInputs(*row) for row in zip(speed.tolist(), pull.tolist(), down.tolist(),
+                                               supply.tolist(), strict=True)]
+    t_control = h * np.arange(0, steps, steps_per_period(period_s, h))
+    previews = sc.reference_N(t_control[:, None] + period_s * np.arange(horizon_steps + 1))
+    return Schedule(inputs, previews * scale, sc.reference_N(t_end) * scale)
+
+
+def physics_limits(setup: RunSetup) -> PhysicsLimits:
+    """Vacuum at the hydraulic file's atmospheric pressure; the cylinder travel plus the
+    end-stop allowance."""
+    hyd = setup.hydraulics
+    return PhysicsLimits(vacuum_Pa=-hyd.accumulator.atmospheric_pressure_Pa_abs,
+                         stroke_range_m=(-END_STOP_ALLOWANCE_M,
+                                         hyd.cylinder.stroke_max_m + END_STOP_ALLOWANCE_M))
+
+
+def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
+             controller: str | None = None, estimator: str | None = None, seed: int = 0,
+             duration: float | None = None, variant: str = "nominal",
+             model: str | Path | None = None, hydraulics: str | Path | None = None,
+             control: str | Path | None = None, rrd: str | Path | None = None,
+             progress: bool = False, tp_result: Result | None = None) -> Result:
+    """Run one operating condition in closed loop.
+
+    Parameters
+    ----------
+    scenario : Scenario, str or Path
+        A loaded scenario, a built-in name (``"W1"`` .. ``"W5"``) or a scenario TOML file.
+    architecture : str
+        Coupling architecture, a key of :data:`trackmj.sim.registry.ARCHITECTURES`
+        (``"tp"``, ``"tp-weak"``, ``"dp-a"``, ``"dp-b"``).
+    controller, estimator : str, optional
+        Keys of the controller and estimator registries; default: the scenario's.
+    seed : int
+        Sensor-noise and terrain seed (>= 0).
+    duration : float, optional
+        Simulated time [s]; default: the scenario's ``duration_s``.
+    variant : str
+        Name of a scenario variant (W5 perturbations); ``"nominal"`` by default.
+    model, hydraulics, control : str or Path, optional
+        Parameter files replacing the packaged ``models/lf1352*.toml``.
+    rrd : str or Path, optional
+        Write a Rerun recording of the run there (track architectures).
+    progress : bool
+        Show a progress bar over simulated seconds.
+    tp_result : Result, optional
+        For ``dp-a``: the tp run whose track load is replayed (run here if None).
+
+    Returns
+    -------
+    Result
+        The 1 kHz timeseries (see :mod:`trackmj.results`) and the metrics.
+
+    Raises
+    ------
+    trackmj.params.ParameterError
+        An input is invalid (raised before anything is built).
+    trackmj.sim.observers.PhysicsError
+        The run left physics (MuJoCo warning, non-finite state, pressure below vacuum,
+        stroke outside the travel, loop closure broken).
+    """
+    setup = prepare(scenario, architecture=architecture, controller=controller,
+                    estimator=estimator, seed=seed, duration=duration, variant=variant,
+                    model=model, hydraulics=hydraulics, control=control)
+    return run(setup, rrd=rrd, progress=progress, tp_result=tp_result)
+
+
+def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = False,
+        tp_result: Result | None = None) -> Result:
+    """Run a prepared setup (see :func:`simulate` for the arguments and the result)."""
+    entry = ARCHITECTURES[setup.architecture]
+    if entry.replays_tp and tp_result is None:
+        tp_result = run(dataclasses.replace(setup, architecture="tp"))
+    with capture_mujoco_warnings() as warnings:
+        asm = entry.build(setup, tp_result)
+        cfg = asm.control
+        controller = CONTROLLERS[setup.controller].build(asm.model, cfg)
+        estimator = ESTIMATORS[setup.estimator].build(asm.model, cfg, COUPLING_STEP_S,
+                                                      asm.initial_estimate)
+        # the run owns this generator: its noise can be drawn a second ahead (same numbers)
+        sensors = Sensors(cfg.sensors, np.random.default_rng([setup.seed, 1]), block=1000)
+        sched = schedule(setup, controller.horizon_steps, controller.period_s)
+        recorder = Recorder(sched)
+        element = asm.element
+        pressures = ((lambda: element.pressures) if isinstance(element, HydraulicTensioner)
+                     else None)
+        observers = [recorder, PhysicsGuard(physics_limits(setup), warnings, pressures)]
+        bar = Progress(setup.duration_s, f"{setup.scenario.name} {setup.architecture}") \
+            if progress else None
+        if bar is not None:
+            observers.append(bar)
+        playback = None
+        if rrd is not None and asm.track is not None:
+            from trackmj.playback import PlaybackRecorder
+
+            playback = PlaybackRecorder(asm.track, rrd)
+            observers.append(PlaybackFrames(playback, FRAME_EVERY_STEPS))
+        wall_start = time.perf_counter()
+        try:
+            run_loop(sched, controller=controller, valves=ValveLogic(cfg.valves,
+                                                                     COUPLING_STEP_S),
+                     plant=asm.plant, sensors=sensors, estimator=estimator,
+                     observers=observers)
+        except BaseException:
+            if playback is not None:
+                playback.discard()   # no half-written recording
+            raise
+        finally:
+            if bar is not None:
+                bar.close()
+        wall = time.perf_counter() - wall_start
+    meta = run_metadata(setup.scenario.name, setup.architecture, setup.controller,
+                        setup.estimator, setup.seed, machine(), variant=setup.variant.name,
+                        duration_s=setup.duration_s, files=setup.files,
+                        overrides=setup.overrides)
+    result = Result(recorder.table(meta), {})
+    m = compute_metrics(result.columns(), setup.scenario.metric_windows(setup.duration_s),
+                        solve_times_s=np.array(recorder.solve_times_s),
+                        solve_success=np.array(recorder.solve_success), wall_time_s=wall)
+    if isinstance(asm.element, HydraulicTensioner):
+        ledger = asm.element.ledger
+        m["interface_energy_residual_J"] = ledger.interface_residual_J
+        m["friction_loss_J"] = ledger.friction_J
+        m["ledger_balance_error_J"] = ledger.balance_error_J
+    m["controller_fallbacks"] = float(getattr(controller, "fallbacks", 0))
+    m["controller_overruns"] = float(np.sum(np.array(recorder.solve_times_s)
+                                            > controller.period_s))
+    if asm.track is not None:
+        m["mujoco_warnings"] = float(asm.track.warning_count)
+    result.metrics = m
+    if playback is not None:
+        playback.log_timeseries(result)
+        playback.close()
+    return result
+

@@ -1,0 +1,164 @@
+"""Everything one run is made of, loaded and validated before anything is built.
+
+:func:`prepare` reads the scenario and the parameter files (packaged defaults or the user's
+files), checks the choices (architecture, controller, estimator, variant, duration) against
+the registries and the scenario, and returns a frozen :class:`RunSetup`; the architectures
+build the run's blocks from it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import mujoco
+
+from trackmj.control.params import ControlConfig, load_config
+from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
+from trackmj.identify import EquivalentIdler, identify_idler
+from trackmj.model import ModelParams, default_xml_path, generate_mjcf, load_model_params
+from trackmj.model.mjcf import with_heightfield
+from trackmj.params import ParameterError
+from trackmj.plant import TrackPlant
+from trackmj.ports import COUPLING_STEP_S
+from trackmj.scenarios import Scenario, Variant, load_scenario
+from trackmj.sim.config import load_idler
+from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS
+from trackmj.terrain import RoadProfile
+
+MAX_DURATION_S = 3600.0
+
+
+@functools.cache
+def _packaged_model() -> ModelParams:
+    return load_model_params()
+
+
+@functools.cache
+def _model_mjcf(params: ModelParams) -> str:
+    """MJCF text for ``params``: the committed file for the packaged parameters, otherwise
+    generated (layout and a settled home keyframe, ~1 s), once per process."""
+    if params == _packaged_model():
+        return default_xml_path().read_text()
+    return generate_mjcf(params)
+
+
+@functools.cache
+def _idler(params: ModelParams) -> EquivalentIdler:
+    """The packaged track's identified idler, or a fresh identification on another model."""
+    if params == _packaged_model():
+        return load_idler()
+    return identify_idler(lambda: TrackPlant(
+        mujoco.MjModel.from_xml_string(_model_mjcf(params)), params))
+
+
+@dataclass(frozen=True)
+class RunSetup:
+    """A validated run: scenario, choices and parameters (SI).
+
+    files: the parameter file of each kind ("model", "hydraulics", "control", "scenario")
+    that made the run ("packaged" for the package's own); overrides: the ``--set`` items.
+    ``hydraulics`` carries the variant's bulk-modulus and friction scales already.
+    """
+
+    scenario: Scenario
+    variant: Variant
+    architecture: str
+    controller: str
+    estimator: str
+    seed: int
+    duration_s: float
+    model: ModelParams
+    hydraulics: HydraulicParams
+    control: ControlConfig
+    files: dict[str, str] = field(default_factory=dict)
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def steps(self) -> int:
+        """Coupling steps of the run [-]."""
+        return round(self.duration_s / COUPLING_STEP_S)
+
+    @property
+    def force0_N(self) -> float:
+        """Initial tensioner force: the reference at t = 0 times the pre-tension scale [N]."""
+        return float(self.scenario.reference_N(0.0)) * self.variant.pretension_scale
+
+    @property
+    def supply0_Pa(self) -> float:
+        """Supply pressure at t = 0 [Pa gauge]."""
+        return float(self.scenario.supply_pressure_Pa(0.0))
+
+    @property
+    def head_pressure0_Pa(self) -> float:
+        """Head pressure [Pa gauge] holding force0_N with the rods at tank pressure."""
+        cyl, tank = self.hydraulics.cylinder, self.hydraulics.tank_pressure_Pa
+        return (self.force0_N + 2.0 * cyl.area_rod_m2 * tank) / (2.0 * cyl.area_head_m2)
+
+    @property
+    def idler(self) -> EquivalentIdler:
+        """Equivalent idler of the run's track model (identified once per process)."""
+        return _idler(self.model)
+
+    def mjcf(self, terrain: RoadProfile | None) -> str:
+        """MJCF text of the run's track model, on ``terrain`` (None: flat ground)."""
+        text = _model_mjcf(self.model)
+        return text if terrain is None else with_heightfield(text, terrain)
+
+
+def _choice(kind: str, value: str, allowed: dict[str, Any] | tuple[str, ...]) -> str:
+    if value not in allowed:
+        raise ParameterError(f"{kind} = {value!r}: allowed {', '.join(allowed)}")
+    return value
+
+
+def scaled_hydraulics(base: HydraulicParams, variant: Variant) -> HydraulicParams:
+    """``base`` with the variant's bulk-modulus and cylinder-friction scales applied."""
+    fluid = dataclasses.replace(base.fluid, bulk_modulus_Pa=base.fluid.bulk_modulus_Pa
+                                * variant.bulk_modulus_scale)
+    cyl = base.cylinder
+    cylinder = dataclasses.replace(
+        cyl, coulomb_friction_N=cyl.coulomb_friction_N * variant.friction_scale,
+        viscous_friction_N_s_m=cyl.viscous_friction_N_s_m * variant.friction_scale)
+    return dataclasses.replace(base, fluid=fluid, cylinder=cylinder)
+
+
+def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
+            controller: str | None = None, estimator: str | None = None, seed: int = 0,
+            duration: float | None = None, variant: str = "nominal",
+            model: str | Path | None = None, hydraulics: str | Path | None = None,
+            control: str | Path | None = None) -> RunSetup:
+    """Load and validate every input of one run; ParameterError (a ValueError) naming the
+    file, key or option and what is allowed, before anything is built."""
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    _choice("architecture", architecture, ARCHITECTURES)
+    controller = _choice("controller", controller or sc.controller, CONTROLLERS)
+    estimator = _choice("estimator", estimator or sc.estimator, ESTIMATORS)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ParameterError(f"seed = {seed!r}: must be an integer >= 0")
+    duration_s = sc.duration_s if duration is None else float(duration)
+    if not (math.isfinite(duration_s) and COUPLING_STEP_S <= duration_s <= MAX_DURATION_S):
+        raise ParameterError(f"duration = {duration!r} s: allowed "
+                             f"[{COUPLING_STEP_S:g}, {MAX_DURATION_S:g}] s")
+    if sc.evaluation.start_s >= duration_s:
+        raise ParameterError(f"duration = {duration_s:g} s ends before the evaluation starts "
+                             f"({sc.source.name} [evaluation].start_s = "
+                             f"{sc.evaluation.start_s:g} s): no metric could be computed")
+    try:
+        var = sc.variant(variant)
+    except KeyError as exc:
+        raise ParameterError(exc.args[0]) from None
+    files = {"scenario": str(sc.source),
+             "model": str(model) if model else "packaged",
+             "hydraulics": str(hydraulics) if hydraulics else "packaged",
+             "control": str(control) if control else "packaged"}
+    return RunSetup(
+        scenario=sc, variant=var, architecture=architecture, controller=controller,
+        estimator=estimator, seed=seed, duration_s=duration_s,
+        model=load_model_params(model) if model else _packaged_model(),
+        hydraulics=scaled_hydraulics(load_hydraulic_params(hydraulics), var),
+        control=load_config(control), files=files)
