@@ -175,7 +175,19 @@ class _KalmanBase:
 
 class ExtendedKalmanFilter(_KalmanBase):
     """EKF; ``step(z, u, p_s)`` predicts over dt with applied opening u and supply p_s [Pa],
-    then updates with z (3,). Returns the posterior state (4,) (a view; do not modify)."""
+    then updates with z (3,). Returns the posterior state (4,) (a view; do not modify).
+
+    Parameters
+    ----------
+    model : ReducedModel
+        Process model (the hand-derived Jacobian of its right-hand side).
+    params : EstimatorParams
+        Process, measurement and initial standard deviations (SI, per 1 ms sample).
+    dt : float
+        Sample period [s].
+    x0 : ndarray, shape (4,)
+        Initial state (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s]).
+    """
 
     def __init__(
         self, model: ReducedModel, params: EstimatorParams, dt: float, x0: NDArray[np.float64]
@@ -199,6 +211,17 @@ class UnscentedKalmanFilter(_KalmanBase):
 
     alpha = 1, kappa = -1 gives lambda = -1, centre weights W_m0 = -1/3, W_c0 = 5/3 and a
     spread of sqrt(3) sigma: well-conditioned, unlike alpha = 1e-3 (W_m0 ~ -1e6).
+
+    Parameters
+    ----------
+    model : ReducedModel
+        Process model (each sigma point takes one trapezoidal step of it).
+    params : EstimatorParams
+        Standard deviations (SI, per 1 ms sample) and the sigma-point spread.
+    dt : float
+        Sample period [s].
+    x0 : ndarray, shape (4,)
+        Initial state (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s]).
     """
 
     def __init__(

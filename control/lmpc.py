@@ -43,7 +43,20 @@ def osqp_options(mpc: MpcParams) -> dict:
 
 
 class LinearMpc(_MpcBase):
-    """LMPC; ``controller(estimate (4,), reference_preview (N+1,) [N], t) -> ControlOutput``."""
+    """Linear MPC (see the module docstring):
+    ``controller(estimate (4,), reference_preview (N+1,) [N], t [s]) -> ControlOutput``.
+
+    Parameters
+    ----------
+    model : ReducedModel
+        The model linearised at every solve.
+    ctrl : ControllerParams
+        Period [s], tension band [N], pressure band [Pa], input bounds [-].
+    mpc : MpcParams
+        Horizon, move blocking, weights and the OSQP settings.
+    qp_solver : str
+        CasADi QP plugin: ``"osqp"`` (default) or ``"qrqp"``.
+    """
 
     def __init__(
         self,

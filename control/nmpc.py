@@ -151,7 +151,23 @@ class _MpcBase:
 
 
 class NonlinearMpc(_MpcBase):
-    """NMPC; ``jit=True`` compiles the SQP's functions with the system C compiler (slow build)."""
+    """Nonlinear MPC on the reduced model (see the module docstring).
+
+    ``controller(estimate (4,), reference_preview (N+1,) [N], t [s]) -> ControlOutput``;
+    the supply pressure, stiffness, unloaded stroke and pressure limit can be updated
+    online with ``set_parameters``.
+
+    Parameters
+    ----------
+    model : ReducedModel
+        The prediction model (its plant parameters, SI).
+    ctrl : ControllerParams
+        Period [s], tension band [N], pressure band [Pa], input bounds [-].
+    mpc : MpcParams
+        Horizon, move blocking, weights and SQP settings.
+    jit : bool
+        Compile the SQP's functions with the system C compiler (slow build, optional).
+    """
 
     def __init__(
         self, model: ReducedModel, ctrl: ControllerParams, mpc: MpcParams, jit: bool = False

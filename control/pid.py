@@ -27,7 +27,20 @@ from trackmj.ports import ControlOutput
 
 
 class PidController:
-    """``controller(estimate (4,), reference_preview (N+1,) [N], t) -> ControlOutput``."""
+    """PID on the estimated tension (see the module docstring):
+    ``controller(estimate (4,), reference_preview (1,) [N], t [s]) -> ControlOutput``.
+
+    Parameters
+    ----------
+    model : ReducedModel
+        Gives the tension of an estimate and the tension-rate gain the rule is tuned on.
+    ctrl : ControllerParams
+        Period [s] and input bounds [-].
+    pid : PidParams
+        Tuning-rule inputs, dead band, integration band, output hysteresis.
+    operating_force_N : float
+        Tension at which the tension-rate gain k' is evaluated for the tuning [N].
+    """
 
     def __init__(
         self,

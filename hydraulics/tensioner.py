@@ -31,6 +31,8 @@ MODES: dict[int, tuple[float, float, float]] = {
     -1: (1.0, 1.0, 1.0),   # release: main energised (P->B, A->T), V_L and V_R open
 }
 _tuple_new = tuple.__new__  # LogRow(...) without NamedTuple's keyword-capable __new__
+NODE_NAMES = ("line A", "head L", "head R", "rod node", "supply")
+"""Names of the pressure nodes in ``HydraulicTensioner.pressures`` order."""
 FLOW_NAMES = ("main_PA", "main_AT", "main_PB", "main_BT", "V_L", "V_R", "relief",
               "makeup_L", "makeup_R", "makeup_rod", "leak_L", "leak_R")
 
@@ -170,6 +172,31 @@ class HydraulicTensioner:
     ledgers) are laid out, with units, in the kernels module docstring. Python keeps the
     solenoids, the supply profile and the input checks, and turns a kernel's failure status
     into a RuntimeError (Newton did not converge; strong and weak coupling).
+
+    Parameters
+    ----------
+    params : HydraulicParams, optional
+        Circuit parameters; default: the packaged ``models/lf1352_hydraulics.toml``.
+    dt_s : float
+        Exchange step h [s] (the 1 ms coupling step).
+    stroke_m : float
+        Initial stroke s_0 [m] (0 fully retracted, ``cylinder.stroke_max_m`` extended).
+    head_pressure_Pa : float, optional
+        Initial pressure of both heads [Pa gauge]; default: 15 kN with the rods at tank.
+    supply_profile : callable or str, optional
+        Prescribed supply pressure p_s(t) [Pa gauge] (a callable of t [s], or the name of a
+        ``[profiles.*]`` table); None: pump + accumulator + relief.
+    coupling : {"strong", "weak", "multirate"}
+        Coupling scheme (see above).
+    exchange_steps : int
+        Multi-rate: steps between force exchanges [-].
+    substep_s : float
+        Multi-rate: hydraulic sub-step [s], at most ``dt_s``.
+    t0_s : float
+        Initial time [s].
+    supply_pressure_Pa : float, optional
+        Initial supply pressure with the accumulator [Pa gauge]; default: the relief's
+        cracking pressure.
     """
 
     def __init__(self, params: HydraulicParams | None = None, *, dt_s: float = 1e-3,

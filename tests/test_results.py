@@ -128,13 +128,14 @@ def test_killed_writer_leaves_the_previous_result_and_is_cleaned_up(tmp_path) ->
             print("staged", flush=True)
             time.sleep(60)
     """)
-    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout.readline().strip() == "staged"
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=10)
-    finally:
-        proc.kill()
+    with subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
+                          text=True) as proc:
+        try:
+            assert proc.stdout.readline().strip() == "staged"
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(timeout=10)
+        finally:
+            proc.kill()
     assert R.read_result(out).metrics["rmse_N"] == 1.0
     assert any(p.name.startswith(".run.stage-") for p in tmp_path.iterdir())
     R.write_result(_result(20, rmse_N=3.0), out)

@@ -1,7 +1,8 @@
 """``trackmj report``: W1-W5 x architectures x seeds -> report.md beside the study's figures.
 
-The study's figures (paper-notes.md §6) are printed beside ours for comparison only; nothing
-in trackmj is tuned toward them. Metric mapping (ours -> the study's wording):
+The study's figures (Ding et al., Actuators 2025, 14(12), 615, its results tables) are
+printed beside ours for comparison only; nothing in trackmj is tuned toward them. Metric
+mapping (ours -> the study's wording):
 
 * W1: ``rmse_N`` (tension RMSE), ``overshoot_N`` (peak error / overshoot);
 * W2, W5: ``fluctuation_N`` (± band), ``rmse_N``;
@@ -9,7 +10,7 @@ in trackmj is tuned toward them. Metric mapping (ours -> the study's wording):
   (settling);
 * W4: ``disturbance_peak_error_N`` (tension dip), ``recovery_time_s``;
 * all: ``supply_energy_J`` (energy drawn from the supply; the study does not define its
-  "energy consumption", see paper-notes §7).
+  "energy consumption").
 W5 aggregates every variant of the scenario file (bulk modulus, friction, contact
 stiffness, pre-tension at 0.8/1.2) with the nominal case.
 """
@@ -31,7 +32,7 @@ from trackmj.scenarios import load_scenario
 ARCHS = ("tp", "tp-weak", "dp-a", "dp-b")
 STUDY_ARCHS = ("tp", "dp-a", "dp-b")
 
-# (scenario, metric) -> study value per architecture, SI (paper-notes §6)
+# (scenario, metric) -> study value per architecture, SI (Ding et al. 2025, results tables)
 STUDY: dict[tuple[str, str], dict[str, float]] = {
     ("W1", "rmse_N"): {"tp": 420.0, "dp-a": 1150.0, "dp-b": 920.0},
     ("W1", "overshoot_N"): {"tp": 800.0, "dp-a": 2100.0},
@@ -118,8 +119,8 @@ def write_report(results: Sequence[Result], out_dir: str | Path) -> Path:
     lines = ["# trackmj report", "",
              f"Machine: {machine()}. Seeds: {sorted({r.seed for r in results})}; duration "
              f"{results[0].metadata['duration_s']} s per run; values are mean ± std over seeds "
-             "(and W5 variants). Study figures (Ding et al. 2025, paper-notes §6) are shown "
-             "for comparison only; trackmj is never tuned toward them.", ""]
+             "(and W5 variants). Study figures (Ding et al., Actuators 2025, 14(12), 615) are "
+             "shown for comparison only; trackmj is never tuned toward them.", ""]
     for name in scenarios:
         runs = [r for r in results if r.scenario == name]
         sc = load_scenario(name)

@@ -95,18 +95,21 @@ class PhysicsLimits:
 class PhysicsGuard:
     """Raises :class:`PhysicsError` at the first step that leaves physics: a MuJoCo warning
     (from ``warnings``, filled by :func:`capture_mujoco_warnings`), a non-finite readout,
-    a chamber or supply pressure below vacuum, a stroke outside the travel the end stops
-    must hold, or a loop closure gap beyond ``closure_max_m``.
+    a pressure below vacuum, a stroke outside the travel the end stops must hold, or a loop
+    closure gap beyond ``closure_max_m``.
 
-    pressures: optional callable returning every node pressure of the element [Pa gauge]
-    (the readout's head pressure is the mean of the two heads).
+    pressures: optional callable returning every node pressure of the element [Pa gauge],
+    named by ``pressure_names`` (the readout's head pressure is the mean of the two heads);
+    without it the readout's head, rod and supply pressures are checked.
     """
 
     def __init__(self, limits: PhysicsLimits, warnings: Sequence[str],
-                 pressures: Callable[[], Sequence[float]] | None = None) -> None:
+                 pressures: Callable[[], Sequence[float]] | None = None,
+                 pressure_names: Sequence[str] = ()) -> None:
         self.limits = limits
         self.warnings = warnings
         self.pressures = pressures
+        self.pressure_names = tuple(pressure_names)
         self._lo, self._hi = limits.stroke_range_m
 
     def _fail(self, r: Readout, what: str) -> None:
@@ -127,13 +130,15 @@ class PhysicsGuard:
         if r.closure_error_m > self.limits.closure_max_m:
             self._fail(r, f"track loop closure gap {r.closure_error_m * 1e3:.1f} mm exceeds "
                           f"{self.limits.closure_max_m * 1e3:.1f} mm")
-        vacuum = self.limits.vacuum_Pa
-        lowest = min(r.p_head_Pa, r.p_rod_Pa)
         if self.pressures is not None:
-            lowest = min(lowest, *self.pressures())
-        if lowest < vacuum or r.p_supply_Pa < vacuum:
-            self._fail(r, f"pressure {min(lowest, r.p_supply_Pa) / 1e6:.3f} MPa gauge below "
-                          f"vacuum ({vacuum / 1e6:.3f} MPa gauge)")
+            values, names = self.pressures(), self.pressure_names
+        else:
+            values, names = (r.p_head_Pa, r.p_rod_Pa, r.p_supply_Pa), ("head", "rod", "supply")
+        vacuum = self.limits.vacuum_Pa
+        if min(values) < vacuum:   # NaN (no such node) never compares below
+            name, value = min(zip(names, values, strict=True), key=lambda nv: nv[1])
+            self._fail(r, f"{name} pressure {value / 1e6:.3f} MPa gauge below vacuum "
+                          f"({vacuum / 1e6:.3f} MPa gauge)")
 
 
 @contextlib.contextmanager
@@ -155,17 +160,17 @@ class Progress:
 
     UPDATE_STEPS = 100
 
-    def __init__(self, duration_s: float, description: str) -> None:
+    def __init__(self, steps: int, description: str) -> None:
         from tqdm import tqdm
 
-        self.bar = tqdm(total=round(duration_s, 3), unit="simulated s", desc=description,
-                        leave=False, mininterval=0.5,
+        self.bar = tqdm(total=steps, unit_scale=COUPLING_STEP_S, unit="simulated s",
+                        desc=description, leave=False, mininterval=0.5,
                         bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} "
                                    "simulated s [{elapsed}<{remaining}]")
 
     def on_step(self, k: int, readout: Readout, command: Command) -> None:
         if (k + 1) % self.UPDATE_STEPS == 0:
-            self.bar.update(self.UPDATE_STEPS * COUPLING_STEP_S)
+            self.bar.update(self.UPDATE_STEPS)
 
     def close(self) -> None:
         self.bar.close()

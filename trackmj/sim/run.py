@@ -22,6 +22,7 @@ import numpy as np
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.hydraulics import HydraulicTensioner
+from trackmj.hydraulics.tensioner import NODE_NAMES
 from trackmj.machine import machine
 from trackmj.metrics import compute_metrics
 from trackmj.ports import COUPLING_STEP_S, StepInputs, steps_per_period
@@ -139,10 +140,11 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
         sched = schedule(setup, controller.horizon_steps, controller.period_s)
         recorder = Recorder(sched)
         element = asm.element
-        pressures = ((lambda: element.pressures) if isinstance(element, HydraulicTensioner)
-                     else None)
-        observers = [recorder, PhysicsGuard(physics_limits(setup), warnings, pressures)]
-        bar = Progress(setup.duration_s, f"{setup.scenario.name} {setup.architecture}") \
+        guard = (PhysicsGuard(physics_limits(setup), warnings, lambda: element.pressures,
+                              NODE_NAMES) if isinstance(element, HydraulicTensioner)
+                 else PhysicsGuard(physics_limits(setup), warnings))
+        observers = [recorder, guard]
+        bar = Progress(setup.steps, f"{setup.scenario.name} {setup.architecture}") \
             if progress else None
         if bar is not None:
             observers.append(bar)
