@@ -25,6 +25,7 @@ from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.params import load_config
 from trackmj.control.pid import PidController
+from trackmj.sim.config import nominal_plant_params
 
 
 def reference(t: float) -> float:
@@ -70,7 +71,8 @@ def main() -> None:
         if v is not None
     }
     mpc = dataclasses.replace(cfg.mpc, **over)
-    model = ReducedModel(cfg.plant)
+    plant = nominal_plant_params(control_config=cfg)
+    model = ReducedModel(plant)
     lscpu = subprocess.run(["lscpu"], capture_output=True, text=True).stdout.splitlines()
     print("\n".join(lscpu[:12]))
     print(f"MPC settings: {mpc}; gc {'disabled' if args.no_gc else 'enabled'}")
@@ -86,7 +88,7 @@ def main() -> None:
         if args.no_gc:
             gc.disable()
         try:
-            res = run_closed_loop(cfg, ctrl, reference, args.duration, estimator=est, seed=3)
+            res = run_closed_loop(cfg, plant, ctrl, reference, args.duration, estimator=est, seed=3)
         finally:
             gc.enable()
             gc.callbacks.remove(gc_log)

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from trackmj.control.estimators import ExtendedKalmanFilter, UnscentedKalmanFilter
 from trackmj.control.model import ReducedModel, ReducedPlant
-from trackmj.control.params import ControlConfig
+from trackmj.control.params import ControlConfig, PlantParams
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.ports import ControlOutput, steps_per_period
@@ -41,6 +41,7 @@ class LoopResult:
 
 def run_closed_loop(
     cfg: ControlConfig,
+    plant_params: PlantParams,
     controller: Controller,
     reference: Callable[[float], float],
     t_end: float,
@@ -50,19 +51,20 @@ def run_closed_loop(
     dt: float = 1e-3,
     feed_supply: bool = True,
 ) -> LoopResult:
-    """Simulate ``t_end`` seconds. ``reference(t)`` [N], ``supply(t)`` [Pa] (default the
-    nominal supply). The controller receives the estimator's mean posterior over the past
-    period (``period_mean``: decimation filter 1 kHz -> controller rate). With
+    """Simulate ``t_end`` seconds of the reduced plant ``plant_params`` under ``cfg``'s
+    sensors, estimator and valve logic. ``reference(t)`` [N], ``supply(t)`` [Pa] (default
+    the plant's nominal supply). The controller receives the estimator's mean posterior
+    over the past period (``period_mean``: decimation filter 1 kHz -> controller rate). With
     ``feed_supply`` the supply pressure is handed to the estimator and, if it has
     ``set_parameters``, to the controller (assumes a supply pressure transducer)."""
     ratio = steps_per_period(cfg.controller.period_s, dt)
     if abs(cfg.sensors.sample_period_s - dt) > 1e-12:
         raise ValueError(f"sensor period {cfg.sensors.sample_period_s} s must equal dt = {dt} s")
-    model = ReducedModel(cfg.plant)
-    p_nom = cfg.plant.supply_pressure_Pa
+    model = ReducedModel(plant_params)
+    p_nom = plant_params.supply_pressure_Pa
     supply = supply or (lambda _t: p_nom)
     x0 = model.equilibrium(reference(0.0))
-    plant = ReducedPlant(cfg.plant, x0, dt)
+    plant = ReducedPlant(plant_params, x0, dt)
     sensors = Sensors(cfg.sensors, seed)
     est_cls = {"ekf": ExtendedKalmanFilter, "ukf": UnscentedKalmanFilter}[estimator]
     est = est_cls(model, cfg.estimator, dt, x0)

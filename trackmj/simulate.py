@@ -45,11 +45,10 @@ import numpy as np
 
 from trackmj.control.estimators import ExtendedKalmanFilter, UnscentedKalmanFilter
 from trackmj.control.model import ReducedModel
-from trackmj.control.params import ControlConfig, load_config
+from trackmj.control.params import ControlConfig, PlantParams, load_config
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.hydraulics import HydraulicParams, HydraulicTensioner, load_hydraulic_params
-from trackmj.hydraulics.components import series_area
 from trackmj.identify import EquivalentIdler, identify_idler
 from trackmj.machine import machine
 from trackmj.metrics import compute_metrics
@@ -57,6 +56,7 @@ from trackmj.plant import TrackPlant
 from trackmj.ports import COUPLING_STEP_S, ForceLaw, steps_per_period
 from trackmj.results import Result, TimeseriesRecorder, run_metadata
 from trackmj.scenarios import Scenario, Variant, load_scenario
+from trackmj.sim.config import reduced_plant_params
 
 ARCHITECTURES = ("tp", "tp-weak", "dp-a", "dp-b")
 CONTROLLERS = ("nmpc", "lmpc", "pid")
@@ -173,29 +173,18 @@ def hydraulic_params_for(variant: Variant) -> HydraulicParams:
 
 
 def control_config(hyd: HydraulicParams, idler: EquivalentIdler, y0_m: float,
-                   supply_Pa: float) -> ControlConfig:
-    """The controller's reduced model filled from the plugin's sizes (lumped cylinders, the
-    valve and restrictor paths in series) and the identified idler; valve logic without its
-    own solenoid delay (the plugin applies it). The rod vent keeps the control file's value:
-    the plugin's full main-valve edge would make the rod mode too fast for the estimator's
-    integrator, and the rod stays at tank pressure either way."""
+                   supply_Pa: float) -> tuple[ControlConfig, PlantParams]:
+    """The control file with the valve logic's own solenoid delay off (the plugin applies
+    it), and the controller's reduced plant derived from the plugin's sizes and the
+    identified idler (:func:`trackmj.sim.config.reduced_plant_params`)."""
     cfg = load_config()
-    cyl, met = hyd.cylinder, hyd.metering
-    head_path = 2.0 * series_area(hyd.switching_valves.open_area_m2, met.head_branch_area_m2)
-    rod_path = series_area(hyd.main_valve.open_area_m2, met.rod_feed_area_m2)
-    plant = cfg.plant.replace(
-        area_head_m2=2.0 * cyl.area_head_m2, area_rod_m2=2.0 * cyl.area_rod_m2,
-        dead_volume_head_m3=2.0 * cyl.dead_volume_head_m3,
-        dead_volume_rod_m3=2.0 * cyl.dead_volume_rod_m3 + hyd.lines.line_b_volume_m3,
-        valve_area_head_m2=head_path, valve_area_rod_m2=rod_path,
-        bulk_modulus_Pa=hyd.fluid.bulk_modulus_Pa, supply_pressure_Pa=supply_Pa,
-        tank_pressure_Pa=hyd.tank_pressure_Pa, stiffness_N_m=idler.stiffness_N_m,
-        mass_kg=idler.mass_kg, damping_N_s_m=idler.damping_N_s_m, free_position_m=y0_m)
+    plant = reduced_plant_params(hyd, idler, cfg, supply_pressure_Pa=supply_Pa,
+                                 free_position_m=y0_m)
     valves = dataclasses.replace(cfg.valves, solenoid_delay_s=0.0)
     # a simulation must not depend on the wall clock: every finished solve is applied and
     # overruns of the controller period are counted from the solve times instead
     mpc = dataclasses.replace(cfg.mpc, time_budget_s=10.0)
-    return dataclasses.replace(cfg, plant=plant, valves=valves, mpc=mpc)
+    return dataclasses.replace(cfg, valves=valves, mpc=mpc), plant
 
 
 def make_controller(name: str, model: ReducedModel, cfg: ControlConfig):
@@ -303,8 +292,8 @@ def _build(sc: Scenario, architecture: str, var: Variant, seed: int,
     else:
         mechanics = _initial_track(sc, seed, var, force0)
         y0 = mechanics.stroke_m - force0 / idler.stiffness_N_m
-    cfg = control_config(hyd, idler, y0, supply0)
-    model = ReducedModel(cfg.plant)
+    cfg, plant = control_config(hyd, idler, y0, supply0)
+    model = ReducedModel(plant)
     if architecture == "dp-b":
         rate = model.tension_rate_gain(force0)
         volume = 2.0 * hyd.cylinder.dead_volume_head_m3 + two_ah * mechanics.stroke_m
