@@ -151,7 +151,7 @@ MALFORMED = [
     ("W1", "seeds = [0, 1, 2, 3, 4]", "seeds = []",
      r"\[scenario\]\.seeds = \[\]: expected a non-empty array of integers, got an empty array"),
     ("W1", "seeds = [0, 1, 2, 3, 4]", "seeds = [-1]",
-     r"\[scenario\]\.seeds\[0\] = -1 is outside the allowed range \[0, 4\.29497e\+09\]"),
+     r"\[scenario\]\.seeds\[0\] = -1 is outside the allowed range \[0, 4294967295\]$"),
     ("W1", "seeds = [0, 1, 2, 3, 4]", "seeds = [3, 3]",
      r"\[scenario\]\.seeds = \[3, 3\] lists a seed twice"),
     ("W1", "seeds = [0, 1, 2, 3, 4]", "seeds = 3",

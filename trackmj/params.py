@@ -118,6 +118,11 @@ def unit_from_name(name: str) -> str | None:
     return None
 
 
+def _number(x: float) -> str:
+    """An integer as written, a float in short form (1e+11, 0.02)."""
+    return str(x) if isinstance(x, int) else f"{x:g}"
+
+
 @dataclass(frozen=True)
 class Spec:
     """What :func:`param` declares about one field (see there)."""
@@ -136,8 +141,8 @@ class Spec:
         """The allowed range as text, e.g. ``(0, 1e+11]``; '' if unbounded."""
         if self.low is None and self.high is None:
             return ""
-        lo = "-inf" if self.low is None else f"{self.low:g}"
-        hi = "inf" if self.high is None else f"{self.high:g}"
+        lo = "-inf" if self.low is None else _number(self.low)
+        hi = "inf" if self.high is None else _number(self.high)
         return f"{'(' if self.open_low else '['}{lo}, {hi}{')' if self.open_high else ']'}"
 
 
@@ -329,6 +334,8 @@ def _show(value: Any) -> str:
 
 def _expected(hint: Any) -> str:
     origin, args = get_origin(hint), get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_expected(a) for a in args if a is not type(None))
     if hint is float:
         return "a number"
     if hint is int:
