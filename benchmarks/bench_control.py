@@ -26,6 +26,7 @@ from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.params import load_config
 from trackmj.control.pid import PidController
+from trackmj.sim.config import nominal_plant_params
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
 
@@ -91,7 +92,8 @@ def main() -> None:
         if v is not None
     }
     mpc = dataclasses.replace(cfg.mpc, **over)
-    model = ReducedModel(cfg.plant)
+    plant = nominal_plant_params(control_config=cfg)
+    model = ReducedModel(plant)
     lscpu = subprocess.run(["lscpu"], capture_output=True, text=True).stdout.splitlines()
     print("\n".join(lscpu[:12]))
     print(f"MPC settings: {mpc}; gc {'disabled' if args.no_gc else 'enabled'}")
@@ -111,7 +113,7 @@ def main() -> None:
         est_cls = ExtendedKalmanFilter if est == "ekf" else UnscentedKalmanFilter
         try:
             with timed(type(ctrl), "__call__", ctrl_times), timed(est_cls, "step", est_times):
-                res = run_closed_loop(cfg, ctrl, reference, args.duration, estimator=est,
+                res = run_closed_loop(cfg, plant, ctrl, reference, args.duration, estimator=est,
                                       seed=3)
         finally:
             gc.enable()

@@ -1,87 +1,77 @@
-"""Control-domain parameters: frozen dataclasses read from ``models/lf1352_control.toml``.
+"""Control-domain parameters: frozen, validated dataclasses.
 
-All values SI (pressures gauge [Pa]). Each dataclass validates its ranges on construction and
-raises ``ValueError`` naming the parameter and the allowed range.
+:func:`load_config` reads the controller's own parameters from ``models/lf1352_control.toml``
+(sensors, valve logic, estimator, controller limits, MPC, PID and the reduced model's
+numerical choices). The reduced model's physical parameters (:class:`PlantParams`) are not
+in that file: they derive from the hydraulic parameters and the identified idler
+(``trackmj.sim.config.reduced_plant_params``), so no value is entered twice.
+
+All values SI (pressures gauge [Pa]). The checks are the one validator of
+:mod:`trackmj.params`: types, ranges and cross-field checks run on construction, and the
+loader refuses unknown, missing or mistyped keys naming the file, the table and the key.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import tomllib
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
+
+from trackmj.params import Location, Parameters, load_file, param, sources_field
 
 DEFAULT_FILE = "lf1352_control.toml"
 
 
-def _check(obj: object, name: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    """Raise ValueError unless lo (<|<=) getattr(obj, name) <= hi."""
-    v = getattr(obj, name)
-    values = v if isinstance(v, tuple) else (v,)
-    for x in values:
-        ok = math.isfinite(x) and (x > lo if lo_open else x >= lo) and x <= hi
-        if not ok:
-            bracket = "(" if lo_open else "["
-            raise ValueError(
-                f"{type(obj).__name__}.{name} = {v!r} outside allowed range {bracket}{lo}, {hi}]"
-            )
-
-
 @dataclass(frozen=True, slots=True)
-class PlantParams:
+class PlantParams(Parameters):
     """Reduced model: one equivalent cylinder (both cylinders lumped) + idler mass-spring-damper.
 
     State X = [p_head Pa, p_rod Pa, y m, y_dot m/s]; y = stroke, grows outward (tensioning).
     Areas [m^2] are effective full-opening path areas: valve_area_head_m2 supply<->heads and
     heads->tank, valve_area_rod_m2 the release feed supply->rods, vent_area_rod_m2 rods->tank.
-    Defaults equal ``models/lf1352_control.toml``.
+    Built by ``trackmj.sim.config.reduced_plant_params`` (no defaults: every value derives
+    from the hydraulic, idler and control files).
     """
 
-    area_head_m2: float = 2.513e-3
-    area_rod_m2: float = 1.532e-3
-    stroke_m: float = 0.10
-    dead_volume_head_m3: float = 3.0e-4
-    dead_volume_rod_m3: float = 3.0e-4
-    bulk_modulus_Pa: float = 1.4e9
-    density_kg_m3: float = 860.0
-    discharge_coefficient: float = 0.65
-    valve_area_head_m2: float = 5.5e-8
-    valve_area_rod_m2: float = 5.5e-8
-    vent_area_rod_m2: float = 1.0e-5
-    critical_pressure_Pa: float = 1.0e5
-    opening_smoothing: float = 0.01
-    supply_pressure_Pa: float = 12.0e6
-    tank_pressure_Pa: float = 0.2e6
-    leakage_m3_s_Pa: float = 1.0e-14
-    mass_kg: float = 474.0
-    stiffness_N_m: float = 9.4e6
-    damping_N_s_m: float = 1.3e5
-    free_position_m: float = 0.0484
+    area_head_m2: float = param(0.0, 1.0, open_low=True, doc="head area of both cylinders")
+    area_rod_m2: float = param(0.0, 1.0, open_low=True, doc="rod (annulus) area of both")
+    stroke_m: float = param(0.0, 2.0, open_low=True, doc="stroke between the end stops")
+    dead_volume_head_m3: float = param(0.0, 1.0, open_low=True,
+                                       doc="head node volume at zero stroke")
+    dead_volume_rod_m3: float = param(0.0, 1.0, open_low=True,
+                                      doc="rod node volume at full stroke (incl. line B)")
+    bulk_modulus_Pa: float = param(1e7, 1e10, doc="oil bulk modulus")
+    density_kg_m3: float = param(500.0, 2000.0, doc="oil density")
+    discharge_coefficient: float = param(0.0, 1.0, open_low=True, unit="1",
+                                         doc="orifice discharge coefficient Cq")
+    valve_area_head_m2: float = param(0.0, 1e-2, open_low=True,
+                                      doc="effective path area supply <-> heads, heads -> tank")
+    valve_area_rod_m2: float = param(0.0, 1e-2, open_low=True,
+                                     doc="effective path area of the release feed supply -> rods")
+    vent_area_rod_m2: float = param(0.0, 1e-2, open_low=True, doc="rods -> tank vent area")
+    critical_pressure_Pa: float = param(0.0, 5e6, open_low=True,
+                                        doc="orifice regularisation pressure p_cr")
+    opening_smoothing: float = param(0.0, 0.1, open_low=True, unit="1",
+                                     doc="smoothing width of max(u, 0) in the opening map")
+    supply_pressure_Pa: float = param(0.0, 5e7, open_low=True, doc="nominal supply pressure")
+    tank_pressure_Pa: float = param(0.0, 5e6, doc="tank pressure")
+    leakage_m3_s_Pa: float = param(0.0, 1e-9, doc="piston-seal leakage of both cylinders")
+    mass_kg: float = param(0.0, 1e5, open_low=True, doc="equivalent idler mass M")
+    stiffness_N_m: float = param(0.0, 1e9, open_low=True, doc="equivalent idler stiffness k")
+    damping_N_s_m: float = param(0.0, 1e7, doc="equivalent idler damping c")
+    free_position_m: float = param(-1.0, None, doc="stroke y0 at which the idler spring is "
+                                   "unloaded (<= stroke_m)")
 
-    def __post_init__(self) -> None:
-        _check(self, "area_head_m2", 0.0, 1.0, lo_open=True)
-        _check(self, "area_rod_m2", 0.0, self.area_head_m2, lo_open=True)
-        _check(self, "stroke_m", 0.0, 2.0, lo_open=True)
-        _check(self, "dead_volume_head_m3", 0.0, 1.0, lo_open=True)
-        _check(self, "dead_volume_rod_m3", 0.0, 1.0, lo_open=True)
-        _check(self, "bulk_modulus_Pa", 1e7, 1e10)
-        _check(self, "density_kg_m3", 500.0, 2000.0)
-        _check(self, "discharge_coefficient", 0.0, 1.0, lo_open=True)
-        _check(self, "valve_area_head_m2", 0.0, 1e-2, lo_open=True)
-        _check(self, "valve_area_rod_m2", 0.0, 1e-2, lo_open=True)
-        _check(self, "vent_area_rod_m2", 0.0, 1e-2, lo_open=True)
-        _check(self, "critical_pressure_Pa", 0.0, 5e6, lo_open=True)
-        _check(self, "opening_smoothing", 0.0, 0.1, lo_open=True)
-        _check(self, "supply_pressure_Pa", 0.0, 5e7, lo_open=True)
-        _check(self, "tank_pressure_Pa", 0.0, 5e6)
-        _check(self, "leakage_m3_s_Pa", 0.0, 1e-9)
-        _check(self, "mass_kg", 0.0, 1e5, lo_open=True)
-        _check(self, "stiffness_N_m", 0.0, 1e9, lo_open=True)
-        _check(self, "damping_N_s_m", 0.0, 1e7)
-        _check(self, "free_position_m", -1.0, self.stroke_m)
+    def cross_check(self, at: Location) -> None:
+        if self.area_rod_m2 >= self.area_head_m2:
+            raise at.error("area_rod_m2", self.area_rod_m2,
+                           f"must be < area_head_m2 = {self.area_head_m2!r}")
+        if self.free_position_m > self.stroke_m:
+            raise at.error("free_position_m", self.free_position_m,
+                           f"must be <= stroke_m = {self.stroke_m!r}")
 
     def replace(self, **changes: float) -> PlantParams:
         """Copy with some fields changed (validated again)."""
@@ -89,87 +79,68 @@ class PlantParams:
 
 
 @dataclass(frozen=True, slots=True)
-class SensorParams:
-    """1 kHz sensors for p_head, p_rod [Pa] and stroke y [m]: Gaussian noise, bias, quantum."""
+class SensorParams(Parameters):
+    """Sensors for p_head, p_rod [Pa] and stroke y [m]: Gaussian noise, bias, quantum."""
 
-    sample_period_s: float = 1.0e-3
-    pressure_noise_std_Pa: float = 0.15e6
-    stroke_noise_std_m: float = 0.2e-3
-    pressure_quantum_Pa: float = 0.0
-    stroke_quantum_m: float = 0.0
-    pressure_bias_Pa: float = 0.0
-    stroke_bias_m: float = 0.0
-
-    def __post_init__(self) -> None:
-        _check(self, "sample_period_s", 0.0, 1.0, lo_open=True)
-        _check(self, "pressure_noise_std_Pa", 0.0, 1e7)
-        _check(self, "stroke_noise_std_m", 0.0, 0.1)
-        _check(self, "pressure_quantum_Pa", 0.0, 1e6)
-        _check(self, "stroke_quantum_m", 0.0, 0.01)
-        _check(self, "pressure_bias_Pa", -1e7, 1e7)
-        _check(self, "stroke_bias_m", -0.1, 0.1)
+    sample_period_s: float = param(0.0, 1.0, open_low=True, doc="sampling period")
+    pressure_noise_std_Pa: float = param(0.0, 1e7, doc="pressure noise standard deviation")
+    stroke_noise_std_m: float = param(0.0, 0.1, doc="stroke noise standard deviation")
+    pressure_quantum_Pa: float = param(0.0, 1e6, doc="pressure quantisation step (0: off)")
+    stroke_quantum_m: float = param(0.0, 0.01, doc="stroke quantisation step (0: off)")
+    pressure_bias_Pa: float = param(-1e7, 1e7, doc="pressure sensor bias")
+    stroke_bias_m: float = param(-0.1, 0.1, doc="stroke sensor bias")
 
 
 @dataclass(frozen=True, slots=True)
-class ValveParams:
-    """Valve logic: dead zone on |u|, minimum holding time and solenoid delay [s]."""
+class ValveParams(Parameters):
+    """Valve logic: dead zone on |u|, minimum holding time and solenoid delay."""
 
-    dead_zone: float = 0.05
-    min_hold_s: float = 0.030
-    solenoid_delay_s: float = 0.020
-    sigma_delta: bool = True
-
-    def __post_init__(self) -> None:
-        _check(self, "dead_zone", 0.0, 0.99)
-        _check(self, "min_hold_s", 0.0, 1.0)
-        _check(self, "solenoid_delay_s", 0.0, 1.0)
+    dead_zone: float = param(0.0, 0.99, unit="1", doc="|u| below this -> hold")
+    min_hold_s: float = param(0.0, 1.0, doc="minimum time a valve mode is held")
+    solenoid_delay_s: float = param(0.0, 1.0, doc="delay applied by the valve logic")
+    sigma_delta: bool = param(doc="sum-up rounding so the mode average follows u")
 
 
 @dataclass(frozen=True, slots=True)
-class EstimatorParams:
+class EstimatorParams(Parameters):
     """EKF/UKF: standard deviations (SI) of the discrete per-sample noises, UKF spread."""
 
-    process_std: tuple[float, float, float, float] = (0.2e6, 0.3e6, 0.05e-3, 0.1e-3)
-    measurement_std: tuple[float, float, float] = (0.15e6, 0.15e6, 0.2e-3)
-    initial_std: tuple[float, float, float, float] = (0.5e6, 0.5e6, 1.0e-3, 10.0e-3)
-    ukf_alpha: float = 1.0
-    ukf_beta: float = 2.0
-    ukf_kappa: float = -1.0
-
-    def __post_init__(self) -> None:
-        for name, n in (("process_std", 4), ("measurement_std", 3), ("initial_std", 4)):
-            if len(getattr(self, name)) != n:
-                raise ValueError(f"EstimatorParams.{name} must have {n} entries")
-            _check(self, name, 0.0, 1e8, lo_open=True)
-        _check(self, "ukf_alpha", 0.1, 1.0)
-        _check(self, "ukf_beta", 0.0, 10.0)
-        _check(self, "ukf_kappa", -3.0, 10.0)
+    process_std: tuple[float, float, float, float] = param(
+        0.0, 1e8, open_low=True, unit="Pa, Pa, m, m/s",
+        doc="process noise std of (p_head, p_rod, y, y_dot) per sample")
+    measurement_std: tuple[float, float, float] = param(
+        0.0, 1e8, open_low=True, unit="Pa, Pa, m", doc="measurement noise std of (p_head, "
+        "p_rod, y)")
+    initial_std: tuple[float, float, float, float] = param(
+        0.0, 1e8, open_low=True, unit="Pa, Pa, m, m/s", doc="initial state std")
+    ukf_alpha: float = param(0.1, 1.0, unit="1", doc="UKF sigma-point spread alpha")
+    ukf_beta: float = param(0.0, 10.0, unit="1", doc="UKF prior-distribution beta")
+    ukf_kappa: float = param(-3.0, 10.0, unit="1", doc="UKF secondary scaling kappa")
 
 
 @dataclass(frozen=True, slots=True)
-class ControllerParams:
-    """Shared controller limits: period [s], tension band [N], pressure band [Pa], u bounds."""
+class ControllerParams(Parameters):
+    """Shared controller limits: period, tension band, pressure band, u bounds."""
 
-    period_s: float = 0.010
-    force_min_N: float = 10.0e3
-    force_max_N: float = 20.0e3
-    pressure_min_Pa: float = 0.0
-    pressure_max_Pa: float = 21.0e6
-    u_min: float = -1.0
-    u_max: float = 1.0
+    period_s: float = param(0.0, 1.0, open_low=True, doc="control period")
+    force_min_N: float = param(-1e6, 1e6, doc="lower tension limit F_min")
+    force_max_N: float = param(-1e6, 1e6, doc="upper tension limit F_max")
+    pressure_min_Pa: float = param(-1e5, 5e7, doc="lower chamber pressure limit")
+    pressure_max_Pa: float = param(-1e5, 5e7, doc="upper chamber pressure limit")
+    u_min: float = param(-1.0, 0.0, unit="1", doc="lowest valve opening (-1: full release)")
+    u_max: float = param(0.0, 1.0, unit="1", doc="highest valve opening (+1: full pressurize)")
 
-    def __post_init__(self) -> None:
-        _check(self, "period_s", 0.0, 1.0, lo_open=True)
-        _check(self, "force_min_N", -1e6, 1e6)
-        _check(self, "force_max_N", self.force_min_N, 1e6)
-        _check(self, "pressure_min_Pa", -1e5, 5e7)
-        _check(self, "pressure_max_Pa", self.pressure_min_Pa, 5e7)
-        _check(self, "u_min", -1.0, 0.0)
-        _check(self, "u_max", 0.0, 1.0)
+    def cross_check(self, at: Location) -> None:
+        if self.force_max_N < self.force_min_N:
+            raise at.error("force_max_N", self.force_max_N,
+                           f"must be >= force_min_N = {self.force_min_N!r}")
+        if self.pressure_max_Pa < self.pressure_min_Pa:
+            raise at.error("pressure_max_Pa", self.pressure_max_Pa,
+                           f"must be >= pressure_min_Pa = {self.pressure_min_Pa!r}")
 
 
 @dataclass(frozen=True, slots=True)
-class MpcParams:
+class MpcParams(Parameters):
     """NMPC/LMPC horizon (steps of the controller period), blocking, weights, SQP settings.
 
     max_iter: NMPC SQP iterations per period (1 = real-time iteration; its condensed QPs
@@ -177,123 +148,101 @@ class MpcParams:
     its OSQP eps_abs = eps_rel (scaled units).
     """
 
-    horizon_steps: int = 15
-    block_steps: int = 3
-    collocation_degree: int = 1
-    weight_force_per_kN2: float = 1.0
-    weight_input: float = 3.0
-    weight_input_rate: float = 2.0
-    weight_force_slack_per_kN2: float = 1.0e3
-    max_iter: int = 2
-    qp_max_iter: int = 100
-    qp_tolerance: float = 1e-4
-    time_budget_s: float = 0.010
+    horizon_steps: int = param(1, 200, doc="prediction horizon in controller periods")
+    block_steps: int = param(1, 200, doc="move-blocking length in controller periods")
+    collocation_degree: int = param(1, 5, unit="1", doc="Radau IIA collocation degree")
+    weight_force_per_kN2: float = param(0.0, 1e6, open_low=True, unit="1/kN^2",
+                                        doc="weight on the tension error in kN")
+    weight_input: float = param(0.0, 1e6, unit="1", doc="weight on u^2")
+    weight_input_rate: float = param(0.0, 1e6, unit="1", doc="weight on the u increments")
+    weight_force_slack_per_kN2: float = param(0.0, 1e9, open_low=True, unit="1/kN^2",
+                                              doc="weight on the soft F_min/F_max slack")
+    max_iter: int = param(1, 1000, doc="NMPC SQP iterations per period")
+    qp_max_iter: int = param(1, 100000, doc="LMPC OSQP iteration cap per QP")
+    qp_tolerance: float = param(0.0, 1.0, open_low=True, unit="1",
+                                doc="LMPC OSQP eps_abs = eps_rel (scaled units)")
+    time_budget_s: float = param(0.0, 10.0, open_low=True,
+                                 doc="a solve longer than this counts as an overrun")
 
-    def __post_init__(self) -> None:
-        _check(self, "horizon_steps", 1, 200)
-        _check(self, "block_steps", 1, self.horizon_steps)
-        _check(self, "collocation_degree", 1, 5)
-        _check(self, "weight_force_per_kN2", 0.0, 1e6, lo_open=True)
-        _check(self, "weight_input", 0.0, 1e6)
-        _check(self, "weight_input_rate", 0.0, 1e6)
-        _check(self, "weight_force_slack_per_kN2", 0.0, 1e9, lo_open=True)
-        _check(self, "max_iter", 1, 1000)
-        _check(self, "qp_max_iter", 1, 100000)
-        _check(self, "qp_tolerance", 0.0, 1.0, lo_open=True)
-        _check(self, "time_budget_s", 0.0, 10.0, lo_open=True)
-        if self.horizon_steps % self.block_steps:
-            raise ValueError(
-                f"MpcParams.horizon_steps = {self.horizon_steps} must be a multiple of "
-                f"block_steps = {self.block_steps}"
-            )
+    def cross_check(self, at: Location) -> None:
+        if self.block_steps > self.horizon_steps or self.horizon_steps % self.block_steps:
+            raise at.error("horizon_steps", self.horizon_steps,
+                           f"must be a multiple of block_steps = {self.block_steps}")
 
 
 @dataclass(frozen=True, slots=True)
-class PidParams:
-    """PID tuning-rule inputs (SIMC on an integrating plant with dead time) [s], error dead
-    band and conditional-integration band [N], output hysteresis thresholds on |u| [-]
-    (see ``trackmj.control.pid``)."""
+class PidParams(Parameters):
+    """PID tuning-rule inputs (SIMC on an integrating plant with dead time), error dead
+    band and conditional-integration band, output hysteresis thresholds on |u| (see
+    ``trackmj.control.pid``)."""
 
-    dead_time_s: float = 0.040
-    closed_loop_time_s: float = 0.25
-    derivative_filter_N: float = 1.0
-    back_calculation_gain: float = 1.0
-    error_dead_band_N: float = 150.0
-    integration_band_N: float = 600.0
-    output_on: float = 0.1
-    output_off: float = 0.05
+    dead_time_s: float = param(0.0, 10.0, doc="effective dead time theta of the SIMC rule")
+    closed_loop_time_s: float = param(0.0, 100.0, open_low=True,
+                                      doc="SIMC closed-loop time constant tau_c")
+    derivative_filter_N: float = param(1.0, 100.0, unit="1",
+                                       doc="derivative filter ratio N (Tf = Td / N); "
+                                       "dimensionless despite the suffix")
+    back_calculation_gain: float = param(0.0, 100.0, open_low=True, unit="1",
+                                         doc="anti-windup Tt = Ti / gain")
+    error_dead_band_N: float = param(0.0, 1e5, doc="errors inside are zero")
+    integration_band_N: float = param(0.0, 1e6, doc="integrate only while |error| <= this")
+    output_on: float = param(0.0, 1.0, unit="1", doc="leave hold when |u| exceeds this")
+    output_off: float = param(0.0, 1.0, unit="1", doc="return to hold below this")
 
-    def __post_init__(self) -> None:
-        _check(self, "dead_time_s", 0.0, 10.0)
-        _check(self, "closed_loop_time_s", 0.0, 100.0, lo_open=True)
-        _check(self, "derivative_filter_N", 1.0, 100.0)
-        _check(self, "back_calculation_gain", 0.0, 100.0, lo_open=True)
-        _check(self, "error_dead_band_N", 0.0, 1e5)
-        _check(self, "integration_band_N", 0.0, 1e6)
-        _check(self, "output_on", 0.0, 1.0)
-        _check(self, "output_off", 0.0, self.output_on)
+    def cross_check(self, at: Location) -> None:
+        if self.output_off > self.output_on:
+            raise at.error("output_off", self.output_off,
+                           f"must be <= output_on = {self.output_on!r}")
 
 
 @dataclass(frozen=True, slots=True)
-class ControlConfig:
-    """All control-domain parameter groups."""
+class ReducedModelParams(Parameters):
+    """The reduced model's own numerical choices (the rest of :class:`PlantParams` derives
+    from the hydraulic and idler files)."""
 
-    plant: PlantParams = field(default_factory=PlantParams)
-    sensors: SensorParams = field(default_factory=SensorParams)
-    valves: ValveParams = field(default_factory=ValveParams)
-    estimator: EstimatorParams = field(default_factory=EstimatorParams)
-    controller: ControllerParams = field(default_factory=ControllerParams)
-    mpc: MpcParams = field(default_factory=MpcParams)
-    pid: PidParams = field(default_factory=PidParams)
+    opening_smoothing: float = param(0.0, 0.1, open_low=True, unit="1",
+                                     doc="smoothing width of the opening positive part")
+    vent_area_rod_m2: float = param(0.0, 1e-2, open_low=True,
+                                    doc="rods -> tank vent area of the reduced model")
 
 
-_SECTIONS: dict[str, type] = {
-    "plant": PlantParams,
-    "sensors": SensorParams,
-    "valves": ValveParams,
-    "estimator": EstimatorParams,
-    "controller": ControllerParams,
-    "mpc": MpcParams,
-    "pid": PidParams,
-}
+@dataclass(frozen=True, slots=True)
+class ControlConfig(Parameters):
+    """All control-domain parameter groups of the control file; ``sources`` maps each
+    table to its ``source``."""
+
+    sensors: SensorParams
+    valves: ValveParams
+    estimator: EstimatorParams
+    controller: ControllerParams
+    mpc: MpcParams
+    pid: PidParams
+    reduced_model: ReducedModelParams
+    sources: Mapping[str, str] = sources_field()
+
+    file_kind: ClassVar[str] = "control"
 
 
-def _build(cls: type, section: str, raw: dict[str, Any]) -> Any:
-    known = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = set(raw) - set(known)
-    if unknown:
-        raise ValueError(f"[{section}]: unknown parameter(s) {sorted(unknown)}")
-    kwargs = {k: tuple(float(x) for x in v) if isinstance(v, list) else v for k, v in raw.items()}
-    return cls(**kwargs)
+def default_path() -> Path:
+    """The packaged ``lf1352_control.toml``."""
+    return Path(str(files("trackmj.models").joinpath(DEFAULT_FILE)))
 
 
-def load_config(path: str | Path | None = None) -> ControlConfig:
-    """Read the control TOML (default: ``trackmj.models/lf1352_control.toml``)."""
-    if path is None:
-        text = files("trackmj.models").joinpath(DEFAULT_FILE).read_text(encoding="utf-8")
-    else:
-        text = Path(path).read_text(encoding="utf-8")
-    raw = tomllib.loads(text)
-    unknown = set(raw) - set(_SECTIONS)
-    if unknown:
-        raise ValueError(f"unknown section(s) {sorted(unknown)}")
-    return ControlConfig(**{k: _build(c, k, raw.get(k, {})) for k, c in _SECTIONS.items()})
+def load_config(path: str | Path | None = None,
+                overrides: Mapping[str, Any] | None = None) -> ControlConfig:
+    """Read and validate the control TOML.
 
+    Parameters
+    ----------
+    path : str or Path, optional
+        The file; default the packaged ``lf1352_control.toml``.
+    overrides : mapping, optional
+        ``{dotted key: value}``, the ``control`` entry of
+        :func:`trackmj.params.parse_overrides`.
 
-def control_config_with(
-    plant_overrides: dict[str, float], base: ControlConfig | None = None
-) -> ControlConfig:
-    """``base`` (default: the TOML file) with some ``PlantParams`` fields replaced, e.g. k_eq,
-    M, c, y0 from ``trackmj.identify`` and the supply pressure and areas from the hydraulic
-    plugin: ``control_config_with({"stiffness_N_m": idler.stiffness_N_m, ...})``.
-
-    Values SI (field names carry the unit). Raises ``ValueError`` naming unknown fields, and
-    the ``PlantParams`` range checks apply to the new values.
+    Returns
+    -------
+    ControlConfig
     """
-    cfg = load_config() if base is None else base
-    known = {f.name for f in dataclasses.fields(PlantParams)}
-    unknown = set(plant_overrides) - known
-    if unknown:
-        raise ValueError(f"control_config_with: unknown plant parameter(s) {sorted(unknown)}")
-    plant = dataclasses.replace(cfg.plant, **{k: float(v) for k, v in plant_overrides.items()})
-    return dataclasses.replace(cfg, plant=plant)
+    return load_file(ControlConfig, default_path() if path is None else path,
+                     overrides=overrides)

@@ -1,225 +1,203 @@
-"""Hydraulic parameters: frozen, range-checked dataclasses read from a TOML file.
+"""Hydraulic parameters: frozen, validated dataclasses read from a TOML file.
 
-All values SI, pressures gauge [Pa] unless a name ends in ``_abs``. Every constructor
-validates its fields and raises ``ValueError`` naming the parameter and the allowed range.
+All values SI, pressures gauge [Pa] unless a name ends in ``_abs``. The checks are the one
+validator of :mod:`trackmj.params`: types, ranges and cross-field checks run on
+construction, and :func:`load_hydraulic_params` refuses unknown keys, wrong types, missing
+keys and missing ``source`` strings naming the file, the table and the key.
 """
 
 from __future__ import annotations
 
 import itertools
-import math
-import tomllib
-from dataclasses import dataclass, fields
+from collections.abc import Mapping
+from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Literal
 
-_INF = math.inf
+from trackmj.params import Location, Parameters, load_file, param, sources_field
 
-
-def _check(obj: Any, limits: dict[str, tuple[float, float, bool]]) -> None:
-    """Validate float fields of ``obj``: name -> (low, high, low_inclusive); high inclusive."""
-    for name, (lo, hi, lo_incl) in limits.items():
-        prefix = type(obj).__name__
-        value = getattr(obj, name)
-        try:
-            x = float(value)
-        except (TypeError, ValueError):
-            raise ValueError(f"{prefix}.{name} must be a number, got {value!r}") from None
-        ok = math.isfinite(x) and (x >= lo if lo_incl else x > lo) and x <= hi
-        if not ok:
-            bracket = "[" if lo_incl else "("
-            raise ValueError(f"{prefix}.{name} = {value!r} is outside {bracket}{lo}, {hi}]")
+DEFAULT_FILE = "lf1352_hydraulics.toml"
 
 
 @dataclass(frozen=True, slots=True)
-class Fluid:
-    """Hydraulic oil: density [kg/m^3], effective bulk modulus [Pa], viscosity [m^2/s]."""
+class Fluid(Parameters):
+    """Hydraulic oil."""
 
-    density_kg_m3: float
-    bulk_modulus_Pa: float
-    kinematic_viscosity_m2_s: float
-
-    def __post_init__(self) -> None:
-        _check(self, {"density_kg_m3": (0.0, 2e4, False), "bulk_modulus_Pa": (0.0, 1e11, False),
-                      "kinematic_viscosity_m2_s": (0.0, 1.0, False)})
-
-
-@dataclass(frozen=True, slots=True)
-class OrificeLaw:
-    """Regularised orifice Q = Cq·A·sqrt(2/ρ)·Δp/(Δp²+p_cr²)^(1/4); Cq [-], p_cr [Pa]."""
-
-    discharge_coefficient: float
-    critical_pressure_Pa: float
-
-    def __post_init__(self) -> None:
-        _check(self, {"discharge_coefficient": (0.0, 1.0, False),
-                      "critical_pressure_Pa": (0.0, 1e7, False)})
+    density_kg_m3: float = param(0.0, 2e4, open_low=True, doc="oil density")
+    bulk_modulus_Pa: float = param(0.0, 1e11, open_low=True,
+                                   doc="effective bulk modulus of the oil")
+    kinematic_viscosity_m2_s: float = param(0.0, 1.0, open_low=True,
+                                            doc="kinematic viscosity (recorded, not used by "
+                                            "the turbulent orifice law)")
 
 
 @dataclass(frozen=True, slots=True)
-class Cavitation:
-    """Outflow limiter floor/band [Pa] and tank->chamber make-up check valves."""
+class OrificeLaw(Parameters):
+    """Regularised orifice Q = Cq·A·sqrt(2/ρ)·Δp/(Δp²+p_cr²)^(1/4)."""
 
-    floor_Pa: float
-    band_Pa: float
-    makeup_crack_below_tank_Pa: float
-    makeup_full_below_tank_Pa: float
-    makeup_area_m2: float
-
-    def __post_init__(self) -> None:
-        _check(self, {"floor_Pa": (-1e5, 1e7, True), "band_Pa": (0.0, 1e7, False),
-                      "makeup_crack_below_tank_Pa": (0.0, 1e7, True),
-                      "makeup_full_below_tank_Pa": (self.makeup_crack_below_tank_Pa, 1e7, False),
-                      "makeup_area_m2": (0.0, 1.0, True)})
+    discharge_coefficient: float = param(0.0, 1.0, open_low=True, unit="1",
+                                         doc="discharge coefficient Cq")
+    critical_pressure_Pa: float = param(0.0, 1e7, open_low=True,
+                                        doc="regularisation pressure p_cr; laminar-like below")
 
 
 @dataclass(frozen=True, slots=True)
-class Supply:
-    """Supply node: mode ("accumulator" | "prescribed"), pump flow [m^3/s], line volume [m^3]."""
+class Tank(Parameters):
+    """Return line to the tank."""
 
-    mode: str
-    pump_flow_m3_s: float
-    line_volume_m3: float
-
-    def __post_init__(self) -> None:
-        if self.mode not in ("accumulator", "prescribed"):
-            raise ValueError(f"Supply.mode = {self.mode!r} must be 'accumulator' or 'prescribed'")
-        _check(self, {"pump_flow_m3_s": (0.0, 1.0, True), "line_volume_m3": (0.0, 1.0, False)})
+    pressure_Pa: float = param(0.0, 1e7, doc="tank (return-line back) pressure p_t")
 
 
 @dataclass(frozen=True, slots=True)
-class Accumulator:
-    """Gas accumulator: gas volume at precharge [m^3], precharge [Pa gauge], exponent n [-]."""
+class Cavitation(Parameters):
+    """Outflow limiter floor/band and tank->chamber make-up check valves."""
 
-    gas_volume_m3: float
-    precharge_Pa: float
-    polytropic_exponent: float
-    atmospheric_pressure_Pa_abs: float
+    floor_Pa: float = param(-1e5, 1e7, doc="outflow of a node stops at this pressure")
+    band_Pa: float = param(0.0, 1e7, open_low=True,
+                           doc="outflow fades from full at floor + band to zero at the floor")
+    makeup_crack_below_tank_Pa: float = param(0.0, 1e7,
+                                              doc="make-up valve starts opening this far "
+                                              "below p_t")
+    makeup_full_below_tank_Pa: float = param(0.0, 1e7, open_low=True,
+                                             doc="make-up valve fully open this far below p_t")
+    makeup_area_m2: float = param(0.0, 1.0, doc="make-up valve full opening area")
 
-    def __post_init__(self) -> None:
-        _check(self, {"gas_volume_m3": (0.0, 1.0, False), "precharge_Pa": (0.0, 1e8, False),
-                      "polytropic_exponent": (1.0, 1.67, False),
-                      "atmospheric_pressure_Pa_abs": (0.0, 2e5, False)})
-
-
-@dataclass(frozen=True, slots=True)
-class Relief:
-    """Relief valve S->T: opens between crack and full-open pressure [Pa] to full area [m^2]."""
-
-    crack_Pa: float
-    full_open_Pa: float
-    full_area_m2: float
-
-    def __post_init__(self) -> None:
-        _check(self, {"crack_Pa": (0.0, 1e8, False), "full_open_Pa": (self.crack_Pa, 1e8, False),
-                      "full_area_m2": (0.0, 1.0, True)})
+    def cross_check(self, at: Location) -> None:
+        if self.makeup_full_below_tank_Pa <= self.makeup_crack_below_tank_Pa:
+            raise at.error("makeup_full_below_tank_Pa", self.makeup_full_below_tank_Pa,
+                           "must be > makeup_crack_below_tank_Pa = "
+                           f"{self.makeup_crack_below_tank_Pa!r}")
 
 
 @dataclass(frozen=True, slots=True)
-class Valve:
-    """Solenoid valve: open / closed-edge leak area [m^2], overlap (fraction of travel),
-    pure electromagnetic delay [s] and first-order opening time constant [s]."""
+class Supply(Parameters):
+    """Supply node: pump + accumulator + relief, or a prescribed pressure p_s(t)."""
 
-    open_area_m2: float
-    leak_area_m2: float
-    overlap: float
-    delay_s: float
-    time_constant_s: float
-
-    def __post_init__(self) -> None:
-        _check(self, {"open_area_m2": (0.0, 1.0, False),
-                      "leak_area_m2": (0.0, self.open_area_m2, True),
-                      "overlap": (0.0, 0.9, True), "delay_s": (0.0, 1.0, True),
-                      "time_constant_s": (0.0, 1.0, False)})
+    mode: Literal["accumulator", "prescribed"] = param(
+        doc="'accumulator' (pump + gas accumulator + relief) or 'prescribed' (a profile "
+            "passed to HydraulicTensioner)")
+    pump_flow_m3_s: float = param(0.0, 1.0, doc="constant pump flow into the supply node")
+    line_volume_m3: float = param(0.0, 1.0, open_low=True,
+                                  doc="oil volume of the supply node (hose + valve block)")
 
 
 @dataclass(frozen=True, slots=True)
-class Metering:
-    """Fixed restrictors [m^2]: one per head branch (A -> head, both directions) and one in
-    the release feed P -> B; the rods vent B -> T through the main valve edge alone."""
+class Accumulator(Parameters):
+    """Gas accumulator on the supply node (polytropic gas law)."""
 
-    head_branch_area_m2: float
-    rod_feed_area_m2: float
-
-    def __post_init__(self) -> None:
-        _check(self, {"head_branch_area_m2": (0.0, 1.0, False),
-                      "rod_feed_area_m2": (0.0, 1.0, False)})
-
-
-@dataclass(frozen=True, slots=True)
-class Lines:
-    """Hose volumes [m^3] of line A (its own node) and line B (part of the rod node)."""
-
-    line_a_volume_m3: float
-    line_b_volume_m3: float
-
-    def __post_init__(self) -> None:
-        _check(self, {"line_a_volume_m3": (0.0, 1.0, False), "line_b_volume_m3": (0.0, 1.0, True)})
+    gas_volume_m3: float = param(0.0, 1.0, open_low=True, doc="gas volume at precharge")
+    precharge_Pa: float = param(0.0, 1e8, open_low=True, doc="gas precharge pressure (gauge)")
+    polytropic_exponent: float = param(1.0, 1.67, open_low=True, unit="1",
+                                       doc="polytropic exponent n of p·V^n = const")
+    atmospheric_pressure_Pa_abs: float = param(0.0, 2e5, open_low=True,
+                                               doc="converts gauge to absolute for the gas law")
 
 
 @dataclass(frozen=True, slots=True)
-class Cylinder:
-    """One of the two identical cylinders (per-cylinder values, SI)."""
+class Relief(Parameters):
+    """Relief valve supply -> tank."""
 
-    area_head_m2: float
-    area_rod_m2: float
-    stroke_max_m: float
-    dead_volume_head_m3: float
-    dead_volume_rod_m3: float
-    leakage_m3_s_Pa: float
-    coulomb_friction_N: float
-    coulomb_velocity_m_s: float
-    viscous_friction_N_s_m: float
-    endstop_stiffness_N_m: float
-    endstop_damping_N_s_m: float
+    crack_Pa: float = param(0.0, 1e8, open_low=True, doc="starts opening")
+    full_open_Pa: float = param(0.0, 1e8, open_low=True, doc="fully open")
+    full_area_m2: float = param(0.0, 1.0, doc="opening area when fully open")
 
-    def __post_init__(self) -> None:
-        _check(self, {"area_head_m2": (0.0, 1.0, False),
-                      "area_rod_m2": (0.0, self.area_head_m2, False),
-                      "stroke_max_m": (0.0, 10.0, False),
-                      "dead_volume_head_m3": (0.0, 1.0, False),
-                      "dead_volume_rod_m3": (0.0, 1.0, False),
-                      "leakage_m3_s_Pa": (0.0, 1e-6, True),
-                      "coulomb_friction_N": (0.0, 1e6, True),
-                      "coulomb_velocity_m_s": (0.0, 1.0, False),
-                      "viscous_friction_N_s_m": (0.0, 1e8, True),
-                      "endstop_stiffness_N_m": (0.0, 1e12, True),
-                      "endstop_damping_N_s_m": (0.0, 1e9, True)})
+    def cross_check(self, at: Location) -> None:
+        if self.full_open_Pa <= self.crack_Pa:
+            raise at.error("full_open_Pa", self.full_open_Pa,
+                           f"must be > crack_Pa = {self.crack_Pa!r}")
 
 
 @dataclass(frozen=True, slots=True)
-class Coupling:
-    """Strong-coupling numerics: NEPCE correction bound [N], min velocity [m/s], Newton."""
+class Valve(Parameters):
+    """Solenoid valve: edge areas, overlap, delay and opening lag."""
 
-    max_correction_N: float
-    min_correction_velocity_m_s: float
-    newton_tol_Pa: float
-    newton_max_iter: int
+    open_area_m2: float = param(0.0, 1.0, open_low=True, doc="area of an open edge")
+    leak_area_m2: float = param(0.0, 1.0, doc="leak area of a closed edge")
+    overlap: float = param(0.0, 0.9, unit="1",
+                           doc="fraction of the spool travel before an edge opens")
+    delay_s: float = param(0.0, 1.0, doc="pure electromagnetic delay")
+    time_constant_s: float = param(0.0, 1.0, open_low=True, doc="first-order opening lag")
 
-    def __post_init__(self) -> None:
-        _check(self, {"max_correction_N": (0.0, 1e6, True),
-                      "min_correction_velocity_m_s": (0.0, 1.0, False),
-                      "newton_tol_Pa": (0.0, 1e5, False), "newton_max_iter": (1, 1000, True)})
+    def cross_check(self, at: Location) -> None:
+        if self.leak_area_m2 > self.open_area_m2:
+            raise at.error("leak_area_m2", self.leak_area_m2,
+                           f"must be <= open_area_m2 = {self.open_area_m2!r}")
 
 
 @dataclass(frozen=True, slots=True)
-class PressureProfile:
+class Metering(Parameters):
+    """Fixed restrictors: one per head branch (A -> head, both directions) and one in the
+    release feed P -> B; the rods vent B -> T through the main valve edge alone."""
+
+    head_branch_area_m2: float = param(0.0, 1.0, open_low=True,
+                                       doc="restrictor in each head branch, in series with "
+                                       "its 2/2 valve")
+    rod_feed_area_m2: float = param(0.0, 1.0, open_low=True,
+                                    doc="restrictor in the release feed P -> B, in series "
+                                    "with the main valve's P -> B edge")
+
+
+@dataclass(frozen=True, slots=True)
+class Lines(Parameters):
+    """Hose volumes of line A (its own node) and line B (part of the rod node)."""
+
+    line_a_volume_m3: float = param(0.0, 1.0, open_low=True, doc="line A oil volume")
+    line_b_volume_m3: float = param(0.0, 1.0, doc="line B oil volume (in the rod node)")
+
+
+@dataclass(frozen=True, slots=True)
+class Cylinder(Parameters):
+    """One of the two identical cylinders (per-cylinder values)."""
+
+    area_head_m2: float = param(0.0, 1.0, open_low=True, doc="piston (head side) area")
+    area_rod_m2: float = param(0.0, 1.0, open_low=True, doc="annulus (rod side) area")
+    stroke_max_m: float = param(0.0, 10.0, open_low=True, doc="stroke between the end stops")
+    dead_volume_head_m3: float = param(0.0, 1.0, open_low=True,
+                                       doc="head node volume at zero stroke incl. hose "
+                                       "compliance")
+    dead_volume_rod_m3: float = param(0.0, 1.0, open_low=True,
+                                      doc="rod chamber volume at full stroke")
+    leakage_m3_s_Pa: float = param(0.0, 1e-6, doc="laminar piston-seal leakage head -> rod")
+    coulomb_friction_N: float = param(0.0, 1e6, doc="Coulomb seal friction")
+    coulomb_velocity_m_s: float = param(0.0, 1.0, open_low=True,
+                                        doc="tanh smoothing velocity of the Coulomb friction")
+    viscous_friction_N_s_m: float = param(0.0, 1e8, doc="viscous friction coefficient")
+    endstop_stiffness_N_m: float = param(0.0, 1e12, doc="end-stop contact stiffness")
+    endstop_damping_N_s_m: float = param(0.0, 1e9, doc="end-stop contact damping")
+
+    def cross_check(self, at: Location) -> None:
+        if self.area_rod_m2 >= self.area_head_m2:
+            raise at.error("area_rod_m2", self.area_rod_m2,
+                           f"must be < area_head_m2 = {self.area_head_m2!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class Coupling(Parameters):
+    """Strong-coupling numerics: NEPCE correction bound, min velocity, Newton settings."""
+
+    max_correction_N: float = param(0.0, 1e6, doc="bound on the NEPCE correction force")
+    min_correction_velocity_m_s: float = param(0.0, 1.0, open_low=True,
+                                               doc="no correction below this |v|")
+    newton_tol_Pa: float = param(0.0, 1e5, open_low=True, doc="Newton pressure tolerance")
+    newton_max_iter: int = param(1, 1000, doc="Newton iteration limit")
+
+
+@dataclass(frozen=True, slots=True)
+class PressureProfile(Parameters):
     """Piecewise-linear supply pressure p_s(t) [Pa gauge] over times [s]; held at the ends."""
 
-    times_s: tuple[float, ...]
-    pressures_Pa: tuple[float, ...]
+    times_s: tuple[float, ...] = param(0.0, None, doc="breakpoints, strictly increasing")
+    pressures_Pa: tuple[float, ...] = param(0.0, None, doc="pressure at each breakpoint")
 
-    def __post_init__(self) -> None:
+    def cross_check(self, at: Location) -> None:
         t, p = self.times_s, self.pressures_Pa
-        if len(t) != len(p) or len(t) == 0:
-            raise ValueError("PressureProfile.times_s and pressures_Pa need equal, nonzero length")
-        if any(not math.isfinite(x) for x in (*t, *p)):
-            raise ValueError("PressureProfile.times_s / pressures_Pa must be finite")
-        if any(b <= a for a, b in itertools.pairwise(t)):
-            raise ValueError("PressureProfile.times_s must be strictly increasing")
-        if any(x < 0.0 for x in p):
-            raise ValueError("PressureProfile.pressures_Pa must be in [0, inf)")
+        if len(t) != len(p):
+            raise at.error("pressures_Pa", p, f"has {len(p)} entries, times_s has {len(t)}")
+        for i, (a, b) in enumerate(itertools.pairwise(t)):
+            if b <= a:
+                raise at.error(("times_s", i + 1), b, f"must be > times_s[{i}] = {a!r} "
+                               "(strictly increasing)")
 
     def __call__(self, t_s: float) -> float:
         """Supply pressure [Pa] at time ``t_s`` [s]."""
@@ -234,12 +212,13 @@ class PressureProfile:
 
 
 @dataclass(frozen=True, slots=True)
-class HydraulicParams:
-    """Every parameter of the tensioning circuit (see models/lf1352_hydraulics.toml)."""
+class HydraulicParams(Parameters):
+    """Every parameter of the tensioning circuit (see models/lf1352_hydraulics.toml);
+    ``sources`` maps each table to its ``source``."""
 
     fluid: Fluid
     orifice: OrificeLaw
-    tank_pressure_Pa: float
+    tank: Tank
     cavitation: Cavitation
     supply: Supply
     accumulator: Accumulator
@@ -250,56 +229,44 @@ class HydraulicParams:
     lines: Lines
     cylinder: Cylinder
     coupling: Coupling
-    profiles: dict[str, PressureProfile]
+    profiles: Mapping[str, PressureProfile] = param(
+        default_factory=dict,
+        doc="named supply-pressure profiles (optional: a circuit needs none)")
+    sources: Mapping[str, str] = sources_field()
 
-    def __post_init__(self) -> None:
-        _check(self, {"tank_pressure_Pa": (0.0, 1e7, True)})
-        if self.cavitation.floor_Pa >= self.tank_pressure_Pa:
-            raise ValueError("cavitation.floor_Pa must be below tank_pressure_Pa")
+    file_kind: ClassVar[str] = "hydraulics"
 
+    @property
+    def tank_pressure_Pa(self) -> float:
+        """Tank pressure p_t [Pa gauge]."""
+        return self.tank.pressure_Pa
 
-def _build(cls: type, table: dict[str, Any], name: str) -> Any:
-    """Construct ``cls`` from a TOML table, ignoring ``source`` and naming missing keys."""
-    kwargs = {}
-    for f in fields(cls):
-        if f.name not in table:
-            raise ValueError(f"[{name}] is missing parameter {f.name!r}")
-        kwargs[f.name] = table[f.name]
-    return cls(**kwargs)
-
-
-def params_from_dict(data: dict[str, Any]) -> HydraulicParams:
-    """Build :class:`HydraulicParams` from a parsed TOML document."""
-    try:
-        profiles = {
-            key: PressureProfile(tuple(map(float, tab["times_s"])),
-                                 tuple(map(float, tab["pressures_Pa"])))
-            for key, tab in data.get("profiles", {}).items()
-        }
-        return HydraulicParams(
-            fluid=_build(Fluid, data["fluid"], "fluid"),
-            orifice=_build(OrificeLaw, data["orifice"], "orifice"),
-            tank_pressure_Pa=data["tank"]["pressure_Pa"],
-            cavitation=_build(Cavitation, data["cavitation"], "cavitation"),
-            supply=_build(Supply, data["supply"], "supply"),
-            accumulator=_build(Accumulator, data["accumulator"], "accumulator"),
-            relief=_build(Relief, data["relief"], "relief"),
-            main_valve=_build(Valve, data["main_valve"], "main_valve"),
-            switching_valves=_build(Valve, data["switching_valves"], "switching_valves"),
-            metering=_build(Metering, data["metering"], "metering"),
-            lines=_build(Lines, data["lines"], "lines"),
-            cylinder=_build(Cylinder, data["cylinder"], "cylinder"),
-            coupling=_build(Coupling, data["coupling"], "coupling"),
-            profiles=profiles,
-        )
-    except KeyError as exc:
-        raise ValueError(f"hydraulic parameter file is missing table/key {exc}") from None
+    def cross_check(self, at: Location) -> None:
+        if self.cavitation.floor_Pa >= self.tank.pressure_Pa:
+            raise at.error(("cavitation", "floor_Pa"), self.cavitation.floor_Pa,
+                           f"must be below [tank].pressure_Pa = {self.tank.pressure_Pa!r}")
 
 
-def load_hydraulic_params(path: str | Path | None = None) -> HydraulicParams:
-    """Read the hydraulic parameter TOML (default: packaged ``lf1352_hydraulics.toml``)."""
-    if path is None:
-        text = files("trackmj.models").joinpath("lf1352_hydraulics.toml").read_text("utf-8")
-    else:
-        text = Path(path).read_text("utf-8")
-    return params_from_dict(tomllib.loads(text))
+def default_path() -> Path:
+    """The packaged ``lf1352_hydraulics.toml``."""
+    return Path(str(files("trackmj.models").joinpath(DEFAULT_FILE)))
+
+
+def load_hydraulic_params(path: str | Path | None = None,
+                          overrides: Mapping[str, Any] | None = None) -> HydraulicParams:
+    """Read and validate the hydraulic parameter TOML.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        The file; default the packaged ``lf1352_hydraulics.toml``.
+    overrides : mapping, optional
+        ``{dotted key: value}``, the ``hydraulics`` entry of
+        :func:`trackmj.params.parse_overrides`.
+
+    Returns
+    -------
+    HydraulicParams
+    """
+    return load_file(HydraulicParams, default_path() if path is None else path,
+                     overrides=overrides)

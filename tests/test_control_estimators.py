@@ -1,16 +1,21 @@
 """EKF/UKF consistency (NEES, NIS in 95 % chi-square bands over Monte-Carlo runs) and RMSE."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
 
 from trackmj.control.estimators import ExtendedKalmanFilter, UnscentedKalmanFilter
 from trackmj.control.model import ReducedModel, ReducedPlant
-from trackmj.control.params import EstimatorParams, SensorParams, ValveParams, load_config
+from trackmj.control.params import EstimatorParams, load_config
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
+from trackmj.sim.config import nominal_plant_params
 
 RUNS, STEPS, DT = 30, 400, 1e-3
+CFG = load_config()
+PLANT = nominal_plant_params(control_config=CFG)
 
 
 def _monte_carlo(
@@ -21,23 +26,23 @@ def _monte_carlo(
 
     Returns NEES (RUNS, STEPS), NIS (RUNS, STEPS) and tension errors [N] (RUNS, STEPS).
     """
-    cfg = load_config()
-    model = ReducedModel(cfg.plant)
+    model = ReducedModel(PLANT)
     truth = est if truth is None else truth
     q_std = np.array(truth.process_std)
     r_std = truth.measurement_std
-    sens_p = SensorParams(pressure_noise_std_Pa=r_std[0], stroke_noise_std_m=r_std[2])
+    sens_p = dataclasses.replace(CFG.sensors, pressure_noise_std_Pa=r_std[0],
+                                 stroke_noise_std_m=r_std[2])
     nees = np.empty((RUNS, STEPS))
     nis = np.empty((RUNS, STEPS))
     ferr = np.empty((RUNS, STEPS))
     for r in range(RUNS):
         rng = np.random.default_rng(100 + r)
         x0 = model.equilibrium(12e3 + 1e3 * rng.standard_normal())
-        plant = ReducedPlant(cfg.plant, x0)
+        plant = ReducedPlant(PLANT, x0)
         sensors = Sensors(sens_p, rng)
         x_init = x0 + np.array(est.initial_std) * rng.standard_normal(4)
         filt = cls(model, est, DT, x_init)
-        valves = ValveLogic(ValveParams(), DT)
+        valves = ValveLogic(CFG.valves, DT)
         for k in range(STEPS):
             mode = valves.step(0.6 * np.sin(2 * np.pi * 3.0 * k * DT))
             x = plant.step(float(mode), 12e6) + q_std * rng.standard_normal(4)
@@ -51,7 +56,7 @@ def _monte_carlo(
 
 @pytest.mark.parametrize("cls", [ExtendedKalmanFilter, UnscentedKalmanFilter])
 def test_nees_nis_inside_chi_square_bands(cls: type) -> None:
-    nees, nis, ferr = _monte_carlo(cls, load_config().estimator)
+    nees, nis, ferr = _monte_carlo(cls, CFG.estimator)
     lo4, hi4 = chi2.ppf([0.025, 0.975], 4 * RUNS) / RUNS
     lo3, hi3 = chi2.ppf([0.025, 0.975], 3 * RUNS) / RUNS
     a_nees, a_nis = nees.mean(axis=0), nis.mean(axis=0)
@@ -70,15 +75,14 @@ def test_nees_nis_inside_chi_square_bands(cls: type) -> None:
 
 def test_overconfident_filter_is_detected() -> None:
     """The same NEES check fails when the filter's Q is 10x too small in std (test can fail)."""
-    est = load_config().estimator
-    small = EstimatorParams(process_std=tuple(0.1 * s for s in est.process_std))
+    est = CFG.estimator
+    small = dataclasses.replace(est, process_std=tuple(0.1 * s for s in est.process_std))
     nees, _, _ = _monte_carlo(ExtendedKalmanFilter, small, truth=est)
     hi4 = chi2.ppf(0.975, 4 * RUNS) / RUNS
     assert nees.mean() > hi4
 
 
 def test_ukf_weights_well_conditioned() -> None:
-    cfg = load_config()
-    ukf = UnscentedKalmanFilter(ReducedModel(cfg.plant), cfg.estimator, DT, np.zeros(4) + 1.0)
+    ukf = UnscentedKalmanFilter(ReducedModel(PLANT), CFG.estimator, DT, np.zeros(4) + 1.0)
     assert ukf.wm.sum() == pytest.approx(1.0)
     assert np.abs(ukf.wm).max() < 2.0 and np.abs(ukf.wc).max() < 3.0

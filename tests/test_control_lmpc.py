@@ -1,5 +1,7 @@
 """Linear MPC in closed loop on the reduced plant, reported beside NMPC and PID."""
 
+import dataclasses
+
 import numpy as np
 
 from trackmj.control.lmpc import LinearMpc
@@ -8,9 +10,15 @@ from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.ocp import X_SCALE
 from trackmj.control.params import load_config
 from trackmj.control.pid import PidController
+from trackmj.sim.config import nominal_plant_params
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
-CFG = load_config()
+# weight_input rescaled for the derived plant's tension-rate gain: see test_control_nmpc.py
+WEIGHT_INPUT_FOR_DERIVED_PLANT = 0.6
+_FILE = load_config()
+CFG = dataclasses.replace(
+    _FILE, mpc=dataclasses.replace(_FILE.mpc, weight_input=WEIGHT_INPUT_FOR_DERIVED_PLANT))
+PLANT = nominal_plant_params(control_config=CFG)
 
 
 def _step(t: float) -> float:
@@ -18,12 +26,12 @@ def _step(t: float) -> float:
 
 
 def _lmpc() -> LinearMpc:
-    return LinearMpc(ReducedModel(CFG.plant), CFG.controller, CFG.mpc)
+    return LinearMpc(ReducedModel(PLANT), CFG.controller, CFG.mpc)
 
 
 def test_step_12_to_15_kN_beside_nmpc_and_pid() -> None:
     """Same step, seed and loop for the three controllers; LMPC must meet the NMPC's bounds."""
-    model = ReducedModel(CFG.plant)
+    model = ReducedModel(PLANT)
     ctrls = {
         "LMPC": _lmpc(),
         "NMPC": NonlinearMpc(model, CFG.controller, CFG.mpc),
@@ -31,7 +39,7 @@ def test_step_12_to_15_kN_beside_nmpc_and_pid() -> None:
     }
     metrics = {}
     for name, ctrl in ctrls.items():
-        res = run_closed_loop(CFG, ctrl, _step, 3.0, seed=1)
+        res = run_closed_loop(CFG, PLANT, ctrl, _step, 3.0, seed=1)
         m = step_metrics(res, 0.2, 15e3)
         rmse = float(np.sqrt(np.mean((res.force - res.ref) ** 2)))
         metrics[name] = (m, res)
@@ -53,7 +61,7 @@ def test_lmpc_respects_pressure_bound_in_its_plan() -> None:
     """From 12 kN towards 15 kN, a p_max 0.05 MPa above the head pressure (~+0.13 kN) must
     cap the pressurize move of the unconstrained plan, and the planned pressures obey it."""
     ctrl = _lmpc()
-    x = ReducedModel(CFG.plant).equilibrium(12e3)
+    x = ReducedModel(PLANT).equilibrium(12e3)
     ref = np.full(CFG.mpc.horizon_steps + 1, 15e3)
     free = ctrl(x, ref, 0.0)
     capped = _lmpc()

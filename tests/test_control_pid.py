@@ -3,14 +3,16 @@
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import load_config
 from trackmj.control.pid import PidController
+from trackmj.sim.config import nominal_plant_params
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
 CFG = load_config()
+PLANT = nominal_plant_params(control_config=CFG)
 
 
 def test_pid_step_reaches_reference() -> None:
-    pid = PidController(ReducedModel(CFG.plant), CFG.controller, CFG.pid)
-    res = run_closed_loop(CFG, pid, lambda t: 12e3 if t < 0.2 else 15e3, 4.0, seed=1)
+    pid = PidController(ReducedModel(PLANT), CFG.controller, CFG.pid)
+    res = run_closed_loop(CFG, PLANT, pid, lambda t: 12e3 if t < 0.2 else 15e3, 4.0, seed=1)
     m = step_metrics(res, 0.2, 15e3)
     print(f"PID step: {m}, switches {res.switches}, Kc {pid.kc:.2e} 1/N, Ti {pid.ti:.2f} s")
     # with the dead band, hysteresis and conditional integration PID settles to +-2 % in

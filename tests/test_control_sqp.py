@@ -15,8 +15,10 @@ from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.ocp import X_SCALE, initial_guess
 from trackmj.control.params import load_config
 from trackmj.control.sqp import BETA, C1, MAX_ITER_LS, MIN_STEP
+from trackmj.sim.config import nominal_plant_params
 
 CFG = load_config()
+PLANT = nominal_plant_params(control_config=CFG)
 RTOL = 1e-6  # relative to max(1, |u|_inf), u scaled (valve opening)
 
 
@@ -50,7 +52,7 @@ def _sqpmethod(ctrl: NonlinearMpc) -> ca.Function:
 def _problems(ctrl: NonlinearMpc) -> dict[str, tuple[np.ndarray, np.ndarray, object]]:
     """(w0, p, lam_g0) as NonlinearMpc hands them to its SQP."""
     n, d, nb = CFG.mpc.horizon_steps, CFG.mpc.collocation_degree, ctrl.ocp.n_blocks
-    model = ReducedModel(CFG.plant)
+    model = ReducedModel(PLANT)
     x15 = model.equilibrium(15e3)
     ref15, ref18 = np.full(n + 1, 15e3), np.full(n + 1, 18e3)
     probs = {
@@ -76,7 +78,7 @@ def _problems(ctrl: NonlinearMpc) -> dict[str, tuple[np.ndarray, np.ndarray, obj
     return probs
 
 
-CTRL = NonlinearMpc(ReducedModel(CFG.plant), CFG.controller, CFG.mpc)
+CTRL = NonlinearMpc(ReducedModel(PLANT), CFG.controller, CFG.mpc)
 PROBLEMS = _problems(CTRL)
 REF = _sqpmethod(CTRL)
 

@@ -1,5 +1,6 @@
 """Valve logic: minimum holding time never violated, delay bookkeeping, sum-up rounding."""
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -7,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trackmj.control.params import ValveParams
+from trackmj.control.params import ValveParams, load_config
 from trackmj.control.valves import ValveLogic
 
 
@@ -60,14 +61,16 @@ def test_min_holding_time_never_violated(
 
 @pytest.mark.parametrize("u", [0.07, 0.2, 0.37, -0.55, 0.9])
 def test_sum_up_rounding_average_follows_u(u: float) -> None:
-    vl = ValveLogic(ValveParams(dead_zone=0.05, min_hold_s=0.03, solenoid_delay_s=0.02), 1e-3)
+    vl = ValveLogic(ValveParams(dead_zone=0.05, min_hold_s=0.03, solenoid_delay_s=0.02,
+                                sigma_delta=True), 1e-3)
     modes = np.array([vl.step(u) for _ in range(3000)])
     assert abs(modes[20:].mean() - u) < 0.02
     assert vl.switches < 3000 / 30 + 1
 
 
 def test_threshold_mode_and_dead_zone() -> None:
-    vl = ValveLogic(ValveParams(dead_zone=0.1, sigma_delta=False, solenoid_delay_s=0.0), 1e-3)
+    vl = ValveLogic(ValveParams(dead_zone=0.1, min_hold_s=0.03, solenoid_delay_s=0.0,
+                                sigma_delta=False), 1e-3)
     assert [vl.step(0.05) for _ in range(40)] == [0] * 40
     assert vl.step(0.5) == 1
     assert vl.step(-0.5) == 1  # still inside the minimum holding time
@@ -76,7 +79,9 @@ def test_threshold_mode_and_dead_zone() -> None:
 
 
 def test_invalid_parameters_named() -> None:
-    with pytest.raises(ValueError, match="min_hold_s"):
-        ValveParams(min_hold_s=-0.01)
+    valves = load_config().valves
+    with pytest.raises(ValueError, match=r"ValveParams\.min_hold_s = -0\.01 is outside the "
+                       r"allowed range \[0, 1\] s"):
+        dataclasses.replace(valves, min_hold_s=-0.01)
     with pytest.raises(ValueError, match="dt"):
-        ValveLogic(ValveParams(), 0.0)
+        ValveLogic(valves, 0.0)

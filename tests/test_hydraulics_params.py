@@ -12,7 +12,8 @@ from importlib.resources import files
 import pytest
 
 from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
-from trackmj.hydraulics.params import params_from_dict
+from trackmj.hydraulics.params import HydraulicParams
+from trackmj.params import ParameterError, build
 from trackmj.ports import TensionerElement
 
 
@@ -30,11 +31,15 @@ def test_packaged_file_loads_with_sizing_sheet_values() -> None:
 
 
 def test_every_table_states_its_source() -> None:
-    for name, table in _doc().items():
-        if name == "profiles":
-            assert all("source" in t for t in table.values())
-        else:
-            assert "source" in table, name
+    """Every table's source is kept (table path -> source), and one missing is refused."""
+    p = load_hydraulic_params()
+    doc = _doc()
+    expected = {name: table["source"] for name, table in doc.items() if name != "profiles"}
+    expected |= {f"profiles.{k}": t["source"] for k, t in doc["profiles"].items()}
+    assert dict(p.sources) == expected
+    del doc["relief"]["source"]
+    with pytest.raises(ParameterError, match=r"h\.toml \[relief\]: missing key 'source'"):
+        build(HydraulicParams, doc, file="h.toml")
 
 
 def test_importing_the_plugin_does_not_import_mujoco() -> None:
@@ -47,34 +52,77 @@ def test_importing_the_plugin_does_not_import_mujoco() -> None:
 @pytest.mark.parametrize(
     ("table", "key", "value", "needle"),
     [
-        ("fluid", "bulk_modulus_Pa", 0.0, "bulk_modulus_Pa"),
-        ("fluid", "bulk_modulus_Pa", -1e9, "bulk_modulus_Pa"),
-        ("fluid", "density_kg_m3", float("nan"), "density_kg_m3"),
-        ("cylinder", "dead_volume_head_m3", 0.0, "dead_volume_head_m3"),
-        ("cylinder", "dead_volume_rod_m3", -1e-4, "dead_volume_rod_m3"),
-        ("orifice", "discharge_coefficient", 0.0, "discharge_coefficient"),
-        ("orifice", "discharge_coefficient", 1.2, "discharge_coefficient"),
-        ("cylinder", "area_head_m2", -1e-3, "area_head_m2"),
-        ("cylinder", "area_rod_m2", 2e-3, "area_rod_m2"),
-        ("metering", "head_branch_area_m2", -1e-7, "head_branch_area_m2"),
-        ("main_valve", "leak_area_m2", -1e-9, "leak_area_m2"),
-        ("accumulator", "polytropic_exponent", 0.9, "polytropic_exponent"),
-        ("supply", "mode", "pump", "mode"),
+        ("fluid", "bulk_modulus_Pa", 0.0, r"\[fluid\]\.bulk_modulus_Pa = 0\.0 is outside the "
+         r"allowed range \(0, 1e\+11\] Pa"),
+        ("fluid", "bulk_modulus_Pa", -1e9,
+         r"\[fluid\]\.bulk_modulus_Pa = -1000000000\.0 is outside"),
+        ("fluid", "bulk_modulus_Pa", True, r"\[fluid\]\.bulk_modulus_Pa = True: expected a number, "
+         r"got a boolean"),
+        ("fluid", "bulk_modulus_Pa", "1.4e9", r"\[fluid\]\.bulk_modulus_Pa = '1\.4e9': expected a "
+         r"number, got a string"),
+        ("fluid", "density_kg_m3", float("nan"), r"\[fluid\]\.density_kg_m3 = nan: must be finite"),
+        ("cylinder", "dead_volume_head_m3", 0.0, r"\[cylinder\]\.dead_volume_head_m3 = 0\.0 is"),
+        ("cylinder", "dead_volume_rod_m3", -1e-4,
+         r"\[cylinder\]\.dead_volume_rod_m3 = -0\.0001 is"),
+        ("orifice", "discharge_coefficient", 0.0, r"\[orifice\]\.discharge_coefficient = 0\.0 is "
+         r"outside the allowed range \(0, 1\]$"),
+        ("orifice", "discharge_coefficient", 1.2, r"\[orifice\]\.discharge_coefficient = 1\.2 is"),
+        ("cylinder", "area_head_m2", -1e-3, r"\[cylinder\]\.area_head_m2 = -0\.001 is outside"),
+        ("cylinder", "area_rod_m2", 2e-3, r"\[cylinder\]\.area_rod_m2 = 0\.002 must be < "
+         r"area_head_m2 = 0\.0012566"),
+        ("metering", "head_branch_area_m2", -1e-7, r"\[metering\]\.head_branch_area_m2 = -1e-07"),
+        ("main_valve", "leak_area_m2", -1e-9, r"\[main_valve\]\.leak_area_m2 = -1e-09 is outside"),
+        ("main_valve", "leak_area_m2", 1e-3, r"\[main_valve\]\.leak_area_m2 = 0\.001 must be <= "
+         r"open_area_m2 = 0\.0001"),
+        ("relief", "full_open_Pa", 11e6, r"\[relief\]\.full_open_Pa = 11000000\.0 must be > "
+         r"crack_Pa = 12000000\.0"),
+        ("accumulator", "polytropic_exponent", 0.9, r"\[accumulator\]\.polytropic_exponent = 0\.9"),
+        ("supply", "mode", "pump", r"\[supply\]\.mode = 'pump' is not one of \['accumulator', "
+         r"'prescribed'\]"),
+        ("coupling", "newton_max_iter", 30.0, r"\[coupling\]\.newton_max_iter = 30\.0: expected an "
+         r"integer, got a float"),
+        ("lines", "line_a_volume_m3", [5e-5],
+         r"\[lines\]\.line_a_volume_m3 = \[5e-05\]: expected a number, got an array"),
+        ("fluid", "bulk_modulus_Paa", 1.4e9, r"\[fluid\]: unknown key 'bulk_modulus_Paa'; did you "
+         r"mean 'bulk_modulus_Pa'\?"),
     ],
 )
-def test_bad_parameter_raises_naming_it(table: str, key: str, value: object,
-                                        needle: str) -> None:
+def test_bad_parameter_raises_naming_file_table_and_key(table: str, key: str, value: object,
+                                                        needle: str) -> None:
+    """The issue's cases: a misspelt key, ``true`` and a string for a number are refused."""
     doc = _doc()
     doc[table][key] = value
-    with pytest.raises(ValueError, match=needle):
-        params_from_dict(doc)
+    with pytest.raises(ParameterError, match=r"^h\.toml " + needle):
+        build(HydraulicParams, doc, file="h.toml")
 
 
-def test_missing_key_is_named() -> None:
+def test_missing_key_table_and_profile_order_are_named() -> None:
     doc = _doc()
     del doc["cylinder"]["stroke_max_m"]
-    with pytest.raises(ValueError, match="stroke_max_m"):
-        params_from_dict(doc)
+    with pytest.raises(ParameterError, match=r"h\.toml \[cylinder\]: missing key 'stroke_max_m' "
+                       r"\(a number, m, range \(0, 10\]\)"):
+        build(HydraulicParams, doc, file="h.toml")
+    doc = _doc()
+    del doc["tank"]
+    with pytest.raises(ParameterError, match=r"h\.toml: missing table \[tank\]"):
+        build(HydraulicParams, doc, file="h.toml")
+    doc = _doc()
+    doc["profiles"]["W4"]["times_s"] = [0.0, 12.0, 12.0, 20.0, 20.1]
+    with pytest.raises(ParameterError, match=r"h\.toml \[profiles\.W4\]\.times_s\[2\] = 12\.0 "
+                       r"must be > times_s\[1\] = 12\.0 \(strictly increasing\)"):
+        build(HydraulicParams, doc, file="h.toml")
+
+
+def test_code_construction_is_checked_too() -> None:
+    """``dataclasses.replace`` runs the same checks (named after the class), and integers
+    given for floats are stored as floats."""
+    p = load_hydraulic_params()
+    with pytest.raises(ParameterError, match=r"^Fluid\.bulk_modulus_Pa = True: expected a number"):
+        dataclasses.replace(p.fluid, bulk_modulus_Pa=True)
+    with pytest.raises(ParameterError, match=r"^Cylinder\.area_rod_m2 = 0\.002 must be < "):
+        dataclasses.replace(p.cylinder, area_rod_m2=2e-3)
+    fluid = dataclasses.replace(p.fluid, density_kg_m3=860)
+    assert type(fluid.density_kg_m3) is float
 
 
 def test_dataclasses_are_frozen() -> None:

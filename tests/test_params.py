@@ -25,7 +25,8 @@ def test_out_of_range_value_names_key_and_range(tmp_path) -> None:
 
 def test_nan_value_is_rejected(tmp_path) -> None:
     path = _variant(tmp_path, "mass_kg = 1200.0", "mass_kg = nan")
-    with pytest.raises(ParameterError, match=r"\[chassis\]\.mass_kg: must be finite"):
+    with pytest.raises(ParameterError, match=r"variant\.toml \[chassis\]\.mass_kg = nan: must be "
+                       r"finite"):
         load_model_params(path)
 
 
@@ -36,15 +37,46 @@ def test_malformed_toml_names_file(tmp_path) -> None:
 
 
 def test_unknown_and_missing_keys(tmp_path) -> None:
-    with pytest.raises(ParameterError, match=r"unknown key.*'pitch_mm'"):
+    with pytest.raises(ParameterError, match=r"variant\.toml \[track\]: unknown key 'pitch_mm'; "
+                       r"did you mean 'pitch_m'\?"):
         load_model_params(_variant(tmp_path, "pitch_m =", "pitch_mm ="))
-    with pytest.raises(ParameterError, match=r"missing table \[ground\]"):
+    with pytest.raises(ParameterError, match=r"variant\.toml: unknown table \[grund\]; did you "
+                       r"mean 'ground'\?"):
         load_model_params(_variant(tmp_path, "[ground]", "[grund]"))
+    with pytest.raises(ParameterError, match=r"variant\.toml \[track\]: missing key 'pitch_m' "
+                       r"\(a number, m, range \(0\.02, 0\.3\]\): pin-to-pin distance"):
+        load_model_params(_variant(tmp_path, "pitch_m = 0.075", ""))
+
+
+def test_solver_choices_and_integer_counts(tmp_path) -> None:
+    with pytest.raises(ParameterError, match=r"\[solver\]\.jacobian = 'fast' is not one of "
+                       r"\['dense', 'sparse', 'auto'\]"):
+        load_model_params(_variant(tmp_path, 'jacobian = "dense"', 'jacobian = "fast"'))
+    with pytest.raises(ParameterError, match=r"\[track\]\.link_count = 82\.0: expected an "
+                       r"integer, got a float"):
+        load_model_params(_variant(tmp_path, "link_count = 82", "link_count = 82.0"))
+    with pytest.raises(ParameterError, match=r"\[solver\]\.warmstart = 0: expected true or "
+                       r"false, got an integer"):
+        load_model_params(_variant(tmp_path, "warmstart = false", "warmstart = 0"))
 
 
 def test_wrong_link_count_is_rejected(tmp_path) -> None:
-    with pytest.raises(ParameterError, match=r"link_count = 80.*exactly 82"):
+    with pytest.raises(ParameterError, match=r"variant\.toml \[track\]\.link_count = 80 but the "
+                       r"LF1352 model .*needs exactly 82"):
         load_model_params(_variant(tmp_path, "link_count = 82", "link_count = 80"))
+
+
+def test_cross_field_checks_name_file_table_and_key(tmp_path) -> None:
+    with pytest.raises(ParameterError, match=r"variant\.toml \[road_wheels\]\.x_m = \[-0\.75, .*\] "
+                       r"has 6 entries, count = 5"):
+        load_model_params(_variant(tmp_path, "count = 6", "count = 5"))
+    with pytest.raises(ParameterError, match=r"variant\.toml \[idler\]\.slide_range_m = "
+                       r"\[0\.01, 0\.05\] must bracket 0"):
+        load_model_params(_variant(tmp_path, "slide_range_m = [-0.05, 0.05]",
+                                   "slide_range_m = [0.01, 0.05]"))
+    with pytest.raises(ParameterError, match=r"--set model\.simulation\.timestep_s = 0\.0003 must "
+                       r"divide the 1 ms coupling step"):
+        load_model_params(overrides={"simulation.timestep_s": 3e-4})
 
 
 def test_cli_reports_bad_file_without_traceback(tmp_path, capsys) -> None:

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from trackmj.params import ParameterError
-from trackmj.scenarios import load_scenario, scenario_path
+from trackmj.params import ParameterError, parse_overrides
+from trackmj.scenarios import NOMINAL, load_scenario, scenario_path
 from trackmj.terrain import band_rms_m
 
 
@@ -114,87 +116,224 @@ def test_metric_windows_follow_a_shorter_duration() -> None:
 
 def _bad(tmp_path, old: str, new: str, base: str = "W1"):
     text = scenario_path(base).read_text()
-    assert old in text
+    assert old in text, old
     path = tmp_path / "bad.toml"
     path.write_text(text.replace(old, new, 1))
     return path
 
 
-@pytest.mark.parametrize(
-    ("old", "new", "message"),
-    [
-        (
-            "duration_s = 30.0",
-            "duration_s = -1.0",
-            r"bad\.toml \[scenario\]\.duration_s = -1\.0 is outside the allowed range \(0, 3600\]",
-        ),
-        (
-            'controller = "nmpc"',
-            'controller = "mpcc"',
-            r"\[scenario\]\.controller = 'mpcc' is not one of \['nmpc', 'lmpc', 'pid'\]",
-        ),
-        ("seeds = [0, 1, 2, 3, 4]", "seeds = [0, 1.5]", r"\[scenario\]\.seeds"),
-        (
-            "initial_N = 12.0e3",
-            "initial_n = 12.0e3",
-            r"bad\.toml \[reference\]: unknown key.*'initial_n'",
-        ),
-        (
-            "rate_N_s = 50.0",
-            "rate_N_s = 5.0e4",
-            r"\[\[reference\.ramps\]\]\[0\]\.rate_N_s = 50000\.0 is outside",
-        ),
-        ("nominal_Pa = 12.0e6", "nominal_Pa = nan", r"\[supply\]\.nominal_Pa: must be finite"),
-        ('kind = "flat"', 'kind = "bumpy"', r"\[terrain\]\.kind = 'bumpy' is not one of"),
-        (
-            "force_max_N = 20.0e3",
-            "force_max_N = 5.0e3",
-            r"\[limits\]\.force_max_N = 5000\.0 must be > force_min_N",
-        ),
-        ("[evaluation]", "[evaluaton]", r"unknown table\(s\) \['evaluaton'\]"),
-        (
-            "time_s = 3.0",
-            'time_s = "3"',
-            r"\[\[reference\.steps\]\]\[0\]\.time_s: expected a number",
-        ),
-    ],
-)
-def test_bad_files_name_file_and_key(tmp_path, old: str, new: str, message: str) -> None:
+# (base file, text replaced, replacement, expected message fragment (regex)); each file is
+# refused by load_scenario, i.e. before any model or run is built
+MALFORMED = [
+    ("W1", "duration_s = 30.0", "duration_s = -1.0",
+     r"^bad\.toml \[scenario\]\.duration_s = -1\.0 is outside the allowed range "
+     r"\[0\.001, 3600\] s$"),
+    ("W1", "duration_s = 30.0", "duration_s = 0.0005",      # shorter than one 1 ms step
+     r"\[scenario\]\.duration_s = 0\.0005 is outside the allowed range \[0\.001, 3600\]"),
+    ("W1", "duration_s = 30.0", 'duration_s = "30"',
+     r"\[scenario\]\.duration_s = '30': expected a number, got a string"),
+    ("W1", 'name = "W1"', 'name = "../../etc/W1"',           # would write outside runs/
+     r"\[scenario\]\.name = '\.\./\.\./etc/W1' must match .*not starting with '\.'"),
+    ("W1", 'name = "W1"', 'name = "a/b"', r"\[scenario\]\.name = 'a/b' must match"),
+    ("W1", 'name = "W1"', 'name = ".hidden"', r"\[scenario\]\.name = '\.hidden' must match"),
+    ("W1", 'name = "W1"', 'name = ""', r"\[scenario\]\.name = '' must match"),
+    ("W1", 'name = "W1"', f'name = "{"x" * 300}"',
+     r"\[scenario\]\.name = 'x+\.\.\. is 300 characters long; at most 64 allowed"),
+    ("W1", 'name = "W1"', "name = 1", r"\[scenario\]\.name = 1: expected a string, got an integer"),
+    ("W1", 'title = "constant-tension tracking"', 'title = " "',
+     r"\[scenario\]\.title = ' ' must be one non-empty line"),
+    ("W1", 'controller = "nmpc"', 'controller = "mpcc"',
+     r"\[scenario\]\.controller = 'mpcc' is not one of \['nmpc', 'lmpc', 'pid'\]"),
+    ("W1", 'estimator = "ekf"', 'estimator = "kf"',
+     r"\[scenario\]\.estimator = 'kf' is not one of \['ekf', 'ukf'\]"),
+    ("W1", "seeds = [0, 1, 2, 3, 4]", "seeds = [0, 1.5]",
+     r"\[scenario\]\.seeds\[1\] = 1\.5: expected an integer, got a float"),
+    ("W1", "seeds = [0, 1, 2, 3, 4]", "seeds = []",
+     r"\[scenario\]\.seeds = \[\]: expected a non-empty array of integers, got an empty array"),
+    ("W1", "seeds = [0, 1, 2, 3, 4]", "seeds = [-1]",
+     r"\[scenario\]\.seeds\[0\] = -1 is outside the allowed range \[0, 4294967295\]$"),
+    ("W1", "seeds = [0, 1, 2, 3, 4]", "seeds = [3, 3]",
+     r"\[scenario\]\.seeds = \[3, 3\] lists a seed twice"),
+    ("W1", "seeds = [0, 1, 2, 3, 4]", "seeds = 3",
+     r"\[scenario\]\.seeds = 3: expected a non-empty array of integers, got an integer"),
+    ("W1", 'name = "W1"\n', "",
+     r"^bad\.toml \[scenario\]: missing key 'name' \(a string\)"),
+    ("W1", "speed_m_s = 1.5", "speed_m_s = [1.5, 2.0]",   # failed after the model was built
+     r"\[track\]\.speed_m_s = \[1\.5, 2\.0\]: expected a number, got an array"),
+    ("W1", "speed_m_s = 1.5", "speed_m_s = true",
+     r"\[track\]\.speed_m_s = True: expected a number, got a boolean"),
+    ("W1", "speed_m_s = 1.5", "speed_m_s = 7.5",
+     r"\[track\]\.speed_m_s = 7\.5 is outside the allowed range \[0, 5\] m/s"),
+    ("W1", "speed_m_s = 1.5", "speed_m_s = inf", r"\[track\]\.speed_m_s = inf: must be finite"),
+    ("W1", "[track]", "[trak]",
+     r"^bad\.toml: unknown table \[trak\]; did you mean 'track'\?"),
+    ("W1", "initial_N = 12.0e3", "initial_n = 12.0e3",
+     r"^bad\.toml \[reference\]: unknown key 'initial_n'; did you mean 'initial_N'\?"),
+    ("W1", "rate_N_s = 50.0", "rate_N_s = 5.0e4",
+     r"\[\[reference\.ramps\]\]\[0\]\.rate_N_s = 50000\.0 is outside the allowed range "
+     r"\[-5000, 5000\] N/s"),
+    ("W1", "rate_N_s = 50.0", "rate_N_s = 5.0e3",            # 15 kN + 5 kN/s for 15 s
+     r"^bad\.toml \[reference\]: F_ref reaches 90000 N at t = 30 s; it must stay in "
+     r"\[0, 50000\] N over the run"),
+    ("W1", "rate_N_s = 50.0", "rate_N_s = 50.0\nend_s = 10.0",
+     r"\[\[reference\.ramps\]\]\[0\]\.end_s = 10\.0 must be > start_s = 15\.0"),
+    ("W1", "time_s = 3.0", 'time_s = "3"',
+     r"\[\[reference\.steps\]\]\[0\]\.time_s = '3': expected a number, got a string"),
+    ("W1", "time_s = 3.0", "time_s = 30.0",
+     r"\[\[reference\.steps\]\]\[0\]\.time_s = 30\.0 is at or after the end of the run "
+     r"\(\[scenario\]\.duration_s = 30\.0\)"),
+    ("W1", "nominal_Pa = 12.0e6", "nominal_Pa = nan",
+     r"\[supply\]\.nominal_Pa = nan: must be finite"),
+    ("W1", "nominal_Pa = 12.0e6", 'nominal_Pa = "12 MPa"',
+     r"\[supply\]\.nominal_Pa = '12 MPa': expected a number, got a string"),
+    ("W1", 'mode = "accumulator"', 'mode = "pump"',
+     r"\[supply\]\.mode = 'pump' is not one of \['accumulator', 'prescribed'\]"),
+    ("W1", 'kind = "flat"', 'kind = "bumpy"',
+     r"\[terrain\]\.kind = 'bumpy' is not one of \['flat', 'iso8608'\]"),
+    ("W1", "force_max_N = 20.0e3", "force_max_N = 5.0e3",
+     r"\[limits\]\.force_max_N = 5000\.0 must be > force_min_N = 10000\.0"),
+    ("W1", "[evaluation]", "[evaluaton]", r"^bad\.toml: unknown table \[evaluaton\]"),
+    ("W1", "[limits]\nforce_min_N = 10.0e3", "force_min_N = 10.0e3",   # keys land in [terrain]
+     r"^bad\.toml \[terrain\]: unknown key 'force_min_N'"),
+    ("W1", "start_s = 1.0                # tracking", "start_s = 30.0  # tracking",
+     r"\[evaluation\]\.start_s = 30\.0 is at or after the end of the run"),  # all metrics null
+    ("W1", "steady_start_s = 5.0", "steady_start_s = 45.0",
+     r"\[evaluation\]\.steady_start_s = 45\.0 is at or after the end of the run"),
+    ("W1", "settle_band_rel = 0.02", "settle_band_rel = 0.0",
+     r"\[evaluation\]\.settle_band_rel = 0\.0 is outside the allowed range \(0, 0\.5\]$"),
+    ("W2", 'road_class = "D"', 'road_class = "K"',
+     r"\[terrain\]\.road_class = 'K' is not one of \['A', 'B', "),
+    ("W2", 'road_class = "D"\n', "",
+     r"^bad\.toml \[terrain\]: missing key 'road_class' \(needed for kind = 'iso8608'\)"),
+    ("W2", "n_max_cycles_m = 10.0", "n_max_cycles_m = 30.0",
+     r"\[terrain\]\.n_max_cycles_m = 30\.0 exceeds the grid's Nyquist 1/\(2 dx_m\) = 20"),
+    ("W2", "n_max_cycles_m = 10.0", "n_max_cycles_m = 0.4",
+     r"\[terrain\]\.n_max_cycles_m = 0\.4 must be > n_min_cycles_m = 0\.5"),
+    ("W3", "end_s = 8.0", "end_s = 5.0",
+     r"\[\[load_pulses\]\]\[0\]\.end_s = 5\.0 must be > start_s = 6\.0"),
+    ("W3", "end_s = 8.0", "end_s = 6.05",
+     r"\[\[load_pulses\]\]\[0\]\.rise_s = 0\.1 is longer than the window end_s - start_s = "
+     r"0\.05 s"),
+    ("W3", "start_s = 18.0\nend_s = 20.0", "start_s = 38.0\nend_s = 40.0",
+     r"\[\[load_pulses\]\]\[1\]\.start_s = 38\.0 is at or after the end of the run"),
+    ("W3", "hitch_N = -3805.0", "hitch_N = -3.5e4",
+     r"\[\[load_pulses\]\]\[0\]\.hitch_N = -35000\.0 is outside the allowed range "
+     r"\[-30000, 30000\] N"),
+    ("W1", "[scenario]", "load_pulses = 5\n[scenario]",
+     r"^bad\.toml: load_pulses = 5: expected an array of tables \[\[load_pulses\]\]"),
+    ("W1", "[scenario]", "track = 1.5\n[scenario]\n", r"^bad\.toml: malformed TOML"),
+    ("W1", "[track]\n", "[track]\n[track.fast]\n",
+     r"^bad\.toml \[track\]: unknown key 'fast'"),
+    ("W4", 'mode = "prescribed"', 'mode = "accumulator"',
+     r"\[supply\]\.mode = 'accumulator' but \[\[supply\.drops\]\] need mode = 'prescribed'"),
+    ("W4", "transition_s = 0.1", "transition_s = 0.1\n\n[[supply.drops]]\nstart_s = 15.0\n"
+     "end_s = 25.0\npressure_Pa = 10e6\ntransition_s = 0.1",
+     r"\[\[supply\.drops\]\]\[1\]\.start_s = 15\.0 overlaps the drop from 12\.0 to 20\.1 s"),
+    ("W4", "transition_s = 0.1", "transition_s = 9.0",
+     r"\[\[supply\.drops\]\]\[0\]\.transition_s = 9\.0 is outside the allowed range \[0, 5\] s"),
+    ("W4", "end_s = 20.0", "end_s = 12.05",
+     r"\[\[supply\.drops\]\]\[0\]\.transition_s = 0\.1 is longer than the window"),
+    ("W5", 'name = "nominal"', 'name = "base"',
+     r"^bad\.toml \[\[variants\]\]: one variant must be name = 'nominal' with every scale 1"),
+    ("W5", 'name = "friction_0.8"', 'name = "friction_1.2"',
+     r"\[\[variants\]\]\[4\]\.name = 'friction_1\.2' is used twice"),
+    ("W5", 'name = "friction_0.8"', 'name = "../friction"',
+     r"\[\[variants\]\]\[3\]\.name = '\.\./friction' must match"),
+    ("W5", "friction_scale = 0.8", "friction_scale = 0.3",
+     r"\[\[variants\]\]\[3\]\.friction_scale = 0\.3 is outside the allowed range \[0\.5, 2\]"),
+    ("W5", "friction_scale = 0.8", "friction_scal = 0.8",
+     r"\[\[variants\]\]\[3\]: unknown key 'friction_scal'; did you mean 'friction_scale'\?"),
+]
+
+
+@pytest.mark.parametrize(("base", "old", "new", "message"), MALFORMED,
+                         ids=[f"{b}:{n[:30]}" for b, _, n, _ in MALFORMED])
+def test_malformed_scenarios_are_refused_naming_file_table_and_key(
+        tmp_path, base: str, old: str, new: str, message: str) -> None:
     with pytest.raises(ParameterError, match=message):
-        load_scenario(_bad(tmp_path, old, new))
+        load_scenario(_bad(tmp_path, old, new, base))
 
 
-def test_bad_w2_class_and_band(tmp_path) -> None:
-    with pytest.raises(ParameterError, match=r"road_class = 'K' is not one of"):
-        load_scenario(_bad(tmp_path, 'road_class = "D"', 'road_class = "K"', "W2"))
-    with pytest.raises(ParameterError, match=r"n_max_cycles_m = 30\.0 exceeds the grid"):
-        load_scenario(_bad(tmp_path, "n_max_cycles_m = 10.0", "n_max_cycles_m = 30.0", "W2"))
-
-
-def test_bad_w3_w4_windows(tmp_path) -> None:
-    with pytest.raises(
-        ParameterError,
-        match=r"\[\[load_pulses\]\]\[0\]\.end_s = 5\.0 must be > "
-        r"start_s = 6\.0",
-    ):
-        load_scenario(_bad(tmp_path, "end_s = 8.0", "end_s = 5.0", "W3"))
-    with pytest.raises(ParameterError, match=r"\[supply\]\.mode = 'accumulator': \[\[supply"):
-        load_scenario(_bad(tmp_path, 'mode = "prescribed"', 'mode = "accumulator"', "W4"))
-
-
-def test_missing_file_and_malformed_toml(tmp_path) -> None:
-    with pytest.raises(ParameterError, match="not found"):
+def test_unreadable_files_are_refused_naming_the_file(tmp_path) -> None:
+    with pytest.raises(ParameterError, match=r"scenario file not found: .*nope\.toml \(built-in "
+                       r"scenarios: W1, W2, W3, W4, W5\)"):
         load_scenario(tmp_path / "nope.toml")
     with pytest.raises(ParameterError, match=r"bad\.toml: malformed TOML"):
         load_scenario(_bad(tmp_path, "[track]", "[track"))
+    with pytest.raises(ParameterError, match=r": is a directory, not a TOML file"):
+        load_scenario(tmp_path)
+    binary = tmp_path / "run.parquet"
+    binary.write_bytes(b"PAR1\x00\x15\x04" + bytes(range(256)))
+    with pytest.raises(ParameterError, match=r"run\.parquet: not a text file \(NUL byte at "
+                       r"offset 4\)"):
+        load_scenario(binary)
+    latin1 = tmp_path / "latin1.toml"
+    latin1.write_bytes('[scenario]\ntitle = "Spannung f\u00fcr W1"\n'.encode("latin-1"))
+    with pytest.raises(ParameterError, match=r"latin1\.toml: not UTF-8 text \(byte 0xfc at "
+                       r"offset 30\); save the file as UTF-8"):
+        load_scenario(latin1)
+    bom = tmp_path / "bom.toml"            # a UTF-8 byte-order mark (Windows editors) is fine
+    bom.write_bytes(b"\xef\xbb\xbf" + scenario_path("W1").read_bytes())
+    assert load_scenario(bom).name == "W1"
 
 
-def test_custom_minimal_file_gets_defaults(tmp_path) -> None:
+def test_missing_required_table_is_named(tmp_path) -> None:
+    text = scenario_path("W1").read_text()
+    cut = text.index("[limits]")
     path = tmp_path / "mine.toml"
-    path.write_text('[scenario]\nname = "mine"\n[reference]\ninitial_N = 14e3\n')
+    path.write_text(text[:cut] + text[text.index("[evaluation]"):])
+    with pytest.raises(ParameterError, match=r"^mine\.toml: missing table \[limits\]$"):
+        load_scenario(path)
+
+
+def test_custom_file_with_every_table_loads(tmp_path) -> None:
+    """A custom condition: arrays of tables are optional, flat terrain needs only its kind,
+    variants default to the nominal one, and an open ramp runs to the end."""
+    path = tmp_path / "mine.toml"
+    path.write_text('[scenario]\nname = "mine"\ntitle = "my ramp"\nduration_s = 8\n'
+                    'seeds = [7]\ncontroller = "pid"\nestimator = "ukf"\n'
+                    "[track]\nspeed_m_s = 1\nramp_s = 0.5\n"
+                    "[reference]\ninitial_N = 14e3\n"
+                    "[[reference.ramps]]\nstart_s = 2.0\nrate_N_s = 100.0\n"
+                    '[supply]\nmode = "accumulator"\nnominal_Pa = 12e6\n'
+                    '[terrain]\nkind = "flat"\n'
+                    "[limits]\nforce_min_N = 10e3\nforce_max_N = 20e3\n"
+                    "[evaluation]\nstart_s = 1.0\nsteady_start_s = 4.0\nsettle_band_rel = 0.02\n"
+                    "min_hold_s = 0.5\n")
     s = load_scenario(path)
-    assert s.duration_s == 30.0 and s.track.speed_m_s == 1.5 and s.terrain.kind == "flat"
-    assert s.variants[0].name == "nominal" and s.reference_N(10.0) == 14e3
+    assert (s.duration_s, s.seeds, s.controller, s.estimator) == (8.0, (7,), "pid", "ukf")
+    assert type(s.duration_s) is float and type(s.track.speed_m_s) is float
+    assert s.variants == (NOMINAL,) and s.load_pulses == () and s.terrain_profile(0) is None
+    np.testing.assert_allclose(s.reference_N([0.0, 2.0, 8.0]), [14e3, 14e3, 14.6e3])
+
+
+def test_overrides_change_the_loaded_scenario_and_are_checked() -> None:
+    sets = parse_overrides(["scenario.track.speed_m_s=2", "scenario.load_pulses.0.hitch_N=-15000",
+                            "scenario.scenario.controller=pid", "scenario.scenario.seeds=[9]"])
+    s = load_scenario("W3", overrides=sets["scenario"])
+    assert s.track.speed_m_s == 2.0 and s.load_pulses[0].hitch_N == -15000.0
+    assert (s.controller, s.seeds) == ("pid", (9,))
+    assert s.load_pulses[1] == load_scenario("W3").load_pulses[1]
+    w2 = load_scenario("W2", overrides={"terrain.kind": "flat"})
+    assert w2.terrain_profile(0) is None
+    with pytest.raises(ParameterError, match=r"^--set scenario\.load_pulses\.2\.hitch_N: index "
+                       r"'2' is out of range; \[load_pulses\] has 2 entries$"):
+        load_scenario("W3", overrides={"load_pulses.2.hitch_N": 1.0})
+    with pytest.raises(ParameterError, match=r"^--set scenario\.track\.speed_m_s = 9\.0 is outside "
+                       r"the allowed range \[0, 5\] m/s$"):
+        load_scenario("W1", overrides={"track.speed_m_s": 9.0})
+    with pytest.raises(ParameterError, match=r"^--set scenario\.trak\.speed_m_s: the file has no "
+                       r"key 'trak'; did you mean 'track'\?"):
+        load_scenario("W1", overrides={"trak.speed_m_s": 2.0})
+
+
+def test_replace_runs_the_same_checks() -> None:
+    s = load_scenario("W3")
+    late = dataclasses.replace(s.load_pulses[0], start_s=31.0, end_s=32.0)
+    with pytest.raises(ParameterError, match=r"^Scenario 'W3' \[\[load_pulses\]\]\[0\]\.start_s = "
+                       r"31\.0 is at or after the end of the run"):
+        dataclasses.replace(s, load_pulses=(late,))
+    assert dataclasses.replace(s, load_pulses=()).load_pulses == ()
 
 
 def test_w4_windows_give_dip_and_recovery_from_compute_metrics() -> None:

@@ -207,7 +207,7 @@ def band_rms(t: np.ndarray, x: np.ndarray, f_low: float = 8.0, f_high: float = 1
     xx = np.asarray(x, dtype=float)[m]
     if len(xx) < 8:
         return math.nan
-    from scipy.signal import welch   # imported here: scipy.signal costs ~0.3 s to import
+    from scipy.signal import welch  # imported here: scipy.signal costs ~0.3 s to import
 
     fs = 1.0 / sample_period(t)
     nperseg = min(len(xx), round(fs / resolution_hz))

@@ -1,49 +1,63 @@
 """Operating conditions W1-W5 as frozen dataclasses loaded from TOML.
 
 ``load_scenario("W1")`` reads ``experiments/W1.toml`` from the installed package
-``trackmj.experiments``; any other argument is a path to a custom file. Invalid files raise
-:class:`~trackmj.params.ParameterError` naming the file, the key and the allowed range or
-values. Units are SI: s, N, Pa, m/s; forces are F_ten (the cylinder force on the idler
-carrier, see README "Tension convention").
+``trackmj.experiments``; any other argument is a path to a custom file. The file is read by
+the one validator (:mod:`trackmj.params`) into :class:`ScenarioFile`, whose tables mirror
+the file; invalid files raise :class:`~trackmj.params.ParameterError` naming the file, the
+table, the key, the value and the allowed range or choices, before anything is built.
+Units are SI: s, N, Pa, m/s; forces are F_ten (the cylinder force on the idler carrier, see
+README "Tension convention").
 
-File layout (every table optional except ``[scenario]`` and ``[reference]``)::
+File layout; every table is required, the arrays of tables are optional (a condition has
+no steps, ramps, drops, pulses or variants unless it lists them)::
 
     [scenario]    name, title, duration_s, seeds, controller, estimator
     [track]       speed_m_s, ramp_s
     [reference]   initial_N; [[reference.steps]] time_s, delta_N;
-                  [[reference.ramps]] start_s, rate_N_s, end_s
+                  [[reference.ramps]] start_s, rate_N_s, end_s (optional: to the end)
     [supply]      mode, nominal_Pa; [[supply.drops]] start_s, end_s, pressure_Pa, transition_s
-    [terrain]     kind, road_class, n_min_cycles_m, n_max_cycles_m, dx_m, x_start_m,
-                  flat_until_m, taper_m, margin_m
+    [terrain]     kind; for kind = "iso8608" also road_class, n_min_cycles_m, n_max_cycles_m,
+                  dx_m, x_start_m, flat_until_m, taper_m, margin_m (for "flat" they are
+                  optional and unused, so ``--set scenario.terrain.kind=flat`` works on W2)
     [[load_pulses]] start_s, end_s, delta_N, hitch_N, pull_angle_deg, rise_s
     [[variants]]  name, bulk_modulus_scale, friction_scale, contact_stiffness_scale,
-                  pretension_scale
+                  pretension_scale (each scale optional, default 1: a variant names only
+                  what it changes; if variants are listed one must be "nominal")
     [limits]      force_min_N, force_max_N
     [evaluation]  start_s, steady_start_s, settle_band_rel, min_hold_s
+
+Time windows must lie in the run: steps, ramp, drop and pulse starts and the evaluation
+starts before ``duration_s``; each drop's and pulse's edges fit inside its window; drops do
+not overlap; F_ref stays in [0, 50 kN]. The scenario ``name`` names the run directories, so
+it is a short identifier (letters, digits, ``_ . -``, not starting with a dot, at most 64
+characters). Tables may carry a ``source`` string; unlike parameter files they need not.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
 from trackmj.metrics import MetricWindows
-from trackmj.params import ParameterError, load_table, param, read_toml, validate
+from trackmj.params import Location, ParameterError, Parameters, construct, load_file, param
+from trackmj.ports import COUPLING_STEP_S
+from trackmj.sim.registry import CONTROLLERS, ESTIMATORS, choices
 from trackmj.terrain import ISO8608_GD_N0_M3, RoadProfile, road_profile, taper_start
 
 BUILTIN = ("W1", "W2", "W3", "W4", "W5")
-CONTROLLERS = ("nmpc", "lmpc", "pid")
-ESTIMATORS = ("ekf", "ukf")
-SUPPLY_MODES = ("accumulator", "prescribed")
-TERRAIN_KINDS = ("flat", "iso8608")
 TERRAIN_SEED_SALT = 8608
 """Terrain RNG = default_rng([seed, 8608]): independent of the noise stream of the same seed."""
+NAME_PATTERN = r"[A-Za-z0-9_-][A-Za-z0-9_.-]*"
+"""Scenario and variant names: they become parts of run directory names."""
+REFERENCE_MAX_N = 50e3
+"""F_ref must stay within [0, REFERENCE_MAX_N] over the run [N]."""
 
 
 def _edge(t: np.ndarray, t0: float, rise_s: float) -> np.ndarray:
@@ -54,83 +68,148 @@ def _edge(t: np.ndarray, t0: float, rise_s: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Track:
-    """Sprocket-driven track speed [m/s], reached by a linear ramp from 0 over ramp_s [s]."""
+class Header(Parameters):
+    """The ``[scenario]`` table: what the condition is called, how long and how often it runs,
+    and its default controller and estimator."""
 
-    speed_m_s: float = param(0.0, 5.0)
-    ramp_s: float = param(0.0, 10.0)
+    name: str = param(pattern=NAME_PATTERN, max_len=64,
+                      doc="letters, digits, '_', '.', '-', not starting with '.'; names the "
+                      "run directories")
+    title: str = param(max_len=200, doc="one line describing the condition")
+    duration_s: float = param(COUPLING_STEP_S, 3600.0,
+                              doc="simulated time; at least one 1 ms step")
+    seeds: tuple[int, ...] = param(0, 2**32 - 1, unit="1",
+                                   doc="one run per seed (sensor noise and terrain)")
+    controller: str = param(choices=choices(CONTROLLERS), doc="default controller")
+    estimator: str = param(choices=choices(ESTIMATORS), doc="default state estimator")
+
+    def cross_check(self, at: Location) -> None:
+        if not self.title.strip() or any(c in self.title for c in "\n\r\t"):
+            raise at.error("title", self.title, "must be one non-empty line")
+        if len(set(self.seeds)) != len(self.seeds):
+            raise at.error("seeds", self.seeds, "lists a seed twice")
 
 
 @dataclass(frozen=True)
-class Step:
+class Track(Parameters):
+    """Sprocket-driven track speed, reached by a linear ramp from standstill."""
+
+    speed_m_s: float = param(0.0, 5.0, doc="track speed commanded to the sprocket servo")
+    ramp_s: float = param(0.0, 10.0, doc="duration of the linear start from standstill")
+
+
+@dataclass(frozen=True)
+class Step(Parameters):
     """Reference step of delta_N [N] at time_s [s]."""
 
-    time_s: float = param(0.0, None)
-    delta_N: float = param(-50e3, 50e3)
+    time_s: float = param(0.0, None, doc="time of the step")
+    delta_N: float = param(-50e3, 50e3, doc="change of F_ref")
 
 
 @dataclass(frozen=True)
-class Ramp:
-    """Reference ramp of rate_N_s [N/s] from start_s to end_s [s] (end_s = inf: to the end)."""
+class Ramp(Parameters):
+    """Reference ramp of rate_N_s [N/s] from start_s to end_s [s]."""
 
-    start_s: float = param(0.0, None)
-    rate_N_s: float = param(-5e3, 5e3)
-    end_s: float = math.inf
+    start_s: float = param(0.0, None, doc="start of the ramp")
+    rate_N_s: float = param(-5e3, 5e3, doc="slope of F_ref")
+    end_s: float | None = param(0.0, None, default=None,
+                                doc="end of the ramp; optional: without it the ramp runs to "
+                                "the end of the run")
+
+    def cross_check(self, at: Location) -> None:
+        if self.end_s is not None and not self.end_s > self.start_s:
+            raise at.error("end_s", self.end_s, f"must be > start_s = {self.start_s!r}")
 
 
 @dataclass(frozen=True)
-class Reference:
+class Reference(Parameters):
     """F_ref(t) = initial_N + Σ steps + Σ ramps [N]."""
 
-    initial_N: float = param(0.0, 50e3)
-    steps: tuple[Step, ...] = ()
-    ramps: tuple[Ramp, ...] = ()
+    initial_N: float = param(0.0, REFERENCE_MAX_N, doc="F_ref at t = 0")
+    steps: tuple[Step, ...] = param(default=(), doc="optional reference steps")
+    ramps: tuple[Ramp, ...] = param(default=(), doc="optional reference ramps")
 
 
 @dataclass(frozen=True)
-class SupplyDrop:
+class SupplyDrop(Parameters):
     """Supply pressure held at pressure_Pa from start_s to end_s [s], linear transitions of
     transition_s [s] at both ends (starting at start_s and at end_s)."""
 
-    start_s: float = param(0.0, None)
-    end_s: float = param(0.0, None)
-    pressure_Pa: float = param(0.0, 30e6)
-    transition_s: float = param(0.0, 5.0)
+    start_s: float = param(0.0, None, doc="start of the first transition")
+    end_s: float = param(0.0, None, doc="start of the transition back to nominal")
+    pressure_Pa: float = param(0.0, 30e6, doc="supply pressure during the drop")
+    transition_s: float = param(0.0, 5.0, doc="duration of each linear transition")
+
+    def cross_check(self, at: Location) -> None:
+        _check_window(self, at, self.transition_s, "transition_s")
 
 
 @dataclass(frozen=True)
-class Supply:
+class Supply(Parameters):
     """Supply: ``accumulator`` (pump + accumulator + relief model; nominal_Pa is its initial
     pressure) or ``prescribed`` (p_s(t) = nominal_Pa with the drops applied) [Pa gauge]."""
 
-    mode: str
-    nominal_Pa: float = param(1e6, 30e6)
-    drops: tuple[SupplyDrop, ...] = ()
+    mode: Literal["accumulator", "prescribed"] = param(doc="supply model")
+    nominal_Pa: float = param(1e6, 30e6, doc="nominal supply pressure")
+    drops: tuple[SupplyDrop, ...] = param(default=(),
+                                          doc="optional drops (need mode = 'prescribed')")
+
+    def cross_check(self, at: Location) -> None:
+        if self.drops and self.mode != "prescribed":
+            raise at.error("mode", self.mode, "but [[supply.drops]] need mode = 'prescribed'")
+        ordered = sorted(enumerate(self.drops), key=lambda d: d[1].start_s)
+        for (_, a), (j, b) in itertools.pairwise(ordered):
+            if b.start_s < a.end_s + a.transition_s:
+                raise at.error(("drops", j, "start_s"), b.start_s,
+                               f"overlaps the drop from {a.start_s!r} to "
+                               f"{a.end_s + a.transition_s!r} s; drops must not overlap")
+
+
+_ISO8608_KEYS = ("road_class", "n_min_cycles_m", "n_max_cycles_m", "dx_m", "x_start_m",
+                 "flat_until_m", "taper_m", "margin_m")
 
 
 @dataclass(frozen=True)
-class Terrain:
+class Terrain(Parameters):
     """Ground: ``flat`` or an ``iso8608`` random road of road_class over the spatial band
     [n_min, n_max] cycles/m on a grid of dx_m [m] from x_start_m; flat up to flat_until_m
-    and blended in over taper_m [m]; extends margin_m [m] past the distance driven."""
+    and blended in over taper_m [m]; extends margin_m [m] past the distance driven. The
+    iso8608 keys are required for ``iso8608`` and optional (unused) for ``flat``."""
 
-    kind: str
-    road_class: str
-    n_min_cycles_m: float = param(1e-3, 100.0, open_low=True)
-    n_max_cycles_m: float = param(1e-3, 100.0, open_low=True)
-    dx_m: float = param(1e-3, 0.5)
-    x_start_m: float = param(-100.0, 0.0)
-    flat_until_m: float = param(-100.0, 100.0)
-    taper_m: float = param(0.0, 100.0)
-    margin_m: float = param(0.0, 100.0)
+    kind: Literal["flat", "iso8608"] = param(doc="ground model")
+    road_class: str | None = param(choices=tuple(ISO8608_GD_N0_M3), default=None,
+                                   doc="ISO 8608 road class (iso8608)")
+    n_min_cycles_m: float | None = param(1e-3, 100.0, open_low=True, default=None,
+                                         doc="lowest spatial frequency (iso8608)")
+    n_max_cycles_m: float | None = param(1e-3, 100.0, open_low=True, default=None,
+                                         doc="highest spatial frequency (iso8608)")
+    dx_m: float | None = param(1e-3, 0.5, default=None, doc="grid spacing (iso8608)")
+    x_start_m: float | None = param(-100.0, 0.0, default=None,
+                                    doc="road start behind the vehicle (iso8608)")
+    flat_until_m: float | None = param(-100.0, 100.0, default=None,
+                                       doc="road level up to here (iso8608)")
+    taper_m: float | None = param(0.0, 100.0, default=None,
+                                  doc="blend length from flat to rough (iso8608)")
+    margin_m: float | None = param(0.0, 100.0, default=None,
+                                   doc="road beyond the distance driven (iso8608)")
 
-
-_TERRAIN_DEFAULTS = {"n_min_cycles_m": 0.011, "n_max_cycles_m": 2.83, "dx_m": 0.025,
-                     "x_start_m": -5.0, "flat_until_m": 2.0, "taper_m": 1.0, "margin_m": 5.0}
+    def cross_check(self, at: Location) -> None:
+        if self.kind != "iso8608":
+            return
+        for key in _ISO8608_KEYS:
+            if getattr(self, key) is None:
+                raise ParameterError(f"{at.table()}: missing key {key!r} (needed for "
+                                     "kind = 'iso8608')")
+        if self.n_max_cycles_m <= self.n_min_cycles_m:
+            raise at.error("n_max_cycles_m", self.n_max_cycles_m,
+                           f"must be > n_min_cycles_m = {self.n_min_cycles_m!r}")
+        if self.n_max_cycles_m > 0.5 / self.dx_m:
+            raise at.error("n_max_cycles_m", self.n_max_cycles_m,
+                           f"exceeds the grid's Nyquist 1/(2 dx_m) = {0.5 / self.dx_m:g}")
 
 
 @dataclass(frozen=True)
-class LoadPulse:
+class LoadPulse(Parameters):
     """Load disturbance from start_s to end_s [s] with linear edges of rise_s [s], applied
     physically as a force hitch_N [N] on the rear hitch along a line pull_angle_deg [deg]
     below the horizontal, rearward (> 0: a towed load, the sprocket drives harder and the
@@ -138,79 +217,172 @@ class LoadPulse:
     :meth:`~trackmj.plant.TrackPlant.set_hitch_force`). delta_N [N] is the change of the
     hold-mode idler load the pulse is calibrated to (``experiments/calibrate_w3.py``)."""
 
-    start_s: float = param(0.0, None)
-    end_s: float = param(0.0, None)
-    delta_N: float = param(-20e3, 20e3)
-    hitch_N: float = param(-30e3, 30e3)
-    pull_angle_deg: float = param(0.0, 60.0)
-    rise_s: float = param(0.0, 1.0)
+    start_s: float = param(0.0, None, doc="start of the rising edge")
+    end_s: float = param(0.0, None, doc="start of the falling edge")
+    delta_N: float = param(-20e3, 20e3, doc="target change of the hold-mode idler load")
+    hitch_N: float = param(-30e3, 30e3, doc="hitch force (> 0 tow, < 0 push)")
+    pull_angle_deg: float = param(0.0, 60.0, doc="line of the hitch force below horizontal")
+    rise_s: float = param(0.0, 1.0, doc="duration of each linear edge")
+
+    def cross_check(self, at: Location) -> None:
+        _check_window(self, at, self.rise_s, "rise_s")
+
+
+def _check_window(window: SupplyDrop | LoadPulse, at: Location, edge_s: float,
+                  edge_key: str) -> None:
+    if not window.end_s > window.start_s:
+        raise at.error("end_s", window.end_s, f"must be > start_s = {window.start_s!r}")
+    if edge_s > window.end_s - window.start_s:
+        raise at.error(edge_key, edge_s, "is longer than the window end_s - start_s = "
+                       f"{window.end_s - window.start_s:g} s")
 
 
 @dataclass(frozen=True)
-class Variant:
+class Variant(Parameters):
     """Named parameter perturbation: multiplicative scales on the bulk modulus, the cylinder
-    friction coefficient, the track contact stiffness and the initial pre-tension."""
+    friction coefficient, the track contact stiffness and the initial pre-tension. Each scale
+    is optional (default 1): a variant names only what it changes."""
 
-    name: str
-    bulk_modulus_scale: float = param(0.5, 2.0)
-    friction_scale: float = param(0.5, 2.0)
-    contact_stiffness_scale: float = param(0.5, 2.0)
-    pretension_scale: float = param(0.5, 2.0)
+    name: str = param(pattern=NAME_PATTERN, max_len=64,
+                      doc="letters, digits, '_', '.', '-', not starting with '.'")
+    bulk_modulus_scale: float = param(0.5, 2.0, default=1.0, doc="oil bulk modulus factor")
+    friction_scale: float = param(0.5, 2.0, default=1.0, doc="cylinder friction factor")
+    contact_stiffness_scale: float = param(0.5, 2.0, default=1.0,
+                                           doc="track contact stiffness factor")
+    pretension_scale: float = param(0.5, 2.0, default=1.0, doc="initial pre-tension factor")
 
 
-NOMINAL = Variant("nominal", 1.0, 1.0, 1.0, 1.0)
+NOMINAL = Variant("nominal")
 
 
 @dataclass(frozen=True)
-class Limits:
+class Limits(Parameters):
     """Admissible tension band [F_min, F_max] [N]."""
 
-    force_min_N: float = param(0.0, 100e3)
-    force_max_N: float = param(0.0, 100e3)
+    force_min_N: float = param(0.0, 100e3, doc="lower tension limit")
+    force_max_N: float = param(0.0, 100e3, doc="upper tension limit")
+
+    def cross_check(self, at: Location) -> None:
+        if self.force_max_N <= self.force_min_N:
+            raise at.error("force_max_N", self.force_max_N,
+                           f"must be > force_min_N = {self.force_min_N!r}")
 
 
 @dataclass(frozen=True)
-class Evaluation:
+class Evaluation(Parameters):
     """Metric windows: tracking metrics from start_s, steady-state metrics from
     steady_start_s [s]; settling band relative to the final value; minimum hold [s]."""
 
-    start_s: float = param(0.0, None)
-    steady_start_s: float = param(0.0, None)
-    settle_band_rel: float = param(0.0, 0.5, open_low=True)
-    min_hold_s: float = param(0.0, 10.0)
+    start_s: float = param(0.0, None, doc="tracking metrics from here")
+    steady_start_s: float = param(0.0, None, doc="steady-state metrics from here")
+    settle_band_rel: float = param(0.0, 0.5, open_low=True,
+                                   doc="settling band relative to the final value")
+    min_hold_s: float = param(0.0, 10.0, doc="time in the band that counts as settled")
+
+
+@dataclass(frozen=True)
+class ScenarioFile(Parameters):
+    """A scenario file as written (see the module docstring for its layout)."""
+
+    scenario: Header
+    track: Track
+    reference: Reference
+    supply: Supply
+    terrain: Terrain
+    limits: Limits
+    evaluation: Evaluation
+    load_pulses: tuple[LoadPulse, ...] = param(default=(), doc="optional load pulses")
+    variants: tuple[Variant, ...] = param(default=(), doc="optional parameter variants")
+
+    file_kind: ClassVar[str] = "scenario"
+
+    def cross_check(self, at: Location) -> None:
+        duration = self.scenario.duration_s
+        starts = [(("reference", "steps", i, "time_s"), s.time_s)
+                  for i, s in enumerate(self.reference.steps)]
+        starts += [(("reference", "ramps", i, "start_s"), r.start_s)
+                   for i, r in enumerate(self.reference.ramps)]
+        starts += [(("supply", "drops", i, "start_s"), d.start_s)
+                   for i, d in enumerate(self.supply.drops)]
+        starts += [(("load_pulses", i, "start_s"), p.start_s)
+                   for i, p in enumerate(self.load_pulses)]
+        starts += [(("evaluation", key), getattr(self.evaluation, key))
+                   for key in ("start_s", "steady_start_s")]
+        for key, t in starts:
+            if t >= duration:
+                raise at.error(key, t, f"is at or after the end of the run "
+                               f"([scenario].duration_s = {duration!r})")
+        _check_reference_range(self.reference, duration, at.child("reference"))
+        names = [v.name for v in self.variants]
+        for i, name in enumerate(names):
+            if name in names[:i]:
+                raise at.error(("variants", i, "name"), name, "is used twice")
+        if self.variants and NOMINAL not in self.variants:
+            raise ParameterError(f"{at.table()} [[variants]]: one variant must be "
+                                 "name = 'nominal' with every scale 1 (the default run)")
+
+
+def _check_reference_range(ref: Reference, duration_s: float, at: Location) -> None:
+    """F_ref is piecewise linear: its extremes over [0, duration] lie at the breakpoints."""
+    times = {0.0, duration_s, *(s.time_s for s in ref.steps)}
+    times |= {r.start_s for r in ref.ramps} | {r.end_s for r in ref.ramps if r.end_s is not None}
+    t = np.array(sorted(x for x in times if x <= duration_s))
+    t = np.concatenate([t, t[t > 0.0] - 1e-9])     # just before each step too
+    f = _reference(ref, t)
+    for bad in (f < 0.0, f > REFERENCE_MAX_N):
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ParameterError(f"{at.table()}: F_ref reaches {f[k]:.6g} N at t = "
+                                 f"{t[k]:.6g} s; it must stay in [0, {REFERENCE_MAX_N:g}] N "
+                                 "over the run")
+
+
+def _reference(ref: Reference, t: np.ndarray) -> np.ndarray:
+    f = np.full(t.shape, ref.initial_N)
+    for s in ref.steps:
+        f = f + np.where(t >= s.time_s, s.delta_N, 0.0)
+    for r in ref.ramps:
+        end = math.inf if r.end_s is None else r.end_s
+        f = f + r.rate_N_s * np.clip(t - r.start_s, 0.0, end - r.start_s)
+    return f
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """One operating condition (see the module docstring for the file layout)."""
+    """One operating condition (see the module docstring for the file layout); built by
+    :func:`load_scenario`, checked again on construction (``dataclasses.replace``) by the
+    same checks as the file. ``source`` is the file it was read from."""
 
     name: str
     title: str
     source: Path
-    duration_s: float = field(default=30.0,
-                              metadata=param(0.0, 3600.0, open_low=True).metadata)
-    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
-    controller: str = "nmpc"
-    estimator: str = "ekf"
-    track: Track = field(default_factory=lambda: Track(1.5, 1.0))
-    reference: Reference = field(default_factory=lambda: Reference(15e3))
-    supply: Supply = field(default_factory=lambda: Supply("accumulator", 12e6))
-    terrain: Terrain = field(default_factory=lambda: Terrain("flat", "D", **_TERRAIN_DEFAULTS))
-    load_pulses: tuple[LoadPulse, ...] = ()
-    variants: tuple[Variant, ...] = (NOMINAL,)
-    limits: Limits = field(default_factory=lambda: Limits(10e3, 20e3))
-    evaluation: Evaluation = field(default_factory=lambda: Evaluation(1.0, 5.0, 0.02, 0.5))
+    duration_s: float
+    seeds: tuple[int, ...]
+    controller: str
+    estimator: str
+    track: Track
+    reference: Reference
+    supply: Supply
+    terrain: Terrain
+    load_pulses: tuple[LoadPulse, ...]
+    variants: tuple[Variant, ...]
+    limits: Limits
+    evaluation: Evaluation
+
+    def __post_init__(self) -> None:
+        header = construct(Header, Location(label=f"Scenario {self.name!r}", path=("scenario",)),
+                           name=self.name, title=self.title, duration_s=self.duration_s,
+                           seeds=self.seeds, controller=self.controller,
+                           estimator=self.estimator)
+        construct(ScenarioFile, Location(label=f"Scenario {self.name!r}"), scenario=header,
+                  track=self.track, reference=self.reference, supply=self.supply,
+                  terrain=self.terrain, limits=self.limits, evaluation=self.evaluation,
+                  load_pulses=self.load_pulses, variants=self.variants)
 
     # ------------------------------------------------------------------ signals
     def reference_N(self, t_s: np.ndarray | float) -> np.ndarray:
         """F_ref(t) [N], same shape as ``t_s`` (vectorised)."""
-        t = np.asarray(t_s, dtype=float)
-        f = np.full(t.shape, self.reference.initial_N)
-        for s in self.reference.steps:
-            f = f + np.where(t >= s.time_s, s.delta_N, 0.0)
-        for r in self.reference.ramps:
-            f = f + r.rate_N_s * np.clip(t - r.start_s, 0.0, r.end_s - r.start_s)
-        return f
+        return _reference(self.reference, np.asarray(t_s, dtype=float))
 
     def reference_preview(self, t0_s: float, n: int, dt_s: float) -> np.ndarray:
         """F_ref at t0 + k·dt for k = 0..n−1 [N], shape (n,) (the controller's preview)."""
@@ -299,136 +471,34 @@ def scenario_path(name_or_path: str | Path) -> Path:
     """Path of a built-in scenario (``W1``..``W5``, case-insensitive) or of a custom file."""
     if isinstance(name_or_path, str) and name_or_path.upper() in BUILTIN:
         return Path(str(files("trackmj.experiments").joinpath(f"{name_or_path.upper()}.toml")))
-    return Path(name_or_path)
+    path = Path(name_or_path)
+    if not path.exists():
+        raise ParameterError(f"scenario file not found: {path} (built-in scenarios: "
+                             f"{', '.join(BUILTIN)})")
+    return path
 
 
-def _choice(where: str, value: Any, allowed: tuple[str, ...]) -> str:
-    if value not in allowed:
-        raise ParameterError(f"{where} = {value!r} is not one of {list(allowed)}")
-    return value
+def load_scenario(name_or_path: str | Path,
+                  overrides: Mapping[str, Any] | None = None) -> Scenario:
+    """Load and validate a scenario.
 
+    Parameters
+    ----------
+    name_or_path : str or Path
+        A built-in name (``W1``..``W5``) or a TOML file.
+    overrides : mapping, optional
+        ``{dotted key: value}``, the ``scenario`` entry of
+        :func:`trackmj.params.parse_overrides` (e.g. ``{"track.speed_m_s": 2.0}``).
 
-def _table(data: dict[str, Any], key: str, where: str) -> dict[str, Any]:
-    value = data.get(key, {})
-    if not isinstance(value, dict):
-        raise ParameterError(f"{where}: [{key}] must be a table")
-    return dict(value)
-
-
-def _array(data: dict[str, Any], key: str, where: str) -> list[dict[str, Any]]:
-    value = data.pop(key, [])
-    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
-        raise ParameterError(f"{where}: [[{key}]] must be an array of tables")
-    return value
-
-
-def _with_defaults(cls: type, table: dict[str, Any], defaults: Any) -> dict[str, Any]:
-    return {f.name: getattr(defaults, f.name) for f in fields(cls)} | table
-
-
-def _windowed(where: str, start: float, end: Any) -> None:
-    if isinstance(end, bool) or not isinstance(end, int | float) or math.isnan(end):
-        raise ParameterError(f"{where}.end_s: expected a number, got {end!r}")
-    if not end > start:
-        raise ParameterError(f"{where}.end_s = {end!r} must be > start_s = {start!r}")
-
-
-def load_scenario(name_or_path: str | Path) -> Scenario:
-    """Load a scenario by built-in name (``W1``..``W5``) or from a TOML path."""
+    Returns
+    -------
+    Scenario
+    """
     path = scenario_path(name_or_path)
-    data = read_toml(path)
-    f = path.name
-    base = Scenario(name="", title="", source=path)
-
-    unknown = set(data) - {"scenario", "track", "reference", "supply", "terrain",
-                           "load_pulses", "variants", "limits", "evaluation"}
-    if unknown:
-        raise ParameterError(f"{f}: unknown table(s) {sorted(unknown)}")
-    head = _table(data, "scenario", f)
-    allowed = {"name", "title", "duration_s", "seeds", "controller", "estimator", "source"}
-    if set(head) - allowed:
-        raise ParameterError(f"{f} [scenario]: unknown key(s) {sorted(set(head) - allowed)}; "
-                             f"allowed: {sorted(allowed - {'source'})}")
-    if not isinstance(head.get("name"), str) or not head["name"]:
-        raise ParameterError(f"{f} [scenario]: missing key 'name' (a non-empty string)")
-    seeds = head.get("seeds", list(base.seeds))
-    if (not isinstance(seeds, list) or not seeds
-            or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds)):
-        raise ParameterError(f"{f} [scenario].seeds = {seeds!r} must be a non-empty list of "
-                             f"integers >= 0")
-    duration = head.get("duration_s", base.duration_s)
-    controller = _choice(f"{f} [scenario].controller", head.get("controller", "nmpc"),
-                         CONTROLLERS)
-    estimator = _choice(f"{f} [scenario].estimator", head.get("estimator", "ekf"), ESTIMATORS)
-
-    track = load_table(Track, _with_defaults(Track, _table(data, "track", f), base.track),
-                       f"{f} [track]")
-
-    ref_t = _table(data, "reference", f)
-    steps = tuple(load_table(Step, s, f"{f} [[reference.steps]][{i}]")
-                  for i, s in enumerate(_array(ref_t, "steps", f"{f} [reference]")))
-    ramps = []
-    for i, r in enumerate(_array(ref_t, "ramps", f"{f} [reference]")):
-        ramp = load_table(Ramp, r, f"{f} [[reference.ramps]][{i}]")
-        _windowed(f"{f} [[reference.ramps]][{i}]", ramp.start_s, ramp.end_s)
-        ramps.append(ramp)
-    reference = load_table(Reference, ref_t, f"{f} [reference]")
-    reference = Reference(reference.initial_N, steps, tuple(ramps))
-
-    sup_t = _table(data, "supply", f)
-    drops = []
-    for i, d in enumerate(_array(sup_t, "drops", f"{f} [supply]")):
-        drop = load_table(SupplyDrop, d, f"{f} [[supply.drops]][{i}]")
-        _windowed(f"{f} [[supply.drops]][{i}]", drop.start_s, drop.end_s)
-        drops.append(drop)
-    supply = load_table(Supply, _with_defaults(Supply, sup_t, base.supply) | {"drops": ()},
-                        f"{f} [supply]")
-    _choice(f"{f} [supply].mode", supply.mode, SUPPLY_MODES)
-    if drops and supply.mode != "prescribed":
-        raise ParameterError(f"{f} [supply].mode = {supply.mode!r}: [[supply.drops]] need "
-                             f"mode = 'prescribed'")
-    supply = Supply(supply.mode, supply.nominal_Pa, tuple(drops))
-
-    terrain = load_table(Terrain, _with_defaults(Terrain, _table(data, "terrain", f),
-                                                 base.terrain), f"{f} [terrain]")
-    _choice(f"{f} [terrain].kind", terrain.kind, TERRAIN_KINDS)
-    _choice(f"{f} [terrain].road_class", terrain.road_class, tuple(ISO8608_GD_N0_M3))
-    if terrain.n_max_cycles_m <= terrain.n_min_cycles_m:
-        raise ParameterError(f"{f} [terrain].n_max_cycles_m = {terrain.n_max_cycles_m!r} must "
-                             f"be > n_min_cycles_m = {terrain.n_min_cycles_m!r}")
-    if terrain.n_max_cycles_m > 0.5 / terrain.dx_m:
-        raise ParameterError(f"{f} [terrain].n_max_cycles_m = {terrain.n_max_cycles_m!r} "
-                             f"exceeds the grid's Nyquist 1/(2 dx_m) = {0.5 / terrain.dx_m:g}")
-
-    pulses = []
-    for i, p in enumerate(_array(data, "load_pulses", f)):
-        pulse = load_table(LoadPulse, p, f"{f} [[load_pulses]][{i}]")
-        _windowed(f"{f} [[load_pulses]][{i}]", pulse.start_s, pulse.end_s)
-        pulses.append(pulse)
-
-    variants = []
-    for i, v in enumerate(_array(data, "variants", f)):
-        where = f"{f} [[variants]][{i}]"
-        if not isinstance(v.get("name"), str) or not v["name"]:
-            raise ParameterError(f"{where}: missing key 'name' (a non-empty string)")
-        variants.append(load_table(Variant, _with_defaults(Variant, v, NOMINAL), where))
-    names = [v.name for v in variants]
-    if len(set(names)) != len(names):
-        raise ParameterError(f"{f} [[variants]]: duplicate names in {names}")
-
-    limits = load_table(Limits, _with_defaults(Limits, _table(data, "limits", f), base.limits),
-                        f"{f} [limits]")
-    if limits.force_max_N <= limits.force_min_N:
-        raise ParameterError(f"{f} [limits].force_max_N = {limits.force_max_N!r} must be > "
-                             f"force_min_N = {limits.force_min_N!r}")
-    evaluation = load_table(Evaluation, _with_defaults(Evaluation, _table(data, "evaluation", f),
-                                                       base.evaluation), f"{f} [evaluation]")
-
-    scenario = Scenario(
-        name=head["name"], title=str(head.get("title", head["name"])), source=path,
-        duration_s=duration, seeds=tuple(seeds), controller=controller, estimator=estimator,
-        track=track, reference=reference, supply=supply, terrain=terrain,
-        load_pulses=tuple(pulses), variants=tuple(variants) or (NOMINAL,), limits=limits,
-        evaluation=evaluation)
-    validate(scenario, f"{f} [scenario]")
-    return scenario
+    f = load_file(ScenarioFile, path, overrides=overrides, require_source=False)
+    h = f.scenario
+    return Scenario(name=h.name, title=h.title, source=path, duration_s=h.duration_s,
+                    seeds=h.seeds, controller=h.controller, estimator=h.estimator,
+                    track=f.track, reference=f.reference, supply=f.supply, terrain=f.terrain,
+                    load_pulses=f.load_pulses, variants=f.variants or (NOMINAL,),
+                    limits=f.limits, evaluation=f.evaluation)

@@ -2,18 +2,20 @@
 
 Units are SI (m, kg, N, s, rad); each field declares its allowed range with
 :func:`trackmj.params.param`, and :func:`load_model_params` refuses unknown keys, wrong types
-and out-of-range values naming the file, the table and the key.
+and out-of-range values naming the file, the table and the key; every table carries a
+``source`` (kept in :attr:`ModelParams.sources`).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import Any, ClassVar, Literal
 
-from trackmj.params import ParameterError, load_table, param, read_toml
+from trackmj.params import Location, Parameters, load_file, param, sources_field
 from trackmj.ports import COUPLING_STEP_S
 
 MODEL_NAME = "lf1352"
@@ -34,24 +36,24 @@ def default_xml_path() -> Path:
 
 
 @dataclass(frozen=True)
-class SimulationParams:
+class SimulationParams(Parameters):
     timestep_s: float = param(1e-5, 1e-3, doc="MuJoCo timestep [s]; divides the 1 ms step")
     gravity_m_s2: float = param(0.0, 20.0, doc="gravitational acceleration [m/s²]")
 
 
 @dataclass(frozen=True)
-class TrackParams:
+class TrackParams(Parameters):
     link_count: int = param(20, 200, doc="number of links [-]")
     pitch_m: float = param(0.02, 0.3, open_low=True, doc="pin-to-pin distance [m]")
     link_mass_kg: float = param(0.1, 100.0, doc="mass of one link with its shoe [kg]")
     rail_radius_m: float = param(0.002, 0.05, doc="rail capsule radius [m]")
     pin_radius_m: float = param(0.002, 0.05, doc="pin sphere radius [m]")
     link_width_m: float = param(0.05, 1.5, doc="shoe width [m], visual and inertia")
-    ground_friction: float = param(0.0, 2.0, doc="Coulomb coefficient pin-ground [-]")
+    ground_friction: float = param(0.0, 2.0, unit="1", doc="Coulomb coefficient pin-ground [-]")
 
 
 @dataclass(frozen=True)
-class ChassisParams:
+class ChassisParams(Parameters):
     mass_kg: float = param(10.0, 1e5)
     pitch_inertia_kg_m2: float = param(1.0, 1e6)
     length_m: float = param(0.1, 20.0)
@@ -62,7 +64,7 @@ class ChassisParams:
 
 
 @dataclass(frozen=True)
-class SprocketParams:
+class SprocketParams(Parameters):
     tooth_count: int = param(6, 40)
     x_m: float = param(-10.0, 10.0)
     z_m: float = param(0.0, 5.0)
@@ -71,11 +73,11 @@ class SprocketParams:
     mass_kg: float = param(0.1, 1e4)
     inertia_kg_m2: float = param(1e-4, 1e4)
     drive_gain_N_m_s: float = param(1.0, 1e8, doc="velocity servo gain [N·m·s/rad]")
-    drive_torque_limit_N_m: float = param(1.0, 1e7)
+    drive_torque_limit_N_m: float = param(1.0, 1e7, unit="N·m")
 
 
 @dataclass(frozen=True)
-class IdlerParams:
+class IdlerParams(Parameters):
     radius_m: float = param(0.02, 1.0)
     x_m: float = param(-10.0, 10.0)
     z_m: float = param(0.0, 5.0)
@@ -86,8 +88,8 @@ class IdlerParams:
 
 
 @dataclass(frozen=True)
-class RoadWheelParams:
-    count: int = param(1, 12)
+class RoadWheelParams(Parameters):
+    count: int = param(1, 12, unit="1")
     radius_m: float = param(0.02, 1.0)
     x_m: tuple[float, ...] = param(-10.0, 10.0)
     mass_kg: float = param(0.1, 1e4)
@@ -97,46 +99,46 @@ class RoadWheelParams:
 
 
 @dataclass(frozen=True)
-class ReturnRollerParams:
+class ReturnRollerParams(Parameters):
     radius_m: float = param(0.01, 1.0)
     x_m: tuple[float, ...] = param(-10.0, 10.0)
     z_m: float = param(0.0, 5.0)
 
 
 @dataclass(frozen=True)
-class GroundParams:
+class GroundParams(Parameters):
     stiffness_N_m: float = param(1e3, 1e10, doc="Kelvin-Voigt stiffness per pin contact [N/m]")
     damping_N_s_m: float = param(0.0, 1e8, doc="Kelvin-Voigt damping per pin contact [N·s/m]")
     reference_mass_kg: float = param(0.01, 1e4, doc="effective mass for solref conversion [kg]")
-    impedance: float = param(0.5, 0.999, doc="constant MuJoCo impedance d [-]")
+    impedance: float = param(0.5, 0.999, unit="1", doc="constant MuJoCo impedance d [-]")
 
 
 @dataclass(frozen=True)
-class ContactParams:
-    rail_solref: tuple[float, float] = param(0.0, 10.0)
-    tooth_solref: tuple[float, float] = param(0.0, 10.0)
-    closure_solref: tuple[float, float] = param(0.0, 10.0)
+class ContactParams(Parameters):
+    rail_solref: tuple[float, float] = param(0.0, 10.0, unit="s, 1")
+    tooth_solref: tuple[float, float] = param(0.0, 10.0, unit="s, 1")
+    closure_solref: tuple[float, float] = param(0.0, 10.0, unit="s, 1")
 
 
 @dataclass(frozen=True)
-class PassiveTensionerParams:
+class PassiveTensionerParams(Parameters):
     preload_N: float = param(0.0, 1e6, doc="force at the layout stroke [N]")
     stiffness_N_m: float = param(0.0, 1e9)
     damping_N_s_m: float = param(0.0, 1e8)
 
 
 @dataclass(frozen=True)
-class SolverParams:
-    iterations: int = param(1, 1000)
-    tolerance: float = param(0.0, 1e-2)
-    cone: str = "pyramidal"
-    jacobian: str = "dense"
-    warmstart: bool = False
-    midphase: bool = True   # per-body geom bounding-volume tree before the narrow phase
+class SolverParams(Parameters):
+    iterations: int = param(1, 1000, unit="1")
+    tolerance: float = param(0.0, 1e-2, unit="1")
+    cone: Literal["pyramidal", "elliptic"] = param()
+    jacobian: Literal["dense", "sparse", "auto"] = param()
+    warmstart: bool = param()
+    midphase: bool = param(doc="per-body geom bounding-volume tree before the narrow phase")
 
 
 @dataclass(frozen=True)
-class ModelParams:
+class ModelParams(Parameters):
     """All mechanical parameters of one track side (SI units, see lf1352.toml)."""
 
     simulation: SimulationParams
@@ -150,6 +152,12 @@ class ModelParams:
     contacts: ContactParams
     tensioner: PassiveTensionerParams
     solver: SolverParams
+    sources: Mapping[str, str] = sources_field()
+
+    file_kind: ClassVar[str] = "model"
+
+    def cross_check(self, at: Location) -> None:
+        _check_consistency(self, at)
 
     @property
     def sprocket_pitch_radius_m(self) -> float:
@@ -157,40 +165,26 @@ class ModelParams:
         return self.track.pitch_m / (2.0 * math.sin(math.pi / self.sprocket.tooth_count))
 
 
-def load_model_params(path: str | Path | None = None) -> ModelParams:
-    """Read and validate the model parameter file (default: packaged lf1352.toml)."""
+def load_model_params(path: str | Path | None = None,
+                      overrides: dict[str, Any] | None = None) -> ModelParams:
+    """Read and validate the model parameter file (default: packaged lf1352.toml);
+    ``overrides``: ``{dotted key: value}`` (the ``model`` entry of
+    :func:`trackmj.params.parse_overrides`)."""
     path = Path(path) if path is not None else default_param_path()
-    data = read_toml(path)
-    tables = {}
-    classes = {f.name: globals()[f.type] if isinstance(f.type, str) else f.type
-               for f in dataclasses.fields(ModelParams)}
-    for name, cls in classes.items():
-        if name not in data:
-            raise ParameterError(f"{path.name}: missing table [{name}]")
-        tables[name] = load_table(cls, data[name], f"{path.name} [{name}]")
-    params = ModelParams(**tables)
-    _check_consistency(params, path.name)
-    return params
+    return load_file(ModelParams, path, overrides=overrides)
 
 
-def _check_consistency(p: ModelParams, where: str) -> None:
+def _check_consistency(p: ModelParams, at: Location) -> None:
     if p.track.link_count != 82:
-        raise ParameterError(f"{where} [track].link_count = {p.track.link_count}: the LF1352 "
-                             "model (names link_00..link_81) needs exactly 82")
+        raise at.error(("track", "link_count"), p.track.link_count, "but the LF1352 model "
+                       "(names link_00..link_81) needs exactly 82")
     if len(p.road_wheels.x_m) != p.road_wheels.count:
-        raise ParameterError(f"{where} [road_wheels].x_m has {len(p.road_wheels.x_m)} entries, "
-                             f"count = {p.road_wheels.count}")
-    if p.solver.jacobian not in ("dense", "sparse", "auto"):
-        raise ParameterError(f"{where} [solver].jacobian = {p.solver.jacobian!r}: allowed "
-                             "'dense', 'sparse' or 'auto'")
-    if p.solver.cone not in ("pyramidal", "elliptic"):
-        raise ParameterError(f"{where} [solver].cone = {p.solver.cone!r}: allowed "
-                             "'pyramidal' or 'elliptic'")
+        raise at.error(("road_wheels", "x_m"), p.road_wheels.x_m,
+                       f"has {len(p.road_wheels.x_m)} entries, count = {p.road_wheels.count}")
     lo, hi = p.idler.slide_range_m
     if not lo < 0.0 < hi:
-        raise ParameterError(f"{where} [idler].slide_range_m = {p.idler.slide_range_m}: "
-                             "must bracket 0 (low < 0 < high)")
+        raise at.error(("idler", "slide_range_m"), p.idler.slide_range_m,
+                       "must bracket 0 (low < 0 < high)")
     if COUPLING_STEP_S / p.simulation.timestep_s % 1.0 > 1e-9:
-        raise ParameterError(f"{where} [simulation].timestep_s = {p.simulation.timestep_s}: "
-                             "must divide the 1 ms coupling step")
-
+        raise at.error(("simulation", "timestep_s"), p.simulation.timestep_s,
+                       "must divide the 1 ms coupling step")

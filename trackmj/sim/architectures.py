@@ -90,7 +90,7 @@ def _control(setup: RunSetup, free_position_m: float) -> tuple[ControlConfig, Re
                                  supply_pressure_Pa=setup.supply0_Pa,
                                  free_position_m=free_position_m)
     cfg = dataclasses.replace(
-        cfg, plant=plant, valves=dataclasses.replace(cfg.valves, solenoid_delay_s=0.0),
+        cfg, valves=dataclasses.replace(cfg.valves, solenoid_delay_s=0.0),
         mpc=dataclasses.replace(cfg.mpc, time_budget_s=10.0))
     return cfg, ReducedModel(plant)
 

@@ -1,39 +1,262 @@
-"""The controller's reduced plant derived from the hydraulic parameters and the identified
-equivalent idler (temporary: replaced by the validator branch's version at merge)."""
+"""The controller's reduced plant, derived from the hydraulic file and the identified idler.
+
+The reduced model (:class:`~trackmj.control.params.PlantParams`) has no file of its own:
+:func:`reduced_plant_params` lumps the two cylinders of the hydraulic parameters into one,
+puts each valve edge in series with its restrictor, adds line B to the rod node, and takes
+k, M, c from the equivalent idler identified on the MuJoCo track. The idler is identified
+once from the committed track and stored in ``models/lf1352_idler.toml``
+(:func:`write_idler_file`, regenerate with ``python -m trackmj.sim.config``);
+:func:`load_idler` reads it through the one validator.
+"""
 
 from __future__ import annotations
 
-import functools
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
 
-from trackmj.control.params import ControlConfig, PlantParams
-from trackmj.hydraulics import HydraulicParams
+from trackmj.control.params import ControlConfig, PlantParams, load_config
+from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
 from trackmj.hydraulics.components import series_area
-from trackmj.identify import EquivalentIdler, identify_idler
+from trackmj.identify import EquivalentIdler
+from trackmj.model import default_xml_path, models_dir
+from trackmj.params import Location, Parameters, load_file, param
+
+IDLER_FILE = "lf1352_idler.toml"
+NOMINAL_FORCE_N = 15e3
+"""Operating point of :func:`nominal_plant_params`: the reference tension of W2-W5 [N]..."""
+NOMINAL_SUPPLY_PA = 12e6
+"""... at the study's simulation supply pressure [Pa], with the force at mid stroke."""
 
 
-@functools.cache
-def load_idler() -> EquivalentIdler:
-    """Equivalent idler dynamics of the packaged track (identified once per process)."""
+@dataclass(frozen=True)
+class IdlerTable(Parameters):
+    """The equivalent idler M·ÿ = F − k·(y − y0) − c·ẏ on the cylinder stroke."""
+
+    stiffness_N_m: float = param(0.0, 1e10, open_low=True, doc="k, static dF/dy")
+    mass_kg: float = param(0.0, 1e5, open_low=True, doc="M = k / omega_n^2")
+    damping_N_s_m: float = param(0.0, 1e8, doc="c = 2 zeta sqrt(k M)")
+    natural_frequency_Hz: float = param(0.0, 1e3, open_low=True, doc="omega_n / 2 pi")
+    damping_ratio: float = param(0.0, 1.0, open_low=True, open_high=True, unit="1",
+                                 doc="zeta of the second-order step fit")
+    fit_r2: float = param(None, 1.0, unit="1", doc="coefficient of determination of the fit")
+    stroke_m: float = param(0.0, 1.0, doc="stroke at the lower force level")
+
+
+@dataclass(frozen=True)
+class IdentificationTable(Parameters):
+    """How the idler was identified (the arguments of ``trackmj.identify.identify_idler``)."""
+
+    model_file: str = param(doc="the MuJoCo model identified (in the models directory)")
+    model_sha256: str = param(pattern="[0-9a-f]{64}", doc="SHA-256 of that file")
+    force_low_N: float = param(0.0, 1e6, doc="settling force")
+    force_high_N: float = param(0.0, 1e6, doc="force after the step")
+    settle_s: float = param(0.0, 100.0, open_low=True, doc="settling time at force_low_N")
+    record_s: float = param(0.0, 100.0, open_low=True, doc="fitted record after the step")
+
+    def cross_check(self, at: Location) -> None:
+        if self.force_high_N <= self.force_low_N:
+            raise at.error("force_high_N", self.force_high_N,
+                           f"must be > force_low_N = {self.force_low_N!r}")
+
+
+@dataclass(frozen=True)
+class IdlerFile(Parameters):
+    """``models/lf1352_idler.toml``: the identified idler and how it was identified."""
+
+    idler: IdlerTable
+    identification: IdentificationTable
+
+
+IDENTIFICATION = {"force_low_N": 12_000.0, "force_high_N": 15_000.0, "settle_s": 1.5,
+                  "record_s": 0.6}
+"""The step of :func:`identify_packaged_idler` (``identify_idler``'s defaults)."""
+
+
+def default_idler_path() -> Path:
+    """The packaged ``models/lf1352_idler.toml``."""
+    return models_dir() / IDLER_FILE
+
+
+def load_idler(path: str | Path | None = None) -> EquivalentIdler:
+    """Read the identified equivalent idler.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        Default the packaged ``models/lf1352_idler.toml``.
+
+    Returns
+    -------
+    EquivalentIdler
+    """
+    data = load_file(IdlerFile, default_idler_path() if path is None else path)
+    t = data.idler
+    return EquivalentIdler(stiffness_N_m=t.stiffness_N_m, mass_kg=t.mass_kg,
+                           damping_N_s_m=t.damping_N_s_m,
+                           natural_frequency_Hz=t.natural_frequency_Hz,
+                           damping_ratio=t.damping_ratio, fit_r2=t.fit_r2, stroke_m=t.stroke_m)
+
+
+def load_identification(path: str | Path | None = None) -> IdentificationTable:
+    """The ``[identification]`` table of the idler file (model hash, step used)."""
+    return load_file(IdlerFile, default_idler_path() if path is None else path).identification
+
+
+def file_sha256(path: str | Path) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def identify_packaged_idler() -> EquivalentIdler:
+    """Identify the equivalent idler on the packaged track (a few seconds, deterministic)."""
+    from trackmj.identify import identify_idler
     from trackmj.plant import TrackPlant
 
-    return identify_idler(TrackPlant.load)
+    return identify_idler(TrackPlant.load, **IDENTIFICATION)
+
+
+def write_idler_file(idler: EquivalentIdler, path: str | Path,
+                     model_path: str | Path | None = None) -> Path:
+    """Write ``idler`` as an idler file (with its generated-file header) to ``path``.
+
+    Parameters
+    ----------
+    idler : EquivalentIdler
+        Usually :func:`identify_packaged_idler`.
+    path : str or Path
+        Target file.
+    model_path : str or Path, optional
+        The model it was identified on (default the packaged ``lf1352.xml``); its name and
+        SHA-256 are recorded.
+
+    Returns
+    -------
+    Path
+    """
+    model = Path(model_path) if model_path is not None else default_xml_path()
+    values = {name: float(getattr(idler, name)) for name in
+              ("stiffness_N_m", "mass_kg", "damping_N_s_m", "natural_frequency_Hz",
+               "damping_ratio", "fit_r2", "stroke_m")}
+    lines = [
+        "# GENERATED FILE - do not edit. The equivalent idler of the LF1352 track, identified",
+        "# on the committed MuJoCo model by trackmj.identify.identify_idler(TrackPlant.load)",
+        "# (a 12 -> 15 kN force step on the standing track, second-order fit of the stroke).",
+        "# Written by trackmj.sim.config.write_idler_file; regenerate after any change of",
+        "# models/lf1352.xml with:  python -m trackmj.sim.config",
+        "# tests/test_sim_config.py checks this file equals a fresh identification.",
+        "# Read by trackmj.sim.config.load_idler; the reduced plant of the controller takes",
+        "# k, M and c from it (trackmj.sim.config.reduced_plant_params). Units SI.",
+        "",
+        "[idler]",
+        'source = "identified on the MuJoCo track by trackmj.identify (see [identification])"',
+        *(f"{name} = {value!r}" for name, value in values.items()),
+        "",
+        "[identification]",
+        'source = "the arguments of trackmj.identify.identify_idler used for [idler]"',
+        f'model_file = "{model.name}"',
+        f'model_sha256 = "{file_sha256(model)}"',
+        *(f"{name} = {value!r}" for name, value in IDENTIFICATION.items()),
+        "",
+    ]
+    path = Path(path)
+    path.write_text("\n".join(lines), encoding="utf-8")
+    load_idler(path)   # what was written must read back
+    return path
 
 
 def reduced_plant_params(hydraulics: HydraulicParams, idler: EquivalentIdler,
-                         control: ControlConfig, *, supply_pressure_Pa: float,
+                         control_config: ControlConfig, *, supply_pressure_Pa: float,
                          free_position_m: float) -> PlantParams:
-    """The reduced model's plant: the plugin's cylinders lumped, the valve and restrictor
-    paths in series, the line-B hose in the rod node, and the identified idler."""
-    hyd = hydraulics
-    cyl, met = hyd.cylinder, hyd.metering
-    head_path = 2.0 * series_area(hyd.switching_valves.open_area_m2, met.head_branch_area_m2)
-    rod_path = series_area(hyd.main_valve.open_area_m2, met.rod_feed_area_m2)
-    return control.plant.replace(
-        area_head_m2=2.0 * cyl.area_head_m2, area_rod_m2=2.0 * cyl.area_rod_m2,
+    """The controller's reduced model from the hydraulic circuit and the equivalent idler.
+
+    The two identical cylinders act as one with twice the areas, volumes and seal leakage;
+    line B belongs to the rod node. Each full-opening path area is its valve edge in series
+    with its restrictor (turbulent orifices: A = (A1^-2 + A2^-2)^-1/2): the head path is the
+    two branches (2/2 valve + head restrictor) in parallel, the rod path the main valve's
+    P -> B edge with the release-feed restrictor. The rod vent and the opening smoothing are
+    the control file's own (``[reduced_model]``).
+
+    Parameters
+    ----------
+    hydraulics : HydraulicParams
+        The plugin's circuit (per-cylinder values).
+    idler : EquivalentIdler
+        k [N/m], M [kg], c [N·s/m] of the idler seen by the stroke.
+    control_config : ControlConfig
+        Supplies ``reduced_model.vent_area_rod_m2`` and ``opening_smoothing``.
+    supply_pressure_Pa : float
+        Nominal supply pressure of the model [Pa gauge].
+    free_position_m : float
+        Stroke y0 [m] at which the idler spring is unloaded.
+
+    Returns
+    -------
+    PlantParams
+    """
+    cyl, met, own = hydraulics.cylinder, hydraulics.metering, control_config.reduced_model
+    return PlantParams(
+        area_head_m2=2.0 * cyl.area_head_m2,
+        area_rod_m2=2.0 * cyl.area_rod_m2,
+        stroke_m=cyl.stroke_max_m,
         dead_volume_head_m3=2.0 * cyl.dead_volume_head_m3,
-        dead_volume_rod_m3=2.0 * cyl.dead_volume_rod_m3 + hyd.lines.line_b_volume_m3,
-        valve_area_head_m2=head_path, valve_area_rod_m2=rod_path,
-        bulk_modulus_Pa=hyd.fluid.bulk_modulus_Pa, supply_pressure_Pa=supply_pressure_Pa,
-        tank_pressure_Pa=hyd.tank_pressure_Pa, stiffness_N_m=idler.stiffness_N_m,
-        mass_kg=idler.mass_kg, damping_N_s_m=idler.damping_N_s_m,
-        free_position_m=free_position_m)
+        dead_volume_rod_m3=2.0 * cyl.dead_volume_rod_m3 + hydraulics.lines.line_b_volume_m3,
+        bulk_modulus_Pa=hydraulics.fluid.bulk_modulus_Pa,
+        density_kg_m3=hydraulics.fluid.density_kg_m3,
+        discharge_coefficient=hydraulics.orifice.discharge_coefficient,
+        valve_area_head_m2=2.0 * series_area(hydraulics.switching_valves.open_area_m2,
+                                             met.head_branch_area_m2),
+        valve_area_rod_m2=series_area(hydraulics.main_valve.open_area_m2, met.rod_feed_area_m2),
+        vent_area_rod_m2=own.vent_area_rod_m2,
+        critical_pressure_Pa=hydraulics.orifice.critical_pressure_Pa,
+        opening_smoothing=own.opening_smoothing,
+        supply_pressure_Pa=supply_pressure_Pa,
+        tank_pressure_Pa=hydraulics.tank_pressure_Pa,
+        leakage_m3_s_Pa=2.0 * cyl.leakage_m3_s_Pa,
+        mass_kg=idler.mass_kg,
+        stiffness_N_m=idler.stiffness_N_m,
+        damping_N_s_m=idler.damping_N_s_m,
+        free_position_m=free_position_m,
+    )
+
+
+def nominal_plant_params(hydraulics: HydraulicParams | None = None,
+                         idler: EquivalentIdler | None = None,
+                         control_config: ControlConfig | None = None, *,
+                         force_N: float = NOMINAL_FORCE_N,
+                         supply_pressure_Pa: float = NOMINAL_SUPPLY_PA) -> PlantParams:
+    """The reduced plant of the packaged files at an operating point: ``force_N`` [N] at mid
+    stroke (y0 = stroke_max/2 − F/k) and ``supply_pressure_Pa`` [Pa]; defaults 15 kN and
+    12 MPa. The control unit tests run on it; a coupled run sets y0 from the settled track.
+
+    Parameters
+    ----------
+    hydraulics, idler, control_config : optional
+        Default: the packaged hydraulic file, idler file and control file.
+    force_N : float
+        Idler force at mid stroke [N].
+    supply_pressure_Pa : float
+        Supply pressure [Pa gauge].
+
+    Returns
+    -------
+    PlantParams
+    """
+    hydraulics = load_hydraulic_params() if hydraulics is None else hydraulics
+    idler = load_idler() if idler is None else idler
+    control_config = load_config() if control_config is None else control_config
+    y0 = 0.5 * hydraulics.cylinder.stroke_max_m - force_N / idler.stiffness_N_m
+    return reduced_plant_params(hydraulics, idler, control_config,
+                                supply_pressure_Pa=supply_pressure_Pa, free_position_m=y0)
+
+
+def main() -> None:
+    """Identify the idler on the packaged track and rewrite ``models/lf1352_idler.toml``."""
+    idler = identify_packaged_idler()
+    path = write_idler_file(idler, default_idler_path())
+    print(f"wrote {path}: k {idler.stiffness_N_m:.4g} N/m, M {idler.mass_kg:.4g} kg, "
+          f"c {idler.damping_N_s_m:.4g} N s/m, fit R^2 {idler.fit_r2:.3f}")
+
+
+if __name__ == "__main__":
+    main()

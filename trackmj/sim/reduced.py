@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.model import ReducedModel
-from trackmj.control.params import ControlConfig
+from trackmj.control.params import ControlConfig, PlantParams
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.metrics import overshoot, settling_time
@@ -60,20 +60,21 @@ class _StateProbe:
         self.estimate[k] = self.estimator.x
 
 
-def run_closed_loop(cfg: ControlConfig, controller: Controller,
+def run_closed_loop(cfg: ControlConfig, plant_params: PlantParams, controller: Controller,
                     reference: Callable[[float], float], t_end: float,
                     supply: Callable[[float], float] | None = None, estimator: str = "ekf",
                     seed: int = 0) -> LoopResult:
-    """Simulate ``t_end`` [s] of ``controller`` on the reduced model of ``cfg.plant``,
-    starting at rest at ``reference(0)``; ``reference(t)`` [N], ``supply(t)`` [Pa] (default
-    the nominal supply, told to the controller and the estimator as a supply-pressure
-    transducer would). Sensor noise from ``seed``."""
+    """Simulate ``t_end`` [s] of ``controller`` on the reduced model ``plant_params`` with
+    ``cfg``'s sensors, estimator and valve logic, starting at rest at ``reference(0)``;
+    ``reference(t)`` [N], ``supply(t)`` [Pa] (default the plant's nominal supply, told to
+    the controller and the estimator as a supply-pressure transducer would). Sensor noise
+    from ``seed``."""
     h = COUPLING_STEP_S
     if abs(cfg.sensors.sample_period_s - h) > 1e-12:
         raise ValueError(f"sensor period {cfg.sensors.sample_period_s} s must equal the "
                          f"{h} s coupling step")
-    model = ReducedModel(cfg.plant)
-    p_nom = cfg.plant.supply_pressure_Pa
+    model = ReducedModel(plant_params)
+    p_nom = plant_params.supply_pressure_Pa
     supply = supply or (lambda _t: p_nom)
     x0 = model.equilibrium(reference(0.0))
     steps = round(t_end / h)
@@ -84,7 +85,7 @@ def run_closed_loop(cfg: ControlConfig, controller: Controller,
                          for t in t_start[::ratio]])
     sched = Schedule([StepInputs(0.0, 0.0, 0.0, supply(t)) for t in t_start], previews,
                      np.array([reference(t + h) for t in t_start]))
-    plant = ReducedLoopPlant(cfg.plant, x0)
+    plant = ReducedLoopPlant(plant_params, x0)
     est = ESTIMATORS[estimator].build(model, cfg, h, x0)
     valves = ValveLogic(cfg.valves, h)
     recorder, probe = Recorder(sched), _StateProbe(plant, est, steps)
@@ -92,7 +93,8 @@ def run_closed_loop(cfg: ControlConfig, controller: Controller,
              sensors=Sensors(cfg.sensors, seed), estimator=est, observers=[recorder, probe])
     c = recorder.columns()
     x_est = probe.estimate
-    force_est = x_est[:, 0] * cfg.plant.area_head_m2 - x_est[:, 1] * cfg.plant.area_rod_m2
+    force_est = (x_est[:, 0] * plant_params.area_head_m2
+                 - x_est[:, 1] * plant_params.area_rod_m2)
     return LoopResult(c["t_s"], c["tension_N"], force_est, c["tension_ref_N"], probe.truth,
                       x_est, c["valve_mode"].astype(np.int64), c["u"],
                       np.array(recorder.solve_times_s), valves.switches)
