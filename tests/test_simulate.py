@@ -107,3 +107,24 @@ def test_cli_run_writes_outputs(tmp_path) -> None:
     assert metrics["metrics"]["rmse_N"] is not None
     assert (out / "timeseries.parquet").stat().st_size > 0
     assert (out / "timeseries.png").stat().st_size > 0
+
+
+def test_cli_overrides_change_the_run_and_are_recorded(tmp_path, capsys) -> None:
+    standing, driven = tmp_path / "standing", tmp_path / "driven"
+    assert main(["run", "W1", "--duration", "1.5", "--out", str(standing),
+                 "--set", "scenario.track.speed_m_s=0.0",
+                 "--set", "hydraulics.fluid.bulk_modulus_Pa=1.2e9"]) == 0
+    assert main(["run", "W1", "--duration", "1.5", "--out", str(driven)]) == 0
+    doc = json.loads((standing / "metrics.json").read_text())
+    assert doc["run"]["overrides"] == {"scenario.track.speed_m_s": 0.0,
+                                       "hydraulics.fluid.bulk_modulus_Pa": 1.2e9}
+    assert doc["run"]["files"]["hydraulics"] == "packaged"
+    # a standing track has no chordal (link-passing) ripple: the tension is far calmer
+    ripple = {name: np.std(read_result(out).columns()["tension_N"][-500:])
+              for name, out in (("standing", standing), ("driven", driven))}
+    assert ripple["standing"] < 0.2 * ripple["driven"], ripple
+    capsys.readouterr()
+    assert main(["run", "W1", "--duration", "1.5", "--out", str(tmp_path / "bad"),
+                 "--set", "hydraulics.fluid.bulk_modulus_Paa=1.2e9"]) == 2
+    err = capsys.readouterr().err
+    assert "did you mean 'bulk_modulus_Pa'" in err and not (tmp_path / "bad").exists()

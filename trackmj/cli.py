@@ -138,8 +138,9 @@ def _run_one(kwargs: dict):
 
 
 def _files(args: argparse.Namespace) -> dict:
-    """The parameter files given on the command line (None: the packaged ones)."""
-    return dict(model=args.model, hydraulics=args.hydraulics, control=args.control)
+    """The parameter files and ``--set`` overrides given on the command line."""
+    return dict(model=args.model, hydraulics=args.hydraulics, control=args.control,
+                overrides=args.set)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -178,7 +179,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     scenario = setups[0].scenario
     out = check_output_dir(Path(args.out or f"runs/compare-{scenario.name}"))
     base = dict(scenario=scenario, estimator=args.estimator, seed=args.seed,
-                duration=args.duration, **_files(args))
+                duration=args.duration, model=args.model, hydraulics=args.hydraulics,
+                control=args.control, set=args.set)
     cases = [dict(base, architecture=a, controller=c) for c in controllers
              for a in ("tp", "tp-weak", "dp-b")]
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
@@ -257,6 +259,11 @@ def build_parser() -> argparse.ArgumentParser:
                        "(default: packaged models/lf1352_hydraulics.toml)")
         p.add_argument("--control", metavar="FILE", help="control parameter TOML "
                        "(default: packaged models/lf1352_control.toml)")
+        p.add_argument("--set", metavar="KIND.TABLE.KEY=VALUE", action="append", default=[],
+                       help="override one key of a file (repeatable), KIND one of model, "
+                            "hydraulics, control, scenario; e.g. "
+                            "--set hydraulics.fluid.bulk_modulus_Pa=1.2e9 "
+                            "--set scenario.track.speed_m_s=2.0")
 
     def run_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("scenario", help="W1..W5 or a scenario TOML file")

@@ -210,8 +210,10 @@ def _json_read(value: Any) -> Any:
 
 
 def metrics_json(result: Result) -> str:
-    """The text of ``metrics.json`` for ``result``."""
-    return json.dumps({"run": result.metadata, "metrics": _json_ready(result.metrics)},
+    """The text of ``metrics.json`` for ``result``; metadata stored as JSON objects (e.g. the
+    files and overrides of the run) are written as objects."""
+    run = {k: json.loads(v) if v.startswith("{") else v for k, v in result.metadata.items()}
+    return json.dumps({"run": run, "metrics": _json_ready(result.metrics)},
                       indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 

@@ -38,7 +38,7 @@ from trackmj.sim.observers import (
     capture_mujoco_warnings,
 )
 from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS
-from trackmj.sim.setup import RunSetup, prepare
+from trackmj.sim.setup import Overrides, RunSetup, prepare
 
 END_STOP_ALLOWANCE_M = 5e-3
 """End-stop penetration a physical run may reach beyond the cylinder travel [m] (50 kN per
@@ -76,8 +76,9 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
              controller: str | None = None, estimator: str | None = None, seed: int = 0,
              duration: float | None = None, variant: str = "nominal",
              model: str | Path | None = None, hydraulics: str | Path | None = None,
-             control: str | Path | None = None, rrd: str | Path | None = None,
-             progress: bool = False, tp_result: Result | None = None) -> Result:
+             control: str | Path | None = None, set: Overrides | None = None,
+             rrd: str | Path | None = None, progress: bool = False,
+             tp_result: Result | None = None) -> Result:
     """Run one operating condition in closed loop.
 
     Parameters
@@ -97,6 +98,10 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
         Name of a scenario variant (W5 perturbations); ``"nominal"`` by default.
     model, hydraulics, control : str or Path, optional
         Parameter files replacing the packaged ``models/lf1352*.toml``.
+    set : mapping or sequence of str, optional
+        Overrides of file keys, ``{"hydraulics.fluid.bulk_modulus_Pa": 1.2e9}`` or
+        ``["hydraulics.fluid.bulk_modulus_Pa=1.2e9"]`` (the CLI's ``--set``); KIND is
+        ``model``, ``hydraulics``, ``control`` or ``scenario``. Validated like the files.
     rrd : str or Path, optional
         Write a Rerun recording of the run there (track architectures).
     progress : bool
@@ -119,7 +124,7 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     """
     setup = prepare(scenario, architecture=architecture, controller=controller,
                     estimator=estimator, seed=seed, duration=duration, variant=variant,
-                    model=model, hydraulics=hydraulics, control=control)
+                    model=model, hydraulics=hydraulics, control=control, overrides=set)
     return run(setup, rrd=rrd, progress=progress, tp_result=tp_result)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,7 +23,7 @@ from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
 from trackmj.identify import EquivalentIdler, identify_idler
 from trackmj.model import ModelParams, default_xml_path, generate_mjcf, load_model_params
 from trackmj.model.mjcf import with_heightfield
-from trackmj.params import ParameterError
+from trackmj.params import FILE_KINDS, ParameterError, parse_overrides
 from trackmj.plant import TrackPlant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.scenarios import Scenario, Variant, load_scenario
@@ -110,6 +111,28 @@ class RunSetup:
         return text if terrain is None else with_heightfield(text, terrain)
 
 
+Overrides = Sequence[str] | Mapping[str, Any]
+"""Parameter overrides: ``--set`` items ``"KIND.TABLE.KEY=VALUE"`` or a mapping
+``{"KIND.TABLE.KEY": value}`` (KIND one of model, hydraulics, control, scenario)."""
+
+
+def overrides_by_kind(overrides: Overrides | None) -> dict[str, dict[str, Any]]:
+    """``{kind: {"TABLE.KEY": value}}`` for every file kind from either form of overrides;
+    ParameterError naming the item for an unknown kind or a malformed key."""
+    if not overrides:
+        return {kind: {} for kind in FILE_KINDS}
+    if isinstance(overrides, Mapping):
+        out: dict[str, dict[str, Any]] = {kind: {} for kind in FILE_KINDS}
+        for key, value in overrides.items():
+            kind, _, dotted = str(key).partition(".")
+            if kind not in FILE_KINDS or not dotted:
+                raise ParameterError(f"set[{key!r}]: expected 'KIND.TABLE.KEY' with KIND one "
+                                     f"of {', '.join(FILE_KINDS)}")
+            out[kind][dotted] = value
+        return out
+    return parse_overrides(list(overrides))
+
+
 def _choice(kind: str, value: str, allowed: dict[str, Any] | tuple[str, ...]) -> str:
     if value not in allowed:
         raise ParameterError(f"{kind} = {value!r}: allowed {', '.join(allowed)}")
@@ -131,10 +154,18 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
             controller: str | None = None, estimator: str | None = None, seed: int = 0,
             duration: float | None = None, variant: str = "nominal",
             model: str | Path | None = None, hydraulics: str | Path | None = None,
-            control: str | Path | None = None) -> RunSetup:
+            control: str | Path | None = None, overrides: Overrides | None = None) -> RunSetup:
     """Load and validate every input of one run; ParameterError (a ValueError) naming the
-    file, key or option and what is allowed, before anything is built."""
-    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    file, key or option and what is allowed, before anything is built.
+
+    ``overrides`` (see :data:`Overrides`) change keys of the scenario and parameter files;
+    they pass the same validation as the files.
+    """
+    sets = overrides_by_kind(overrides)
+    if isinstance(scenario, Scenario) and sets["scenario"]:
+        scenario = scenario.source
+    sc = (scenario if isinstance(scenario, Scenario)
+          else load_scenario(scenario, overrides=sets["scenario"]))
     _choice("architecture", architecture, ARCHITECTURES)
     controller = _choice("controller", controller or sc.controller, CONTROLLERS)
     estimator = _choice("estimator", estimator or sc.estimator, ESTIMATORS)
@@ -156,9 +187,13 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
              "model": str(model) if model else "packaged",
              "hydraulics": str(hydraulics) if hydraulics else "packaged",
              "control": str(control) if control else "packaged"}
+    model_params = (load_model_params(model, overrides=sets["model"])
+                    if model or sets["model"] else _packaged_model())
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,
-        estimator=estimator, seed=seed, duration_s=duration_s,
-        model=load_model_params(model) if model else _packaged_model(),
-        hydraulics=scaled_hydraulics(load_hydraulic_params(hydraulics), var),
-        control=load_config(control), files=files)
+        estimator=estimator, seed=seed, duration_s=duration_s, model=model_params,
+        hydraulics=scaled_hydraulics(load_hydraulic_params(hydraulics,
+                                                           overrides=sets["hydraulics"]), var),
+        control=load_config(control, overrides=sets["control"]), files=files,
+        overrides={f"{kind}.{key}": value for kind, keys in sets.items()
+                   for key, value in keys.items()})
