@@ -165,12 +165,22 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_compare(args: argparse.Namespace) -> int:
-    from concurrent.futures import ProcessPoolExecutor
+def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
+    """RunSpec fields shared by every run of a compare or report command."""
+    from trackmj.executor import as_path, overrides_tuple
 
+    return dict(scenario=scenario, estimator=getattr(args, "estimator", None),
+                duration=args.duration, overrides=overrides_tuple(args.set),
+                model=as_path(args.model), hydraulics=as_path(args.hydraulics),
+                control=as_path(args.control))
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from trackmj.executor import Executor, RunSpec
     from trackmj.figures import compare_figure
     from trackmj.io import write_text_atomic
     from trackmj.results import check_output_dir, write_result
+    from trackmj.sim.registry import ARCHITECTURES
     from trackmj.sim.setup import prepare
 
     controllers = args.controllers.split(",") if args.controllers else [None]
@@ -178,20 +188,15 @@ def _cmd_compare(args: argparse.Namespace) -> int:
                       duration=args.duration, **_files(args)) for c in controllers]
     scenario = setups[0].scenario
     out = check_output_dir(Path(args.out or f"runs/compare-{scenario.name}"))
-    base = dict(scenario=scenario, estimator=args.estimator, seed=args.seed,
-                duration=args.duration, model=args.model, hydraulics=args.hydraulics,
-                control=args.control, set=args.set)
-    cases = [dict(base, architecture=a, controller=c) for c in controllers
-             for a in ("tp", "tp-weak", "dp-b")]
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        results = list(pool.map(_run_one, cases))
-        tp = {r.controller: r for r in results if r.architecture == "tp"}
-        dpa = list(pool.map(_run_one, [dict(base, architecture="dp-a", controller=c,
-                                             tp_result=tp[s.controller])
-                                        for c, s in zip(controllers, setups, strict=True)]))
-    results += dpa
-    order = {"tp": 0, "tp-weak": 1, "dp-a": 2, "dp-b": 3}
-    results.sort(key=lambda r: (r.controller, order[r.architecture]))
+    base = _specs_base(args, str(args.scenario))
+    specs = [RunSpec(**base, architecture=a, controller=s.controller, seed=args.seed)
+             for s in setups for a in ARCHITECTURES]
+    with Executor(workers=args.workers, scheduler=args.scheduler) as executor:
+        outcomes = executor.map(specs, progress=f"compare {scenario.name}")
+    failed = [o for o in outcomes if not o.ok]
+    for o in failed:
+        print(f"trackmj: {o.spec.architecture} {o.spec.controller}: {o.error}", file=sys.stderr)
+    results = [o.result for o in outcomes if o.ok]
     for r in results:
         write_result(r, out / f"{r.architecture}-{r.controller}")
     label = "architecture" if len(controllers) == 1 else "controller"
@@ -199,11 +204,11 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         compare_figure([r for r in results if r.controller == c], out / f"compare-{c}.png")
     table = _summary_table(results, "{r.architecture} {r.controller}")
     write_text_atomic(out / "compare.md", f"# {scenario.name}: {scenario.title}\n\n"
-                      f"seed {args.seed}, duration {results[0].metadata['duration_s']} s\n\n"
+                      f"seed {args.seed}, duration {setups[0].duration_s:g} s\n\n"
                       f"{table}\n")
     print(table)
     print(f"-> {out} ({label} comparison)")
-    return 0
+    return 1 if failed else 0
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
@@ -212,7 +217,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
     if args.seeds < 1 or args.seeds > 50:
         raise ValueError(f"--seeds = {args.seeds}: allowed 1..50")
     scenarios = args.scenarios.split(",")
-    results = run_matrix(scenarios, list(range(args.seeds)), args.duration, args.workers)
+    results = run_matrix(scenarios, list(range(args.seeds)), args.duration, args.workers,
+                         args.scheduler)
     path = write_report(results, Path(args.out))
     print(f"{len(results)} runs -> {path}")
     return 0
@@ -265,6 +271,12 @@ def build_parser() -> argparse.ArgumentParser:
                             "--set hydraulics.fluid.bulk_modulus_Pa=1.2e9 "
                             "--set scenario.track.speed_m_s=2.0")
 
+    def executor_args(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--workers", type=int, help="Dask worker processes of the local "
+                       "cluster (default: one per core)")
+        p.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler, "
+                       "e.g. tcp://HOST:8786, instead of a local cluster")
+
     def run_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("scenario", help="W1..W5 or a scenario TOML file")
         p.add_argument("--estimator", choices=choices(ESTIMATORS),
@@ -286,14 +298,14 @@ def build_parser() -> argparse.ArgumentParser:
     compare = sub.add_parser("compare", help="all architectures on one scenario")
     run_args(compare)
     compare.add_argument("--controllers", help="comma list, e.g. nmpc,lmpc,pid")
-    compare.add_argument("--workers", type=int, default=2, help="parallel processes")
+    executor_args(compare)
     compare.set_defaults(func=_cmd_compare)
 
     report = sub.add_parser("report", help="W1-W5 x architectures x seeds -> report.md")
     report.add_argument("--scenarios", default="W1,W2,W3,W4,W5", help="comma list")
     report.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 per case")
     report.add_argument("--duration", type=float, help="simulated time per run [s]")
-    report.add_argument("--workers", type=int, default=2, help="parallel processes")
+    executor_args(report)
     report.add_argument("--out", default="runs/report", help="output directory")
     report.set_defaults(func=_cmd_report)
 

@@ -17,19 +17,21 @@ stiffness, pre-tension at 0.8/1.2) with the nominal case.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
+from trackmj.executor import Executor, RunSpec
 from trackmj.figures import compare_figure
 from trackmj.io import write_text_atomic
 from trackmj.machine import machine
 from trackmj.results import Result, write_result
 from trackmj.scenarios import load_scenario
+from trackmj.sim.registry import ARCHITECTURES
 
-ARCHS = ("tp", "tp-weak", "dp-a", "dp-b")
+ARCHS = tuple(ARCHITECTURES)
 STUDY_ARCHS = ("tp", "dp-a", "dp-b")
 
 # (scenario, metric) -> study value per architecture, SI (Ding et al. 2025, results tables)
@@ -64,33 +66,21 @@ def _display(metric: str) -> tuple[float, str]:
     return 1.0, "-"
 
 
-def _run(kwargs: dict) -> Result:
-    from trackmj.sim.run import simulate
-
-    return simulate(**kwargs)
-
-
 def run_matrix(scenarios: Sequence[str], seeds: Sequence[int], duration: float | None,
-               workers: int) -> list[Result]:
-    """All runs of the report: tp/tp-weak/dp-b first, then dp-a on each tp run's load."""
-    first, cases = [], []
-    for name in scenarios:
-        sc = load_scenario(name)
-        variants = [v.name for v in sc.variants]
-        for seed in seeds:
-            for variant in variants:
-                base = dict(scenario=sc, seed=seed, duration=duration, variant=variant)
-                first += [dict(base, architecture=a) for a in ("tp", "tp-weak", "dp-b")]
-                cases.append(base)
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        results = list(pool.map(_run, first))
-        tp = {(r.scenario, r.seed, r.metadata["variant"]): r for r in results
-              if r.architecture == "tp"}
-        dpa = [dict(c, architecture="dp-a",
-                    tp_result=tp[(c["scenario"].name, c["seed"], c["variant"])])
-               for c in cases]
-        results += list(pool.map(_run, dpa))
-    return results
+               workers: int | None = None, scheduler: str | None = None) -> list[Result]:
+    """Every run of the report (each scenario's variants x seeds x architectures) on the
+    shared executor; a failed run is reported and left out."""
+    specs = [RunSpec(scenario=name, architecture=arch, seed=seed, duration=duration,
+                     variant=variant.name)
+             for name in scenarios for variant in load_scenario(name).variants
+             for seed in seeds for arch in ARCHITECTURES]
+    with Executor(workers=workers, scheduler=scheduler) as executor:
+        outcomes = executor.map(specs, progress="report")
+    for o in outcomes:
+        if not o.ok:
+            print(f"trackmj: {o.spec.scenario} {o.spec.architecture} {o.spec.variant} seed "
+                  f"{o.spec.seed}: {o.error}", file=sys.stderr)
+    return [o.result for o in outcomes if o.ok]
 
 
 def _cell(values: list[float], scale: float) -> str:
