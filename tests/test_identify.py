@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from trackmj.identify import _ConstantForce, fit_step_response, identify_idler
+from trackmj.identify import ConstantForce, fit_step_response, identify_idler
 from trackmj.plant import TrackPlant
 
 
@@ -29,7 +29,7 @@ def test_fit_recovers_a_known_second_order_system() -> None:
 
 def _settled_stroke(force_N: float) -> float:
     plant = TrackPlant.load()
-    element = _ConstantForce(force_N, damping_N_s_m=2e4)
+    element = ConstantForce(force_N, damping_N_s_m=2e4)
     plant.run(element, 2.0)
     samples: list[float] = []
     plant.run(element, 0.3, 0.0, lambda pl: samples.append(pl.stroke_m))

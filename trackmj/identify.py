@@ -37,7 +37,7 @@ class EquivalentIdler:
     stroke_m: float
 
 
-class _ConstantForce:
+class ConstantForce:
     """Tensioner element giving a constant force with optional implicit damping."""
 
     def __init__(self, force_N: float, damping_N_s_m: float) -> None:
@@ -93,7 +93,7 @@ def identify_idler(make_plant: Callable[[], object], force_low_N: float = 12_000
     make_plant: returns a fresh ``TrackPlant`` (at its home keyframe).
     """
     plant = make_plant()
-    element = _ConstantForce(force_low_N, damping_N_s_m=2e4)
+    element = ConstantForce(force_low_N, damping_N_s_m=2e4)
     plant.run(element, settle_s)
     element.damping_N_s_m = 0.0
     element.force_N = force_high_N

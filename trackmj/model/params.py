@@ -17,7 +17,6 @@ from trackmj.params import ParameterError, load_table, param, read_toml
 from trackmj.ports import COUPLING_STEP_S
 
 MODEL_NAME = "lf1352"
-LOOP_CLOSURE_PIN = 41
 
 
 def models_dir() -> Path:
@@ -107,15 +106,29 @@ class ReturnRollerParams:
 class GroundParams:
     stiffness_N_m: float = param(1e3, 1e10, doc="Kelvin-Voigt stiffness per pin contact [N/m]")
     damping_N_s_m: float = param(0.0, 1e8, doc="Kelvin-Voigt damping per pin contact [N·s/m]")
-    reference_mass_kg: float = param(0.01, 1e4, doc="effective mass for solref conversion [kg]")
-    impedance: float = param(0.5, 0.999, doc="constant MuJoCo impedance d [-]")
 
 
 @dataclass(frozen=True)
 class ContactParams:
-    rail_solref: tuple[float, float] = param(0.0, 10.0)
-    tooth_solref: tuple[float, float] = param(0.0, 10.0)
-    closure_solref: tuple[float, float] = param(0.0, 10.0)
+    """Kelvin–Voigt normal stiffness and damping of the frictionless contacts: link rails
+    on hub, idler, road wheels and rollers; pin spheres on the sprocket teeth."""
+
+    rail_stiffness_N_m: float = param(1e3, 1e10, doc="rail contact stiffness [N/m]")
+    rail_damping_N_s_m: float = param(0.0, 1e8, doc="rail contact damping [N·s/m]")
+    tooth_stiffness_N_m: float = param(1e3, 1e10, doc="tooth contact stiffness [N/m]")
+    tooth_damping_N_s_m: float = param(0.0, 1e8, doc="tooth contact damping [N·s/m]")
+
+
+@dataclass(frozen=True)
+class PinParams:
+    """Joint between two links at a pin: in-plane (radial) Kelvin–Voigt stiffness and
+    damping, and the torsional spring-damper about the pin axis (zero twist when the two
+    links are in line). The planar model has no motion along the pin axis."""
+
+    radial_stiffness_N_m: float = param(1e5, 1e10, doc="in-plane pin stiffness [N/m]")
+    radial_damping_N_s_m: float = param(0.0, 1e6, doc="in-plane pin damping [N·s/m]")
+    torsional_stiffness_N_m_rad: float = param(0.0, 1e5, doc="twist stiffness [N·m/rad]")
+    torsional_damping_N_m_s_rad: float = param(0.0, 1e4, doc="twist damping [N·m·s/rad]")
 
 
 @dataclass(frozen=True)
@@ -129,8 +142,10 @@ class PassiveTensionerParams:
 class SolverParams:
     iterations: int = param(1, 1000)
     tolerance: float = param(0.0, 1e-2)
+    soft_margin: float = param(1.0, 100.0, doc="apparent mass of a soft constraint over "
+                               "its explicit-integration limit (h²K + 2hB)/4 [-]")
     cone: str = "pyramidal"
-    jacobian: str = "dense"
+    jacobian: str = "sparse"
     warmstart: bool = False
     midphase: bool = True   # per-body geom bounding-volume tree before the narrow phase
 
@@ -148,8 +163,19 @@ class ModelParams:
     return_rollers: ReturnRollerParams
     ground: GroundParams
     contacts: ContactParams
+    pins: PinParams
     tensioner: PassiveTensionerParams
     solver: SolverParams
+
+    @property
+    def pin_joint(self) -> PinParams:
+        """The pin joint in force (the steel pins of ``[pins]``)."""
+        return self.pins
+
+    @property
+    def pin_joint_table(self) -> str:
+        """Name of the TOML table the pin joint comes from."""
+        return "pins"
 
     @property
     def sprocket_pitch_radius_m(self) -> float:
