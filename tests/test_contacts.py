@@ -4,11 +4,12 @@ Static: force / penetration of every loaded contact of the standing track equals
 stated stiffness of its kind. Dynamic: the free vibration of a mass on a contact mapped
 by :func:`trackmj.model.soft.soft_constraint` decays with the stated damping and rings
 with the stated stiffness on the documented mass m + m_a, as semi-implicit Euler
-integrates them. Pins: a free span of the loop stretches as n pins in series.
+integrates them. Pins: a free span of the loop stretches as n pins in series, steel or rubber-bushed.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import mujoco
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 
 from trackmj.identify import ConstantForce
+from trackmj.model import ModelParams, generate_mjcf
 from trackmj.model.soft import row_diag, soft_constraint
 from trackmj.plant import TrackPlant
 
@@ -131,11 +133,21 @@ def test_contact_free_vibration_has_the_stated_damping(stiffness: float, damping
     assert math.isfinite(apparent) and apparent > 0.0
 
 
-def test_free_span_stretches_as_pins_in_series(plant: TrackPlant) -> None:
+def _bushed_plant(params: ModelParams) -> TrackPlant:
+    bushed = dataclasses.replace(params, bushings=dataclasses.replace(params.bushings,
+                                                                      enabled=True))
+    return TrackPlant(mujoco.MjModel.from_xml_string(generate_mjcf(bushed)), bushed)
+
+
+@pytest.mark.parametrize("pins", ["steel", "bushings"])
+def test_free_span_stretches_as_pins_in_series(model_params: ModelParams, pins: str) -> None:
     """The upper span between return roller 2 and the idler holds n pins in series: its
     length along the links (sum of pin-to-pin distances, blind to sag and kinks) grows by
-    n·ΔT/K when the tension rises by ΔT (the links are rigid)."""
+    n·ΔT/K when the tension rises by ΔT (the links are rigid), for the steel pins and for
+    the rubber bushings."""
+    plant = TrackPlant.load() if pins == "steel" else _bushed_plant(model_params)
     p = plant.params
+    assert p.pin_joint_table == ("pins" if pins == "steel" else "bushings")
     ride = p.chassis.ride_height_m
     x_lo, x_hi = max(p.return_rollers.x_m) + 0.12, p.idler.x_m - 0.3
     lengths, tensions = [], []

@@ -132,6 +132,17 @@ class PinParams:
 
 
 @dataclass(frozen=True)
+class BushingParams:
+    """Rubber-bushed pins: when ``enabled`` they replace the steel pins of ``[pins]``."""
+
+    enabled: bool
+    radial_stiffness_N_m: float = param(1e5, 1e10, doc="in-plane pin stiffness [N/m]")
+    radial_damping_N_s_m: float = param(0.0, 1e6, doc="in-plane pin damping [N·s/m]")
+    torsional_stiffness_N_m_rad: float = param(0.0, 1e5, doc="twist stiffness [N·m/rad]")
+    torsional_damping_N_m_s_rad: float = param(0.0, 1e4, doc="twist damping [N·m·s/rad]")
+
+
+@dataclass(frozen=True)
 class PassiveTensionerParams:
     preload_N: float = param(0.0, 1e6, doc="force at the layout stroke [N]")
     stiffness_N_m: float = param(0.0, 1e9)
@@ -164,18 +175,19 @@ class ModelParams:
     ground: GroundParams
     contacts: ContactParams
     pins: PinParams
+    bushings: BushingParams
     tensioner: PassiveTensionerParams
     solver: SolverParams
 
     @property
-    def pin_joint(self) -> PinParams:
-        """The pin joint in force (the steel pins of ``[pins]``)."""
-        return self.pins
+    def pin_joint(self) -> PinParams | BushingParams:
+        """The pin joint in force: the bushings when enabled, else the steel pins."""
+        return self.bushings if self.bushings.enabled else self.pins
 
     @property
     def pin_joint_table(self) -> str:
         """Name of the TOML table the pin joint comes from."""
-        return "pins"
+        return "bushings" if self.bushings.enabled else "pins"
 
     @property
     def sprocket_pitch_radius_m(self) -> float:
@@ -203,6 +215,9 @@ def _check_consistency(p: ModelParams, where: str) -> None:
     if p.track.link_count != 82:
         raise ParameterError(f"{where} [track].link_count = {p.track.link_count}: the LF1352 "
                              "model (names link_00..link_81) needs exactly 82")
+    if not isinstance(p.bushings.enabled, bool):
+        raise ParameterError(f"{where} [bushings].enabled = {p.bushings.enabled!r}: allowed "
+                             "true or false")
     if len(p.road_wheels.x_m) != p.road_wheels.count:
         raise ParameterError(f"{where} [road_wheels].x_m has {len(p.road_wheels.x_m)} entries, "
                              f"count = {p.road_wheels.count}")
