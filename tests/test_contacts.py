@@ -4,7 +4,8 @@ Static: force / penetration of every loaded contact of the standing track equals
 stated stiffness of its kind. Dynamic: the free vibration of a mass on a contact mapped
 by :func:`trackmj.model.soft.soft_constraint` decays with the stated damping and rings
 with the stated stiffness on the documented mass m + m_a, as semi-implicit Euler
-integrates them. Pins: a free span of the loop stretches as n pins in series, steel or rubber-bushed.
+integrates them. Pins: a free span of the loop stretches as n pins in series, steel or
+rubber-bushed.
 """
 
 from __future__ import annotations

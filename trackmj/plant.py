@@ -333,10 +333,12 @@ class TrackPlant:
         return np.einsum("ij,ij->i", force, bisector)
 
     def strand_tensions_N(self) -> StrandTension:
-        """Mean pin tension of the upper strand and of the rear lower run [N]."""
+        """Mean pin tension of the upper strand and of the rear lower run [N] (see
+        :meth:`upper_strand_pins`, :meth:`lower_strand_pins`)."""
         tension = self.pin_tensions_N()
-        return StrandTension(float(tension[self.upper_strand_pins()].mean()),
-                             float(tension[self.lower_strand_pins()].mean()))
+        pts = self._chassis_frame_pins()
+        return StrandTension(float(tension[self._upper_mask(pts)].mean()),
+                             float(tension[self._lower_mask(pts)].mean()))
 
     def contact_forces_N(self) -> dict[str, float]:
         """Sum of contact normal forces on the track by partner [N]:
@@ -390,20 +392,22 @@ class TrackPlant:
 
     def upper_strand_pins(self) -> np.ndarray:
         """Indices of pins in the upper strand (above the sprocket and idler centres)."""
-        pts = self._chassis_frame_pins()
+        return np.nonzero(self._upper_mask(self._chassis_frame_pins()))[0]
+
+    def _upper_mask(self, pts: np.ndarray) -> np.ndarray:
         ride = self.params.chassis.ride_height_m
         level = max(self.params.sprocket.z_m, self.params.idler.z_m) - ride
-        return np.nonzero(pts[:, 1] > level + 0.05)[0]
+        return pts[:, 1] > level + 0.05
+
+    def _lower_mask(self, pts: np.ndarray) -> np.ndarray:
+        p = self.params
+        return ((pts[:, 0] > p.sprocket.x_m) & (pts[:, 0] < min(p.road_wheels.x_m))
+                & (pts[:, 1] < p.sprocket.z_m - p.chassis.ride_height_m - 0.05))
 
     def lower_strand_pins(self) -> np.ndarray:
         """Indices of pins in the rear lower run: between the sprocket and the rearmost
-        road wheel, below the sprocket centre (the tight side when driving forward)."""
-        pts = self._chassis_frame_pins()
-        p = self.params
-        ride = p.chassis.ride_height_m
-        rear_x = min(p.road_wheels.x_m)
-        return np.nonzero((pts[:, 0] > p.sprocket.x_m) & (pts[:, 0] < rear_x)
-                          & (pts[:, 1] < p.sprocket.z_m - ride - 0.05))[0]
+        road wheel, 5 cm below the sprocket centre (the tight side driving forward)."""
+        return np.nonzero(self._lower_mask(self._chassis_frame_pins()))[0]
 
     def derailment(self) -> DerailmentStatus:
         excursion = float(self.envelope_excursion_m().max())

@@ -308,10 +308,11 @@ def _check_torsion(p: ModelParams) -> None:
     """Limits of the pins' torsional spring-damper (fixed tendons) at this timestep.
 
     The tendon spring is explicit: the zig-zag mode of the links, ω² = 4·k_t/I, must keep
-    soft_margin·(hω)²/4 <= 1. The tendon damping, although implicit in ``implicitfast``,
-    is not seen by the constraint solver of the pin connects; measured on this model at
-    1 ms it diverges from 0.2 N·m·s/rad (0.15 holds), so the limit is I/(20·h), about
-    half of that.
+    soft_margin·(hω)²/4 <= 1. The tendon damping is implicit only in part: MuJoCo 4.0.0's
+    ``implicitfast`` keeps the same-tree entries of a tendon's damping derivative, and a
+    pin tendon joins two links, two trees, so its coupling term stays explicit. Measured on
+    this model at 1 ms it diverges from 0.2 N·m·s/rad (0.15 holds); the limit is
+    I/(20·h), about half of that.
     """
     joint, where = p.pin_joint, f"lf1352.toml [{p.pin_joint_table}]"
     inertia, h = _link_inertia(p)[1], p.simulation.timestep_s
