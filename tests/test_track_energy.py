@@ -30,7 +30,7 @@ def test_ledger_closes(driven: dict) -> None:
     assert e["drive_work_J"] > 1e3
     booked = (e["drive_work_J"] + e["tensioner_work_J"] + e["suspension_loss_J"]
               + e["pin_torsion_loss_J"] + e["hitch_work_J"] + sum(e["contact_work_J"].values())
-              + e["numerical_dissipation_J"])
+              + e["numerical_J"])
     assert e["kinetic_change_J"] + e["potential_change_J"] - booked == pytest.approx(
         e["residual_J"], abs=1e-6)
     assert abs(e["residual_J"]) <= 0.01 * e["drive_work_J"]
@@ -82,7 +82,7 @@ def test_drive_writes_metrics_and_timeseries_whole(tmp_path) -> None:
     metrics = json.loads((out / "metrics.json").read_text())
     assert {"drive_work_J", "tensioner_work_J", "suspension_loss_J", "contact_work_J",
             "kinetic_change_J", "potential_change_J", "residual_J",
-            "numerical_dissipation_J"} <= set(metrics["track_energy"])
+            "numerical_J"} <= set(metrics["track_energy"])
     assert metrics["real_time_factor"] > 0.0
     table = pq.read_table(out / "timeseries.parquet")
     assert table.num_rows == 400

@@ -73,7 +73,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     contacts = sum(e["contact_work_J"].values())
     print(f"energy [kJ]        drive {e['drive_work_J'] / 1e3:.3f}, tensioner "
           f"{e['tensioner_work_J'] / 1e3:.3f}, suspension {e['suspension_loss_J'] / 1e3:.3f}, "
-          f"constraints {contacts / 1e3:.3f}, numerical {e['numerical_dissipation_J'] / 1e3:.3f}"
+          f"constraints {contacts / 1e3:.3f}, numerical {e['numerical_J'] / 1e3:.3f}"
           f"; dKE {e['kinetic_change_J'] / 1e3:.3f}, dPE {e['potential_change_J'] / 1e3:.3f}, "
           f"residual {e['residual_J']:.2e} J")
     print(f"max pin gap        {m['max_pin_gap_m'] * 1e3:.3f} mm   MuJoCo warnings "

@@ -53,7 +53,13 @@ _LIMIT_JOINT = int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)
 
 @dataclass
 class TrackEnergy:
-    """Energy terms of a run [J] (see the module docstring); ``to_dict`` for JSON."""
+    """Energy terms of a run [J] (see the module docstring); ``to_dict`` for JSON.
+
+    Work terms are positive into the track. ``contact_work_J`` by partner (:data:`PARTNERS`),
+    with the integrator's parts moved to ``numerical_terms_J``; ``numerical_J`` is their
+    sum, of either sign (the velocity jump dissipates, the explicit constraint springs and
+    the constraint curvature create).
+    """
 
     drive_work_J: float = 0.0
     tensioner_work_J: float = 0.0
@@ -64,7 +70,7 @@ class TrackEnergy:
                                                                                     0.0))
     kinetic_change_J: float = 0.0
     potential_change_J: float = 0.0
-    numerical_dissipation_J: float = 0.0
+    numerical_J: float = 0.0
     numerical_terms_J: dict[str, float] = field(default_factory=lambda: dict.fromkeys(
         ("velocity_jump", "explicit_forces", "explicit_constraint_springs",
          "constraint_curvature"), 0.0))
@@ -75,7 +81,7 @@ class TrackEnergy:
         """Sum of all work terms and the numerical term [J]."""
         return (self.drive_work_J + self.tensioner_work_J + self.suspension_loss_J
                 + self.pin_torsion_loss_J + self.hitch_work_J
-                + sum(self.contact_work_J.values()) + self.numerical_dissipation_J)
+                + sum(self.contact_work_J.values()) + self.numerical_J)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -308,6 +314,6 @@ class TrackEnergyLedger:
         t.numerical_terms_J["constraint_curvature"] = self._curvature
         t.numerical_terms_J["explicit_forces"] += (t.potential_change_J + kinetic_next
                                                    - self._kinetic_mid_sum)
-        t.numerical_dissipation_J = float(sum(t.numerical_terms_J.values()))
+        t.numerical_J = float(sum(t.numerical_terms_J.values()))
         t.residual_J = t.kinetic_change_J + t.potential_change_J - t.booked_J
         return t
