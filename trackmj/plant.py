@@ -259,19 +259,17 @@ class TrackPlant:
             self._hitch_loaded = hitch != (0.0, 0.0)
 
     def scale_contact_stiffness(self, scale: float) -> None:
-        """Scale the stiffness of every track contact by ``scale`` [-] (W5 perturbation):
-        the ground foundation's direct stiffness (solref[0] < 0) linearly, the time
-        constant of the others (solref[0] > 0, stiffness ∝ 1/τ²) by 1/sqrt(scale)."""
+        """Multiply the physical stiffness of every track contact by ``scale`` [-] (W5
+        perturbation). The partner geoms (ground, hub, idler, wheels, rollers, teeth) decide
+        every contact (priority) and carry a direct solref (−k, −b) with K = n·k/((1−d)·A)
+        (:mod:`trackmj.model.soft`), so k scales linearly; damping and impedance stay."""
         if not (math.isfinite(scale) and scale > 0.0):
             raise ValueError(f"contact stiffness scale must be > 0, got {scale!r}")
         m = self.model
-        for g in range(m.ngeom):
-            if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0:
-                continue
-            if m.geom_solref[g, 0] < 0.0:
-                m.geom_solref[g, 0] *= scale
-            else:
-                m.geom_solref[g, 0] /= math.sqrt(scale)
+        direct = m.geom_solref[:, 0] < 0.0
+        if not np.any(direct):
+            raise ValueError("no contact with a direct (physical) solref in this model")
+        m.geom_solref[direct, 0] *= scale
 
     @property
     def chassis_acc_z_m_s2(self) -> float:

@@ -132,14 +132,10 @@ class PinParams:
 
 
 @dataclass(frozen=True)
-class BushingParams:
+class BushingParams(PinParams):
     """Rubber-bushed pins: when ``enabled`` they replace the steel pins of ``[pins]``."""
 
     enabled: bool
-    radial_stiffness_N_m: float = param(1e5, 1e10, doc="in-plane pin stiffness [N/m]")
-    radial_damping_N_s_m: float = param(0.0, 1e6, doc="in-plane pin damping [N·s/m]")
-    torsional_stiffness_N_m_rad: float = param(0.0, 1e5, doc="twist stiffness [N·m/rad]")
-    torsional_damping_N_m_s_rad: float = param(0.0, 1e4, doc="twist damping [N·m·s/rad]")
 
 
 @dataclass(frozen=True)
@@ -180,7 +176,7 @@ class ModelParams:
     solver: SolverParams
 
     @property
-    def pin_joint(self) -> PinParams | BushingParams:
+    def pin_joint(self) -> PinParams:
         """The pin joint in force: the bushings when enabled, else the steel pins."""
         return self.bushings if self.bushings.enabled else self.pins
 
