@@ -59,7 +59,7 @@ def main() -> None:
           f"{(timers['mjTIMER_POS_KINEMATICS'] + timers['mjTIMER_POS_INERTIA']) * 1e6:8.1f} us")
     print(f"plant.step (passive)   {coupled * 1e6:8.1f} us/step   real-time factor "
           f"{1e-3 / coupled:5.2f}x   ratio to bare {coupled / bare:.3f}")
-    print(f"final speed {plant.chassis_velocity[0]:.3f} m/s, closure "
+    print(f"final speed {plant.chassis_velocity[0]:.3f} m/s, max pin gap "
           f"{plant.closure_error_m * 1e3:.3f} mm, warnings {plant.warning_count}, "
           f"finite {bool(np.isfinite(d.qpos).all())}")
 

@@ -74,19 +74,20 @@ def _scenario_file(tmp_path, name: str, edit) -> str:
     return str(path)
 
 
-def test_w3_push_that_breaks_the_track_stops_with_the_reason(tmp_path, monkeypatch,
-                                                             capsys) -> None:
-    """A -15 kN push pulse at 2-4 s (inside the file's allowed ±30 kN) blows the loop apart:
-    the run stops with exit 3 naming the time and the broken closure, writes no result and
-    leaves no MuJoCo log in the working directory."""
+def test_w3_push_beyond_what_the_tensioner_holds_stops_with_the_reason(tmp_path, monkeypatch,
+                                                                      capsys) -> None:
+    """A -30 kN push pulse at 2-4 s (the file's allowed limit) drives the idler in faster than
+    the rod chambers can be fed: the run stops with exit 3 naming the time and the node
+    below vacuum, writes no result and leaves no MuJoCo log in the working directory."""
     monkeypatch.chdir(tmp_path)
     path = _scenario_file(tmp_path, "W3", lambda s: s.replace(
         "start_s = 6.0\nend_s = 8.0", "start_s = 2.0\nend_s = 4.0").replace(
-        "hitch_N = -3805.0", "hitch_N = -15000.0"))
+        "hitch_N = -3755.0", "hitch_N = -30000.0"))
     out = tmp_path / "out"
     assert main(["run", path, "--duration", "4", "--out", str(out)]) == 3
     err = capsys.readouterr().err
-    assert re.search(r"stopped: t = 2\.\d+ s: track loop closure gap [\d.]+ mm exceeds", err)
+    assert re.search(r"stopped: t = [23]\.\d+ s: rod node pressure -[\d.]+ MPa gauge below "
+                     r"vacuum .*the run left physics", err), err
     assert "Traceback" not in err
     assert not out.exists() and not (tmp_path / "MUJOCO_LOG.TXT").exists()
 

@@ -51,7 +51,7 @@ def test_unknown_and_missing_keys(tmp_path) -> None:
 def test_solver_choices_and_integer_counts(tmp_path) -> None:
     with pytest.raises(ParameterError, match=r"\[solver\]\.jacobian = 'fast' is not one of "
                        r"\['dense', 'sparse', 'auto'\]"):
-        load_model_params(_variant(tmp_path, 'jacobian = "dense"', 'jacobian = "fast"'))
+        load_model_params(_variant(tmp_path, 'jacobian = "sparse"', 'jacobian = "fast"'))
     with pytest.raises(ParameterError, match=r"\[track\]\.link_count = 82\.0: expected an "
                        r"integer, got a float"):
         load_model_params(_variant(tmp_path, "link_count = 82", "link_count = 82.0"))

@@ -34,8 +34,12 @@ def test_committed_idler_file_equals_a_fresh_identification() -> None:
     assert load_identification().model_sha256 == file_sha256(default_xml_path()), REGENERATE
     stored, fresh = load_idler(), identify_packaged_idler()
     for f in dataclasses.fields(EquivalentIdler):
+        if f.name in ("modes", "response"):
+            continue
         assert getattr(stored, f.name) == pytest.approx(getattr(fresh, f.name), rel=1e-9,
                                                         abs=1e-12), (f.name, REGENERATE)
+    for a, b in zip(stored.modes, fresh.modes, strict=True):
+        assert dataclasses.astuple(a) == pytest.approx(dataclasses.astuple(b), rel=1e-9)
 
 
 def test_reduced_plant_lumps_both_cylinders_and_puts_paths_in_series() -> None:

@@ -102,9 +102,11 @@ def _public_api() -> list[tuple[str, object]]:
     from trackmj.control.nmpc import NonlinearMpc
     from trackmj.control.pid import PidController
     from trackmj.hydraulics import HydraulicTensioner
+    from trackmj.plant import TrackPlant
     from trackmj.sim.run import simulate
 
-    return [(obj.__name__, obj) for obj in (simulate, HydraulicTensioner, NonlinearMpc,
+    return [(obj.__name__, obj) for obj in (simulate, TrackPlant, HydraulicTensioner,
+                                             NonlinearMpc,
                                              LinearMpc, PidController, ExtendedKalmanFilter,
                                              UnscentedKalmanFilter)]
 

@@ -7,11 +7,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from collections.abc import Sequence
 from pathlib import Path
-
-import numpy as np
 
 
 def _cmd_model_info(args: argparse.Namespace) -> int:
@@ -38,7 +35,7 @@ def _cmd_model_info(args: argparse.Namespace) -> int:
     print(f"masses           total {total_mass:.0f} kg, chassis {p.chassis.mass_kg:.0f} kg, "
           f"track {link_mass:.0f} kg")
     print(f"geoms            {m.ngeom} ({contact_pairs} geom pairs can collide)")
-    print(f"equalities       {m.neq} (loop closure), actuators {m.nu}: "
+    print(f"equalities       {m.neq} (one connect per pin), actuators {m.nu}: "
           f"{', '.join(m.actuator(i).name for i in range(m.nu))}")
     print(f"timestep         {m.opt.timestep * 1e3:.3f} ms, integrator "
           f"{mujoco.mjtIntegrator(m.opt.integrator).name}")
@@ -59,48 +56,31 @@ def _cmd_model_generate(args: argparse.Namespace) -> int:
 
 
 def _cmd_drive(args: argparse.Namespace) -> int:
-    from trackmj.plant import PassiveTensioner, TrackPlant
+    from trackmj.drive import drive
 
-    if not 0.0 <= abs(args.speed) <= 5.0:
-        raise SystemExit("--speed must be within [-5, 5] m/s")
-    if not 0.0 < args.duration <= 3600.0:
-        raise SystemExit("--duration must be within (0, 3600] s")
-    plant = TrackPlant.load(args.model, args.params)
-    element = PassiveTensioner.from_params(plant.params)
-    if args.preload is not None:
-        element.preload_N = args.preload * 1e3
-    ramp = min(1.0, args.duration / 4.0)
-    samples: list[tuple[float, float, float, float, float]] = []
-    derail_events = 0
-
-    def record(pl: TrackPlant) -> None:
-        nonlocal derail_events
-        if round(pl.time_s * 1000) % 10:
-            return
-        t = pl.pin_tensions_N()
-        upper = pl.upper_strand_pins()
-        samples.append((pl.time_s, pl.idler_force_N, float(t[upper].mean()), float(t.max()),
-                        pl.chassis_velocity[0]))
-        if round(pl.time_s * 1000) % 100 == 0 and pl.derailment().any:
-            derail_events += 1
-
-    start = time.perf_counter()
-    plant.run(element, args.duration, lambda t: args.speed * min(1.0, t / ramp), record)
-    wall = time.perf_counter() - start
-    arr = np.array(samples)
-    steady = arr[arr[:, 0] >= ramp + 1.0] if args.duration > ramp + 1.0 else arr
-    print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s in {wall:.1f} s wall "
-          f"({args.duration / wall:.2f}x real time)")
-    print(f"idler force        mean {steady[:, 1].mean() / 1e3:7.2f} kN   "
-          f"min {steady[:, 1].min() / 1e3:7.2f}  max {steady[:, 1].max() / 1e3:7.2f}")
-    print(f"upper-strand tension mean {steady[:, 2].mean() / 1e3:5.2f} kN   "
-          f"min {steady[:, 2].min() / 1e3:7.2f}  max {steady[:, 2].max() / 1e3:7.2f}")
-    print(f"peak pin tension   {arr[:, 3].max() / 1e3:7.2f} kN")
-    print(f"vehicle speed      {steady[:, 4].mean():.3f} m/s "
-          f"(sprocket pitch speed {args.speed:.3f} m/s)")
-    print(f"closure error      {plant.closure_error_m * 1e3:.3f} mm   "
-          f"MuJoCo warnings {plant.warning_count}   derailment checks failed {derail_events}")
-    return 0 if plant.warning_count == 0 and derail_events == 0 else 1
+    preload = None if args.preload is None else args.preload * 1e3
+    result = drive(args.speed, args.duration, model=args.model, params=args.params,
+                   preload_N=preload, out_dir=args.out)
+    m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
+    print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s: {m['real_time_factor']:.2f}x "
+          f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
+    print(f"idler force        mean {s['idler_force_mean_N'] / 1e3:7.2f} kN   "
+          f"min {s['idler_force_min_N'] / 1e3:7.2f}  max {s['idler_force_max_N'] / 1e3:7.2f}")
+    print(f"strand tension     upper {s['upper_strand_tension_mean_N'] / 1e3:5.2f} kN, "
+          f"rear lower run {s['lower_strand_tension_mean_N'] / 1e3:5.2f} kN")
+    print(f"vehicle speed      {s['vehicle_speed_mean_m_s']:.3f} m/s "
+          f"(sprocket pitch speed {s['track_speed_mean_m_s']:.3f} m/s)")
+    contacts = sum(e["contact_work_J"].values())
+    print(f"energy [kJ]        drive {e['drive_work_J'] / 1e3:.3f}, tensioner "
+          f"{e['tensioner_work_J'] / 1e3:.3f}, suspension {e['suspension_loss_J'] / 1e3:.3f}, "
+          f"constraints {contacts / 1e3:.3f}, numerical {e['numerical_J'] / 1e3:.3f}"
+          f"; dKE {e['kinetic_change_J'] / 1e3:.3f}, dPE {e['potential_change_J'] / 1e3:.3f}, "
+          f"residual {e['residual_J']:.2e} J")
+    print(f"max pin gap        {m['max_pin_gap_m'] * 1e3:.3f} mm   MuJoCo warnings "
+          f"{m['mujoco_warnings']}   derailment checks failed {m['derailment_checks_failed']}")
+    if result.out_dir is not None:
+        print(f"wrote {result.out_dir}")
+    return 0 if m["mujoco_warnings"] == 0 and m["derailment_checks_failed"] == 0 else 1
 
 
 SUMMARY_METRICS = (
@@ -256,6 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     drive.add_argument("--speed", type=float, default=1.5, help="sprocket pitch speed [m/s]")
     drive.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
     drive.add_argument("--preload", type=float, help="tensioner preload [kN]")
+    drive.add_argument("--out", help="directory for metrics.json and timeseries.parquet")
     drive.set_defaults(func=_cmd_drive)
 
     def file_args(p: argparse.ArgumentParser) -> None:

@@ -6,6 +6,8 @@ force F [N] > 0 pushes the idler carrier outward.
 
 from __future__ import annotations
 
+import numpy as np
+
 from trackmj.hydraulics import LogRow
 from trackmj.ports import COUPLING_STEP_S, ForceLaw
 
@@ -23,6 +25,21 @@ class ConstantForce:
 
     def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
         """Nothing to finish: the element has no state."""
+
+
+class ForceHistory:
+    """Tensioner element replaying ``force_N`` [N], one value per coupling step (the last
+    one held after the end), with no damping."""
+
+    def __init__(self, force_N: np.ndarray) -> None:
+        self.force_N = force_N
+        self.step = 0
+
+    def force_law(self, t_s: float, stroke_m: float, velocity_m_s: float) -> ForceLaw:
+        return ForceLaw(float(self.force_N[min(self.step, len(self.force_N) - 1)]))
+
+    def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
+        self.step += 1
 
 
 class IdealForceSource:

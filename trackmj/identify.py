@@ -1,10 +1,21 @@
 """Identification of the equivalent idler-carrier dynamics seen by the cylinders.
 
 The reduced models (NMPC prediction, the ``dp-a`` architecture) replace the track by
-M·ÿ = F_ten − k·(y − y0) − c·ẏ on the cylinder stroke y. :func:`identify_idler` finds
-k, M and c from the MuJoCo track itself: it settles the track under a constant
-tensioner force, steps the force, and fits the stroke response with a second-order
-step response (least squares on the first ``fit_window_s`` seconds).
+M·ÿ = F_ten − k·(y − y0) − c·ẏ on the cylinder stroke y. :func:`identify_idler` measures
+the standing MuJoCo track itself:
+
+1. static stiffness k = ΔF/Δy between two settled force levels (the "static dF/dy");
+2. the frequency response H(f) = Y(f)/F(f) (Welch, 2 s Hann segments) of the stroke to
+   a seeded multisine force about their mean, lines every 0.5 Hz in the band;
+3. M and c of the single-DOF model fitted to H in the band with k fixed (relative
+   complex error); ``fit_r2`` is that model's R² on H, which a single mode cannot make
+   high: the track has a body mode near 7-8 Hz (the study's "track-idler-body mode",
+   8-12 Hz), the idler mode near 25-30 Hz and damping-dominated contacts above;
+4. the modal model: the idler mode (r + q·s)/(s² + 2ζω·s + ω²), whose velocity residue
+   q carries the contacts' damping, the body mode r/(s² + 2ζω·s + ω²) and a relaxation
+   r/(s + p), fitted in the same band; ``modal_fit_r2`` is its R².
+
+R² on H: 1 − Σ|H_model − H|² / Σ|H − mean H|² over the band's lines.
 """
 
 from __future__ import annotations
@@ -15,17 +26,53 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.signal import csd, welch
 
-from trackmj.ports import ForceLaw
+from trackmj.elements import ConstantForce, ForceHistory
+from trackmj.ports import COUPLING_STEP_S
+
+
+@dataclass(frozen=True)
+class ModalTerm:
+    """One term of the modal compliance model [SI]: a mode (r + q·s)/(s² + 2ζωs + ω²) with
+    residue r [1/kg], velocity residue q [s/kg] (0 for a plain mode), frequency_Hz = ω/2π
+    and damping ratio ζ; or, with frequency_Hz = 0, a relaxation r/(s + ζ) whose rate
+    [1/s] sits in ``damping_ratio``."""
+
+    residue: float
+    velocity_residue: float
+    frequency_Hz: float
+    damping_ratio: float
+
+    def compliance(self, omega: np.ndarray) -> np.ndarray:
+        """Complex compliance [m/N] at angular frequencies ``omega`` [rad/s]."""
+        s = 1j * omega
+        if self.frequency_Hz == 0.0:
+            return self.residue / (s + self.damping_ratio)
+        w = 2.0 * math.pi * self.frequency_Hz
+        return (self.residue + self.velocity_residue * s) / (
+            s * s + 2.0 * self.damping_ratio * w * s + w * w)
+
+
+@dataclass(frozen=True)
+class FrequencyResponse:
+    """Measured compliance of the stroke to the tensioner force in the identification band:
+    frequency_Hz, compliance_m_N (complex) [m/N] and coherence [-], each shape (lines,)."""
+
+    frequency_Hz: np.ndarray
+    compliance_m_N: np.ndarray
+    coherence: np.ndarray
 
 
 @dataclass(frozen=True)
 class EquivalentIdler:
-    """Equivalent mass-spring-damper on the stroke (SI).
+    """Equivalent mass-spring-damper on the stroke (SI) and the modal model of the track.
 
-    stiffness_N_m: k, static dF/dy; mass_kg: M = k/ω_n²; damping_N_s_m: c = 2ζ·sqrt(k·M);
-    natural_frequency_Hz: ω_n/2π; damping_ratio: ζ; fit_r2: coefficient of determination of
-    the step-response fit (1 = perfect); stroke_m: stroke at the lower force level.
+    stiffness_N_m: k, static dF/dy; mass_kg: M and damping_N_s_m: c fitted to the
+    frequency response with k fixed; natural_frequency_Hz: sqrt(k/M)/2π; damping_ratio:
+    c/(2·sqrt(k·M)); fit_r2: R² of that single-DOF model on the frequency response;
+    stroke_m: stroke at the lower force level; modes, modal_fit_r2: the modal model and its
+    R²; response: the measured frequency response (None when read from the idler file).
     """
 
     stiffness_N_m: float
@@ -35,76 +82,139 @@ class EquivalentIdler:
     damping_ratio: float
     fit_r2: float
     stroke_m: float
+    modes: tuple[ModalTerm, ...]
+    modal_fit_r2: float
+    response: FrequencyResponse | None = None
+
+    def single_dof_compliance(self, omega: np.ndarray) -> np.ndarray:
+        """1/(k − M·ω² + i·c·ω) [m/N] at ``omega`` [rad/s]."""
+        return 1.0 / (self.stiffness_N_m - self.mass_kg * omega ** 2
+                      + 1j * self.damping_N_s_m * omega)
+
+    def modal_compliance(self, omega: np.ndarray) -> np.ndarray:
+        """The modal model's compliance [m/N] at ``omega`` [rad/s]."""
+        return sum(term.compliance(omega) for term in self.modes)
 
 
-class _ConstantForce:
-    """Tensioner element giving a constant force with optional implicit damping."""
-
-    def __init__(self, force_N: float, damping_N_s_m: float) -> None:
-        self.force_N = force_N
-        self.damping_N_s_m = damping_N_s_m
-
-    def force_law(self, t_s: float, stroke_m: float, velocity_m_s: float) -> ForceLaw:
-        return ForceLaw(self.force_N, -self.damping_N_s_m)
-
-    def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
-        """Stateless."""
+def multisine(duration_s: float, band_Hz: tuple[float, float], amplitude_N: float,
+              seed: int) -> np.ndarray:
+    """Zero-mean multisine at 1 kHz [N], shape (steps,): lines every 0.5 Hz in ``band_Hz``
+    with equal amplitudes (rms = amplitude_N / sqrt(2)) and seeded random phases."""
+    t = np.arange(round(duration_s / COUPLING_STEP_S)) * COUPLING_STEP_S
+    lines = np.arange(band_Hz[0], band_Hz[1] + 1e-9, 0.5)
+    phases = np.random.default_rng(seed).uniform(0.0, 2.0 * math.pi, len(lines))
+    each = amplitude_N / math.sqrt(len(lines))
+    return each * np.sin(2.0 * math.pi * lines[None, :] * t[:, None] + phases).sum(axis=1)
 
 
-def second_order_step(t: np.ndarray, gain: float, omega_n: float, zeta: float) -> np.ndarray:
-    """Unit-input step response of gain/(s²/ω² + 2ζs/ω + 1) for 0 < ζ < 1, t [s]."""
-    wd = omega_n * math.sqrt(1.0 - zeta * zeta)
-    decay = np.exp(-zeta * omega_n * t)
-    return gain * (1.0 - decay * (np.cos(wd * t) + zeta * omega_n / wd * np.sin(wd * t)))
+def frequency_response(force_N: np.ndarray, stroke_m: np.ndarray, band_Hz: tuple[float, float],
+                       segment_s: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(frequency [Hz], compliance H = S_fy/S_ff [m/N], coherence [-]) in ``band_Hz``
+    from 1 kHz samples (Welch, Hann segments of ``segment_s``, half overlap)."""
+    fs, n = 1.0 / COUPLING_STEP_S, round(segment_s / COUPLING_STEP_S)
+    f = force_N - force_N.mean()
+    y = stroke_m - stroke_m.mean()
+    freq, pff = welch(f, fs, nperseg=n)
+    _, pfy = csd(f, y, fs, nperseg=n)
+    _, pyy = welch(y, fs, nperseg=n)
+    band = (freq >= band_Hz[0]) & (freq <= band_Hz[1])
+    coherence = np.abs(pfy[band]) ** 2 / (pff[band] * pyy[band])
+    return freq[band], pfy[band] / pff[band], coherence
 
 
-def fit_step_response(t: np.ndarray, dy: np.ndarray,
-                      force_step_N: float) -> tuple[float, float, float, float]:
-    """Fit dy(t) [m] after a force step [N] with a second-order response.
+def r2(model: np.ndarray, measured: np.ndarray) -> float:
+    """R² of a complex response: 1 − Σ|model − measured|² / Σ|measured − mean|²."""
+    spread = np.sum(np.abs(measured - measured.mean()) ** 2)
+    return float(1.0 - np.sum(np.abs(model - measured) ** 2) / spread)
 
-    Returns (stiffness k [N/m], ω_n [rad/s], ζ [-], R²). The static gain is the mean
-    of the last 20 % of the record, so the record should reach steady state. The start
-    values come from the textbook peak relations (overshoot → ζ, time to peak → ω_d).
-    """
-    steady = float(np.mean(dy[int(0.8 * len(dy)):]))
-    if steady == 0.0 or not np.all(np.isfinite(dy)):
-        raise ValueError("step response has no finite non-zero steady state")
-    peak = int(np.argmax(dy / steady))
-    overshoot = max(float(dy[peak] / steady) - 1.0, 1e-3)
-    zeta0 = min(-math.log(overshoot) / math.hypot(math.pi, math.log(overshoot)), 0.95)
-    omega0 = math.pi / max(float(t[peak]), 1e-3) / math.sqrt(1.0 - zeta0 * zeta0)
+
+def fit_single_dof(freq_Hz: np.ndarray, compliance: np.ndarray,
+                   stiffness_N_m: float) -> tuple[float, float]:
+    """(M [kg], c [N·s/m]) of 1/(k − Mω² + icω) fitted to ``compliance`` with k given
+    (relative complex error; several starting frequencies, best kept)."""
+    omega = 2.0 * math.pi * freq_Hz
 
     def residual(x: np.ndarray) -> np.ndarray:
-        return second_order_step(t, x[0], x[1], x[2]) - dy
+        model = 1.0 / (stiffness_N_m - x[0] * omega ** 2 + 1j * x[1] * omega)
+        err = (model - compliance) / np.abs(compliance)
+        return np.concatenate([err.real, err.imag])
 
-    fit = least_squares(residual, x0=[steady, omega0, zeta0],
-                        bounds=([steady * 0.5, 1.0, 0.01], [steady * 2.0, 1e4, 0.99]))
-    gain, omega_n, zeta = fit.x
-    ss_res = float(np.sum(fit.fun ** 2))
-    ss_tot = float(np.sum((dy - dy.mean()) ** 2))
-    return force_step_N / gain, float(omega_n), float(zeta), 1.0 - ss_res / ss_tot
+    best = None
+    for f0 in (10.0, 20.0, 30.0, 45.0):
+        mass = stiffness_N_m / (2.0 * math.pi * f0) ** 2
+        fit = least_squares(residual, x0=[mass, 0.4 * math.sqrt(stiffness_N_m * mass)],
+                            bounds=([1e-3, 0.0], [1e5, 1e8]))
+        if best is None or fit.cost < best.cost:
+            best = fit
+    return float(best.x[0]), float(best.x[1])
+
+
+def fit_modal(freq_Hz: np.ndarray, compliance: np.ndarray) -> tuple[ModalTerm, ...]:
+    """Idler mode (r + q·s)/(…), body mode r/(…) and a relaxation r/(s + p) fitted to
+    ``compliance`` (errors weighted by |H|^-½), started from the idler mode at the largest
+    |H|, body modes at 7-9 Hz and relaxation rates 100-1000 1/s; the best start kept."""
+    omega = 2.0 * math.pi * freq_Hz
+    peak = float(freq_Hz[np.argmax(np.abs(compliance))])
+
+    def terms(x: np.ndarray) -> tuple[ModalTerm, ...]:
+        return (ModalTerm(x[0], x[1], x[2], x[3]), ModalTerm(x[4], 0.0, x[5], x[6]),
+                ModalTerm(x[7], 0.0, 0.0, x[8]))
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        model = sum(t.compliance(omega) for t in terms(x))
+        err = (model - compliance) / np.abs(compliance) ** 0.5
+        return np.concatenate([err.real, err.imag])
+
+    low = [-1.0, -1.0, 0.5, 0.01, -1.0, 0.5, 0.01, -1.0, 1.0]
+    high = [1.0, 1.0, 60.0, 1.5, 1.0, 60.0, 1.5, 1.0, 1e4]
+    scale = [1e-2, 1e-4, 5.0, 0.1, 1e-4, 2.0, 0.1, 1e-4, 100.0]
+    best = None
+    for body in (7.0, 8.0, 9.0):
+        for rate in (100.0, 300.0, 1000.0):
+            x0 = [1.0 / 150.0, 0.0, peak, 0.15, 5e-5, body, 0.1, 1e-7 * rate, rate]
+            fit = least_squares(residual, x0=np.clip(x0, low, high), x_scale=scale,
+                                bounds=(low, high))
+            if best is None or fit.cost < best.cost:
+                best = fit
+    return terms(best.x)
+
+
+def _settled_stroke(plant, force_N: float, settle_s: float) -> float:
+    """Mean stroke [m] over 0.3 s after ``settle_s`` [s] at a constant damped force."""
+    element = ConstantForce(force_N, damping_N_s_m=2e4)
+    plant.run(element, settle_s)
+    samples: list[float] = []
+    plant.run(element, 0.3, 0.0, lambda pl: samples.append(pl.stroke_m))
+    return float(np.mean(samples))
 
 
 def identify_idler(make_plant: Callable[[], object], force_low_N: float = 12_000.0,
                    force_high_N: float = 15_000.0, settle_s: float = 1.5,
-                   record_s: float = 0.6) -> EquivalentIdler:
-    """Identify the equivalent idler dynamics on a standing track (sprocket held).
+                   excitation_s: float = 8.0, band_Hz: tuple[float, float] = (1.0, 50.0),
+                   amplitude_N: float = 1_500.0, seed: int = 0) -> EquivalentIdler:
+    """Identify the equivalent idler on a standing track (sprocket held at 0 rad/s).
 
-    make_plant: returns a fresh ``TrackPlant`` (at its home keyframe).
+    make_plant: returns a fresh ``TrackPlant`` at its home keyframe. The multisine of
+    ``amplitude_N`` [N] (rms amplitude/√2) runs about the mean of the two force levels.
     """
     plant = make_plant()
-    element = _ConstantForce(force_low_N, damping_N_s_m=2e4)
-    plant.run(element, settle_s)
-    element.damping_N_s_m = 0.0
-    element.force_N = force_high_N
-    start = plant.stroke_m
+    stroke_low = _settled_stroke(plant, force_low_N, settle_s)
+    stroke_high = _settled_stroke(plant, force_high_N, settle_s)
+    stiffness = (force_high_N - force_low_N) / (stroke_high - stroke_low)
+    mean = 0.5 * (force_low_N + force_high_N)
+    _settled_stroke(plant, mean, settle_s)
+    force = mean + multisine(excitation_s, band_Hz, amplitude_N, seed)
     strokes: list[float] = []
-    plant.run(element, record_s, 0.0, lambda pl: strokes.append(pl.stroke_m))
-    t = np.arange(1, len(strokes) + 1) * 1e-3
-    dy = np.array(strokes) - start
-    k, omega_n, zeta, r2 = fit_step_response(t, dy, force_high_N - force_low_N)
-    mass = k / omega_n ** 2
-    return EquivalentIdler(stiffness_N_m=k, mass_kg=mass,
-                           damping_N_s_m=2.0 * zeta * math.sqrt(k * mass),
-                           natural_frequency_Hz=omega_n / (2.0 * math.pi),
-                           damping_ratio=zeta, fit_r2=r2, stroke_m=start)
+    plant.run(ForceHistory(force), excitation_s, 0.0, lambda pl: strokes.append(pl.stroke_m))
+    freq, compliance, coherence = frequency_response(force, np.array(strokes), band_Hz)
+    mass, damping = fit_single_dof(freq, compliance, stiffness)
+    omega = 2.0 * math.pi * freq
+    single = 1.0 / (stiffness - mass * omega ** 2 + 1j * damping * omega)
+    modes = fit_modal(freq, compliance)
+    return EquivalentIdler(
+        stiffness_N_m=stiffness, mass_kg=mass, damping_N_s_m=damping,
+        natural_frequency_Hz=math.sqrt(stiffness / mass) / (2.0 * math.pi),
+        damping_ratio=damping / (2.0 * math.sqrt(stiffness * mass)),
+        fit_r2=r2(single, compliance), stroke_m=stroke_low, modes=modes,
+        modal_fit_r2=r2(sum(t.compliance(omega) for t in modes), compliance),
+        response=FrequencyResponse(freq, compliance, coherence))

@@ -6,7 +6,9 @@ Sign conventions (see also :mod:`trackmj.ports`):
   (tensioning). Stroke velocity v = ds/dt [m/s].
 * tensioner force [N] > 0 pushes the idler carrier outward.
 * pin tension [N] > 0 pulls the two links of a pin apart along the track (tension);
-  pin k joins link_{k-1} and link_k; array index k, shape (82,).
+  pin k joins link_{k-1} and link_k; array index k, shape (82,). Each pin is a compliant
+  ``connect`` with a stated stiffness (``[pins]`` of the model file); its tension is the
+  force that connect transmits, along the bisector of the two links.
 * chassis pose (x [m] forward, z [m] up, pitch [rad] about +y, nose-down positive).
 """
 
@@ -21,7 +23,6 @@ import mujoco
 import numpy as np
 
 from trackmj.model import (
-    LOOP_CLOSURE_PIN,
     ModelParams,
     default_xml_path,
     load_model_params,
@@ -73,13 +74,36 @@ class DerailmentStatus:
         return self.sprocket_disengaged or self.links_off_envelope or self.slack_strand
 
 
+@dataclass(frozen=True)
+class StrandTension:
+    """Mean pin tension [N] of the upper strand (slack side, set by the tensioner) and of
+    the rear lower run between sprocket and rearmost road wheel (tight side, carries the
+    traction)."""
+
+    upper_N: float
+    lower_N: float
+
+
 class TrackPlant:
     """One LF1352 track side in MuJoCo with named accessors.
 
     State layout: ``data.qpos`` holds chassis (x, z, pitch), sprocket angle, idler slide,
-    six suspension slides, then link_00 (x, z, pitch) and the 81 pin hinges; use the
+    six suspension slides, then (x, z, pitch) of each free link link_00..link_81; use the
     accessors rather than raw indices. The coupling step is 1 ms; the MuJoCo timestep
-    must divide it (``substeps`` MuJoCo steps per coupling step).
+    must divide it (``substeps`` MuJoCo steps per coupling step). Sign conventions: see the
+    module docstring (stroke outward positive, tensioner force > 0 pushes the idler out).
+
+    Ports: ``apply(StepInputs)`` (track speed command, rear-hitch load) and
+    ``step(element)`` (one coupling step through the tensioner port); readouts as
+    properties (``stroke_m``, ``stroke_velocity_m_s``, ``idler_force_N``,
+    ``chassis_acc_z_m_s2``, ``closure_error_m``, ``warning_count``).
+
+    Parameters
+    ----------
+    model : mujoco.MjModel
+        The compiled track model (``models/lf1352.xml`` or a generated variant).
+    params : ModelParams
+        The parameters the model was generated from (geometry, contacts, pins).
     """
 
     ENVELOPE_THRESHOLD_M = 0.10
@@ -119,14 +143,12 @@ class TrackPlant:
         self.link_count = n
         self._link_body = np.array([m.body(f"link_{k:02d}").id for k in range(n)])
         self._pin_geom = np.array([m.geom(f"link_{k:02d}_pin").id for k in range(n)])
-        # pin k joins link_{k-1} and link_k; its child in the tree is link_k on branch A
-        # (k <= 40), link_{k-1} on branch B (k >= 42) and link_81 for pin 0; the closure
-        # pin's entry is a placeholder (its force comes from the equality constraint)
-        child = [n - 1 if k == 0 else (k if k <= LOOP_CLOSURE_PIN else k - 1)
-                 for k in range(n)]
-        self._pin_child_body = self._link_body[child]
-        self._closure_eq = m.equality("loop_closure").id
-        self._closure_sites = (m.site("closure_a").id, m.site("closure_b").id)
+        # the pin connects are the model's only equalities, in pin order: 3 rows each
+        pin_eq = [m.equality(f"pin_{k:02d}").id for k in range(n)]
+        if m.neq != n or pin_eq != list(range(n)):
+            raise ValueError(f"{m.neq} equalities: expected the {n} pin connects pin_00.. "
+                             "only, in order (regenerate the model)")
+        self._pin_rows = 3 * n
         self._chassis_body = m.body("chassis").id
         self._hitch_site = m.site("rear_hitch").id
         self._sprocket_body = m.body("sprocket").id
@@ -250,19 +272,17 @@ class TrackPlant:
             self._hitch_loaded = hitch != (0.0, 0.0)
 
     def scale_contact_stiffness(self, scale: float) -> None:
-        """Scale the stiffness of every track contact by ``scale`` [-] (W5 perturbation):
-        the ground foundation's direct stiffness (solref[0] < 0) linearly, the time
-        constant of the others (solref[0] > 0, stiffness ∝ 1/τ²) by 1/sqrt(scale)."""
+        """Multiply the physical stiffness of every track contact by ``scale`` [-] (W5
+        perturbation). The partner geoms (ground, hub, idler, wheels, rollers, teeth) decide
+        every contact (priority) and carry a direct solref (−k, −b) with K = n·k/((1−d)·A)
+        (:mod:`trackmj.model.soft`), so k scales linearly; damping and impedance stay."""
         if not (math.isfinite(scale) and scale > 0.0):
             raise ValueError(f"contact stiffness scale must be > 0, got {scale!r}")
         m = self.model
-        for g in range(m.ngeom):
-            if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0:
-                continue
-            if m.geom_solref[g, 0] < 0.0:
-                m.geom_solref[g, 0] *= scale
-            else:
-                m.geom_solref[g, 0] /= math.sqrt(scale)
+        direct = m.geom_solref[:, 0] < 0.0
+        if not np.any(direct):
+            raise ValueError("no contact with a direct (physical) solref in this model")
+        m.geom_solref[direct, 0] *= scale
 
     @property
     def chassis_acc_z_m_s2(self) -> float:
@@ -290,10 +310,11 @@ class TrackPlant:
 
     @property
     def closure_error_m(self) -> float:
-        """Gap between the two ends of the loop at the closure pin [m]."""
-        a, b = self._closure_sites
-        xpos = self.data.site_xpos
-        return math.dist(xpos[a], xpos[b])
+        """Largest pin gap of the loop [m]: the deflection of the most loaded pin compliance
+        (tension / stated pin stiffness, plus its damping share), at the start of the
+        last step. Every pin is a ``connect``; no pin is special."""
+        gaps = self.data.efc_pos[: self._pin_rows].reshape(-1, 3)
+        return float(np.sqrt(np.einsum("ij,ij->i", gaps, gaps).max()))
 
     @property
     def warning_count(self) -> int:
@@ -305,30 +326,30 @@ class TrackPlant:
         return self.data.geom_xpos[self._pin_geom][:, [0, 2]].copy()
 
     def pin_tensions_N(self) -> np.ndarray:
-        """Axial force at every pin [N], shape (82,), tension positive.
+        """Tension in every pin [N], shape (82,), positive pulling the links apart.
 
-        Tree pins from the interaction force of each child link with its parent
-        (``cfrc_int`` after ``mj_rnePostConstraint``), projected on the child's axis;
-        the closure pin from the ``loop_closure`` constraint force.
+        The force the pin's ``connect`` transmits (MuJoCo's ``efc_force``, the force the
+        last step applied), projected on the bisector of the two links' axes. It is the
+        pin compliance's elastic and viscous force K·gap + B·gap rate plus the constraint's
+        apparent-mass term (:mod:`trackmj.model.soft`), which carries the pins' own stretch
+        mode; no filtering.
         """
         d = self.data
-        mujoco.mj_rnePostConstraint(self.model, d)
-        bodies = self._pin_child_body
-        axes = d.xmat[bodies, 0::3]   # first column of each body's rotation matrix
-        tension = -np.einsum("ij,ij->i", d.cfrc_int[bodies, 3:6], axes)
-        tension[LOOP_CLOSURE_PIN] = self._closure_tension()
-        return tension
+        # connect residual = anchor(link_{k-1}) − anchor(link_k); its force acts on
+        # link_{k-1}, forwards (towards link_k) under tension
+        force = d.efc_force[: self._pin_rows].reshape(-1, 3)
+        axes = d.xmat[self._link_body, 0::3]   # each link's x axis (towards the next pin)
+        bisector = axes + np.roll(axes, 1, axis=0)   # links k-1 and k at pin k
+        bisector /= np.linalg.norm(bisector, axis=1, keepdims=True)
+        return np.einsum("ij,ij->i", force, bisector)
 
-    def _closure_tension(self) -> float:
-        d = self.data
-        rows = np.nonzero((d.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
-                          & (d.efc_id == self._closure_eq))[0]
-        if len(rows) != 3:
-            return 0.0
-        # connect residual is anchor(link_40) - anchor(link_41): the row forces act on link_40
-        force_on_link40 = d.efc_force[rows]
-        axis = d.xmat[self._link_body[LOOP_CLOSURE_PIN - 1]].reshape(3, 3)[:, 0]
-        return float(force_on_link40 @ axis)
+    def strand_tensions_N(self) -> StrandTension:
+        """Mean pin tension of the upper strand and of the rear lower run [N] (see
+        :meth:`upper_strand_pins`, :meth:`lower_strand_pins`)."""
+        tension = self.pin_tensions_N()
+        pts = self._chassis_frame_pins()
+        return StrandTension(float(tension[self._upper_mask(pts)].mean()),
+                             float(tension[self._lower_mask(pts)].mean()))
 
     def contact_forces_N(self) -> dict[str, float]:
         """Sum of contact normal forces on the track by partner [N]:
@@ -382,10 +403,22 @@ class TrackPlant:
 
     def upper_strand_pins(self) -> np.ndarray:
         """Indices of pins in the upper strand (above the sprocket and idler centres)."""
-        pts = self._chassis_frame_pins()
+        return np.nonzero(self._upper_mask(self._chassis_frame_pins()))[0]
+
+    def _upper_mask(self, pts: np.ndarray) -> np.ndarray:
         ride = self.params.chassis.ride_height_m
         level = max(self.params.sprocket.z_m, self.params.idler.z_m) - ride
-        return np.nonzero(pts[:, 1] > level + 0.05)[0]
+        return pts[:, 1] > level + 0.05
+
+    def _lower_mask(self, pts: np.ndarray) -> np.ndarray:
+        p = self.params
+        return ((pts[:, 0] > p.sprocket.x_m) & (pts[:, 0] < min(p.road_wheels.x_m))
+                & (pts[:, 1] < p.sprocket.z_m - p.chassis.ride_height_m - 0.05))
+
+    def lower_strand_pins(self) -> np.ndarray:
+        """Indices of pins in the rear lower run: between the sprocket and the rearmost
+        road wheel, 5 cm below the sprocket centre (the tight side driving forward)."""
+        return np.nonzero(self._lower_mask(self._chassis_frame_pins()))[0]
 
     def derailment(self) -> DerailmentStatus:
         excursion = float(self.envelope_excursion_m().max())

@@ -1,16 +1,16 @@
 """Generator of the LF1352 track-side MuJoCo model (``models/lf1352.xml``).
 
 Subpackages, each a stage of the model: :mod:`.params` (the validated parameter file),
-:mod:`.layout` (pin positions that close the loop), :mod:`.mjcf` (one builder per subtree,
-the heightfield terrain), :mod:`.generate` (settled ``home`` keyframe, the committed file).
+:mod:`.layout` (pin positions that close the loop), :mod:`.soft` (stated stiffness and
+damping -> MuJoCo soft-constraint parameters), :mod:`.mjcf` (one builder per subtree, the
+heightfield terrain), :mod:`.generate` (settled ``home`` keyframe, the committed file).
 Nothing here imports the plant.
 """
 
 from trackmj.model.generate import generate_mjcf, write_model
 from trackmj.model.layout import Layout, compute_layout
-from trackmj.model.mjcf import build_mjcf, ground_solref, with_heightfield
+from trackmj.model.mjcf import build_mjcf, soft_constraints, with_heightfield
 from trackmj.model.params import (
-    LOOP_CLOSURE_PIN,
     MODEL_NAME,
     ModelParams,
     default_param_path,
@@ -19,7 +19,7 @@ from trackmj.model.params import (
     models_dir,
 )
 
-__all__ = ["LOOP_CLOSURE_PIN", "MODEL_NAME", "Layout", "ModelParams", "build_mjcf",
+__all__ = ["MODEL_NAME", "Layout", "ModelParams", "build_mjcf",
            "compute_layout", "default_param_path", "default_xml_path", "generate_mjcf",
-           "ground_solref", "load_model_params", "models_dir", "with_heightfield",
+           "load_model_params", "models_dir", "soft_constraints", "with_heightfield",
            "write_model"]

@@ -12,21 +12,24 @@ The model is planar (x forward, z up, all hinges about +y):
   ``return_roller_1..2`` fixed to the chassis.
 * ``link_00..link_81``: rigid links, numbered in the running direction for forward travel
   (bottom strand rearward, over the sprocket, top strand forward, round the idler).
-  Pin k joins link_{k-1} and link_k. The links form a tree rooted at ``link_00`` (bottom
-  strand, planar joints) with two branches (link_01..link_40 and link_81..link_41) closed by
-  ONE ``connect`` equality ``loop_closure`` at pin 41; this halves the chain depth compared
-  with a single chain and keeps constraint Jacobians short.
+  Pin k joins link_{k-1} and link_k. Every link is a free planar body (world slides
+  ``link_kk_x``, ``link_kk_z``, hinge ``link_kk_pitch`` through its centre of mass) and
+  every pin is a ``connect`` equality ``pin_kk`` with the stated pin stiffness and damping
+  (``[pins]``, or ``[bushings]`` when enabled), optionally with a torsional spring-damper
+  (fixed tendon ``pin_kk_torsion``). No link is a tree root for others: in a kinematic
+  tree the contact rows' missing J̇·q̇ term depends on each link's path to the root, which
+  travels round the loop and put a once-per-revolution component into the idler force.
 
 Collision filtering (contype/conaffinity bits): link rails (8) touch wheels, hub, idler and
 rollers; pin spheres (16) touch the ground and sprocket teeth; links never touch links.
 Wheels and idler roll without friction on the rails (condim 1), so their spin decouples
 from the track and is not modelled; the ground contact carries Coulomb friction (condim 3).
 
-Ground foundation: MuJoCo's direct ``solref = (-k, -b)`` is mass-normalised. With a
-constant impedance d (``solimp = d d ...``) a contact of effective mass m responds with the
-physical stiffness K = m·k·d/(1−d) and damping B = m·b·d/(1−d); :func:`ground_solref`
-inverts this with ``ground.reference_mass_kg`` so the TOML holds K [N/m] and B [N·s/m] per
-pin contact.
+Stated contacts: the partner geoms (ground, hub, idler, road wheels, rollers, teeth) have
+priority over the link geoms and carry the solref/solimp that give the stated Kelvin–Voigt
+stiffness and damping per contact (``[ground]``, ``[contacts]``), computed from the
+compiled model's row diagonals by :mod:`trackmj.model.soft`, which documents the mapping
+and what stays approximate.
 
 Terrain: :func:`with_heightfield` replaces the flat ground by an ISO 8608 road profile
 (arrays from :func:`trackmj.terrain.heightfield`).
@@ -37,10 +40,12 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 
+import mujoco
 import numpy as np
 
 from trackmj.model.layout import Layout, hub_radius
-from trackmj.model.params import LOOP_CLOSURE_PIN, MODEL_NAME, ModelParams
+from trackmj.model.params import MODEL_NAME, ModelParams
+from trackmj.model.soft import SoftConstraint, body_inv_weight, row_diag, soft_constraint
 from trackmj.params import ParameterError
 from trackmj.terrain import RoadProfile, heightfield
 
@@ -65,13 +70,6 @@ def _quat_y(angle: float) -> str:
 
 def _sub(parent: ET.Element, tag: str, **attrs: str) -> ET.Element:
     return ET.SubElement(parent, tag, {k.rstrip("_"): v for k, v in attrs.items()})
-
-
-def ground_solref(p: ModelParams) -> tuple[float, float]:
-    """MuJoCo direct solref (-k, -b) giving the physical ground stiffness and damping."""
-    g = p.ground
-    scale = (1.0 - g.impedance) / (g.impedance * g.reference_mass_kg)
-    return -g.stiffness_N_m * scale, -g.damping_N_s_m * scale
 
 
 def _cylinder_inertia(mass_kg: float, radius_m: float) -> str:
@@ -114,24 +112,24 @@ def _defaults(root: ET.Element, p: ModelParams) -> None:
     _sub(vis, "geom", group="2", contype="0", conaffinity="0", rgba="0.45 0.45 0.5 1")
     col = _sub(default, "default", class_="collision")
     _sub(col, "geom", group="3", rgba="0.8 0.3 0.2 0.4")
+    # link geoms (priority 0) take the partner's contact parameters, which carry the
+    # solref/solimp of their stated stiffness and damping (_map_soft_constraints)
     rail = _sub(col, "default", class_="rail")
-    _sub(rail, "geom", type="capsule", size=_fmt(t.rail_radius_m), contype=str(_RAIL),
-         solref=_fmt(*p.contacts.rail_solref))
+    _sub(rail, "geom", type="capsule", size=_fmt(t.rail_radius_m), contype=str(_RAIL))
     pin = _sub(col, "default", class_="pin")
     _sub(pin, "geom", type="sphere", size=_fmt(t.pin_radius_m), contype=str(_PIN))
     wheel = _sub(col, "default", class_="wheel")
-    _sub(wheel, "geom", type="capsule", conaffinity=str(_RAIL),
-         solref=_fmt(*p.contacts.rail_solref))
+    _sub(wheel, "geom", type="capsule", conaffinity=str(_RAIL), priority="1", condim="1")
     tooth = _sub(col, "default", class_="tooth")
     _sub(tooth, "geom", type="capsule", size=_fmt(p.sprocket.tooth_radius_m),
-         conaffinity=str(_PIN), priority="1", condim="1",
-         solref=_fmt(*p.contacts.tooth_solref))
+         conaffinity=str(_PIN), priority="1", condim="1")
     gnd = _sub(col, "default", class_="ground")
     _sub(gnd, "geom", conaffinity=str(_PIN), priority="2", condim="3",
-         friction=_fmt(t.ground_friction, 0.005, 0.0001), solref=_fmt(*ground_solref(p)),
-         solimp=_fmt(p.ground.impedance, p.ground.impedance, 0.001, 0.5, 2))
-    link_j = _sub(default, "default", class_="pin_hinge")
+         friction=_fmt(t.ground_friction, 0.005, 0.0001))
+    link_j = _sub(default, "default", class_="link_pitch")
     _sub(link_j, "joint", type="hinge", axis="0 1 0")
+    pin_joint = _sub(default, "default", class_="pin_joint")
+    _sub(pin_joint, "equality", solref="0.02 1")  # replaced by _map_soft_constraints
 
 
 def _world(root: ET.Element) -> ET.Element:
@@ -235,62 +233,159 @@ def _running_gear(chassis: ET.Element, p: ModelParams, layout: Layout) -> None:
         _wheel_geoms(body, f"return_roller_{k}", p.return_rollers.radius_m, half_w)
 
 
-def _link_inertial(body: ET.Element, p: ModelParams) -> None:
+def _link_inertia(p: ModelParams) -> tuple[float, float, float]:
+    """Principal moments of a link about its centre of mass [kg·m²] (x along the link,
+    y the pin axis); a box of pitch x width x pin diameter."""
     t = p.track
     m, L, w, h = t.link_mass_kg, t.pitch_m, t.link_width_m, 2.0 * t.pin_radius_m
-    _sub(body, "inertial", pos=_fmt(L / 2, 0, 0), mass=_fmt(m),
-         diaginertia=_fmt(m * (w * w + h * h) / 12, m * (L * L + h * h) / 12,
-                          m * (L * L + w * w) / 12))
+    return m * (w * w + h * h) / 12, m * (L * L + h * h) / 12, m * (L * L + w * w) / 12
+
+
+def _link_directions(layout: Layout) -> np.ndarray:
+    """Angle of every link's axis (pin k -> pin k+1) from +x towards +z [rad], (82,)."""
+    pins = layout.pins
+    step = np.roll(pins, -1, axis=0) - pins
+    return np.arctan2(step[:, 1], step[:, 0])
 
 
 def _links(root: ET.Element, world: ET.Element, p: ModelParams, layout: Layout) -> None:
-    """The 82 links as a tree rooted at link_00 with two branches, closed at pin 41."""
-    t = p.track
+    """The 82 links as free planar bodies joined by one ``connect`` per pin.
+
+    Link k has its origin at pin k and its x axis towards pin k+1; its joints are world
+    slides ``link_kk_x``, ``link_kk_z`` and the hinge ``link_kk_pitch`` about +y through
+    its centre of mass, so its mass matrix is constant and every link is equivalent.
+    Equality ``pin_kk`` joins the far end of link_{k-1} to the origin of link k; the
+    optional fixed tendon ``pin_kk_torsion`` (pitch_k − pitch_{k-1}) carries the pin's
+    torsional spring-damper, neutral when the two links are in line.
+    """
+    t, joint = p.track, p.pin_joint
     pitch, n, half_w = t.pitch_m, t.link_count, t.link_width_m / 2.0
     pins = layout.pins
-    direction = np.array([math.atan2(*(pins[(k + 1) % n] - pins[k])[::-1]) for k in range(n)])
-    half = LOOP_CLOSURE_PIN  # branch A: links 1..40, branch B: links 81..41
-
-    def add_link_geoms(body: ET.Element, k: int, pin_at_origin: bool) -> None:
-        _link_inertial(body, p)
+    direction = _link_directions(layout)
+    for k in range(n):
+        quat = _quat_y(direction[k])
+        body = _sub(world, "body", name=f"link_{k:02d}", pos=_fmt(pins[k, 0], 0, pins[k, 1]),
+                    quat=quat)
+        rot = np.empty(9)
+        mujoco.mju_quat2Mat(rot, np.array([float(v) for v in quat.split()]))
+        rot = rot.reshape(3, 3)
+        # slide axes are given in the body frame: world x and z seen from the link
+        _sub(body, "joint", name=f"link_{k:02d}_x", type="slide",
+             axis=_fmt(*(rot.T @ (1.0, 0.0, 0.0))))
+        _sub(body, "joint", name=f"link_{k:02d}_z", type="slide",
+             axis=_fmt(*(rot.T @ (0.0, 0.0, 1.0))))
+        _sub(body, "joint", name=f"link_{k:02d}_pitch", class_="link_pitch",
+             pos=_fmt(pitch / 2, 0, 0))
+        _sub(body, "inertial", pos=_fmt(pitch / 2, 0, 0), mass=_fmt(t.link_mass_kg),
+             diaginertia=_fmt(*_link_inertia(p)))
         _sub(body, "geom", name=f"link_{k:02d}_rail", class_="rail",
              fromto=_fmt(0, 0, 0, pitch, 0, 0))
-        _sub(body, "geom", name=f"link_{k:02d}_pin", class_="pin",
-             pos=_fmt(0 if pin_at_origin else pitch, 0, 0))
+        _sub(body, "geom", name=f"link_{k:02d}_pin", class_="pin", pos="0 0 0")
         _sub(body, "geom", name=f"link_{k:02d}_shoe", class_="visual", type="box",
              pos=_fmt(pitch / 2, 0, 0), size=_fmt(pitch * 0.48, half_w, t.rail_radius_m),
              rgba="0.25 0.25 0.28 1")
-
-    root_link = _sub(world, "body", name="link_00", pos=_fmt(pins[0, 0], 0, pins[0, 1]),
-                     quat=_quat_y(direction[0]))
-    _sub(root_link, "joint", name="link_00_x", type="slide", axis="1 0 0")
-    _sub(root_link, "joint", name="link_00_z", type="slide", axis="0 0 1")
-    _sub(root_link, "joint", name="link_00_pitch", class_="pin_hinge")
-    add_link_geoms(root_link, 0, pin_at_origin=True)
-
-    parent, parent_angle = root_link, direction[0]
-    for k in range(1, half):
-        body = _sub(parent, "body", name=f"link_{k:02d}", pos=_fmt(pitch, 0, 0),
-                    quat=_quat_y(direction[k] - parent_angle))
-        _sub(body, "joint", name=f"pin_{k:02d}", class_="pin_hinge")
-        add_link_geoms(body, k, pin_at_origin=True)
-        parent, parent_angle = body, direction[k]
-    _sub(parent, "site", name="closure_a", pos=_fmt(pitch, 0, 0), size="0.01")
-
-    parent, parent_angle, offset = root_link, direction[0], 0.0
-    for k in range(n - 1, half - 1, -1):
-        angle = direction[k] + math.pi
-        body = _sub(parent, "body", name=f"link_{k:02d}", pos=_fmt(offset, 0, 0),
-                    quat=_quat_y(angle - parent_angle))
-        _sub(body, "joint", name=f"pin_{(k + 1) % n:02d}", class_="pin_hinge")
-        add_link_geoms(body, k, pin_at_origin=False)
-        parent, parent_angle, offset = body, angle, pitch
-    _sub(parent, "site", name="closure_b", pos=_fmt(pitch, 0, 0), size="0.01")
-
+    if joint.torsional_stiffness_N_m_rad > 0.0 or joint.torsional_damping_N_m_s_rad > 0.0:
+        tendon = _sub(root, "tendon")
+        for k in range(n):
+            # a hinge angle q about +y turns the link by −q in the x-z plane, so the pin's
+            # twist from in-line is (dir_k − q_k) − (dir_{k-1} − q_{k-1}): zero when the
+            # tendon length q_k − q_{k-1} equals dir_k − dir_{k-1} (wrapped to ±π)
+            neutral = math.remainder(direction[k] - direction[k - 1], 2.0 * math.pi)
+            fixed = _sub(tendon, "fixed", name=f"pin_{k:02d}_torsion",
+                         stiffness=_fmt(joint.torsional_stiffness_N_m_rad),
+                         damping=_fmt(joint.torsional_damping_N_m_s_rad),
+                         springlength=_fmt(neutral))
+            _sub(fixed, "joint", joint=f"link_{k:02d}_pitch", coef="1")
+            _sub(fixed, "joint", joint=f"link_{(k - 1) % n:02d}_pitch", coef="-1")
     equality = _sub(root, "equality")
-    _sub(equality, "connect", name="loop_closure", body1=f"link_{half - 1:02d}",
-         body2=f"link_{half:02d}", anchor=_fmt(pitch, 0, 0),
-         solref=_fmt(*p.contacts.closure_solref), solimp="0.99 0.999 0.001 0.5 2")
+    for k in range(n):
+        _sub(equality, "connect", name=f"pin_{k:02d}", class_="pin_joint",
+             body1=f"link_{(k - 1) % n:02d}", body2=f"link_{k:02d}",
+             anchor=_fmt(pitch, 0, 0))
+
+
+def _check_torsion(p: ModelParams) -> None:
+    """Limits of the pins' torsional spring-damper (fixed tendons) at this timestep.
+
+    The tendon spring is explicit: the zig-zag mode of the links, ω² = 4·k_t/I, must keep
+    soft_margin·(hω)²/4 <= 1. The tendon damping is implicit only in part: MuJoCo 4.0.0's
+    ``implicitfast`` keeps the same-tree entries of a tendon's damping derivative, and a
+    pin tendon joins two links, two trees, so its coupling term stays explicit. Measured on
+    this model at 1 ms it diverges from 0.2 N·m·s/rad (0.15 holds); the limit is
+    I/(20·h), about half of that.
+    """
+    joint, where = p.pin_joint, f"lf1352.toml [{p.pin_joint_table}]"
+    inertia, h = _link_inertia(p)[1], p.simulation.timestep_s
+    stiffness_limit = inertia / (p.solver.soft_margin * h * h)
+    damping_limit = inertia / (20.0 * h)
+    if joint.torsional_stiffness_N_m_rad > stiffness_limit:
+        raise ParameterError(f"{where}.torsional_stiffness_N_m_rad = "
+                             f"{joint.torsional_stiffness_N_m_rad:g} exceeds the explicit "
+                             f"limit {stiffness_limit:.0f} N·m/rad (link pitch inertia / "
+                             "(soft_margin·timestep²))")
+    if joint.torsional_damping_N_m_s_rad > damping_limit:
+        raise ParameterError(f"{where}.torsional_damping_N_m_s_rad = "
+                             f"{joint.torsional_damping_N_m_s_rad:g} exceeds "
+                             f"{damping_limit:.3f} N·m·s/rad (link pitch inertia / "
+                             "(20·timestep)); larger values diverge at this timestep")
+
+
+CONTACT_PARTNERS = {"ground": "ground", "sprocket_hub": "rail", "idler_wheel": "rail"}
+"""Partner geoms by kind, besides road wheels, return rollers (rail) and teeth (tooth)."""
+
+
+def contact_kind(geom_name: str) -> str | None:
+    """Stated-parameter kind of a partner geom: 'ground', 'rail', 'tooth' or None."""
+    if geom_name.startswith("sprocket_tooth_"):
+        return "tooth"
+    if geom_name.startswith(("road_wheel_", "return_roller_")) and geom_name.endswith(
+            "_collision"):
+        return "rail"
+    return CONTACT_PARTNERS.get(geom_name)
+
+
+def soft_constraints(p: ModelParams, model: mujoco.MjModel) -> dict[str, SoftConstraint]:
+    """The MuJoCo parameters of every stated contact (by partner geom name) and of the pins
+    (key ``pin``), from the row diagonals of ``model`` (see :mod:`trackmj.model.soft`)."""
+    h, margin = p.simulation.timestep_s, p.solver.soft_margin
+    link = body_inv_weight(model, "link_00")
+    stated = {"ground": (p.ground.stiffness_N_m, p.ground.damping_N_s_m, "[ground]"),
+              "rail": (p.contacts.rail_stiffness_N_m, p.contacts.rail_damping_N_s_m,
+                       "[contacts].rail_*"),
+              "tooth": (p.contacts.tooth_stiffness_N_m, p.contacts.tooth_damping_N_s_m,
+                        "[contacts].tooth_*")}
+    out = {}
+    for g in range(model.ngeom):
+        name = model.geom(g).name
+        kind = contact_kind(name)
+        if kind is None:
+            continue
+        partner = float(model.body_invweight0[model.geom_bodyid[g], 0])
+        rows, diag = row_diag(link + partner, int(model.geom_condim[g]),
+                              float(model.geom_friction[g, 0]), float(model.opt.impratio))
+        stiffness, damping, key = stated[kind]
+        out[name] = soft_constraint(stiffness, damping, rows, diag, h, margin,
+                                    f"lf1352.toml {key}")
+    joint = p.pin_joint
+    rows, diag = row_diag(2.0 * link, condim=1)
+    out["pin"] = soft_constraint(joint.radial_stiffness_N_m, joint.radial_damping_N_s_m, rows,
+                                 diag, h, margin, f"lf1352.toml [{p.pin_joint_table}]")
+    return out
+
+
+def _map_soft_constraints(root: ET.Element, p: ModelParams) -> None:
+    """Set solref/solimp of the partner geoms and of the pin class from the stated
+    stiffness and damping (compiles the model once for its row diagonals)."""
+    model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+    mapping = soft_constraints(p, model)
+    for geom in root.iter("geom"):
+        soft = mapping.get(geom.get("name", ""))
+        if soft is not None:
+            geom.set("solref", _fmt(*soft.solref))
+            geom.set("solimp", _fmt(*soft.solimp))
+    pin_class = root.find("default/default[@class='pin_joint']/equality")
+    pin_class.set("solref", _fmt(*mapping["pin"].solref))
+    pin_class.set("solimp", _fmt(*mapping["pin"].solimp))
 
 
 def _actuators(root: ET.Element, p: ModelParams) -> None:
@@ -313,8 +408,10 @@ def build_mjcf(p: ModelParams, layout: Layout, home_qpos: np.ndarray | None = No
     _sprocket(chassis, p, layout)
     _idler(chassis, p, layout)
     _running_gear(chassis, p, layout)
+    _check_torsion(p)
     _links(root, world, p, layout)
     _actuators(root, p)
+    _map_soft_constraints(root, p)
     if home_qpos is not None:
         keyframe = _sub(root, "keyframe")
         _sub(keyframe, "key", name="home", qpos=" ".join(f"{v:.6f}" for v in home_qpos),

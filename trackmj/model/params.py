@@ -19,7 +19,6 @@ from trackmj.params import Location, Parameters, load_file, param, sources_field
 from trackmj.ports import COUPLING_STEP_S
 
 MODEL_NAME = "lf1352"
-LOOP_CLOSURE_PIN = 41
 
 
 def models_dir() -> Path:
@@ -109,15 +108,39 @@ class ReturnRollerParams(Parameters):
 class GroundParams(Parameters):
     stiffness_N_m: float = param(1e3, 1e10, doc="Kelvin-Voigt stiffness per pin contact [N/m]")
     damping_N_s_m: float = param(0.0, 1e8, doc="Kelvin-Voigt damping per pin contact [N·s/m]")
-    reference_mass_kg: float = param(0.01, 1e4, doc="effective mass for solref conversion [kg]")
-    impedance: float = param(0.5, 0.999, unit="1", doc="constant MuJoCo impedance d [-]")
 
 
 @dataclass(frozen=True)
 class ContactParams(Parameters):
-    rail_solref: tuple[float, float] = param(0.0, 10.0, unit="s, 1")
-    tooth_solref: tuple[float, float] = param(0.0, 10.0, unit="s, 1")
-    closure_solref: tuple[float, float] = param(0.0, 10.0, unit="s, 1")
+    """Kelvin–Voigt normal stiffness and damping of the frictionless contacts: link rails
+    on hub, idler, road wheels and rollers; pin spheres on the sprocket teeth."""
+
+    rail_stiffness_N_m: float = param(1e3, 1e10, doc="rail contact stiffness [N/m]")
+    rail_damping_N_s_m: float = param(0.0, 1e8, doc="rail contact damping [N·s/m]")
+    tooth_stiffness_N_m: float = param(1e3, 1e10, doc="tooth contact stiffness [N/m]")
+    tooth_damping_N_s_m: float = param(0.0, 1e8, doc="tooth contact damping [N·s/m]")
+
+
+@dataclass(frozen=True)
+class PinParams(Parameters):
+    """Joint between two links at a pin: in-plane (radial) Kelvin–Voigt stiffness and
+    damping, and the torsional spring-damper about the pin axis (zero twist when the two
+    links are in line). The planar model has no motion along the pin axis."""
+
+    radial_stiffness_N_m: float = param(1e5, 1e10, doc="in-plane pin stiffness [N/m]")
+    radial_damping_N_s_m: float = param(0.0, 1e6, doc="in-plane pin damping [N·s/m]")
+    torsional_stiffness_N_m_rad: float = param(0.0, 1e5, unit="N·m/rad",
+                                               doc="twist stiffness [N·m/rad]")
+    torsional_damping_N_m_s_rad: float = param(0.0, 1e4, unit="N·m·s/rad",
+                                               doc="twist damping [N·m·s/rad]")
+
+
+@dataclass(frozen=True)
+class BushingParams(PinParams):
+    """Rubber-bushed pins: when ``enabled`` they replace the steel pins of ``[pins]``."""
+
+    enabled: bool = param(doc="use the bushings instead of the steel pins")
+
 
 
 @dataclass(frozen=True)
@@ -131,6 +154,9 @@ class PassiveTensionerParams(Parameters):
 class SolverParams(Parameters):
     iterations: int = param(1, 1000, unit="1")
     tolerance: float = param(0.0, 1e-2, unit="1")
+    soft_margin: float = param(1.0, 100.0, unit="1",
+                               doc="apparent mass of a soft constraint over its "
+                                   "explicit-integration limit (h²K + 2hB)/4 [-]")
     cone: Literal["pyramidal", "elliptic"] = param()
     jacobian: Literal["dense", "sparse", "auto"] = param()
     warmstart: bool = param()
@@ -150,6 +176,8 @@ class ModelParams(Parameters):
     return_rollers: ReturnRollerParams
     ground: GroundParams
     contacts: ContactParams
+    pins: PinParams
+    bushings: BushingParams
     tensioner: PassiveTensionerParams
     solver: SolverParams
     sources: Mapping[str, str] = sources_field()
@@ -158,6 +186,16 @@ class ModelParams(Parameters):
 
     def cross_check(self, at: Location) -> None:
         _check_consistency(self, at)
+
+    @property
+    def pin_joint(self) -> PinParams:
+        """The pin joint in force: the bushings when enabled, else the steel pins."""
+        return self.bushings if self.bushings.enabled else self.pins
+
+    @property
+    def pin_joint_table(self) -> str:
+        """Name of the TOML table the pin joint comes from."""
+        return "bushings" if self.bushings.enabled else "pins"
 
     @property
     def sprocket_pitch_radius_m(self) -> float:

@@ -18,7 +18,7 @@ from pathlib import Path
 from trackmj.control.params import ControlConfig, PlantParams, load_config
 from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
 from trackmj.hydraulics.components import series_area
-from trackmj.identify import EquivalentIdler
+from trackmj.identify import EquivalentIdler, ModalTerm
 from trackmj.model import default_xml_path, models_dir
 from trackmj.params import Location, Parameters, load_file, param
 
@@ -30,17 +30,31 @@ NOMINAL_SUPPLY_PA = 12e6
 
 
 @dataclass(frozen=True)
+class ModeTable(Parameters):
+    """One term of the modal compliance model (``trackmj.identify.ModalTerm``)."""
+
+    residue: float = param(unit="1/kg", doc="r of (r + q s)/(s^2 + 2 zeta w s + w^2), or "
+                           "of r/(s + rate) for the relaxation")
+    velocity_residue: float = param(unit="s/kg", doc="q (0 for a plain mode)")
+    frequency_Hz: float = param(0.0, 1e4, doc="w / 2 pi; 0 marks the relaxation term")
+    damping_ratio: float = param(0.0, None, unit="1 or 1/s",
+                                 doc="zeta of a mode [-], or the relaxation rate [1/s]")
+
+
+@dataclass(frozen=True)
 class IdlerTable(Parameters):
-    """The equivalent idler M·ÿ = F − k·(y − y0) − c·ẏ on the cylinder stroke."""
+    """The equivalent idler M·ÿ = F − k·(y − y0) − c·ẏ on the cylinder stroke, and the
+    modal model of the measured frequency response."""
 
     stiffness_N_m: float = param(0.0, 1e10, open_low=True, doc="k, static dF/dy")
-    mass_kg: float = param(0.0, 1e5, open_low=True, doc="M = k / omega_n^2")
-    damping_N_s_m: float = param(0.0, 1e8, doc="c = 2 zeta sqrt(k M)")
-    natural_frequency_Hz: float = param(0.0, 1e3, open_low=True, doc="omega_n / 2 pi")
-    damping_ratio: float = param(0.0, 1.0, open_low=True, open_high=True, unit="1",
-                                 doc="zeta of the second-order step fit")
-    fit_r2: float = param(None, 1.0, unit="1", doc="coefficient of determination of the fit")
+    mass_kg: float = param(0.0, 1e5, open_low=True, doc="M fitted to the frequency response")
+    damping_N_s_m: float = param(0.0, 1e8, doc="c fitted to the frequency response")
+    natural_frequency_Hz: float = param(0.0, 1e3, open_low=True, doc="sqrt(k / M) / 2 pi")
+    damping_ratio: float = param(0.0, None, unit="1", doc="c / (2 sqrt(k M))")
+    fit_r2: float = param(None, 1.0, unit="1", doc="R² of the single-DOF model on the response")
     stroke_m: float = param(0.0, 1.0, doc="stroke at the lower force level")
+    modal_fit_r2: float = param(None, 1.0, unit="1", doc="R² of the modal model")
+    modes: tuple[ModeTable, ...] = param(doc="terms of the modal model")
 
 
 @dataclass(frozen=True)
@@ -49,10 +63,13 @@ class IdentificationTable(Parameters):
 
     model_file: str = param(doc="the MuJoCo model identified (in the models directory)")
     model_sha256: str = param(pattern="[0-9a-f]{64}", doc="SHA-256 of that file")
-    force_low_N: float = param(0.0, 1e6, doc="settling force")
-    force_high_N: float = param(0.0, 1e6, doc="force after the step")
-    settle_s: float = param(0.0, 100.0, open_low=True, doc="settling time at force_low_N")
-    record_s: float = param(0.0, 100.0, open_low=True, doc="fitted record after the step")
+    force_low_N: float = param(0.0, 1e6, doc="lower settled force level")
+    force_high_N: float = param(0.0, 1e6, doc="upper settled force level")
+    settle_s: float = param(0.0, 100.0, open_low=True, doc="settling time at each level")
+    excitation_s: float = param(0.0, 1000.0, open_low=True, doc="multisine record length")
+    band_Hz: tuple[float, float] = param(0.0, 500.0, doc="band of the multisine lines")
+    amplitude_N: float = param(0.0, 1e5, open_low=True, doc="multisine amplitude")
+    seed: int = param(0, None, unit="1", doc="seed of the multisine phases")
 
     def cross_check(self, at: Location) -> None:
         if self.force_high_N <= self.force_low_N:
@@ -69,8 +86,13 @@ class IdlerFile(Parameters):
 
 
 IDENTIFICATION = {"force_low_N": 12_000.0, "force_high_N": 15_000.0, "settle_s": 1.5,
-                  "record_s": 0.6}
-"""The step of :func:`identify_packaged_idler` (``identify_idler``'s defaults)."""
+                  "excitation_s": 8.0, "band_Hz": (1.0, 50.0), "amplitude_N": 1_500.0,
+                  "seed": 0}
+"""The identification of :func:`identify_packaged_idler` (``identify_idler``'s defaults)."""
+
+SCALARS = ("stiffness_N_m", "mass_kg", "damping_N_s_m", "natural_frequency_Hz",
+           "damping_ratio", "fit_r2", "stroke_m", "modal_fit_r2")
+"""The idler's scalar fields stored in the file."""
 
 
 def default_idler_path() -> Path:
@@ -92,10 +114,9 @@ def load_idler(path: str | Path | None = None) -> EquivalentIdler:
     """
     data = load_file(IdlerFile, default_idler_path() if path is None else path)
     t = data.idler
-    return EquivalentIdler(stiffness_N_m=t.stiffness_N_m, mass_kg=t.mass_kg,
-                           damping_N_s_m=t.damping_N_s_m,
-                           natural_frequency_Hz=t.natural_frequency_Hz,
-                           damping_ratio=t.damping_ratio, fit_r2=t.fit_r2, stroke_m=t.stroke_m)
+    modes = tuple(ModalTerm(m.residue, m.velocity_residue, m.frequency_Hz, m.damping_ratio)
+                  for m in t.modes)
+    return EquivalentIdler(**{name: getattr(t, name) for name in SCALARS}, modes=modes)
 
 
 def load_identification(path: str | Path | None = None) -> IdentificationTable:
@@ -135,15 +156,16 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
     Path
     """
     model = Path(model_path) if model_path is not None else default_xml_path()
-    values = {name: float(getattr(idler, name)) for name in
-              ("stiffness_N_m", "mass_kg", "damping_N_s_m", "natural_frequency_Hz",
-               "damping_ratio", "fit_r2", "stroke_m")}
+    values = {name: float(getattr(idler, name)) for name in SCALARS}
+    identification = {name: list(v) if isinstance(v, tuple) else v
+                      for name, v in IDENTIFICATION.items()}
     lines = [
         "# GENERATED FILE - do not edit. The equivalent idler of the LF1352 track, identified",
-        "# on the committed MuJoCo model by trackmj.identify.identify_idler(TrackPlant.load)",
-        "# (a 12 -> 15 kN force step on the standing track, second-order fit of the stroke).",
-        "# Written by trackmj.sim.config.write_idler_file; regenerate after any change of",
-        "# models/lf1352.xml with:  python -m trackmj.sim.config",
+        "# on the committed MuJoCo model by trackmj.identify.identify_idler(TrackPlant.load):",
+        "# static stiffness between two settled force levels, then the frequency response of",
+        "# the stroke to a multisine force, fitted by a single-DOF model (k fixed) and by a",
+        "# modal model. Written by trackmj.sim.config.write_idler_file; regenerate after any",
+        "# change of models/lf1352.xml with:  python -m trackmj.sim.config",
         "# tests/test_sim_config.py checks this file equals a fresh identification.",
         "# Read by trackmj.sim.config.load_idler; the reduced plant of the controller takes",
         "# k, M and c from it (trackmj.sim.config.reduced_plant_params). Units SI.",
@@ -152,11 +174,17 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
         'source = "identified on the MuJoCo track by trackmj.identify (see [identification])"',
         *(f"{name} = {value!r}" for name, value in values.items()),
         "",
+        *(line for term in idler.modes for line in (
+            "[[idler.modes]]", 'source = "trackmj.identify.fit_modal"',
+            f"residue = {float(term.residue)!r}",
+            f"velocity_residue = {float(term.velocity_residue)!r}",
+            f"frequency_Hz = {float(term.frequency_Hz)!r}",
+            f"damping_ratio = {float(term.damping_ratio)!r}", "")),
         "[identification]",
         'source = "the arguments of trackmj.identify.identify_idler used for [idler]"',
         f'model_file = "{model.name}"',
         f'model_sha256 = "{file_sha256(model)}"',
-        *(f"{name} = {value!r}" for name, value in IDENTIFICATION.items()),
+        *(f"{name} = {value!r}" for name, value in identification.items()),
         "",
     ]
     path = Path(path)
