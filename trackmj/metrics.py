@@ -321,7 +321,8 @@ class MetricWindows:
     time, switching; skips the start-up transient). steady: window of the fluctuation band,
     the mean tension and the spectra. step: (t_step, initial, final, t_end) of a reference
     step, its overshoot and settling evaluated in [t_step, t_end]. disturbances: (onset,
-    end) windows of load pulses or supply drops. settle_band_rel: settling and recovery band
+    end) windows of load pulses or supply drops, disturbance_labels what each one is (for
+    figures; empty: unnamed). settle_band_rel: settling and recovery band
     relative to the final value (recovery: to the reference at the onset), unless
     recovery_band_N is given. min_hold_s: how long a response must stay inside its band
     before the window ends to count as settled/recovered. lowpass_cutoff_Hz: cut-off of
@@ -345,6 +346,7 @@ class MetricWindows:
     road_band_Hz: tuple[float, float] | None = None
     step: tuple[float, float, float, float] | None = None
     disturbances: tuple[tuple[float, float], ...] = ()
+    disturbance_labels: tuple[str, ...] = ()
     steady: tuple[float, float] | None = None
     recovery_band_N: float | None = None
 
@@ -658,3 +660,56 @@ def prediction_vs_tp(columns: Mapping[str, np.ndarray], metrics: Mapping[str, An
                                                                     math.nan))),
             "energy_error_vs_tp_J": diff, "energy_error_vs_tp_pct": pct,
             "energy_error_term": term}
+
+
+# ------------------------------------------------------------------ display
+
+METRIC_DISPLAY: dict[str, tuple[str, float, str]] = {
+    "rmse_lp_N": ("tension RMSE, low-pass", 1e-3, "kN"),
+    "rmse_N": ("tension RMSE, raw", 1e-3, "kN"),
+    "ripple_rms_N": ("ripple RMS (raw − low-pass)", 1e-3, "kN"),
+    "ripple_band_rms_N.tooth_passing": ("ripple in the tooth-passing band", 1e-3, "kN"),
+    "ripple_band_rms_N.body_mode": ("ripple in the body-mode band", 1e-3, "kN"),
+    "peak_error_lp_N": ("peak error, low-pass", 1e-3, "kN"),
+    "peak_error_N": ("peak error, raw", 1e-3, "kN"),
+    "overshoot_lp_N": ("step overshoot, low-pass", 1e-3, "kN"),
+    "settling_time_lp_s": ("settling time, low-pass", 1.0, "s"),
+    "disturbance_peak_error_lp_N": ("disturbance peak error, low-pass", 1e-3, "kN"),
+    "recovery_time_lp_s": ("recovery time, low-pass", 1.0, "s"),
+    "fluctuation_N": ("fluctuation ±, raw", 1e-3, "kN"),
+    "fluctuation_lp_N": ("fluctuation ±, low-pass", 1e-3, "kN"),
+    "constraint_violation_s": ("time outside [F_min, F_max], raw", 1.0, "s"),
+    "p_head_max_Pa": ("peak head pressure", 1e-6, "MPa"),
+    "valve_switch_rate_Hz": ("valve switching", 1.0, "Hz"),
+    "chassis_acc_body_mode_rms_m_s2": ("chassis acc. RMS, body-mode band", 1.0, "m/s²"),
+    "energy_in_J": ("energy in (pump, else supply)", 1e-3, "kJ"),
+    "interface_energy_residual_J": ("interface energy residual", 1.0, "J"),
+    "solve_time_median_s": ("solve time median", 1e3, "ms"),
+    "solve_time_max_s": ("solve time max", 1e3, "ms"),
+    "real_time_factor": ("real-time factor", 1.0, "×"),
+    "prediction_rmse_vs_tp_N": ("F_ten RMSE vs tp, raw", 1e-3, "kN"),
+    "prediction_rmse_vs_tp_lp_N": ("F_ten RMSE vs tp, low-pass", 1e-3, "kN"),
+    "peak_pressure_error_vs_tp_Pa": ("peak head pressure − tp", 1e-6, "MPa"),
+    "energy_error_vs_tp_pct": ("energy error vs tp", 1.0, "%"),
+}
+"""How tables show a metric (dotted key for a table entry): label, scale, display unit."""
+
+
+def lookup(metrics: Mapping[str, Any], key: str) -> float:
+    """A metric by dotted key (``ripple_band_rms_N.tooth_passing``); NaN if absent or not a
+    number. ``energy_in_J``: the run's energy input, the first finite of the energy terms
+    pump, supply, circuit (:func:`energy_terms`)."""
+    if key == "energy_in_J":
+        terms = energy_terms(metrics).terms
+        for name in ("pump", "supply", "circuit"):
+            if math.isfinite(terms.get(name, math.nan)):
+                return terms[name]
+        return math.nan
+    value: Any = metrics
+    for part in key.split("."):
+        if not isinstance(value, Mapping) or part not in value:
+            return math.nan
+        value = value[part]
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return math.nan
+    return float(value)

@@ -491,6 +491,8 @@ class Scenario:
             step = (s0.time_s, before, before + s0.delta_N, t_stop)
         dist = tuple((p.start_s, p.end_s) for p in self.load_pulses)
         dist += tuple((d.start_s, d.end_s) for d in self.supply.drops)
+        labels = tuple(f"load pulse {p.delta_N / 1e3:+g} kN" for p in self.load_pulses)
+        labels += tuple(f"supply drop to {d.pressure_Pa / 1e6:g} MPa" for d in self.supply.drops)
         ev, speed = self.evaluation, self.track.speed_m_s
         tooth = None
         if link_pitch_m is not None and speed > 0.0:
@@ -502,6 +504,7 @@ class Scenario:
         return MetricWindows(
             force_min_N=self.limits.force_min_N, force_max_N=self.limits.force_max_N,
             evaluation_start_s=ev.start_s, step=step, disturbances=dist,
+            disturbance_labels=labels,
             steady=(ev.steady_start_s, duration), settle_band_rel=ev.settle_band_rel,
             min_hold_s=ev.min_hold_s, lowpass_cutoff_Hz=ev.lowpass_cutoff_Hz,
             body_mode_band_Hz=ev.body_mode_band_Hz, tooth_passing_band_Hz=tooth,
