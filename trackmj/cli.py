@@ -328,7 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--archs", default="tp,dp-a,dp-b",
                         help="architectures (comma list; default: the study's three)")
     report.add_argument("--baselines", default="lmpc,pid",
-                        help="baseline controllers run on tp in W1 and W2 ('' for none)")
+                        help="baseline controllers run on tp in W1 ('' for none)")
     executor_args(report)
     report.add_argument("--out", default="runs/report",
                         help="output directory; runs already complete in it are kept")
