@@ -138,6 +138,9 @@ def test_every_claim_is_answered_on_a_synthetic_matrix(tmp_path, monkeypatch) ->
     and a condition with no recovery says why. Figures are drawn by test_figures."""
     for name in ("overlay_figure", "psd_figure", "run_figure"):
         monkeypatch.setattr(R, name, lambda results, path, **kw: path)
+    drawn = {}
+    monkeypatch.setattr(R, "variants_figure",
+                        lambda variants, series, path, **kw: drawn.update(series) or path)
     runs = _w1_runs(seeds=(0,))
     durations = {"W2": 6.0, "W3": 22.0, "W4": 22.0, "W5": 6.0}
     for scenario, duration in durations.items():
@@ -167,5 +170,7 @@ def test_every_claim_is_answered_on_a_synthetic_matrix(tmp_path, monkeypatch) ->
     assert claims["W3: TP overshoot / settling"]["ours"].startswith("low-pass 0.")
     robust = claims["W5: TP more robust than DP-A"]
     assert robust["verdict"] == "direction only" and "spread" in robust["ours"]
+    rmse = drawn["tension RMSE, low-pass [kN]"]
+    assert set(rmse) == {"tp", "dp-a", "dp-b"} and all(len(v) == 9 for v in rmse.values())
     assert len(json.loads((tmp_path / "report.json").read_text())["prediction_vs_tp"]) == \
         2 * (1 + 1 + 1 + 1 + 9)     # dp-a and dp-b of each W1-W5 case (W5: 9 variants)

@@ -12,6 +12,7 @@ grey. The windows come from the run's own ``metrics["evaluation"]`` table.
 * :func:`overlay_figure`: several runs of one case overlaid (per architecture or per
   controller), zooms, prediction error against tp, energy breakdown bars.
 * :func:`psd_figure`: tension and chassis-acceleration spectra with the bands marked.
+* :func:`variants_figure`: a metric per parameter variant and architecture (W5).
 """
 
 from __future__ import annotations
@@ -264,7 +265,9 @@ def run_figure(result: Result, path: str | Path) -> Path:
                           label="p_head raw (50 ms min-max)")
     for name, ls, label in (("p_head_Pa", "-", "p_head"), ("p_rod_Pa", "--", "p_rod"),
                             ("p_supply_Pa", ":", "p_supply")):
-        if np.isfinite(c[name]).all():
+        if np.isfinite(c[name]).all() and name == "p_supply_Pa":     # a smooth node: as is
+            ax_p.plot(t, c[name] / 1e6, color="black", ls=ls, lw=1.1, label=label)
+        elif np.isfinite(c[name]).all():
             ax_p.plot(t, lowpass(t, c[name], w.lowpass_cutoff_Hz) / 1e6, color="black", ls=ls,
                       lw=1.1, label=f"{label} {w.lowpass_cutoff_Hz:g} Hz low-pass")
         else:
@@ -315,8 +318,9 @@ def _bars(ax: Axes, labels: Sequence[str], series: Mapping[str, Sequence[float]]
     width = 0.8 / n
     for j, (name, values) in enumerate(series.items()):
         x = np.arange(len(labels)) + (j - (n - 1) / 2) * width
-        bars = ax.bar(x, values, width=width, color=shades[j % 4], hatch=hatches[j % 4],
-                      edgecolor="black", lw=0.5, label=name)
+        colour = STYLES[name]["color"] if name in STYLES else shades[j % 4]
+        bars = ax.bar(x, values, width=width, color=colour, hatch=hatches[j % 4],
+                      edgecolor="0.6" if name == "tp" else "black", lw=0.5, label=name)
         ax.bar_label(bars, labels=[_number(v, values) for v in values], fontsize=7,
                      padding=1)
     ax.axhline(0.0, color="black", lw=0.6)
@@ -325,9 +329,9 @@ def _bars(ax: Axes, labels: Sequence[str], series: Mapping[str, Sequence[float]]
     ax.grid(axis="y", alpha=0.3)
     finite = [v for vals in series.values() for v in vals if math.isfinite(v)] or [0.0]
     low, high = min(min(finite), 0.0), max(max(finite), 0.0)
-    pad = 0.18 * (high - low or 1.0)       # room for the value labels on both sides of 0
-    ax.set_ylim(low - pad, high + pad)
-    _legend_above(ax, ncol=2)
+    pad = 0.18 * (high - low or 1.0)       # room for the value labels
+    ax.set_ylim(low - pad if low < 0.0 else 0.0, high + pad)
+    _legend_above(ax, ncol=len(series))
 
 
 def overlay_figure(results: Sequence[Result], path: str | Path, *,
@@ -448,3 +452,16 @@ def psd_figure(results: Sequence[Result], path: str | Path, *,
                  f"{steady[1]:g} s (Welch, {w.psd_resolution_Hz:g} Hz resolution)")
     return _save(fig, Path(path))
 
+
+
+def variants_figure(variants: Sequence[str], series: Mapping[str, Mapping[str, Sequence[float]]],
+                    path: str | Path, *, title: str = "") -> Path:
+    """Grouped bars per parameter variant (W5), one panel per metric: ``series`` maps a
+    panel's "label [unit]" to {architecture: one value per variant} (mean over seeds)."""
+    fig, axes = plt.subplots(len(series), 1, figsize=(14, 3.6 * len(series)),
+                             layout="constrained", squeeze=False)
+    for ax, (label, values) in zip(axes[:, 0], series.items(), strict=True):
+        name, unit = label.rsplit(" [", 1)
+        _bars(ax, list(variants), values, unit.rstrip("]"), name)
+    fig.suptitle(title)
+    return _save(fig, Path(path))
