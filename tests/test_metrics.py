@@ -135,11 +135,50 @@ def test_control_increment_rms_per_control_period() -> None:
 @pytest.mark.parametrize("amp", [0.5, 3.0])
 def test_band_rms_of_sines(amp: float) -> None:
     t = _t(30.0)
-    assert M.band_rms(t, amp * np.sin(2 * np.pi * 10.0 * t)) == pytest.approx(
-        amp / math.sqrt(2), rel=0.01)
-    assert M.band_rms(t, amp * np.sin(2 * np.pi * 2.0 * t)) < 1e-3 * amp
+
+    def band(x: np.ndarray) -> float:
+        return M.band_rms(t, x, 8.0, 12.0, resolution_Hz=0.5)
+
+    assert band(amp * np.sin(2 * np.pi * 10.0 * t)) == pytest.approx(amp / math.sqrt(2),
+                                                                       rel=0.01)
+    assert band(amp * np.sin(2 * np.pi * 2.0 * t)) < 1e-3 * amp
     mixed = amp * np.sin(2 * np.pi * 2.0 * t) + 0.2 * np.sin(2 * np.pi * 9.1 * t + 1.0)
-    assert M.band_rms(t, mixed) == pytest.approx(0.2 / math.sqrt(2), rel=0.02)
+    assert band(mixed) == pytest.approx(0.2 / math.sqrt(2), rel=0.02)
+
+
+def test_psd_integrates_to_the_variance_and_marks_missing_signals() -> None:
+    t = _t(20.0)
+    rng = np.random.default_rng(3)
+    x = 5.0 + 2.0 * np.sin(2 * np.pi * 7.0 * t) + rng.normal(0.0, 0.5, t.shape)
+    f, density = M.psd(t, x, resolution_Hz=0.5)
+    assert f[1] - f[0] == pytest.approx(0.5)
+    assert np.sum(density) * 0.5 == pytest.approx(np.var(x), rel=0.02)   # Parseval
+    assert f[np.argmax(density)] == pytest.approx(7.0)
+    _, none = M.psd(t, np.full_like(t, np.nan), resolution_Hz=0.5)
+    assert np.isnan(none).all()
+
+
+def test_lowpass_magnitude_is_the_squared_butterworth() -> None:
+    """|H|^2 = 1/(1 + (f/fc)^4) for sosfiltfilt of a 2nd-order Butterworth: -6 dB at fc."""
+    t = _t(20.0)
+    inner = (t > 5.0) & (t < 15.0)            # away from the ends' odd extension
+    for f in (0.5, 2.0, 8.0, 20.0):
+        x = np.sin(2 * np.pi * f * t)
+        gain = np.max(np.abs(M.lowpass(t, x, 2.0)[inner]))
+        assert gain == pytest.approx(1.0 / (1.0 + (f / 2.0) ** 4), rel=0.01, abs=1e-5)
+    assert np.isnan(M.lowpass(t, np.full_like(t, np.nan), 2.0)).all()
+    with pytest.raises(ValueError, match="Nyquist"):
+        M.lowpass(t, np.sin(t), 600.0)
+
+
+def test_lowpass_of_a_perfect_step_is_what_its_docstring_says() -> None:
+    """The filter's own share of a low-passed step response: 3.4 % overshoot, pre-ringing
+    from 0.11 s before the step, inside ±10 % of the step from 0.11 s after it."""
+    t = _t(20.0)
+    y = M.lowpass(t, np.where(t >= 10.0, 3e3, 0.0), 2.0)
+    assert (y.max() - 3e3) / 3e3 == pytest.approx(0.0335, abs=5e-4)
+    assert M.settling_time(t, y, 3e3, 10.0, band_abs=300.0) == pytest.approx(0.111, abs=2e-3)
+    assert 10.0 - t[np.flatnonzero(np.abs(y) > 300.0)[0]] == pytest.approx(0.111, abs=2e-3)
 
 
 def test_energy_of_constant_and_linear_power() -> None:
@@ -169,19 +208,28 @@ def _contract_columns(t: np.ndarray) -> dict[str, np.ndarray]:
             "mech_work_J": 0.01 * t - 1e-3 * t, "chassis_acc_z_m_s2": np.sin(2 * np.pi * 10 * t)}
 
 
+def _windows(**changes: object) -> M.MetricWindows:
+    base = dict(force_min_N=10e3, force_max_N=20e3, evaluation_start_s=1.0,
+                settle_band_rel=0.02, min_hold_s=0.5, lowpass_cutoff_Hz=2.0,
+                body_mode_band_Hz=(8.0, 12.0), tooth_passing_band_Hz=(18.0, 22.0),
+                psd_resolution_Hz=0.5, psd_max_Hz=50.0)
+    return M.MetricWindows(**(base | changes))
+
+
 def test_compute_metrics_standard_set() -> None:
     t = _t(20.0)
-    w = M.MetricWindows(force_min_N=10e3, force_max_N=20e3, evaluation_start_s=1.0,
-                        step=(3.0, 12e3, 15e3, 10.0), steady=(10.0, 20.0),
-                        disturbances=((12.0, 14.0),), recovery_band_N=250.0)
-    out = M.compute_metrics(_contract_columns(t), w, solve_times_s=[1e-3, 2e-3, 4e-3],
+    w = _windows(step=(3.0, 12e3, 15e3, 10.0), steady=(10.0, 20.0),
+                 disturbances=((12.0, 14.0),), recovery_band_N=250.0)
+    out = M.compute_metrics(_contract_columns(t), w, control_period_s=0.01,
+                            solve_times_s=[1e-3, 2e-3, 4e-3],
                             solve_success=[True, False, True], wall_time_s=10.0)
     assert out["overshoot_N"] == 0.0
     assert out["settling_time_s"] == pytest.approx(-0.4 * math.log(0.1), abs=1e-3)
     assert out["fluctuation_N"] == pytest.approx(200.0, rel=0.01)
-    assert out["chassis_acc_rms_8_12Hz_m_s2"] == pytest.approx(1 / math.sqrt(2), rel=0.01)
+    assert out["chassis_acc_body_mode_rms_m_s2"] == pytest.approx(1 / math.sqrt(2), rel=0.01)
     assert out["valve_switches"] == 2.0
     assert out["valve_switch_rate_Hz"] == pytest.approx(2 / 19.0)
+    assert out["control_increment_rms"] == pytest.approx(math.sqrt(2 / 1900), rel=0.01)
     assert out["supply_energy_J"] == pytest.approx(300.0, rel=1e-3)
     assert out["interface_energy_residual_J"] == pytest.approx(0.02)
     assert out["constraint_violation_s"] == 0.0
@@ -189,7 +237,133 @@ def test_compute_metrics_standard_set() -> None:
     assert out["recovery_time_s"] == 0.0  # the 200 N sine stays inside the 250 N band
     assert out["solve_failures"] == 1.0 and out["solve_time_median_s"] == pytest.approx(2e-3)
     assert out["real_time_factor"] == pytest.approx(2.0)
-    narrow = M.compute_metrics(_contract_columns(t), M.MetricWindows(
-        10e3, 20e3, evaluation_start_s=1.0, disturbances=((12.0, 14.0),), recovery_band_N=150.0))
+    # the 10 Hz sine is ripple (0.16 % of it passes the 2 Hz low-pass): in the body-mode band
+    assert out["fluctuation_lp_N"] < 5.0 and out["recovery_time_lp_s"] == 0.0
+    assert out["ripple_band_rms_N"]["body_mode"] == pytest.approx(200 / math.sqrt(2) *
+                                                                  math.sqrt(10 / 19), rel=0.02)
+    assert out["ripple_band_rms_N"]["tooth_passing"] < 1.0
+    assert M.MetricWindows.from_table(out["evaluation"]) == w
+    narrow = M.compute_metrics(_contract_columns(t), _windows(
+        disturbances=((12.0, 14.0),), recovery_band_N=150.0))
     assert math.isnan(narrow["recovery_time_s"])  # 200 N never stays inside 150 N for 0.5 s
+    assert narrow["recovery_time_lp_s"] == 0.0    # ... but its low-pass does
     assert math.isnan(narrow["overshoot_N"]) and math.isnan(narrow["fluctuation_N"])
+    assert math.isnan(narrow["control_increment_rms"])  # no control period given
+    assert narrow["psd"]["f_Hz"] == [] and math.isnan(narrow["chassis_acc_body_mode_rms_m_s2"])
+
+
+def _step_ripple_noise(t: np.ndarray, ripple_N: float, noise_N: float,
+                       seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """12 -> 15 kN at 3 s with a first-order response (tau 0.4 s), plus a 20 Hz sine of
+    amplitude ripple_N and white noise of std noise_N: (reference, slow error, tension)."""
+    ref = np.where(t >= 3.0, 15e3, 12e3)
+    slow = np.where(t >= 3.0, -3e3 * np.exp(-(t - 3.0) / 0.4), 0.0)
+    rng = np.random.default_rng(seed)
+    y = (ref + slow + ripple_N * np.sin(2 * np.pi * 20.0 * t)
+         + rng.normal(0.0, noise_N, t.shape))
+    return ref, slow, y
+
+
+def _columns(t: np.ndarray, y: np.ndarray, ref: np.ndarray) -> dict[str, np.ndarray]:
+    zeros = np.zeros_like(t)
+    return {"t_s": t, "tension_N": y, "tension_ref_N": ref, "p_head_Pa": y / 2.5e-3,
+            "valve_mode": zeros, "u": zeros, "e_supply_J": zeros, "p_work_J": zeros,
+            "mech_work_J": zeros, "chassis_acc_z_m_s2": zeros}
+
+
+def test_lowpassed_metrics_recover_the_step_error_and_ripple_the_sine() -> None:
+    """A step plus a 20 Hz sine plus noise: rmse_lp_N is the step's own tracking error,
+    ripple_rms_N the sine's RMS (with the noise, all but the 0.4 % of its power below the
+    cut-off), rmse_N both; the raw settling time never comes (the ±1 kN sine exceeds the
+    ±300 N band), the low-passed one is the first-order -tau ln(300/3000)."""
+    t = _t(15.0)
+    ripple, noise = 1000.0, 100.0
+    ref, slow, y = _step_ripple_noise(t, ripple, noise)
+    w = _windows(step=(3.0, 12e3, 15e3, 15.0), steady=(5.0, 15.0))
+    out = M.compute_metrics(_columns(t, y, ref), w)
+    ev = t >= 1.0
+    step_error = float(np.sqrt(np.mean(slow[ev] ** 2)))
+    assert out["rmse_lp_N"] == pytest.approx(step_error, rel=0.01)
+    assert out["ripple_rms_N"] == pytest.approx(math.hypot(ripple / math.sqrt(2), noise),
+                                                rel=0.01)
+    assert out["rmse_N"] == pytest.approx(math.hypot(out["rmse_lp_N"], out["ripple_rms_N"]),
+                                          rel=0.01)
+    assert math.isnan(out["settling_time_s"])
+    assert out["settling_time_lp_s"] == pytest.approx(-0.4 * math.log(0.1), abs=0.02)
+    assert out["overshoot_lp_N"] < 0.04 * 3e3      # the filter's own 3.4 % at most
+    assert out["overshoot_N"] > ripple              # raw: the sine's crest and the noise
+    bands = out["ripple_band_rms_N"]
+    assert bands["tooth_passing"] == pytest.approx(ripple / math.sqrt(2), rel=0.02)
+    assert bands["body_mode"] == pytest.approx(noise * math.sqrt(4.5 / 500), rel=0.15)
+    parts = math.sqrt(sum(v ** 2 for v in bands.values()))
+    assert parts == pytest.approx(out["ripple_rms_N"], rel=0.01)  # bands + rest = ripple
+    f = np.array(out["psd"]["f_Hz"])
+    assert f[-1] == pytest.approx(50.0)
+    assert f[np.argmax(out["psd"]["tension_N2_Hz"])] == pytest.approx(20.0)
+
+
+def test_recovery_time_of_a_decaying_disturbance_on_the_lowpass() -> None:
+    """W4-like: a 900 N dip at 12 s decaying with tau = 0.5 s under a ±600 N 20 Hz ripple:
+    the raw error never stays in the ±300 N band, the low-passed one does after tau ln 3.
+    The low-pass rounds the instantaneous onset: its peak error is the filtered dip's
+    (~0.72 of 900 N), whatever the ripple."""
+    t = _t(30.0)
+    ref = np.full_like(t, 15e3)
+    dip = np.where(t >= 12.0, 900.0 * np.exp(-(t - 12.0) / 0.5), 0.0)
+    y = ref - dip + 600.0 * np.sin(2 * np.pi * 20.0 * t)
+    out = M.compute_metrics(_columns(t, y, ref), _windows(disturbances=((12.0, 20.0),),
+                                                           steady=(5.0, 30.0)))
+    assert math.isnan(out["recovery_time_s"])
+    # the first trough of the sine after the onset, at 12 + 3/80 s
+    assert out["disturbance_peak_error_N"] == pytest.approx(900.0 * math.exp(-0.0375 / 0.5)
+                                                            + 600.0, rel=1e-3)
+    assert out["recovery_time_lp_s"] == pytest.approx(0.5 * math.log(3.0), abs=0.03)
+    rounded = float(np.max(M.lowpass(t, dip, 2.0)))
+    assert 0.7 * 900.0 < rounded < 0.75 * 900.0
+    assert out["disturbance_peak_error_lp_N"] == pytest.approx(rounded, rel=0.01)
+
+
+def test_prediction_error_is_zero_against_itself_and_bounded_below() -> None:
+    t = _t(10.0)
+    ref, _, y = _step_ripple_noise(t, 800.0, 50.0)
+    w = _windows(step=(3.0, 12e3, 15e3, 10.0), steady=(5.0, 10.0))
+    tp_cols = _columns(t, y, ref)
+    tp = M.compute_metrics(tp_cols, w) | {"energy_J": {"pump": 9e3, "relief": 1e3}}
+    same = M.prediction_vs_tp(tp_cols, tp, tp_cols, tp, w)
+    assert same["prediction_rmse_vs_tp_N"] == 0.0 and same["prediction_rmse_vs_tp_lp_N"] == 0.0
+    assert same["peak_pressure_error_vs_tp_Pa"] == 0.0
+    assert same["energy_error_vs_tp_J"] == {"pump": 0.0, "relief": 0.0}
+    # a reduced model that predicts 150 N more tension, with its own ripple phase
+    other = y + 150.0 + 300.0 * np.sin(2 * np.pi * 20.0 * t + 1.0)
+    cols = _columns(t, other, ref)
+    mine = M.compute_metrics(cols, w) | {"energy_J": {"pump": 9.9e3, "relief": "absent"}}
+    err = M.prediction_vs_tp(cols, mine, tp_cols, tp, w)
+    assert err["prediction_rmse_vs_tp_N"] == pytest.approx(math.hypot(150, 300 / math.sqrt(2)),
+                                                           rel=1e-3)
+    assert err["prediction_rmse_vs_tp_lp_N"] == pytest.approx(150.0, rel=0.01)
+    assert err["prediction_rmse_vs_tp_N"] >= abs(mine["rmse_N"] - tp["rmse_N"])
+    assert err["peak_pressure_error_vs_tp_Pa"] == pytest.approx(
+        mine["p_head_max_Pa"] - tp["p_head_max_Pa"])
+    assert err["energy_error_vs_tp_J"] == {"pump": pytest.approx(900.0)}
+    assert err["energy_error_term"] == "pump" and err["energy_error_vs_tp_pct"] == \
+        pytest.approx(10.0)
+    with pytest.raises(ValueError, match="time grid"):
+        M.prediction_vs_tp(_columns(t[:-1], other[:-1], ref[:-1]), mine, tp_cols, tp, w)
+
+
+def test_energy_terms_of_a_table_of_a_fallback_and_of_nothing() -> None:
+    table = {"pump": 10e3, "circuit": 8e3, "relief": 2e3,
+             "throttling": {"main": 3e3, "V_L": 1e3, "V_R": math.nan}, "leakage": 0.5e3,
+             "mechanical": 1e3, "residual": 1.0, "circuit_is_ideal_actuator": True,
+             "note": "dp-b: ideal force source"}
+    e = M.energy_terms({"energy_J": table})
+    assert e.source == "energy_J" and e.terms["throttling"] == 4e3
+    assert set(e.terms) == {"pump", "circuit", "relief", "throttling", "leakage",
+                            "mechanical", "residual"}
+    assert e.notes == ["circuit_is_ideal_actuator", "note: dp-b: ideal force source"]
+    old = M.energy_terms({"supply_energy_J": 5e3})
+    assert old.terms == {"supply": 5e3} and old.source == "supply_energy_J" and old.notes
+    assert M.energy_terms({}).terms == {}
+    ideal = M.energy_terms({"energy_J": {"pump": math.nan, "circuit": 7e3}})
+    assert M.headline_energy(e, ideal) == "circuit"
+    assert M.headline_energy(e, old) is None

@@ -83,31 +83,51 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     return 0 if m["mujoco_warnings"] == 0 and m["derailment_checks_failed"] == 0 else 1
 
 
-SUMMARY_METRICS = (
-    ("rmse_N", "tension RMSE", 1e-3, "kN"),
-    ("peak_error_N", "peak error", 1e-3, "kN"),
-    ("overshoot_N", "overshoot", 1e-3, "kN"),
-    ("settling_time_s", "settling time", 1.0, "s"),
-    ("fluctuation_N", "fluctuation (±)", 1e-3, "kN"),
-    ("supply_energy_J", "supply energy", 1e-3, "kJ"),
-    ("valve_switch_rate_Hz", "valve switching", 1.0, "Hz"),
-    ("interface_energy_residual_J", "interface residual", 1.0, "J"),
-    ("solve_time_median_s", "solve time median", 1e3, "ms"),
-    ("solve_time_max_s", "solve time max", 1e3, "ms"),
-    ("real_time_factor", "real-time factor", 1.0, "x"),
-)
+SUMMARY_METRICS = ("rmse_lp_N", "rmse_N", "ripple_rms_N", "ripple_band_rms_N.tooth_passing",
+                   "ripple_band_rms_N.body_mode", "peak_error_lp_N", "peak_error_N",
+                   "overshoot_lp_N", "settling_time_lp_s", "disturbance_peak_error_lp_N",
+                   "recovery_time_lp_s", "fluctuation_N", "constraint_violation_s",
+                   "energy_in_J", "valve_switch_rate_Hz", "interface_energy_residual_J",
+                   "solve_time_median_s", "solve_time_max_s", "real_time_factor")
+"""Rows of the summary table, metric keys (dotted for a table entry; labels and display
+units in :data:`trackmj.metrics.METRIC_DISPLAY`)."""
+STEP_METRICS = ("overshoot_lp_N", "settling_time_lp_s")
+DISTURBANCE_METRICS = ("disturbance_peak_error_lp_N", "recovery_time_lp_s")
+UNSETTLED = ("settling_time_lp_s", "recovery_time_lp_s")
 
 
 def _summary_table(results: list, title: str) -> str:
-    """Markdown table of the headline metrics, one column per result."""
+    """Markdown table of the headline metrics, one column per result. Rows of a step or a
+    disturbance appear only where the scenario has one; a settling or recovery time that
+    never came reads "not within ±band" instead of a dash."""
+    from trackmj.metrics import METRIC_DISPLAY, lookup
+
+    windows = [r.metrics.get("evaluation", {}) for r in results]
+    has_step = any(w.get("step") for w in windows)
+    has_disturbance = any(w.get("disturbances") for w in windows)
     head = "| metric | " + " | ".join(title.format(r=r) for r in results) + " |"
     lines = [head, "|---|" + "---|" * len(results)]
-    for key, name, scale, unit in SUMMARY_METRICS:
+    for key in SUMMARY_METRICS:
+        name, scale, unit = METRIC_DISPLAY[key]
+        if (key in STEP_METRICS and not has_step) or (key in DISTURBANCE_METRICS
+                                                      and not has_disturbance):
+            continue
         cells = []
-        for r in results:
-            value = r.metrics.get(key, float("nan"))
-            cells.append("–" if value != value else f"{value * scale:.3g}")
+        for r, w in zip(results, windows, strict=True):
+            value = lookup(r.metrics, key)
+            if value == value:
+                cells.append(f"{value * scale:.3g}")
+            elif key in UNSETTLED and "settle_band_rel" in w:
+                cells.append(f"not within ±{100 * w['settle_band_rel']:g} %")
+            else:
+                cells.append("–")
         lines.append(f"| {name} [{unit}] | " + " | ".join(cells) + " |")
+    cutoff = {w.get("lowpass_cutoff_Hz") for w in windows} - {None}
+    if cutoff:
+        lines.append("")
+        lines.append(f"low-pass: zero-phase 2nd-order Butterworth at "
+                     f"{', '.join(f'{c:g}' for c in sorted(cutoff))} Hz on F_ten; raw: the "
+                     "1 kHz F_ten (see README, Metrics)")
     return "\n".join(lines)
 
 
@@ -146,7 +166,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
-    """RunSpec fields shared by every run of a compare or report command."""
+    """RunSpec fields shared by every run of a compare command."""
     from trackmj.executor import as_path, overrides_tuple
 
     return dict(scenario=scenario, estimator=getattr(args, "estimator", None),
@@ -156,52 +176,49 @@ def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from trackmj.executor import Executor, RunSpec
-    from trackmj.figures import compare_figure
-    from trackmj.io import write_text_atomic
-    from trackmj.results import check_output_dir, write_result
-    from trackmj.sim.registry import ARCHITECTURES
+    from trackmj.report import compare, write_compare
     from trackmj.sim.setup import prepare
 
     controllers = args.controllers.split(",") if args.controllers else [None]
     setups = [prepare(args.scenario, controller=c, estimator=args.estimator, seed=args.seed,
                       duration=args.duration, **_files(args)) for c in controllers]
     scenario = setups[0].scenario
-    out = check_output_dir(Path(args.out or f"runs/compare-{scenario.name}"))
+    out = Path(args.out or f"runs/compare-{scenario.name}")
     base = _specs_base(args, str(args.scenario))
-    specs = [RunSpec(**base, architecture=a, controller=s.controller, seed=args.seed)
-             for s in setups for a in ARCHITECTURES]
-    with Executor(workers=args.workers, scheduler=args.scheduler) as executor:
-        outcomes = executor.map(specs, progress=f"compare {scenario.name}")
-    failed = [o for o in outcomes if not o.ok]
-    for o in failed:
-        print(f"trackmj: {o.spec.architecture} {o.spec.controller}: {o.error}", file=sys.stderr)
-    results = [o.result for o in outcomes if o.ok]
-    for r in results:
-        write_result(r, out / f"{r.architecture}-{r.controller}")
-    label = "architecture" if len(controllers) == 1 else "controller"
-    for c in {r.controller for r in results}:
-        compare_figure([r for r in results if r.controller == c], out / f"compare-{c}.png")
-    table = _summary_table(results, "{r.architecture} {r.controller}")
-    write_text_atomic(out / "compare.md", f"# {scenario.name}: {scenario.title}\n\n"
-                      f"seed {args.seed}, duration {setups[0].duration_s:g} s\n\n"
-                      f"{table}\n")
-    print(table)
-    print(f"-> {out} ({label} comparison)")
-    return 1 if failed else 0
+    outcome = compare(base, [s.controller for s in setups], out, seed=args.seed,
+                      workers=args.workers, scheduler=args.scheduler)
+    for spec, error in outcome.failed:
+        print(f"trackmj: {spec.architecture} {spec.controller}: {error}", file=sys.stderr)
+    doc = write_compare(outcome, out, scenario, setups[0].duration_s)
+    print(_summary_table(outcome.results, "{r.architecture} {r.controller}"))
+    print(f"-> {doc}")
+    return 1 if outcome.failed else 0
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from trackmj.report import run_matrix, write_report
+    from trackmj.report import check_report_dir, plan, run_matrix, write_report
+    from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS
 
     if args.seeds < 1 or args.seeds > 50:
         raise ValueError(f"--seeds = {args.seeds}: allowed 1..50")
-    scenarios = args.scenarios.split(",")
-    results = run_matrix(scenarios, list(range(args.seeds)), args.duration, args.workers,
-                         args.scheduler)
-    path = write_report(results, Path(args.out))
-    print(f"{len(results)} runs -> {path}")
-    return 0
+    archs = [a for a in args.archs.split(",") if a]
+    baselines = [c for c in args.baselines.split(",") if c]
+    for name, given, known in (("--archs", archs, ARCHITECTURES),
+                               ("--baselines", baselines, CONTROLLERS)):
+        unknown = [x for x in given if x not in known]
+        if unknown:
+            raise ValueError(f"{name}: unknown {unknown}; allowed {sorted(known)}")
+    if "tp" not in archs:
+        raise ValueError("--archs must include tp: every claim and prediction error is "
+                         "against it")
+    out = check_report_dir(Path(args.out))
+    specs = plan(args.scenarios.split(","), list(range(args.seeds)), args.duration, archs,
+                 baselines)
+    matrix = run_matrix(specs, out, workers=args.workers, scheduler=args.scheduler)
+    path = write_report(matrix.results, out, matrix)
+    print(f"{len(matrix.results)} runs ({matrix.resumed} resumed, {len(matrix.failed)} failed) "
+          f"in {matrix.wall_time_s:.0f} s -> {path}")
+    return 1 if matrix.failed else 0
 
 
 def _cmd_view(args: argparse.Namespace) -> int:
@@ -276,18 +293,26 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--rrd", action="store_true", help="also write a Rerun recording")
     run.set_defaults(func=_cmd_run)
 
-    compare = sub.add_parser("compare", help="all architectures on one scenario")
+    compare = sub.add_parser("compare", help="all architectures on one scenario, with each "
+                             "reduced one's prediction error against tp")
     run_args(compare)
-    compare.add_argument("--controllers", help="comma list, e.g. nmpc,lmpc,pid")
+    compare.add_argument("--controllers", help="comma list, e.g. nmpc,lmpc,pid (each on every "
+                         "architecture; one more figure overlays the controllers)")
     executor_args(compare)
     compare.set_defaults(func=_cmd_compare)
 
-    report = sub.add_parser("report", help="W1-W5 x architectures x seeds -> report.md")
+    report = sub.add_parser("report", help="W1-W5 x architectures x seeds -> report.md with "
+                            "the study's claims, resumable")
     report.add_argument("--scenarios", default="W1,W2,W3,W4,W5", help="comma list")
     report.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 per case")
     report.add_argument("--duration", type=float, help="simulated time per run [s]")
+    report.add_argument("--archs", default="tp,dp-a,dp-b",
+                        help="architectures (comma list; default: the study's three)")
+    report.add_argument("--baselines", default="lmpc,pid",
+                        help="baseline controllers run on tp in W1 ('' for none)")
     executor_args(report)
-    report.add_argument("--out", default="runs/report", help="output directory")
+    report.add_argument("--out", default="runs/report",
+                        help="output directory; runs already complete in it are kept")
     report.set_defaults(func=_cmd_report)
 
     view = sub.add_parser("view", help="open a run's Rerun recording in the viewer")

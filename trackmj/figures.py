@@ -1,97 +1,467 @@
 """Figures of runs and comparisons (PNG, matplotlib Agg). Display units: kN, MPa, kJ.
 
-Comparison figures follow the study's Figures 4-8 habit but stay readable in grayscale:
-each architecture has its own line style and marker, not only its own colour.
+Every figure reads in colour and in grayscale: each architecture, controller and energy term
+has its own colour (Okabe-Ito, colour-blind safe) AND line style, marker or hatch. Legends
+sit above the panels, outside the data; every axis states its unit; the admissible band
+[F_min, F_max] is shaded green and the disturbance windows (load pulses, supply drops)
+grey. The windows come from the run's own ``metrics["evaluation"]`` table.
+
+* :func:`run_figure`: one run: tension (raw as a light min-max band, low-pass as the line,
+  reference), chamber and supply pressures, valve mode and u, zooms on the events, energy
+  breakdown.
+* :func:`overlay_figure`: several runs of one case overlaid (per architecture or per
+  controller), zooms, prediction error against tp, energy breakdown bars.
+* :func:`psd_figure`: tension and chassis-acceleration spectra with the bands marked.
+* :func:`variants_figure`: a metric per parameter variant and architecture (W5).
 """
 
 from __future__ import annotations
 
 import io
-from collections.abc import Sequence
+import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.axes import Axes
 
 from trackmj.io import write_bytes_atomic
+from trackmj.metrics import ENERGY_TOTALS, MetricWindows, energy_terms, lowpass
 from trackmj.results import Result
 
-STYLES = {
+STYLES: dict[str, dict[str, Any]] = {
     "tp": dict(color="black", linestyle="-", marker="o"),
-    "tp-weak": dict(color="0.35", linestyle="--", marker="s"),
-    "dp-a": dict(color="0.55", linestyle="-.", marker="^"),
-    "dp-b": dict(color="0.7", linestyle=":", marker="D"),
+    "tp-weak": dict(color="#56B4E9", linestyle=(0, (1, 1)), marker="v"),
+    "dp-a": dict(color="#E69F00", linestyle="--", marker="^"),
+    "dp-b": dict(color="#0072B2", linestyle="-.", marker="s"),
+    "nmpc": dict(color="black", linestyle="-", marker="o"),
+    "lmpc": dict(color="#D55E00", linestyle="--", marker="D"),
+    "pid": dict(color="#009E73", linestyle="-.", marker="P"),
 }
+"""Line style of each architecture and controller (colour, dash pattern, marker)."""
+SPARE_STYLES = (dict(color="#CC79A7", linestyle=(0, (5, 1, 1, 1, 1, 1)), marker="X"),
+                dict(color="#999999", linestyle=(0, (3, 2)), marker="*"))
+ENERGY_STYLES: dict[str, tuple[str, str]] = {
+    "relief": ("#E69F00", ""), "throttling": ("#56B4E9", "//"), "leakage": ("#009E73", "\\\\"),
+    "friction": ("#F0E442", ".."), "makeup": ("#0072B2", "xx"),
+    "stored_change": ("#D55E00", "--"), "mechanical": ("#CC79A7", "oo"),
+    "residual": ("#999999", "++"), "supply": ("#BBBBBB", "")}
+"""Colour and hatch of each energy term in the breakdown bars."""
+ENERGY_ORDER = ("throttling", "leakage", "friction", "makeup", "mechanical", "stored_change",
+                "residual", "relief", "supply")
+"""Stacking order of the energy terms (terms not listed go on top)."""
+RAW_COLOUR = "0.78"
+BAND_COLOUR = "#009E73"
+EVENT_COLOUR = "0.55"
+ENVELOPE_BIN_S = 0.05
+"""Raw signals are drawn as their min-max band over 50 ms bins (the 1 kHz trace would be a
+solid block at full-run scale)."""
+MARKERS_PER_LINE = 12
 
 
 def _save(fig: plt.Figure, path: Path) -> Path:
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110)
+    fig.savefig(buffer, format="png", dpi=100)
     plt.close(fig)
     write_bytes_atomic(path, buffer.getvalue())
     return path
 
 
+def style(label: str, index: int = 0) -> dict[str, Any]:
+    """Line style of ``label`` (an architecture or controller); a spare one otherwise."""
+    return STYLES.get(label, SPARE_STYLES[index % len(SPARE_STYLES)])
+
+
+def windows_of(result: Result) -> MetricWindows:
+    """The metric windows a result was measured on (its ``evaluation`` table)."""
+    table = result.metrics.get("evaluation")
+    if not isinstance(table, Mapping):
+        raise KeyError(f"{result.scenario} {result.architecture}: metrics have no "
+                       "'evaluation' table (a result written before the windows were stored)")
+    return MetricWindows.from_table(table)
+
+
+def _envelope(t: np.ndarray, x: np.ndarray, bin_s: float = ENVELOPE_BIN_S,
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(bin centres [s], min, max) of ``x`` over consecutive bins of ``bin_s``."""
+    n = max(1, round(bin_s / float(np.median(np.diff(t)))))
+    m = len(t) // n * n
+    tb, xb = t[:m].reshape(-1, n), x[:m].reshape(-1, n)
+    return tb.mean(axis=1), xb.min(axis=1), xb.max(axis=1)
+
+
+def _legend_above(ax: Axes, ncol: int | None = None, **kwargs: Any) -> None:
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        ax.legend(handles, labels, loc="lower left", bbox_to_anchor=(0.0, 1.01),
+                  ncol=ncol or len(handles), frameon=False, fontsize=8,
+                  handlelength=3.0, borderaxespad=0.0, columnspacing=1.2, **kwargs)
+
+
+def _shade_events(ax: Axes, w: MetricWindows, label: bool = True) -> None:
+    """Grey spans over the disturbance windows; a dotted line at the reference step."""
+    named = set()
+    for k, (on, off) in enumerate(w.disturbances):
+        kind = _disturbance_kind(w, k)
+        ax.axvspan(on, off, color=EVENT_COLOUR, alpha=0.15, lw=0,
+                   label=f"{kind} window" if label and kind not in named else None)
+        named.add(kind)
+    if w.step is not None:
+        ax.axvline(w.step[0], color=EVENT_COLOUR, ls="-.", lw=1.0,
+                   label=f"reference step at {w.step[0]:g} s" if label else None)
+
+
+def _disturbance_kind(w: MetricWindows, k: int) -> str:
+    """What disturbance ``k`` is, without its size ("load pulse", "supply drop")."""
+    if k >= len(w.disturbance_labels):
+        return "disturbance"
+    return " ".join(w.disturbance_labels[k].split()[:2])
+
+
+def _force_band(ax: Axes, w: MetricWindows, label: bool = True) -> None:
+    ax.axhspan(w.force_min_N / 1e3, w.force_max_N / 1e3, facecolor=(0.0, 0.62, 0.45, 0.08),
+               edgecolor=BAND_COLOUR, lw=0.9, ls="--",
+               label=f"admissible [F_min, F_max] = [{w.force_min_N / 1e3:g}, "
+                     f"{w.force_max_N / 1e3:g}] kN" if label else None)
+
+
+def _zoom_windows(w: MetricWindows, t_end: float) -> list[tuple[str, float, float]]:
+    """(title, t0, t1) of the zoom panels: the reference step, each disturbance edge (onset
+    and end), or, with neither, one second of steady running."""
+    zooms = []
+    if w.step is not None and w.step[0] < t_end:
+        zooms.append((f"step at {w.step[0]:g} s", w.step[0] - 0.5, w.step[0] + 3.0))
+    for k, (on, off) in enumerate(w.disturbances):
+        what = w.disturbance_labels[k] if k < len(w.disturbance_labels) else "disturbance"
+        for edge, name in ((on, "onset"), (off, "end")):
+            if edge < t_end:
+                zooms.append((f"{what}, {name} at {edge:g} s", edge - 0.5, edge + 2.5))
+    if not zooms:
+        t0 = w.steady[0] if w.steady is not None else w.evaluation_start_s
+        t0 = t0 if t0 + 1.0 <= t_end else max(t_end - 1.0, 0.0)   # a short run: its last second
+        zooms.append((f"steady running, {t0:g}-{t0 + 1:g} s", t0, t0 + 1.0))
+    return [(title, max(t0, 0.0), min(t1, t_end)) for title, t0, t1 in zooms]
+
+
+def _markevery(n: int) -> int:
+    return max(n // MARKERS_PER_LINE, 1)
+
+
+def _tension_panel(ax: Axes, runs: Sequence[tuple[str, Result]], w: MetricWindows,
+                   t_range: tuple[float, float] | None = None, raw_of: int = 0,
+                   legend: bool = True, raw_as_line: bool = False) -> None:
+    """Low-passed F_ten of each run (styled), the raw F_ten of run ``raw_of`` as a light band
+    (or a thin line in a zoom), the reference, the force band and the events."""
+    label0, first = runs[raw_of]
+    c = first.columns()
+    t = c["t_s"]
+    sel = np.ones(t.shape, bool) if t_range is None else (t >= t_range[0]) & (t <= t_range[1])
+    raw_label = f"{label0} raw" if len(runs) > 1 else "F_ten raw"
+    if raw_as_line:
+        ax.plot(t[sel], c["tension_N"][sel] / 1e3, color=RAW_COLOUR, lw=0.6, label=raw_label)
+    else:
+        tb, lo, hi = _envelope(t[sel], c["tension_N"][sel])
+        ax.fill_between(tb, lo / 1e3, hi / 1e3, color=RAW_COLOUR, lw=0,
+                        label=f"{raw_label} (50 ms min-max)")
+    for k, (label, res) in enumerate(runs):
+        cc = res.columns()
+        lp = lowpass(cc["t_s"], cc["tension_N"], w.lowpass_cutoff_Hz)
+        name = (f"{label} {w.lowpass_cutoff_Hz:g} Hz low-pass" if len(runs) > 1
+                else f"F_ten {w.lowpass_cutoff_Hz:g} Hz low-pass")
+        ax.plot(cc["t_s"][sel], lp[sel] / 1e3, lw=1.3, markersize=5, label=name,
+                markevery=_markevery(int(sel.sum())), markerfacecolor="white",
+                **style(label, k))
+    ax.plot(t[sel], c["tension_ref_N"][sel] / 1e3, color="black", lw=1.0, ls=(0, (1, 1.5)),
+            label="reference F_ref")
+    _force_band(ax, w, label=legend)
+    _shade_events(ax, w, label=legend)
+    ax.set_ylabel("F_ten [kN]")
+    if t_range is not None:
+        ax.set_xlim(*t_range)
+        lo_y = min(np.nanmin(c["tension_N"][sel]), np.nanmin(c["tension_ref_N"][sel]))
+        hi_y = max(np.nanmax(c["tension_N"][sel]), np.nanmax(c["tension_ref_N"][sel]))
+        pad = 0.08 * (hi_y - lo_y) + 50.0
+        ax.set_ylim((lo_y - pad) / 1e3, (hi_y + pad) / 1e3)
+    ax.grid(alpha=0.3)
+
+
+def _energy_bars(ax: Axes, labels: Sequence[str], results: Sequence[Result]) -> None:
+    """Stacked bars of each run's energy terms [kJ] (positive terms up, negative down) with
+    the totals (pump, circuit) as black ticks; a note where a run has no energy_J table."""
+    terms = [energy_terms(r.metrics) for r in results]
+    names: list[str] = []
+    for e in terms:
+        names += [k for k in e.terms if k not in ENERGY_TOTALS and k not in names]
+    # the circuit's sinks first, so the circuit tick meets their top; the relief last, so the
+    # pump tick meets the top of the stack (when nothing is released from storage)
+    names.sort(key=lambda k: ENERGY_ORDER.index(k) if k in ENERGY_ORDER else len(ENERGY_ORDER))
+    spare = iter(["#777777", "#444444", "#AAAAAA"])
+    drawn: set[str] = set()
+    for x, e in enumerate(terms):
+        up = down = 0.0
+        for name in names:
+            value = e.terms.get(name, math.nan) / 1e3
+            if not math.isfinite(value) or value == 0.0:
+                continue
+            colour, hatch = ENERGY_STYLES.get(name) or ENERGY_STYLES.setdefault(
+                name, (next(spare, "#777777"), "||"))
+            bottom = up if value > 0 else down
+            ax.bar(x, value, bottom=bottom, width=0.6, color=colour, hatch=hatch,
+                   edgecolor="black", lw=0.5, label=None if name in drawn else name)
+            drawn.add(name)
+            if value > 0:
+                up += value
+            else:
+                down += value
+        for total, ls in zip(ENERGY_TOTALS, ("-", "--"), strict=True):
+            value = e.terms.get(total, math.nan) / 1e3
+            if math.isfinite(value):
+                ax.hlines(value, x - 0.42, x + 0.42, color="black", lw=2.0, ls=ls,
+                          label=None if total in drawn else f"{total} (total in)")
+                drawn.add(total)
+    by_note: dict[str, list[str]] = {}
+    for lab, e in zip(labels, terms, strict=True):
+        for n in e.notes:
+            by_note.setdefault(n, []).append(lab)
+    if by_note:     # in head room above the bars, not over them
+        low, high = ax.get_ylim()
+        ax.set_ylim(low, high + 0.12 * len(by_note) * (high - low) + 0.1 * (high - low))
+        ax.text(0.02, 0.98, "\n".join(f"{', '.join(labs)}: {n}" for n, labs in by_note.items()),
+                transform=ax.transAxes, va="top", fontsize=7)
+    ax.axhline(0.0, color="black", lw=0.6)
+    ax.set_xticks(range(len(labels)), labels, rotation=20)
+    ax.set_xlim(-0.6, len(labels) - 0.4)
+    ax.set_ylabel("energy [kJ]")
+    ax.grid(axis="y", alpha=0.3)
+    _legend_above(ax, ncol=3)
+
+
 def run_figure(result: Result, path: str | Path) -> Path:
-    """Four panels: tension vs reference, chamber/supply pressures, valve mode and u,
-    cumulative energies."""
+    """One run: tension (raw band, low-pass, reference, F band, events), chamber and supply
+    pressures, valve mode (−1/0/+1), valve opening u, zoom panels on the step, each
+    disturbance edge (or a second of steady running) and the energy breakdown."""
+    w = windows_of(result)
     c = result.columns()
     t = c["t_s"]
-    fig, axes = plt.subplots(4, 1, figsize=(9, 10), sharex=True)
-    axes[0].plot(t, c["tension_N"] / 1e3, color="black", lw=0.8, label="F_ten")
-    axes[0].plot(t, c["tension_ref_N"] / 1e3, color="0.5", ls="--", lw=1.2, label="reference")
-    axes[0].set_ylabel("tension [kN]")
-    axes[0].legend(loc="best")
-    for name, style in (("p_head_Pa", "-"), ("p_rod_Pa", "--"), ("p_supply_Pa", ":")):
-        axes[1].plot(t, c[name] / 1e6, color="black", ls=style, lw=0.8,
-                     label=name.removesuffix("_Pa"))
-    axes[1].set_ylabel("pressure [MPa]")
-    axes[1].legend(loc="best")
-    axes[2].step(t, c["valve_mode"], where="post", color="black", lw=0.8, label="valve mode")
-    axes[2].plot(t, c["u"], color="0.5", lw=0.8, label="u")
-    axes[2].set_ylabel("mode / u [-]")
-    axes[2].legend(loc="best")
-    for name, style in (("e_supply_J", "-"), ("p_work_J", "--"), ("mech_work_J", ":")):
-        axes[3].plot(t, c[name] / 1e3, color="black", ls=style, lw=0.9,
-                     label=name.removesuffix("_J"))
-    axes[3].set_ylabel("energy [kJ]")
-    axes[3].set_xlabel("time [s]")
-    axes[3].legend(loc="best")
+    zooms = _zoom_windows(w, float(t[-1]))
+    fig = plt.figure(figsize=(16, 11), layout="constrained")
+    outer = fig.add_gridspec(1, 2, width_ratios=(2.2, 1.0))
+    left = outer[0].subgridspec(4, 1, height_ratios=(3.0, 2.0, 1.1, 1.1))
+    right = outer[1].subgridspec(len(zooms) + 1, 1, height_ratios=(*[1.0] * len(zooms), 1.4))
+    ax_f = fig.add_subplot(left[0])
+    ax_p = fig.add_subplot(left[1], sharex=ax_f)
+    ax_v = fig.add_subplot(left[2], sharex=ax_f)
+    ax_u = fig.add_subplot(left[3], sharex=ax_f)
+    _tension_panel(ax_f, [(result.architecture, result)], w)
+    _legend_above(ax_f, ncol=4)
+    if np.isfinite(c["p_head_Pa"]).all():
+        tb, lo, hi = _envelope(t, c["p_head_Pa"])
+        ax_p.fill_between(tb, lo / 1e6, hi / 1e6, color=RAW_COLOUR, lw=0,
+                          label="p_head raw (50 ms min-max)")
+    for name, ls, label in (("p_head_Pa", "-", "p_head"), ("p_rod_Pa", "--", "p_rod"),
+                            ("p_supply_Pa", ":", "p_supply")):
+        if np.isfinite(c[name]).all() and name == "p_supply_Pa":     # a smooth node: as is
+            ax_p.plot(t, c[name] / 1e6, color="black", ls=ls, lw=1.1, label=label)
+        elif np.isfinite(c[name]).all():
+            ax_p.plot(t, lowpass(t, c[name], w.lowpass_cutoff_Hz) / 1e6, color="black", ls=ls,
+                      lw=1.1, label=f"{label} {w.lowpass_cutoff_Hz:g} Hz low-pass")
+        else:
+            ax_p.plot([], [], color="black", ls=ls, label=f"{label}: none in this architecture")
+    _shade_events(ax_p, w, label=False)
+    ax_p.set_ylabel("pressure [MPa]")
+    ax_p.grid(alpha=0.3)
+    _legend_above(ax_p)
+    ax_v.step(t, c["valve_mode"], where="post", color="black", lw=0.8, label="valve mode")
+    ax_v.set_yticks([-1, 0, 1], ["−1 release", "0 hold", "+1 pressurize"])
+    ax_v.set_ylim(-1.4, 1.4)
+    ax_v.set_ylabel("mode [-]")
+    _shade_events(ax_v, w, label=False)
+    ax_v.grid(alpha=0.3)
+    ax_u.plot(t, c["u"], color="#0072B2", lw=0.6, label="valve opening u")
+    ax_u.set_ylabel("u [-]")
+    ax_u.set_xlabel("time [s]")
+    _shade_events(ax_u, w, label=False)
+    ax_u.grid(alpha=0.3)
+    for ax in (ax_f, ax_p, ax_v):
+        ax.tick_params(labelbottom=False)
+    for k, (title, t0, t1) in enumerate(zooms):
+        ax = fig.add_subplot(right[k])
+        _tension_panel(ax, [(result.architecture, result)], w, (t0, t1), legend=False,
+                       raw_as_line=True)
+        ax.set_title(f"zoom: {title}", fontsize=9, loc="left")
+        ax.set_xlabel("time [s]")
+    _energy_bars(fig.add_subplot(right[len(zooms)]), [result.architecture], [result])
     fig.suptitle(f"{result.scenario} {result.architecture} {result.controller}/"
-                 f"{result.estimator} seed {result.seed}")
-    fig.tight_layout()
+                 f"{result.estimator} seed {result.seed}, variant "
+                 f"{result.metadata.get('variant', 'nominal')}")
     return _save(fig, Path(path))
 
 
-def compare_figure(results: Sequence[Result], path: str | Path, label_by: str = "architecture",
-                   ) -> Path:
-    """Tension histories overlaid (style per label, markers every ~1/15 of the run) and a
-    bar chart of supply energy."""
-    fig, (ax, bars) = plt.subplots(1, 2, figsize=(13, 5), gridspec_kw={"width_ratios": [3, 1]})
-    first = results[0].columns()
-    ax.plot(first["t_s"], first["tension_ref_N"] / 1e3, color="0.2", lw=1.6, ls=(0, (1, 1)),
-            label="reference")
-    labels, energies = [], []
-    for k, res in enumerate(results):
+def _number(value: float, values: Sequence[float]) -> str:
+    """Bar label: "–" if undefined, "0" if below 0.1 % of the largest bar, else 3 digits."""
+    if not math.isfinite(value):
+        return "–"
+    largest = max((abs(v) for v in values if math.isfinite(v)), default=0.0)
+    return "0" if abs(value) < 1e-3 * largest or value == 0.0 else f"{value:.3g}"
+
+
+def _bars(ax: Axes, labels: Sequence[str], series: Mapping[str, Sequence[float]], unit: str,
+          ylabel: str) -> None:
+    """Grouped bars: one group per label, one hatched bar per series; values annotated."""
+    hatches, shades = ("", "//", "..", "xx"), ("0.35", "0.75", "0.55", "0.9")
+    n = max(len(series), 1)
+    width = 0.8 / n
+    for j, (name, values) in enumerate(series.items()):
+        x = np.arange(len(labels)) + (j - (n - 1) / 2) * width
+        colour = STYLES[name]["color"] if name in STYLES else shades[j % 4]
+        bars = ax.bar(x, values, width=width, color=colour, hatch=hatches[j % 4],
+                      edgecolor="0.6" if name == "tp" else "black", lw=0.5, label=name)
+        ax.bar_label(bars, labels=[_number(v, values) for v in values], fontsize=7,
+                     padding=1)
+    ax.axhline(0.0, color="black", lw=0.6)
+    ax.set_xticks(range(len(labels)), labels, rotation=20)
+    ax.set_ylabel(f"{ylabel} [{unit}]")
+    ax.grid(axis="y", alpha=0.3)
+    finite = [v for vals in series.values() for v in vals if math.isfinite(v)] or [0.0]
+    low, high = min(min(finite), 0.0), max(max(finite), 0.0)
+    pad = 0.18 * (high - low or 1.0)       # room for the value labels
+    ax.set_ylim(low - pad if low < 0.0 else 0.0, high + pad)
+    _legend_above(ax, ncol=len(series))
+
+
+def overlay_figure(results: Sequence[Result], path: str | Path, *,
+                   label_by: str = "architecture",
+                   predictions: Mapping[str, Mapping[str, Any]] | None = None,
+                   title: str = "") -> Path:
+    """Runs of one case overlaid, labelled by ``label_by`` (``architecture`` or
+    ``controller``): low-passed tension (raw of the first run as a band), head pressure
+    (low-passed) and the first run's supply pressure, zooms on the events, then bars:
+    with ``predictions`` (label -> :func:`trackmj.metrics.prediction_vs_tp`) the prediction
+    RMSE against tp (raw and low-passed), the peak-pressure error and the energy error; without,
+    the tracking RMSE (raw and low-passed); and the energy breakdown of every run."""
+    labels = [getattr(r, label_by) for r in results]
+    runs = list(zip(labels, results, strict=True))
+    w = windows_of(results[0])
+    t_end = float(results[0].columns()["t_s"][-1])
+    zooms = _zoom_windows(w, t_end)[:4]
+    bar_axes = 4 if predictions else 2
+    fig = plt.figure(figsize=(17, 14), layout="constrained")
+    grid = fig.add_gridspec(4, 1, height_ratios=(3.0, 2.0, 2.0, 2.3))
+    ax_f = fig.add_subplot(grid[0])
+    _tension_panel(ax_f, runs, w)
+    ax_f.set_xlabel("time [s]")
+    _legend_above(ax_f, ncol=5)
+    ax_p = fig.add_subplot(grid[1], sharex=ax_f)
+    for k, (label, res) in enumerate(runs):
         c = res.columns()
-        label = getattr(res, label_by)
-        style = STYLES.get(label, dict(color=str(0.2 + 0.15 * k), linestyle="-", marker="x"))
-        ax.plot(c["t_s"], c["tension_N"] / 1e3, lw=0.9, markevery=max(len(c["t_s"]) // 15, 1),
-                markersize=5, label=label, **style)
-        labels.append(label)
-        energies.append(res.metrics.get("supply_energy_J", np.nan) / 1e3)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("tension F_ten [kN]")
-    ax.legend(loc="best")
-    ax.grid(alpha=0.3)
-    hatches = ["", "//", "..", "xx", "\\\\", "oo"]
-    for k, energy in enumerate(energies):
-        bars.bar(k, energy, color="0.85", edgecolor="black", hatch=hatches[k % len(hatches)])
-    bars.set_xticks(range(len(labels)), labels, rotation=30)
-    bars.set_ylabel("supply energy [kJ]")
-    fig.suptitle(f"{results[0].scenario}: {', '.join(labels)}")
-    fig.tight_layout()
+        ax_p.plot(c["t_s"], lowpass(c["t_s"], c["p_head_Pa"], w.lowpass_cutoff_Hz) / 1e6,
+                  lw=1.2, markersize=5, markevery=_markevery(len(c["t_s"])),
+                  markerfacecolor="white", label=f"{label} p_head", **style(label, k))
+    supply = results[0].columns()["p_supply_Pa"]
+    if np.isfinite(supply).any():
+        ax_p.plot(results[0].columns()["t_s"], supply / 1e6, color="0.45", lw=1.0,
+                  ls=(0, (4, 1, 1, 1)), label=f"{labels[0]} p_supply")
+    _shade_events(ax_p, w, label=False)
+    ax_p.set_ylabel("pressure [MPa]")
+    ax_p.set_xlabel("time [s]")
+    ax_p.grid(alpha=0.3)
+    _legend_above(ax_p, ncol=len(runs) + 1,
+                  title=f"head pressure, {w.lowpass_cutoff_Hz:g} Hz low-pass")
+    zoom_grid = grid[2].subgridspec(1, len(zooms))
+    for k, (name, t0, t1) in enumerate(zooms):
+        ax = fig.add_subplot(zoom_grid[k])
+        _tension_panel(ax, runs, w, (t0, t1), legend=False, raw_as_line=True)
+        ax.set_title(f"zoom: {name}", fontsize=9, loc="left")
+        ax.set_xlabel("time [s]")
+    bars = grid[3].subgridspec(1, bar_axes, width_ratios=(*[1.0] * (bar_axes - 1), 1.6))
+    if predictions:
+        others = [lab for lab in labels if lab in predictions and lab != "tp"]
+        _bars(fig.add_subplot(bars[0]), others, {
+            "raw": [predictions[o]["prediction_rmse_vs_tp_N"] / 1e3 for o in others],
+            f"{w.lowpass_cutoff_Hz:g} Hz low-pass":
+                [predictions[o]["prediction_rmse_vs_tp_lp_N"] / 1e3 for o in others]},
+            "kN", "F_ten RMSE vs tp")
+        _bars(fig.add_subplot(bars[1]), others, {"peak p_head − tp": [
+            predictions[o]["peak_pressure_error_vs_tp_Pa"] / 1e6 for o in others]},
+            "MPa", "peak pressure error")
+        term = [predictions[o]["energy_error_term"] for o in others]
+        _bars(fig.add_subplot(bars[2]), [f"{o}\n({t or 'none'})" for o, t in
+                                         zip(others, term, strict=True)],
+              {"(E − E_tp)/E_tp": [predictions[o]["energy_error_vs_tp_pct"]
+                                   for o in others]}, "%", "energy error vs tp")
+    else:
+        _bars(fig.add_subplot(bars[0]), labels, {
+            "raw": [r.metrics.get("rmse_N", math.nan) / 1e3 for r in results],
+            f"{w.lowpass_cutoff_Hz:g} Hz low-pass":
+                [r.metrics.get("rmse_lp_N", math.nan) / 1e3 for r in results]},
+            "kN", "tracking RMSE")
+    _energy_bars(fig.add_subplot(bars[bar_axes - 1]), labels, results)
+    first = results[0]
+    fig.suptitle(title or f"{first.scenario} seed {first.seed}: " + ", ".join(labels))
+    return _save(fig, Path(path))
+
+
+def psd_figure(results: Sequence[Result], path: str | Path, *,
+               label_by: str = "architecture", title: str = "") -> Path:
+    """Tension and chassis vertical acceleration spectra (the runs' ``metrics["psd"]``,
+    steady window) on log axes; the road's excitation band, the body-mode band and the
+    tooth-passing band marked."""
+    w = windows_of(results[0])
+    fig, axes = plt.subplots(2, 1, figsize=(12, 9), layout="constrained", sharex=True)
+    quantities = (("tension_N2_Hz", 1e-6, "F_ten PSD [kN²/Hz]"),
+                  ("chassis_acc_m2_s4_Hz", 1.0, "chassis vertical acc. PSD [(m/s²)²/Hz]"))
+    for ax, (key, scale, ylabel) in zip(axes, quantities, strict=True):
+        if w.road_band_Hz is not None:
+            ax.axvspan(*w.road_band_Hz, color=BAND_COLOUR, alpha=0.08, lw=0,
+                       label=f"road excitation {w.road_band_Hz[0]:g}-{w.road_band_Hz[1]:g} Hz")
+        ax.axvspan(*w.body_mode_band_Hz, facecolor="none", edgecolor="0.7", hatch="//",
+                   lw=0.0, label=f"body mode {w.body_mode_band_Hz[0]:g}-"
+                                 f"{w.body_mode_band_Hz[1]:g} Hz")
+        if w.tooth_passing_band_Hz is not None:
+            lo, hi = w.tooth_passing_band_Hz
+            ax.axvspan(lo, hi, facecolor="none", edgecolor="#F2B48A", hatch="\\\\", lw=0.0,
+                       label=f"tooth passing {lo:.3g}-{hi:.3g} Hz")
+        drawn = 0
+        for k, res in enumerate(results):
+            spectra = res.metrics.get("psd", {})
+            f = np.asarray(spectra.get("f_Hz", []), dtype=float)
+            p = np.asarray(spectra.get(key, []), dtype=float) * scale
+            label = getattr(res, label_by)
+            if len(f) < 2 or not np.isfinite(p[1:]).any():
+                ax.plot([], [], label=f"{label}: none", **style(label, k))
+                continue
+            ax.semilogy(f[1:], p[1:], lw=1.1, markersize=4, markevery=_markevery(len(f)),
+                        markerfacecolor="white", label=label, **style(label, k))
+            drawn += 1
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3, which="both")
+        _legend_above(ax, ncol=4)
+        if not drawn:
+            ax.text(0.5, 0.5, "no run has this quantity", transform=ax.transAxes,
+                    ha="center")
+    axes[1].set_xlabel("frequency [Hz]")
+    axes[1].set_xlim(0.0, w.psd_max_Hz)
+    steady = w.steady or (w.evaluation_start_s, math.nan)
+    first = results[0]
+    fig.suptitle(title or f"{first.scenario} seed {first.seed}: spectra over {steady[0]:g}-"
+                 f"{steady[1]:g} s (Welch, {w.psd_resolution_Hz:g} Hz resolution)")
+    return _save(fig, Path(path))
+
+
+
+def variants_figure(variants: Sequence[str], series: Mapping[str, Mapping[str, Sequence[float]]],
+                    path: str | Path, *, title: str = "") -> Path:
+    """Grouped bars per parameter variant (W5), one panel per metric: ``series`` maps a
+    panel's "label [unit]" to {architecture: one value per variant} (mean over seeds)."""
+    fig, axes = plt.subplots(len(series), 1, figsize=(14, 3.6 * len(series)),
+                             layout="constrained", squeeze=False)
+    for ax, (label, values) in zip(axes[:, 0], series.items(), strict=True):
+        name, unit = label.rsplit(" [", 1)
+        _bars(ax, list(variants), values, unit.rstrip("]"), name)
+    fig.suptitle(title)
     return _save(fig, Path(path))

@@ -6,14 +6,24 @@ signals ``y`` and references ``ref`` have the same shape; the error is e = y −
 metric over an empty window is NaN. Time integrals use the trapezoid rule; durations of
 sample sets count each sample as dt. Units follow the signal: tension in N gives errors in
 N, ISE in N²·s.
+
+Two views of the tension F_ten (see :func:`compute_metrics` for the full list):
+
+* **raw**: the 1 kHz signal as simulated, carrying the track's chordal ripple (tooth
+  passing at v/pitch, ~20 Hz at 1.5 m/s) that no valve with a 25 ms minimum hold follows;
+* **low-passed** (``_lp`` in the name): F_ten through :func:`lowpass`, a zero-phase
+  2nd-order Butterworth at the scenario's ``[evaluation].lowpass_cutoff_Hz`` (2 Hz in
+  W1-W5), compared with the unfiltered reference: the band the controller can act on.
+  The ripple is what the low-pass removes, F_ten − lowpass(F_ten).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -194,26 +204,74 @@ def control_increment_rms(u: np.ndarray, stride: int = 1) -> float:
     return float(np.sqrt(np.mean(du * du))) if len(du) else math.nan
 
 
-def band_rms(t: np.ndarray, x: np.ndarray, f_low: float = 8.0, f_high: float = 12.0,
-             window: Window = None, *, resolution_hz: float = 0.5) -> float:
-    """RMS of ``x`` in the band [f_low, f_high] Hz [unit of x].
+def psd(t: np.ndarray, x: np.ndarray, window: Window = None, *,
+        resolution_Hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided power spectral density of ``x`` over ``window``: (f [Hz], PSD [unit²/Hz]).
 
-    Welch PSD (Hann window, segments of 1/``resolution_hz`` s = 2 s at 0.5 Hz, 50 % overlap,
-    mean removed), integrated over the bins with f_low <= f <= f_high: sqrt(Σ PSD·Δf). A sine
-    of amplitude A at 10 Hz gives A/√2 (its Hann main lobe, ±2 bins = ±1 Hz, lies inside
-    8-12 Hz); a 2 Hz sine gives ~0.
+    Welch's method: Hann window, segments of 1/``resolution_Hz`` s (2 s at 0.5 Hz; the whole
+    window if shorter), 50 % overlap, each segment's mean removed; bins f = k·Δf. Parseval:
+    Σ PSD·Δf is the variance of x (for a stationary x). Empty arrays if the window holds
+    fewer than 8 samples; NaN densities if x is not finite there (a quantity the
+    architecture does not have).
     """
     m = _sel(t, window)
     xx = np.asarray(x, dtype=float)[m]
     if len(xx) < 8:
-        return math.nan
+        return np.zeros(0), np.zeros(0)
     from scipy.signal import welch  # imported here: scipy.signal costs ~0.3 s to import
 
     fs = 1.0 / sample_period(t)
-    nperseg = min(len(xx), round(fs / resolution_hz))
-    f, psd = welch(xx, fs=fs, window="hann", nperseg=nperseg, detrend="constant")
+    nperseg = min(len(xx), round(fs / resolution_Hz))
+    f, density = welch(np.nan_to_num(xx), fs=fs, window="hann", nperseg=nperseg,
+                       detrend="constant")
+    if not np.isfinite(xx).all():
+        density = np.full(f.shape, math.nan)
+    return f, density
+
+
+def psd_band_rms(f: np.ndarray, density: np.ndarray, f_low: float, f_high: float) -> float:
+    """RMS in the band f_low <= f <= f_high of a PSD from :func:`psd`: sqrt(Σ PSD·Δf)
+    [unit of the signal]; NaN without bins."""
+    if len(f) < 2:
+        return math.nan
     sel = (f >= f_low) & (f <= f_high)
-    return float(np.sqrt(np.sum(psd[sel]) * (f[1] - f[0])))
+    return float(np.sqrt(np.sum(density[sel]) * (f[1] - f[0])))
+
+
+def band_rms(t: np.ndarray, x: np.ndarray, f_low: float, f_high: float,
+             window: Window = None, *, resolution_Hz: float) -> float:
+    """RMS of ``x`` in the band [f_low, f_high] Hz [unit of x].
+
+    The Welch PSD of :func:`psd` integrated over the bins with f_low <= f <= f_high; at
+    0.5 Hz resolution (2 s Hann segments) A sine of amplitude A at 10 Hz gives A/√2 in 8-12 Hz
+    (its Hann main lobe, ±2 bins = ±1 Hz, lies inside); a 2 Hz sine gives ~0.
+    """
+    f, density = psd(t, x, window, resolution_Hz=resolution_Hz)
+    return psd_band_rms(f, density, f_low, f_high)
+
+
+def lowpass(t: np.ndarray, x: np.ndarray, cutoff_Hz: float) -> np.ndarray:
+    """Zero-phase low-pass of ``x``, shape (n,) [unit of x].
+
+    A 2nd-order Butterworth with design cut-off ``cutoff_Hz`` run forward and backward
+    (scipy ``sosfiltfilt``, odd extension at both ends): no phase lag, magnitude
+    |H(f)|² = 1/(1 + (f/f_c)⁴), i.e. −6 dB at f_c, 94 % of the amplitude at f_c/2, 0.4 % at
+    4 f_c (8 Hz for f_c = 2 Hz) and 0.01 % at 10 f_c (20 Hz). The filter is acausal: a
+    perfect step passed through it at f_c = 2 Hz rises from 0.11 s before the step, over-
+    and undershoots by 3.4 % of the step, and stays within ±10 % of the step from 0.11 s
+    after it (what it adds to a low-passed settling time against a ±300 N band on a 3 kN
+    step). All NaN if ``x`` is not finite.
+    """
+    x = np.asarray(x, dtype=float)
+    if not np.isfinite(x).all():
+        return np.full(x.shape, math.nan)
+    from scipy.signal import butter, sosfiltfilt
+
+    fs = 1.0 / sample_period(t)
+    if not 0.0 < cutoff_Hz < 0.5 * fs:
+        raise ValueError(f"cut-off {cutoff_Hz} Hz must lie in (0, {0.5 * fs:g}) Hz, the "
+                         "Nyquist band of the signal")
+    return sosfiltfilt(butter(2, cutoff_Hz, fs=fs, output="sos"), x)
 
 
 def cumulative_energy(t: np.ndarray, power: np.ndarray) -> np.ndarray:
@@ -249,93 +307,94 @@ def solve_time_stats(solve_times_s: np.ndarray, success: np.ndarray | None = Non
     return SolveStats(float(np.median(st)), float(np.max(st)), fails)
 
 
+
+
 # ------------------------------------------------------------------ standard metric set
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MetricWindows:
-    """Windows and bands of a scenario for :func:`compute_metrics` (times in s, forces in N).
+    """Windows, bands and settings of a scenario for :func:`compute_metrics` (times in s,
+    forces in N, frequencies in Hz); built by ``Scenario.metric_windows`` from the scenario's
+    ``[limits]`` and ``[evaluation]`` tables.
 
-    evaluation_start_s: start of the tracking window for RMSE/ISE/peak error/violation
-    time/switch rate/energy (skips the start-up transient). step: (t_step, initial, final,
-    t_end) of a reference step (overshoot and settling evaluated in [t_step, t_end]).
-    disturbances: (onset, end) windows of load pulses or supply drops. steady: window for
-    the fluctuation band, mean tension and 8-12 Hz chassis acceleration. settle_band_rel:
-    settling band relative to the final value; recovery_band_N: recovery band (None:
-    settle_band_rel·|ref| at the onset). min_hold_s: how long a response must stay inside
-    its band before the window ends to count as settled/recovered. control_period_s: for
-    the control-increment RMS. acc_band_hz: band of the chassis acceleration RMS.
+    evaluation_start_s: start of the tracking window (RMSE, peak error, ripple, violation
+    time, switching; skips the start-up transient). steady: window of the fluctuation band,
+    the mean tension and the spectra. step: (t_step, initial, final, t_end) of a reference
+    step, its overshoot and settling evaluated in [t_step, t_end]. disturbances: (onset,
+    end) windows of load pulses or supply drops, disturbance_labels what each one is (for
+    figures; empty: unnamed). settle_band_rel: settling and recovery band
+    relative to the final value (recovery: to the reference at the onset), unless
+    recovery_band_N is given. min_hold_s: how long a response must stay inside its band
+    before the window ends to count as settled/recovered. lowpass_cutoff_Hz: cut-off of
+    :func:`lowpass` for the ``_lp`` metrics. body_mode_band_Hz: the track-idler-body mode
+    band; tooth_passing_band_Hz: the sprocket tooth (link) passing band v/pitch ± the
+    scenario's tooth_band_rel (None: no track, or its pitch unknown); road_band_Hz: the
+    band the road excites (speed × the ISO 8608 spatial band; None on flat ground), marked
+    on figures only. psd_resolution_Hz, psd_max_Hz: resolution and upper end of the spectra.
     """
 
     force_min_N: float
     force_max_N: float
-    evaluation_start_s: float = 0.0
+    evaluation_start_s: float
+    settle_band_rel: float
+    min_hold_s: float
+    lowpass_cutoff_Hz: float
+    body_mode_band_Hz: tuple[float, float]
+    psd_resolution_Hz: float
+    psd_max_Hz: float
+    tooth_passing_band_Hz: tuple[float, float] | None = None
+    road_band_Hz: tuple[float, float] | None = None
     step: tuple[float, float, float, float] | None = None
     disturbances: tuple[tuple[float, float], ...] = ()
+    disturbance_labels: tuple[str, ...] = ()
     steady: tuple[float, float] | None = None
-    settle_band_rel: float = 0.02
     recovery_band_N: float | None = None
-    min_hold_s: float = 0.5
-    control_period_s: float = 0.01
-    acc_band_hz: tuple[float, float] = (8.0, 12.0)
+
+    def ripple_bands_Hz(self) -> dict[str, tuple[float, float]]:
+        """Named bands the ripple is split into: ``tooth_passing`` (if known), ``body_mode``."""
+        bands = {} if self.tooth_passing_band_Hz is None else {
+            "tooth_passing": self.tooth_passing_band_Hz}
+        return bands | {"body_mode": self.body_mode_band_Hz}
+
+    def as_table(self) -> dict[str, Any]:
+        """The windows as a JSON-ready table (``metrics["evaluation"]``); fields that are
+        None are left out. :meth:`from_table` reads it back."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any]) -> MetricWindows:
+        """Windows from :meth:`as_table` (after a JSON round trip: lists back to tuples)."""
+        def tupled(value: Any) -> Any:
+            return tuple(tupled(v) for v in value) if isinstance(value, list | tuple) else value
+
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: tupled(v) for k, v in table.items() if k in names})
 
 
 REQUIRED_COLUMNS = ("t_s", "tension_N", "tension_ref_N", "p_head_Pa", "valve_mode", "u",
                     "e_supply_J", "p_work_J", "mech_work_J", "chassis_acc_z_m_s2")
 
 
-def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *,
-                    solve_times_s: Sequence[float] | None = None,
-                    solve_success: Sequence[bool] | None = None,
-                    wall_time_s: float | None = None) -> dict[str, float]:
-    """Standard metric set from the timeseries contract (see ``trackmj.results``).
+def _name(base: str, unit: str, lowpassed: bool) -> str:
+    return f"{base}_lp_{unit}" if lowpassed else f"{base}_{unit}"
 
-    Returns (all floats; NaN where undefined, e.g. no step or an empty window):
 
-    - ``rmse_N``, ``ise_N2s``, ``peak_error_N``: tension error in [evaluation_start, end].
-    - ``tension_mean_N``, ``fluctuation_N`` (half the 2.5-97.5 % error spread),
-      ``chassis_acc_rms_8_12Hz_m_s2``: in the steady window.
-    - ``tension_max_N``, ``tension_min_N``, ``p_head_max_Pa``: extremes after evaluation start.
-    - ``overshoot_N``, ``overshoot_pct`` (of the final value), ``settling_time_s``: step.
-    - ``disturbance_peak_error_N``: max |e| from each disturbance onset to the next onset
-      (or run end); ``recovery_time_s``: the largest recovery time over disturbances, each
-      measured from its onset (see :func:`recovery_time`); NaN if any did not recover.
-    - ``constraint_violation_s``: time with tension outside [force_min_N, force_max_N].
-    - ``valve_switch_rate_Hz``: valve mode changes per second; ``valve_switches``: count.
-    - ``control_increment_rms``: RMS of Δu per control period (u dimensionless).
-    - ``supply_energy_J``: e_supply_J(end) − e_supply_J(evaluation start).
-    - ``interface_energy_residual_J``: p_work_J − mech_work_J at the end (∫Σp·A·v dt vs
-      ∫F·v dt; zero for a power-conserving interface).
-    - ``solve_time_median_s``, ``solve_time_max_s``, ``solve_failures``: if solve times given.
-    - ``real_time_factor``: simulated time / ``wall_time_s`` if given (> 1: faster than real).
-    """
-    missing = [c for c in REQUIRED_COLUMNS if c not in columns]
-    if missing:
-        raise KeyError(f"timeseries lacks column(s) {missing}")
-    t = np.asarray(columns["t_s"], dtype=float)
-    y = np.asarray(columns["tension_N"], dtype=float)
-    ref = np.asarray(columns["tension_ref_N"], dtype=float)
+def _tracking(t: np.ndarray, y: np.ndarray, ref: np.ndarray, w: MetricWindows,
+              lowpassed: bool) -> dict[str, float]:
+    """The tracking metrics of one view of the tension (raw or low-passed), named for it."""
     t_end = float(t[-1])
-    w = windows
     ev = (w.evaluation_start_s, t_end)
     ev_mask = _sel(t, ev)
-    out: dict[str, float] = {
-        "rmse_N": rmse(t, y, ref, ev),
-        "ise_N2s": ise(t, y, ref, ev),
-        "peak_error_N": peak_abs_error(t, y, ref, ev),
-        "tension_max_N": float(np.max(y[ev_mask])) if ev_mask.any() else math.nan,
-        "tension_min_N": float(np.min(y[ev_mask])) if ev_mask.any() else math.nan,
-        "p_head_max_Pa": (float(np.max(np.asarray(columns["p_head_Pa"])[ev_mask]))
-                          if ev_mask.any() else math.nan),
-    }
+    out = {_name("rmse", "N", lowpassed): rmse(t, y, ref, ev),
+           _name("peak_error", "N", lowpassed): peak_abs_error(t, y, ref, ev),
+           _name("tension_max", "N", lowpassed): (float(np.max(y[ev_mask])) if ev_mask.any()
+                                                  else math.nan),
+           _name("tension_min", "N", lowpassed): (float(np.min(y[ev_mask])) if ev_mask.any()
+                                                  else math.nan)}
     steady = None if w.steady is None else (w.steady[0], min(w.steady[1], t_end))
-    steady_ok = steady is not None and steady[1] > steady[0]
-    sm = _sel(t, steady) if steady_ok else np.zeros(t.shape, dtype=bool)
-    out["tension_mean_N"] = float(np.mean(y[sm])) if sm.any() else math.nan
-    out["fluctuation_N"] = fluctuation_band(t, y, ref, steady) if steady_ok else math.nan
-    acc = columns["chassis_acc_z_m_s2"]
-    out["chassis_acc_rms_8_12Hz_m_s2"] = (band_rms(t, acc, *w.acc_band_hz, steady)
-                                          if steady_ok else math.nan)
-
+    out[_name("fluctuation", "N", lowpassed)] = (
+        fluctuation_band(t, y, ref, steady) if steady is not None and steady[1] > steady[0]
+        else math.nan)
     over, settle = Overshoot(math.nan, math.nan), math.nan
     if w.step is not None and w.step[0] < t_end:
         t_step, initial, final, t_stop = w.step
@@ -343,9 +402,9 @@ def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *
         over = overshoot(t, y, initial, final, (t_step, t_stop))
         settle = settling_time(t, y, final, t_step, band_rel=w.settle_band_rel, t_end=t_stop,
                                min_hold_s=w.min_hold_s)
-    out["overshoot_N"], out["overshoot_pct"] = over.value, over.percent
-    out["settling_time_s"] = settle
-
+    out[_name("overshoot", "N", lowpassed)] = over.value
+    out[_name("overshoot", "pct", lowpassed)] = over.percent
+    out[_name("settling_time", "s", lowpassed)] = settle
     onsets = sorted(on for on, _ in w.disturbances if on < t_end)
     peaks, recoveries = [], []
     for k, on in enumerate(onsets):
@@ -355,18 +414,131 @@ def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *
                 else w.settle_band_rel * abs(ref[i_on]))
         peaks.append(peak_abs_error(t, y, ref, (on, until)))
         recoveries.append(recovery_time(t, y, ref, on, until, band, min_hold_s=w.min_hold_s))
-    out["disturbance_peak_error_N"] = max(peaks) if peaks else math.nan
-    out["recovery_time_s"] = (math.nan if not recoveries or any(map(math.isnan, recoveries))
-                              else max(recoveries))
+    out[_name("disturbance_peak_error", "N", lowpassed)] = max(peaks) if peaks else math.nan
+    out[_name("recovery_time", "s", lowpassed)] = (
+        math.nan if not recoveries or any(map(math.isnan, recoveries)) else max(recoveries))
+    return out
+
+
+def ripple_band_rms(t: np.ndarray, ripple: np.ndarray, bands: Mapping[str, tuple[float, float]],
+                    window: Window, *, resolution_Hz: float) -> dict[str, float]:
+    """RMS of ``ripple`` in each named band and in the ``rest`` of the spectrum [unit].
+
+    From the Welch PSD of :func:`psd` over ``window``: each band integrates its bins
+    (f_low <= f <= f_high), ``rest`` the bins outside every band, so the squares of the
+    rest and of disjoint bands add up to the ripple's variance (Parseval).
+    """
+    f, density = psd(t, ripple, window, resolution_Hz=resolution_Hz)
+    out = {name: psd_band_rms(f, density, lo, hi) for name, (lo, hi) in bands.items()}
+    if len(f) < 2:
+        return out | {"rest": math.nan}
+    inside = np.zeros(f.shape, dtype=bool)
+    for lo, hi in bands.values():
+        inside |= (f >= lo) & (f <= hi)
+    out["rest"] = float(np.sqrt(np.sum(density[~inside]) * (f[1] - f[0])))
+    return out
+
+
+def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *,
+                    control_period_s: float | None = None,
+                    solve_times_s: Sequence[float] | None = None,
+                    solve_success: Sequence[bool] | None = None,
+                    wall_time_s: float | None = None) -> dict[str, Any]:
+    """Standard metric set from the timeseries contract (see ``trackmj.results``).
+
+    "Tracking window": [evaluation_start_s, end]; "steady window": ``windows.steady``. The
+    tracking metrics come twice, on the **raw** F_ten and on the **low-passed** F_ten
+    (``_lp`` in the name; :func:`lowpass` at ``lowpass_cutoff_Hz``), always against the
+    unfiltered reference F_ref:
+
+    - ``rmse_N`` / ``rmse_lp_N``: sqrt(mean((F − F_ref)²)) in the tracking window;
+    - ``peak_error_N`` / ``peak_error_lp_N``: max|F − F_ref| in the tracking window;
+    - ``tension_max_N``, ``tension_min_N`` (and ``_lp_``): extremes in the tracking window;
+    - ``fluctuation_N`` / ``fluctuation_lp_N``: ± half the 2.5-97.5 % spread of F − F_ref in
+      the steady window (:func:`fluctuation_band`);
+    - ``overshoot_N``, ``overshoot_pct`` (of the final value), ``settling_time_s`` (and
+      ``_lp_``): of the reference step, in [t_step, t_end] (:func:`overshoot`,
+      :func:`settling_time`, band ±settle_band_rel·|final|, held min_hold_s);
+    - ``disturbance_peak_error_N`` (and ``_lp_``): max|F − F_ref| from each disturbance
+      onset to the next onset (or the run end), the largest over disturbances;
+      ``recovery_time_s`` (and ``_lp_``): the largest recovery time over disturbances, each
+      from its onset (:func:`recovery_time`); NaN if any did not recover.
+
+    Raw only:
+
+    - ``ise_N2s``: ∫(F − F_ref)² dt in the tracking window; ``tension_mean_N``: mean F in
+      the steady window; ``p_head_max_Pa``: peak head pressure in the tracking window;
+    - ``ripple_rms_N``: RMS of the ripple F − lowpass(F) in the tracking window (with
+      ``rmse_lp_N``: rmse_N² ≈ rmse_lp_N² + ripple_rms_N², the cross term being the
+      covariance of a slow and a fast signal); ``ripple_band_rms_N``: table of the ripple's
+      RMS in the named bands (``tooth_passing`` v/pitch ± tooth_band_rel, ``body_mode``) and
+      the ``rest``, from its Welch PSD in the tracking window (:func:`ripple_band_rms`);
+    - ``psd``: table of spectra in the steady window up to psd_max_Hz at psd_resolution_Hz
+      (:func:`psd`): ``f_Hz``, ``tension_N2_Hz`` (raw F_ten), ``chassis_acc_m2_s4_Hz``
+      (chassis vertical acceleration; null without a chassis);
+    - ``chassis_acc_body_mode_rms_m_s2``: chassis vertical acceleration RMS in the body-mode
+      band (8-12 Hz in W1-W5), steady window;
+    - ``constraint_violation_s``: time with F outside [force_min_N, force_max_N];
+      ``valve_switches`` and ``valve_switch_rate_Hz``: valve mode changes (count, per s);
+    - ``control_increment_rms``: RMS of Δu per control period (u dimensionless; NaN unless
+      ``control_period_s`` is given);
+    - ``supply_energy_J``: e_supply_J(end) − e_supply_J(evaluation start);
+      ``interface_energy_residual_J``: p_work_J − mech_work_J at the end (∫Σp·A·v dt vs
+      ∫F·v dt; zero for a power-conserving interface);
+    - ``solve_time_median_s``, ``solve_time_max_s``, ``solve_failures``: if solve times
+      given; ``real_time_factor``: simulated time / ``wall_time_s`` if given (> 1: faster
+      than real time).
+
+    ``evaluation``: the windows themselves (:meth:`MetricWindows.as_table`), so a result
+    states what its metrics were measured on. Floats are NaN where undefined (no step, an
+    empty window, a quantity the architecture lacks).
+    """
+    missing = [c for c in REQUIRED_COLUMNS if c not in columns]
+    if missing:
+        raise KeyError(f"timeseries lacks column(s) {missing}")
+    t = np.asarray(columns["t_s"], dtype=float)
+    y = np.asarray(columns["tension_N"], dtype=float)
+    ref = np.asarray(columns["tension_ref_N"], dtype=float)
+    w = windows
+    t_end = float(t[-1])
+    ev = (w.evaluation_start_s, t_end)
+    ev_mask = _sel(t, ev)
+    y_lp = lowpass(t, y, w.lowpass_cutoff_Hz)
+    out: dict[str, Any] = _tracking(t, y, ref, w, lowpassed=False)
+    out |= _tracking(t, y_lp, ref, w, lowpassed=True)
+    out["ise_N2s"] = ise(t, y, ref, ev)
+    out["p_head_max_Pa"] = (float(np.max(np.asarray(columns["p_head_Pa"])[ev_mask]))
+                            if ev_mask.any() else math.nan)
+    ripple = y - y_lp
+    out["ripple_rms_N"] = float(np.sqrt(np.mean(ripple[ev_mask] ** 2))) if ev_mask.any() \
+        else math.nan
+    out["ripple_band_rms_N"] = ripple_band_rms(t, ripple, w.ripple_bands_Hz(), ev,
+                                               resolution_Hz=w.psd_resolution_Hz)
+
+    steady = None if w.steady is None else (w.steady[0], min(w.steady[1], t_end))
+    steady_ok = steady is not None and steady[1] > steady[0]
+    sm = _sel(t, steady) if steady_ok else np.zeros(t.shape, dtype=bool)
+    out["tension_mean_N"] = float(np.mean(y[sm])) if sm.any() else math.nan
+    acc = np.asarray(columns["chassis_acc_z_m_s2"], dtype=float)
+    f, p_tension = psd(t, y, steady, resolution_Hz=w.psd_resolution_Hz) if steady_ok \
+        else (np.zeros(0), np.zeros(0))
+    _, p_acc = psd(t, acc, steady, resolution_Hz=w.psd_resolution_Hz) if steady_ok \
+        else (np.zeros(0), np.zeros(0))
+    shown = f <= w.psd_max_Hz * (1.0 + 1e-9)     # fs from the median dt is not exact
+    out["psd"] = {"f_Hz": f[shown].tolist(), "tension_N2_Hz": p_tension[shown].tolist(),
+                  "chassis_acc_m2_s4_Hz": p_acc[shown].tolist()}
+    out["chassis_acc_body_mode_rms_m_s2"] = psd_band_rms(f, p_acc, *w.body_mode_band_Hz)
 
     out["constraint_violation_s"] = constraint_violation_time(t, y, w.force_min_N,
                                                               w.force_max_N, ev)
     mode = np.asarray(columns["valve_mode"])
     out["valve_switches"] = float(switch_count(mode[ev_mask]))
     out["valve_switch_rate_Hz"] = switching_rate(t, mode, ev)
-    stride = max(1, round(w.control_period_s / sample_period(t)))
-    out["control_increment_rms"] = control_increment_rms(np.asarray(columns["u"])[ev_mask],
-                                                         stride)
+    out["control_increment_rms"] = math.nan
+    if control_period_s is not None:
+        stride = max(1, round(control_period_s / sample_period(t)))
+        out["control_increment_rms"] = control_increment_rms(
+            np.asarray(columns["u"])[ev_mask], stride)
     e_sup = np.asarray(columns["e_supply_J"], dtype=float)
     out["supply_energy_J"] = (float(e_sup[-1] - e_sup[ev_mask][0]) if ev_mask.any()
                               else math.nan)
@@ -381,4 +553,163 @@ def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *
     if wall_time_s is not None:
         out["real_time_factor"] = ((t_end - float(t[0])) / wall_time_s if wall_time_s > 0
                                    else math.nan)
+    out["evaluation"] = w.as_table()
     return out
+
+
+# ------------------------------------------------------------------ energy terms
+
+ENERGY_TOTALS = ("pump", "circuit")
+"""Terms of an ``energy_J`` table that are totals (energy put in), not parts of a breakdown."""
+ENERGY_HEADLINE = ("pump", "circuit", "mechanical", "supply")
+"""Energy compared between runs: the first of these both runs have (finite)."""
+
+
+class EnergyTerms(NamedTuple):
+    """A run's energy terms [J] (name -> value; a table of sub-terms, e.g. throttling by
+    valve, summed), the notes the table carries (its text or flag entries, e.g. that a dp-b
+    circuit is an ideal actuator's) and where they came from (``energy_J`` or
+    ``supply_energy_J``)."""
+
+    terms: dict[str, float]
+    notes: list[str]
+    source: str
+
+
+def _total(value: Any) -> float:
+    if isinstance(value, Mapping):
+        parts = [_total(v) for v in value.values()]
+        parts = [p for p in parts if not math.isnan(p)]
+        return float(sum(parts)) if parts else math.nan
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return math.nan
+    return float(value)
+
+
+def energy_terms(metrics: Mapping[str, Any]) -> EnergyTerms:
+    """The energy terms of a run's metrics: the ``energy_J`` table if the run has one (keys
+    such as pump, circuit, relief, throttling (by valve), leakage, friction, makeup,
+    stored_change, mechanical, residual), else ``supply_energy_J`` alone as ``supply``
+    with a note saying so; empty if neither exists."""
+    table = metrics.get("energy_J")
+    if isinstance(table, Mapping):
+        terms, notes = {}, []
+        for key, value in table.items():
+            if isinstance(value, str):
+                notes.append(f"{key}: {value}")
+            elif isinstance(value, bool):
+                if value:
+                    notes.append(key)
+            else:
+                terms[key] = _total(value)
+        return EnergyTerms(terms, notes, "energy_J")
+    if "supply_energy_J" in metrics:
+        return EnergyTerms({"supply": float(metrics["supply_energy_J"])},
+                           ["no energy_J table in this run: supply energy only"],
+                           "supply_energy_J")
+    return EnergyTerms({}, ["no energy figures in this run"], "none")
+
+
+def headline_energy(a: EnergyTerms, b: EnergyTerms) -> str | None:
+    """The first term of :data:`ENERGY_HEADLINE` finite in both ``a`` and ``b`` (None: none)."""
+    for term in ENERGY_HEADLINE:
+        if math.isfinite(a.terms.get(term, math.nan)) and math.isfinite(
+                b.terms.get(term, math.nan)):
+            return term
+    return None
+
+
+# ------------------------------------------------------------------ prediction error vs tp
+
+def prediction_vs_tp(columns: Mapping[str, np.ndarray], metrics: Mapping[str, Any],
+                     tp_columns: Mapping[str, np.ndarray], tp_metrics: Mapping[str, Any],
+                     windows: MetricWindows) -> dict[str, Any]:
+    """How far a run's prediction is from the fully coupled tp run of the same case and seed.
+
+    - ``prediction_rmse_vs_tp_N``: sqrt(mean((F − F_tp)²)) of the raw F_ten traces in the
+      tracking window; ``prediction_rmse_vs_tp_lp_N``: the same on their low-passes. Zero
+      for tp against itself. By the triangle inequality of the RMS, it is at least
+      |rmse_N − rmse_N(tp)|: two runs can only track equally well by erring alike.
+    - ``peak_pressure_error_vs_tp_Pa``: p_head_max_Pa − p_head_max_Pa(tp) (signed; dp-b's
+      head pressure is the equivalent pressure of its ideal force source).
+    - ``energy_error_vs_tp_J``: table, per energy term both runs have finite
+      (:func:`energy_terms`): E − E_tp [J]; ``energy_error_vs_tp_pct``: 100·(E − E_tp)/E_tp
+      on the term ``energy_error_term`` (:func:`headline_energy`; NaN, term None: none).
+
+    ValueError if the two runs are not on the same time grid.
+    """
+    t = np.asarray(columns["t_s"], dtype=float)
+    t_tp = np.asarray(tp_columns["t_s"], dtype=float)
+    if t.shape != t_tp.shape or not np.allclose(t, t_tp, rtol=0.0, atol=1e-9):
+        raise ValueError(f"runs differ in their time grid ({len(t)} and {len(t_tp)} samples); "
+                         "a prediction error needs the same case, duration and step")
+    y = np.asarray(columns["tension_N"], dtype=float)
+    y_tp = np.asarray(tp_columns["tension_N"], dtype=float)
+    ev = (windows.evaluation_start_s, float(t[-1]))
+    fc = windows.lowpass_cutoff_Hz
+    mine, theirs = energy_terms(metrics), energy_terms(tp_metrics)
+    diff = {k: mine.terms[k] - theirs.terms[k] for k in mine.terms
+            if k in theirs.terms and math.isfinite(mine.terms[k] - theirs.terms[k])}
+    term = headline_energy(mine, theirs)
+    pct = (100.0 * diff[term] / theirs.terms[term] if term is not None
+           and theirs.terms[term] != 0.0 else math.nan)
+    return {"prediction_rmse_vs_tp_N": rmse(t, y, y_tp, ev),
+            "prediction_rmse_vs_tp_lp_N": rmse(t, lowpass(t, y, fc), lowpass(t, y_tp, fc), ev),
+            "peak_pressure_error_vs_tp_Pa": (float(metrics.get("p_head_max_Pa", math.nan))
+                                             - float(tp_metrics.get("p_head_max_Pa",
+                                                                    math.nan))),
+            "energy_error_vs_tp_J": diff, "energy_error_vs_tp_pct": pct,
+            "energy_error_term": term}
+
+
+# ------------------------------------------------------------------ display
+
+METRIC_DISPLAY: dict[str, tuple[str, float, str]] = {
+    "rmse_lp_N": ("tension RMSE, low-pass", 1e-3, "kN"),
+    "rmse_N": ("tension RMSE, raw", 1e-3, "kN"),
+    "ripple_rms_N": ("ripple RMS (raw − low-pass)", 1e-3, "kN"),
+    "ripple_band_rms_N.tooth_passing": ("ripple in the tooth-passing band", 1e-3, "kN"),
+    "ripple_band_rms_N.body_mode": ("ripple in the body-mode band", 1e-3, "kN"),
+    "peak_error_lp_N": ("peak error, low-pass", 1e-3, "kN"),
+    "peak_error_N": ("peak error, raw", 1e-3, "kN"),
+    "overshoot_lp_N": ("step overshoot, low-pass", 1e-3, "kN"),
+    "settling_time_lp_s": ("settling time, low-pass", 1.0, "s"),
+    "disturbance_peak_error_lp_N": ("disturbance peak error, low-pass", 1e-3, "kN"),
+    "recovery_time_lp_s": ("recovery time, low-pass", 1.0, "s"),
+    "fluctuation_N": ("fluctuation ±, raw", 1e-3, "kN"),
+    "fluctuation_lp_N": ("fluctuation ±, low-pass", 1e-3, "kN"),
+    "constraint_violation_s": ("time outside [F_min, F_max], raw", 1.0, "s"),
+    "p_head_max_Pa": ("peak head pressure", 1e-6, "MPa"),
+    "valve_switch_rate_Hz": ("valve switching", 1.0, "Hz"),
+    "chassis_acc_body_mode_rms_m_s2": ("chassis acc. RMS, body-mode band", 1.0, "m/s²"),
+    "energy_in_J": ("energy in (pump, else supply)", 1e-3, "kJ"),
+    "interface_energy_residual_J": ("interface energy residual", 1.0, "J"),
+    "solve_time_median_s": ("solve time median", 1e3, "ms"),
+    "solve_time_max_s": ("solve time max", 1e3, "ms"),
+    "real_time_factor": ("real-time factor", 1.0, "×"),
+    "prediction_rmse_vs_tp_N": ("F_ten RMSE vs tp, raw", 1e-3, "kN"),
+    "prediction_rmse_vs_tp_lp_N": ("F_ten RMSE vs tp, low-pass", 1e-3, "kN"),
+    "peak_pressure_error_vs_tp_Pa": ("peak head pressure − tp", 1e-6, "MPa"),
+    "energy_error_vs_tp_pct": ("energy error vs tp", 1.0, "%"),
+}
+"""How tables show a metric (dotted key for a table entry): label, scale, display unit."""
+
+
+def lookup(metrics: Mapping[str, Any], key: str) -> float:
+    """A metric by dotted key (``ripple_band_rms_N.tooth_passing``); NaN if absent or not a
+    number. ``energy_in_J``: the run's energy input, the first finite of the energy terms
+    pump, supply, circuit (:func:`energy_terms`)."""
+    if key == "energy_in_J":
+        terms = energy_terms(metrics).terms
+        for name in ("pump", "supply", "circuit"):
+            if math.isfinite(terms.get(name, math.nan)):
+                return terms[name]
+        return math.nan
+    value: Any = metrics
+    for part in key.split("."):
+        if not isinstance(value, Mapping) or part not in value:
+            return math.nan
+        value = value[part]
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return math.nan
+    return float(value)

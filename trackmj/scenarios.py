@@ -24,7 +24,8 @@ no steps, ramps, drops, pulses or variants unless it lists them)::
                   pretension_scale (each scale optional, default 1: a variant names only
                   what it changes; if variants are listed one must be "nominal")
     [limits]      force_min_N, force_max_N
-    [evaluation]  start_s, steady_start_s, settle_band_rel, min_hold_s
+    [evaluation]  start_s, steady_start_s, settle_band_rel, min_hold_s, lowpass_cutoff_Hz,
+                  tooth_band_rel, body_mode_band_Hz, psd_resolution_Hz, psd_max_Hz
 
 Time windows must lie in the run: steps, ramp, drop and pulse starts and the evaluation
 starts before ``duration_s``; each drop's and pulse's edges fit inside its window; drops do
@@ -270,14 +271,42 @@ class Limits(Parameters):
 
 @dataclass(frozen=True)
 class Evaluation(Parameters):
-    """Metric windows: tracking metrics from start_s, steady-state metrics from
-    steady_start_s [s]; settling band relative to the final value; minimum hold [s]."""
+    """How the metrics are measured (:class:`~trackmj.metrics.MetricWindows`): tracking
+    metrics from start_s, steady-state metrics and spectra from steady_start_s [s]; the
+    settling band relative to the final value and the minimum hold [s]; the low-pass of the
+    ``_lp`` metrics; the named ripple bands; the resolution and extent of the spectra."""
 
     start_s: float = param(0.0, None, doc="tracking metrics from here")
     steady_start_s: float = param(0.0, None, doc="steady-state metrics from here")
     settle_band_rel: float = param(0.0, 0.5, open_low=True,
                                    doc="settling band relative to the final value")
     min_hold_s: float = param(0.0, 10.0, doc="time in the band that counts as settled")
+    lowpass_cutoff_Hz: float = param(0.1, 50.0,
+                                     doc="cut-off of the zero-phase 2nd-order Butterworth "
+                                     "low-pass of the _lp metrics")
+    tooth_band_rel: float = param(0.0, 0.5, open_low=True,
+                                  doc="tooth-passing ripple band: v/pitch times 1 ± this")
+    body_mode_band_Hz: tuple[float, float] = param(0.1, 100.0,
+                                                   doc="track-idler-body mode band "
+                                                   "[low, high] (ripple and chassis "
+                                                   "acceleration)")
+    psd_resolution_Hz: float = param(0.05, 10.0,
+                                     doc="frequency resolution of the spectra (Welch "
+                                     "segments of 1/resolution s)")
+    psd_max_Hz: float = param(1.0, 500.0, doc="spectra written up to here")
+
+    def cross_check(self, at: Location) -> None:
+        low, high = self.body_mode_band_Hz
+        if not high > low:
+            raise at.error("body_mode_band_Hz", list(self.body_mode_band_Hz),
+                           "must be [low, high] with high > low")
+        if not low > self.lowpass_cutoff_Hz:
+            raise at.error("body_mode_band_Hz", list(self.body_mode_band_Hz),
+                           f"must lie above lowpass_cutoff_Hz = {self.lowpass_cutoff_Hz!r} "
+                           "(the band splits the ripple the low-pass removes)")
+        if not self.psd_max_Hz > self.psd_resolution_Hz:
+            raise at.error("psd_max_Hz", self.psd_max_Hz,
+                           f"must be > psd_resolution_Hz = {self.psd_resolution_Hz!r}")
 
 
 @dataclass(frozen=True)
@@ -442,10 +471,15 @@ class Scenario:
         raise KeyError(f"{self.name}: no variant {name!r}; available: "
                        f"{[v.name for v in self.variants]}")
 
-    def metric_windows(self, duration_s: float | None = None) -> MetricWindows:
+    def metric_windows(self, duration_s: float | None = None, *,
+                       link_pitch_m: float | None = None) -> MetricWindows:
         """Windows for :func:`trackmj.metrics.compute_metrics`: the first reference step
         (evaluated until the next step or ramp start), load pulses and supply drops as
-        disturbances, the steady window from steady_start_s to the end."""
+        disturbances, the steady window from steady_start_s to the end, and the
+        ``[evaluation]`` settings. With the track's ``link_pitch_m`` [m] the tooth-passing
+        band v/pitch·(1 ± tooth_band_rel) at the scenario's track speed (a link passes the
+        sprocket every pitch); without it (or standing still) there is none. On an iso8608
+        road the band it excites, speed × [n_min, n_max] cycles/m, is recorded too."""
         duration = self.duration_s if duration_s is None else duration_s
         step = None
         if self.reference.steps:
@@ -457,12 +491,25 @@ class Scenario:
             step = (s0.time_s, before, before + s0.delta_N, t_stop)
         dist = tuple((p.start_s, p.end_s) for p in self.load_pulses)
         dist += tuple((d.start_s, d.end_s) for d in self.supply.drops)
+        labels = tuple(f"load pulse {p.delta_N / 1e3:+g} kN" for p in self.load_pulses)
+        labels += tuple(f"supply drop to {d.pressure_Pa / 1e6:g} MPa" for d in self.supply.drops)
+        ev, speed = self.evaluation, self.track.speed_m_s
+        tooth = None
+        if link_pitch_m is not None and speed > 0.0:
+            f_tooth = speed / link_pitch_m
+            tooth = (f_tooth * (1.0 - ev.tooth_band_rel), f_tooth * (1.0 + ev.tooth_band_rel))
+        road = None
+        if self.terrain.kind == "iso8608":
+            road = (speed * self.terrain.n_min_cycles_m, speed * self.terrain.n_max_cycles_m)
         return MetricWindows(
             force_min_N=self.limits.force_min_N, force_max_N=self.limits.force_max_N,
-            evaluation_start_s=self.evaluation.start_s, step=step, disturbances=dist,
-            steady=(self.evaluation.steady_start_s, duration),
-            settle_band_rel=self.evaluation.settle_band_rel,
-            min_hold_s=self.evaluation.min_hold_s)
+            evaluation_start_s=ev.start_s, step=step, disturbances=dist,
+            disturbance_labels=labels,
+            steady=(ev.steady_start_s, duration), settle_band_rel=ev.settle_band_rel,
+            min_hold_s=ev.min_hold_s, lowpass_cutoff_Hz=ev.lowpass_cutoff_Hz,
+            body_mode_band_Hz=ev.body_mode_band_Hz, tooth_passing_band_Hz=tooth,
+            road_band_Hz=road, psd_resolution_Hz=ev.psd_resolution_Hz,
+            psd_max_Hz=ev.psd_max_Hz)
 
 
 # ---------------------------------------------------------------------- loading

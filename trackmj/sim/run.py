@@ -178,7 +178,9 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
                         duration_s=setup.duration_s, files=setup.files,
                         overrides=setup.overrides)
     result = Result(recorder.table(meta), {})
-    m = compute_metrics(result.columns(), setup.scenario.metric_windows(setup.duration_s),
+    windows = setup.scenario.metric_windows(setup.duration_s,
+                                            link_pitch_m=setup.model.track.pitch_m)
+    m = compute_metrics(result.columns(), windows, control_period_s=controller.period_s,
                         solve_times_s=np.array(recorder.solve_times_s),
                         solve_success=np.array(recorder.solve_success), wall_time_s=wall)
     if isinstance(asm.element, HydraulicTensioner):

@@ -1,0 +1,58 @@
+"""`trackmj compare`: every architecture (and controller) on one case, the run contract for
+each run, and the prediction error of each architecture against tp."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from synthetic import energy_table, synthetic_result
+
+from trackmj.cli import main
+from trackmj.report import CompareRun, check_compare_dir, write_compare
+from trackmj.results import read_result
+from trackmj.scenarios import load_scenario
+from trackmj.sim.registry import ARCHITECTURES
+
+
+def test_quick_compare_writes_runs_prediction_errors_and_figures(tmp_path, capsys) -> None:
+    out = tmp_path / "cmp"
+    args = ["compare", "W1", "--duration", "1.5", "--workers", "2", "--out", str(out)]
+    assert main(args) == 0
+    assert f"-> {out / 'compare.json'}" in capsys.readouterr().out
+    doc = json.loads((out / "compare.json").read_text())
+    names = {f"{a}-nmpc" for a in ARCHITECTURES}
+    assert set(doc["runs"]) == names and doc["failed"] == []
+    for name in names:
+        run = read_result(out / name)                    # the normal run contract
+        assert run.metrics.get("mujoco_warnings", 0.0) == 0.0
+        assert (out / name / "timeseries.png").stat().st_size > 20_000
+        metrics = doc["runs"][name]["metrics"]
+        assert metrics["rmse_lp_N"] == pytest.approx(run.metrics["rmse_lp_N"])
+        assert "psd" not in metrics and "evaluation" not in metrics
+    preds = doc["prediction_vs_tp"]["nmpc"]
+    assert preds["tp"]["prediction_rmse_vs_tp_N"] == 0.0
+    assert preds["tp"]["prediction_rmse_vs_tp_lp_N"] == 0.0
+    tp_rmse = doc["runs"]["tp-nmpc"]["metrics"]["rmse_N"]
+    for arch in ARCHITECTURES:
+        rmse = doc["runs"][f"{arch}-nmpc"]["metrics"]["rmse_N"]
+        # the RMS triangle inequality: two runs only track alike by erring alike
+        assert preds[arch]["prediction_rmse_vs_tp_N"] >= abs(rmse - tp_rmse) - 1e-9
+    assert set(doc["figures"]) == {"compare-nmpc.png", "psd-nmpc.png"}
+    assert "Prediction error against tp (nmpc" in (out / "compare.md").read_text()
+    assert check_compare_dir(out) == out                # a previous comparison may be replaced
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    assert main([*args[:-1], str(other)]) == 2          # refused before anything runs
+    assert "holds no trackmj comparison" in capsys.readouterr().err
+
+
+def test_several_controllers_get_their_own_figures(tmp_path) -> None:
+    runs = [synthetic_result("W1", a, controller=c, offset_N=k * 100.0, energy=energy_table())
+            for c in ("nmpc", "pid") for k, a in enumerate(("tp", "dp-b"))]
+    write_compare(CompareRun(runs, [], {}), tmp_path, load_scenario("W1"), 6.0)
+    doc = json.loads((tmp_path / "compare.json").read_text())
+    assert doc["figures"] == ["compare-nmpc.png", "psd-nmpc.png", "compare-pid.png",
+                              "psd-pid.png", "controllers-tp.png", "controllers-dp-b.png"]
+    assert doc["runs"]["dp-b-pid"]["metrics"]["energy_J"]["pump"] == pytest.approx(9501.0)

@@ -1,0 +1,141 @@
+"""Figures: units on every axis, legends outside the data, styles that survive grayscale,
+the energy breakdown stacking the ledger's terms, zooms on each condition's events."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from matplotlib.colors import to_rgb
+from synthetic import energy_table, synthetic_result
+
+from trackmj import figures
+from trackmj.metrics import prediction_vs_tp
+from trackmj.scenarios import load_scenario
+
+
+@pytest.fixture
+def captured(monkeypatch) -> list[plt.Figure]:
+    """The figures the module would save, kept open for inspection."""
+    figs: list[plt.Figure] = []
+    monkeypatch.setattr(figures, "_save", lambda fig, path: figs.append(fig) or path)
+    yield figs
+    for fig in figs:
+        plt.close(fig)
+
+
+def _runs(scenario: str = "W1", duration_s: float = 6.0) -> list:
+    tp = synthetic_result(scenario, "tp", duration_s=duration_s, energy=energy_table())
+    dpa = synthetic_result(scenario, "dp-a", duration_s=duration_s, offset_N=150.0,
+                           energy=energy_table(1.1), chassis=False)
+    dpb = synthetic_result(scenario, "dp-b", duration_s=duration_s, offset_N=-300.0,
+                           ripple_N=50.0, energy=energy_table(ideal=True), supply=False)
+    return [tp, dpa, dpb]
+
+
+def _check_axes(fig: plt.Figure) -> None:
+    """Every axis with data names its unit in brackets; every legend lies above its axes."""
+    renderer = fig.canvas.get_renderer()
+    fig.canvas.draw()
+    for ax in fig.axes:
+        if not (ax.lines or ax.patches or ax.collections):
+            continue
+        assert "[" in ax.get_ylabel() and "]" in ax.get_ylabel(), ax.get_ylabel()
+        if ax.get_xlabel():
+            assert "[" in ax.get_xlabel(), ax.get_xlabel()
+        legend = ax.get_legend()
+        if legend is not None:
+            box = legend.get_window_extent(renderer).transformed(ax.transAxes.inverted())
+            assert box.y0 >= 0.99, f"legend of '{ax.get_ylabel()}' overlaps its data"
+
+
+def test_run_figure_units_legends_and_zooms(captured) -> None:
+    tp = _runs("W3", duration_s=22.0)[0]
+    figures.run_figure(tp, "unused.png")
+    fig = captured[0]
+    _check_axes(fig)
+    titles = [ax.get_title(loc="left") for ax in fig.axes if ax.get_title(loc="left")]
+    assert titles == ["zoom: load pulse +2 kN, onset at 6 s", "zoom: load pulse +2 kN, end at 8 s",
+                      "zoom: load pulse -1.5 kN, onset at 18 s",
+                      "zoom: load pulse -1.5 kN, end at 20 s"]
+    mode_axis = next(ax for ax in fig.axes if ax.get_ylabel() == "mode [-]")
+    assert [t.get_text() for t in mode_axis.get_yticklabels()] == ["−1 release", "0 hold",
+                                                                   "+1 pressurize"]
+
+
+def test_overlay_and_psd_figures_units_and_legends(captured) -> None:
+    runs = _runs()
+    preds = {r.architecture: prediction_vs_tp(r.columns(), r.metrics, runs[0].columns(),
+                                              runs[0].metrics, figures.windows_of(r))
+             for r in runs}
+    figures.overlay_figure(runs, "unused.png", predictions=preds)
+    figures.overlay_figure(runs, "unused.png", label_by="controller")
+    figures.psd_figure(runs, "unused.png")
+    for fig in captured:
+        _check_axes(fig)
+    bars = next(ax for ax in captured[0].axes if ax.get_ylabel() == "F_ten RMSE vs tp [kN]")
+    heights = [p.get_height() for p in bars.patches]
+    # dp-a is tp + 150 N (same noise and ripple): 0.15 kN raw and low-passed
+    assert heights[0] == pytest.approx(0.15, abs=2e-3) and heights[2] == pytest.approx(0.15,
+                                                                                        abs=2e-3)
+
+
+def test_styles_differ_in_more_than_colour() -> None:
+    """Readable in grayscale: within the architectures and within the controllers, each line
+    has its own dash pattern and marker, and its own colour too."""
+    for group in (("tp", "tp-weak", "dp-a", "dp-b"), ("nmpc", "lmpc", "pid")):
+        styles = [figures.style(name) for name in group]
+        assert len({str(s["linestyle"]) for s in styles}) == len(group)
+        assert len({s["marker"] for s in styles}) == len(group)
+        assert len({to_rgb(s["color"]) for s in styles}) == len(group)
+    hatches = [h for _, h in figures.ENERGY_STYLES.values()]
+    assert len(set(hatches)) >= len(hatches) - 1       # relief and supply never share a run
+
+
+def test_energy_bars_stack_the_ledger_terms_and_mark_the_totals() -> None:
+    table = energy_table()
+    with_table = synthetic_result(energy=table)
+    without = synthetic_result()
+    fig, ax = plt.subplots()
+    figures._energy_bars(ax, ["tp", "old"], [with_table, without])
+    at_tp = [p for p in ax.patches if abs(p.get_x() + p.get_width() / 2) < 1e-9]
+    up = sum(p.get_height() for p in at_tp if p.get_height() > 0)
+    down = sum(p.get_height() for p in at_tp if p.get_height() < 0)
+    positive = [v for k, v in table.items() if k not in ("pump", "circuit")
+                for v in ([sum(v.values())] if isinstance(v, dict) else [v]) if v > 0]
+    assert up == pytest.approx(sum(positive) / 1e3)
+    assert down == pytest.approx(table["stored_change"] / 1e3)
+    ticks = sorted(float(seg[0][1]) for c in ax.collections for seg in c.get_segments())
+    assert ticks == pytest.approx(sorted([table["pump"] / 1e3, table["circuit"] / 1e3]))
+    at_old = [p for p in ax.patches if abs(p.get_x() + p.get_width() / 2 - 1) < 1e-9]
+    assert [p.get_height() for p in at_old] == pytest.approx([without.metrics[
+        "supply_energy_J"] / 1e3])
+    assert "old: no energy_J table in this run: supply energy only" in ax.texts[0].get_text()
+    plt.close(fig)
+
+
+@pytest.mark.parametrize(("scenario", "starts"), [("W1", [2.5]), ("W2", [5.0]),
+                                                   ("W3", [5.5, 7.5, 17.5, 19.5]),
+                                                   ("W4", [11.5, 19.5])])
+def test_zooms_follow_each_conditions_events(scenario: str, starts: list[float]) -> None:
+    w = load_scenario(scenario).metric_windows(link_pitch_m=0.075)
+    zooms = figures._zoom_windows(w, 30.0)
+    assert [z[1] for z in zooms] == starts
+    assert all(t1 > t0 for _, t0, t1 in zooms)
+
+
+def test_envelope_holds_each_bins_extremes() -> None:
+    t = np.arange(1, 1001) * 1e-3
+    x = np.sin(2 * np.pi * 20.0 * t)
+    tb, lo, hi = figures._envelope(t, x)
+    assert len(tb) == 20 and np.allclose(hi, 1.0, atol=2e-3) and np.allclose(lo, -1.0, atol=2e-3)
+
+
+def test_figures_write_png_files(tmp_path) -> None:
+    runs = _runs()
+    paths = [figures.run_figure(runs[2], tmp_path / "run.png"),
+             figures.overlay_figure(runs, tmp_path / "overlay.png"),
+             figures.psd_figure(runs, tmp_path / "psd.png")]
+    for path in paths:
+        data = path.read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
