@@ -1,81 +1,71 @@
-"""State estimators (EKF, UKF) for X = [p_head Pa, p_rod Pa, y m, y_dot m/s] from
+"""State estimators (EKF, UKF) for X = [p_head Pa, p_rod Pa, y m, y_dot m/s, y0 m] from
 z = [p_head Pa, p_rod Pa, y m] sampled every dt [s] (1 ms).
 
-Process model: the reduced model discretised by one linearly-implicit trapezoidal step,
-x+ = x + (I - h/2 J)^-1 h f(x, u),  F = (I - h/2 J)^-1 (I + h/2 J),
-with the hand-derived Jacobian J (no symbolic work per step). It is A-stable, so the ~100 Hz
-oil-column mode neither blows up nor is damped away at h = 1 ms.
+The fifth state is a disturbance state: y0, the stroke at which the equivalent idler is
+unloaded, as a random walk. The reduced model's idler is a linear spring
+F = k·(y − y0) + c·ẏ + M·ÿ; the real track is not (ground and contact friction creep, a
+hitch load moves the running gear), so its equilibrium stroke for a given force wanders.
+Estimating y0 makes the model's equilibrium agree with the measured force and stroke, which
+is what makes the MPC offset-free (it takes ŷ0 as its online parameter) and lets it see a
+load disturbance on the idler as such (the input-disturbance model of offset-free MPC,
+e.g. Pannocchia & Rawlings 2003, with the disturbance entering as an idler load
+k·Δy0).
 
-Noise: the study's Q = diag(0.2^2, 0.3^2, 0.05^2, 0.1^2) and R = diag(0.15^2, 0.15^2, 0.02^2)
+Process model: the reduced model (:mod:`trackmj.control.model`) with y0 constant,
+discretised by one linearly-implicit trapezoidal step x+ = x + (I − h/2·J)⁻¹·h·f(x, u),
+F = (I − h/2·J)⁻¹(I + h/2·J) with J the exact Jacobian (CasADi algorithmic
+differentiation); A-stable, so the ~100 Hz oil-column mode neither blows up nor is damped
+away at h = 1 ms.
+
+Noise: the study's Q = diag(0.2², 0.3², 0.05², 0.1²) and R = diag(0.15², 0.15², 0.02²)
 are read in (MPa, MPa, mm, mm/s) for Q and (MPa, MPa, cm -> 0.2 mm) for R as discrete
-per-sample covariances; see ``models/lf1352_control.toml`` for the reasoning. SI inside.
-The measurement is linear (H = [I3 0]), so both filters share the exact linear update.
+per-sample covariances (see ``models/lf1352_control.toml``), plus our own y0 random-walk
+variance. SI inside. The measurement is linear (H = [I3 0 0]), so both filters share the
+exact linear update.
 
-The arithmetic is written once for scalars (floats or CasADi SX): the EKF's whole 1 kHz step
-(predict + update) is one SX function evaluated on the filter's own arrays through a
-:class:`~trackmj.control.fastcall.BufferedFunction` (22 -> ~4 us per step, measured); the UKF
-propagates its sigma points with the same step in floats and shares the SX update.
+The whole 1 kHz EKF step (predict + update) and the UKF's sigma-point step are SX
+functions evaluated on the filter's own arrays through
+:class:`~trackmj.control.fastcall.BufferedFunction`.
 """
 
 from __future__ import annotations
 
 import functools
-import math
-from typing import Any
 
 import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.fastcall import BufferedFunction
-from trackmj.control.model import ReducedModel, _rhs_jacobian_generic
+from trackmj.control.model import ReducedModel, _rhs_generic
 from trackmj.control.params import EstimatorParams, PlantParams
 
-Matrix = tuple[tuple[Any, ...], ...]
+N_STATE = 5
+"""Estimated state: p_head [Pa], p_rod [Pa], y [m], ẏ [m/s], y0 [m]."""
+N_MEAS = 3
 
 
-def _trapezoid_step(x: Any, f: Any, jac: Matrix, h: float) -> tuple[tuple[Any, ...], Matrix]:
-    """One linearly-implicit trapezoidal step for any scalar algebra: (x+ (4), F (4x4)).
+SCALE = np.array((1e6, 1e6, 1e-3, 0.1, 1e-3))
+"""SI per scaled unit of the state (MPa, MPa, mm, 0.1 m/s, mm): the implicit step's linear
+solves are done on the scaled system, whose entries are O(1-10); unscaled (Pa next to m)
+the elimination loses the y0 row to round-off (measured: F's y0 row off by 1e-3)."""
 
-    M = I - c J with c = h/2; x+ = x + M^-1 h f, F = M^-1 (I + c J) = 2 M^-1 - I. M^-1 in
-    closed form: row 2 of J is (0, 0, 0, 1) (dy/dt = v), so x2 = y2 + c x3 eliminates y and
-    leaves a 3x3 system on (p_h, p_r, v) inverted by its adjugate.
-    """
-    c = 0.5 * h
-    (j00, j01, j02, j03), (j10, j11, j12, j13), _, (j30, j31, j32, j33) = jac
-    # reduced matrix N on (p_h, p_r, v): N[i] = (m_i0, m_i1, m_i3 + c m_i2), m = I - c J
-    n00, n01, n02 = 1.0 - c * j00, -c * j01, -c * j03 - c * c * j02
-    n10, n11, n12 = -c * j10, 1.0 - c * j11, -c * j13 - c * c * j12
-    n20, n21, n22 = -c * j30, -c * j31, 1.0 - c * j33 - c * c * j32
-    a00, a01, a02 = n11 * n22 - n12 * n21, n02 * n21 - n01 * n22, n01 * n12 - n02 * n11
-    a10, a11, a12 = n12 * n20 - n10 * n22, n00 * n22 - n02 * n20, n02 * n10 - n00 * n12
-    a20, a21, a22 = n10 * n21 - n11 * n20, n01 * n20 - n00 * n21, n00 * n11 - n01 * n10
-    r = 1.0 / (n00 * a00 + n01 * a10 + n02 * a20)
-    # column 2 of M^-1: -N^-1 (m_02, m_12, m_32) with m_i2 = -c j_i2
-    v0, v1, v2 = c * j02, c * j12, c * j32
-    k0 = (a00 * v0 + a01 * v1 + a02 * v2) * r
-    k1 = (a10 * v0 + a11 * v1 + a12 * v2) * r
-    k3 = (a20 * v0 + a21 * v1 + a22 * v2) * r
-    m_inv = (
-        (a00 * r, a01 * r, k0, a02 * r),
-        (a10 * r, a11 * r, k1, a12 * r),
-        (c * a20 * r, c * a21 * r, 1.0 + c * k3, c * a22 * r),
-        (a20 * r, a21 * r, k3, a22 * r),
-    )
-    hf = [h * fi for fi in f]
-    x_next = tuple(x[i] + sum(m_inv[i][j] * hf[j] for j in range(4)) for i in range(4))
-    trans = tuple(
-        tuple(2.0 * m_inv[i][j] - (1.0 if i == j else 0.0) for j in range(4)) for i in range(4)
-    )
+
+def _trapezoid_sx(plant: PlantParams, x: ca.SX, u: ca.SX, p_s: ca.SX,
+                  h: float) -> tuple[ca.SX, ca.SX]:
+    """One linearly-implicit trapezoidal step of the augmented model: (x+, F)."""
+    f = ca.vertcat(*_rhs_generic(plant, [x[i] for i in range(4)], u, p_s,
+                                 plant.stiffness_N_m, x[4], ca.sqrt), 0)
+    scale, inv = ca.diag(ca.DM(SCALE)), ca.diag(ca.DM(1.0 / SCALE))
+    jac = ca.mtimes([inv, ca.jacobian(f, x), scale])       # d(f/scale)/d(x/scale)
+    m = ca.SX.eye(N_STATE) - 0.5 * h * jac
+    x_next = x + ca.mtimes(scale, ca.solve(m, h * ca.mtimes(inv, f)))
+    trans = ca.mtimes([scale, ca.solve(m, ca.SX.eye(N_STATE) + 0.5 * h * jac), inv])
     return x_next, trans
 
 
-def _sx(rows: Matrix) -> ca.SX:
-    return ca.vertcat(*[ca.horzcat(*row) for row in rows])
-
-
 def _update_sx(x: ca.SX, P: ca.SX, z: ca.SX, r: ca.SX) -> tuple[ca.SX, ...]:
-    """Linear update with H = [I3 0]: gain K = P[:, :3] S^-1 (4, 3), S = P[:3, :3] + diag(r);
+    """Linear update with H = [I3 0]: gain K = P[:, :3] S^-1, S = P[:3, :3] + diag(r);
     S^-1 by the explicit symmetric 3x3 adjugate. Returns (x+, P+ symmetrised, innovation,
     S^-1)."""
     innovation = z - x[:3]
@@ -83,43 +73,51 @@ def _update_sx(x: ca.SX, P: ca.SX, z: ca.SX, r: ca.SX) -> tuple[ca.SX, ...]:
     c0, c1, c2 = d * f - e * e, c * e - b * f, b * e - c * d
     q = 1.0 / (a * c0 + b * c1 + c * c2)
     c4, c5 = (b * c - a * e) * q, (a * d - b * b) * q
-    s_inv = _sx(((c0 * q, c1 * q, c2 * q), (c1 * q, (a * f - c * c) * q, c4), (c2 * q, c4, c5)))
+    s_inv = ca.vertcat(ca.horzcat(c0 * q, c1 * q, c2 * q),
+                       ca.horzcat(c1 * q, (a * f - c * c) * q, c4),
+                       ca.horzcat(c2 * q, c4, c5))
     gain = ca.mtimes(P[:, :3], s_inv)
     P_new = P - ca.mtimes(gain, P[:3, :])
     return x + ca.mtimes(gain, innovation), 0.5 * (P_new + P_new.T), innovation, s_inv
 
 
 def _symbols() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
-    return ca.SX.sym("x", 4), ca.SX.sym("P", 4, 4), ca.SX.sym("z", 3), ca.SX.sym("r", 3)
+    return (ca.SX.sym("x", N_STATE), ca.SX.sym("P", N_STATE, N_STATE), ca.SX.sym("z", N_MEAS),
+            ca.SX.sym("r", N_MEAS))
 
 
 @functools.cache
 def _update_function() -> ca.Function:
-    """(x (4), P (4x4), z (3), r (3)) -> (x+, P+, innovation, S^-1 (3x3))."""
+    """(x, P, z, r) -> (x+, P+, innovation, S^-1 (3x3))."""
     x, P, z, r = _symbols()
     return ca.Function("kf_update", [x, P, z, r], [ca.densify(v) for v in _update_sx(x, P, z, r)])
 
 
 @functools.cache
+def _propagate_function(plant: PlantParams, dt: float) -> ca.Function:
+    """(x, (u, p_s)) -> x+: one trapezoidal step (the UKF's sigma-point propagation)."""
+    x, ups = ca.SX.sym("x", N_STATE), ca.SX.sym("u_ps", 2)
+    return ca.Function("propagate", [x, ups], [_trapezoid_sx(plant, x, ups[0], ups[1], dt)[0]])
+
+
+@functools.cache
 def _ekf_function(plant: PlantParams, dt: float) -> ca.Function:
-    """One EKF step (x, P, z, (u, p_s), Q, r) -> (x+, P+, innovation, S^-1): predict with the
-    trapezoidal step and the hand-derived Jacobian, P- = F P F^T + Q, then the update."""
+    """One EKF step (x, P, z, (u, p_s), Q, r) -> (x+, P+, innovation, S^-1)."""
     x, P, z, r = _symbols()
-    ups, Q = ca.SX.sym("u_ps", 2), ca.SX.sym("Q", 4, 4)
-    xs = [x[i] for i in range(4)]
-    f, jac = _rhs_jacobian_generic(plant, xs, ups[0], ups[1], ca.sqrt)
-    x_pred, trans = _trapezoid_step(xs, f, jac, dt)
-    F = _sx(trans)
+    ups, Q = ca.SX.sym("u_ps", 2), ca.SX.sym("Q", N_STATE, N_STATE)
+    x_pred, F = _trapezoid_sx(plant, x, ups[0], ups[1], dt)
     P_pred = ca.mtimes([F, P, F.T]) + Q
-    outs = _update_sx(ca.vertcat(*x_pred), P_pred, z, r)
+    outs = _update_sx(x_pred, P_pred, z, r)
     return ca.Function("ekf_step", [x, P, z, ups, Q, r], [ca.densify(v) for v in outs])
 
 
 class _KalmanBase:
     """Shared state, covariances and the linear measurement update.
 
-    ``x`` (4,) and ``P`` (4, 4) are updated in place (the compiled steps are bound to them);
+    ``x`` (5,) and ``P`` (5, 5) are updated in place (the compiled steps are bound to them);
     P and Q are symmetric, so the column-major view CasADi takes of them is the same matrix.
+    The filter starts at ``x0`` (4,), the plant state, with y0 = the model's
+    ``free_position_m``.
     """
 
     def __init__(
@@ -129,20 +127,21 @@ class _KalmanBase:
             raise ValueError(f"dt = {dt} must be > 0")
         self.model = model
         self.dt = dt
-        self.Q = np.diag(np.square(params.process_std))
+        self.Q = np.diag(np.square((*params.process_std, params.free_position_process_std_m)))
         self.R = np.diag(np.square(params.measurement_std))
-        self.x = np.array(x0, dtype=float).reshape(4)
-        self.P = np.diag(np.square(params.initial_std))
+        self.x = np.array((*np.asarray(x0, dtype=float).reshape(4),
+                           model.p.free_position_m))
+        self.P = np.diag(np.square((*params.initial_std, params.free_position_initial_std_m)))
         self._r = np.square(np.asarray(params.measurement_std, dtype=float))
-        self._z = np.zeros(3)
-        self._x_out, self._P_out = np.zeros(4), np.zeros((4, 4))
-        self.innovation, self._s_inv = np.zeros(3), np.linalg.inv(self.P[:3, :3] + self.R)
+        self._z = np.zeros(N_MEAS)
+        self._x_out, self._P_out = np.zeros(N_STATE), np.zeros((N_STATE, N_STATE))
+        self.innovation, self._s_inv = np.zeros(N_MEAS), np.linalg.inv(self.P[:3, :3] + self.R)
         self._outputs = [self._x_out, self._P_out, self.innovation, self._s_inv]
-        self._sum = np.zeros(4)
+        self._sum = np.zeros(N_STATE)
         self._count = 0
 
     def period_mean(self) -> NDArray[np.float64]:
-        """Mean posterior state (4,) over the steps since the last call (decimation filter).
+        """Mean posterior state (5,) over the steps since the last call (decimation filter).
 
         The controller runs every 10 samples; the boxcar mean of the 1 kHz posteriors is the
         anti-aliasing filter before that downsampling. With the study's large Q the posterior
@@ -168,25 +167,26 @@ class _KalmanBase:
         return float(self.innovation @ self._s_inv @ self.innovation)
 
     def nees(self, x_true: NDArray[np.float64]) -> float:
-        """Normalised estimation error squared against the true state (chi-square, 4 dof)."""
+        """Normalised estimation error squared against the true state (5,) (chi-square,
+        5 dof)."""
         e = x_true - self.x
         return float(e @ np.linalg.solve(self.P, e))
 
 
 class ExtendedKalmanFilter(_KalmanBase):
     """EKF; ``step(z, u, p_s)`` predicts over dt with applied opening u and supply p_s [Pa],
-    then updates with z (3,). Returns the posterior state (4,) (a view; do not modify).
+    then updates with z (3,). Returns the posterior state (5,) (a view; do not modify).
 
     Parameters
     ----------
     model : ReducedModel
-        Process model (the hand-derived Jacobian of its right-hand side).
+        Process model (differentiated exactly by CasADi).
     params : EstimatorParams
         Process, measurement and initial standard deviations (SI, per 1 ms sample).
     dt : float
         Sample period [s].
     x0 : ndarray, shape (4,)
-        Initial state (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s]).
+        Initial plant state (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s]).
     """
 
     def __init__(
@@ -207,10 +207,10 @@ class ExtendedKalmanFilter(_KalmanBase):
 
 
 class UnscentedKalmanFilter(_KalmanBase):
-    """UKF with scaled sigma points (alpha, beta, kappa from params; 2n+1 = 9 points).
+    """UKF with scaled sigma points (alpha, beta, kappa from params; 2n+1 = 11 points).
 
-    alpha = 1, kappa = -1 gives lambda = -1, centre weights W_m0 = -1/3, W_c0 = 5/3 and a
-    spread of sqrt(3) sigma: well-conditioned, unlike alpha = 1e-3 (W_m0 ~ -1e6).
+    alpha = 1, kappa = -1 gives lambda = -1, centre weights W_m0 = -1/4, W_c0 = 7/4 and a
+    spread of 2 sigma: well-conditioned, unlike alpha = 1e-3 (W_m0 ~ -1e6).
 
     Parameters
     ----------
@@ -221,14 +221,14 @@ class UnscentedKalmanFilter(_KalmanBase):
     dt : float
         Sample period [s].
     x0 : ndarray, shape (4,)
-        Initial state (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s]).
+        Initial plant state (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s]).
     """
 
     def __init__(
         self, model: ReducedModel, params: EstimatorParams, dt: float, x0: NDArray[np.float64]
     ) -> None:
         super().__init__(model, params, dt, x0)
-        n = 4
+        n = N_STATE
         a, b, k = params.ukf_alpha, params.ukf_beta, params.ukf_kappa
         lam = a * a * (n + k) - n
         if n + lam <= 0.0:
@@ -238,22 +238,25 @@ class UnscentedKalmanFilter(_KalmanBase):
         self.wc = self.wm.copy()
         self.wm[0] = lam / (n + lam)
         self.wc[0] = self.wm[0] + 1.0 - a * a + b
+        self._point, self._u_ps, self._point_next = np.zeros(n), np.zeros(2), np.zeros(n)
+        self._propagate = BufferedFunction(_propagate_function(model.p, dt),
+                                           [self._point, self._u_ps], [self._point_next])
         self._update = BufferedFunction(
             _update_function(), [self.x, self.P, self._z, self._r], self._outputs)
 
-    def _propagate(self, x: NDArray[np.float64], u: float, p_s: float) -> tuple[float, ...]:
-        """One trapezoidal step of a sigma point (floats)."""
-        xs = tuple(x.tolist())
-        f, jac = _rhs_jacobian_generic(self.model.p, xs, u, p_s, math.sqrt)
-        return _trapezoid_step(xs, f, jac, self.dt)[0]
-
     def step(self, z: NDArray[np.float64], u: float, p_s: float) -> NDArray[np.float64]:
+        n = N_STATE
         L = np.linalg.cholesky(self.P) * self.gamma
-        pts = np.empty((9, 4))
+        pts = np.empty((2 * n + 1, n))
         pts[0] = self.x
-        pts[1:5] = self.x + L.T
-        pts[5:] = self.x - L.T
-        prop = np.array([self._propagate(p, u, p_s) for p in pts])
+        pts[1:n + 1] = self.x + L.T
+        pts[n + 1:] = self.x - L.T
+        self._u_ps[0], self._u_ps[1] = u, p_s
+        prop = np.empty_like(pts)
+        for i, point in enumerate(pts):
+            self._point[:] = point
+            self._propagate()
+            prop[i] = self._point_next
         self.x[:] = self.wm @ prop
         d = prop - self.x
         self.P[:] = (d.T * self.wc) @ d + self.Q

@@ -17,7 +17,8 @@ regularised turbulent law Q = Cq A sqrt(2/rho) dp / (dp^2 + p_cr^2)^(1/4).
     dp_r/dt = beta / (V_r0 + A_r (L - y)) (Q_r + A_r y_dot + C_l (p_h - p_r))
     M y''   = F_ten - k_eq (y - y0) - c_eq y_dot,   F_ten = p_h A_h - p_r A_r  [N]
 
-The same expression is built for CasADi SX (NMPC/LMPC) and for Python floats (plant, EKF).
+The same expression is built for CasADi SX (NMPC/LMPC, EKF/UKF) and for Python floats
+(the reduced plant).
 """
 
 from __future__ import annotations
@@ -66,56 +67,8 @@ def _rhs_generic(
     return dph, dpr, v, acc
 
 
-def _rhs_jacobian_generic(
-    p: PlantParams, x: Any, u: Any, p_s: Any, sqrt: Callable[[Any], Any]
-) -> tuple[tuple[Any, ...], tuple[tuple[Any, ...], ...]]:
-    """dX/dt (4-tuple) and its hand-derived Jacobian d(dX/dt)/dX (4x4 nested tuples) at fixed
-    u, p_s, k_eq = p.stiffness_N_m, for any scalar algebra (floats or SX)."""
-    ph, pr, y, v = x[0], x[1], x[2], x[3]
-    eps = p.opening_smoothing
-    norm = 1.0 + math.sqrt(1.0 + eps * eps) - eps
-    r = sqrt(u * u + eps * eps)
-    a_pos = (u + r - eps) / norm
-    a_neg = (-u + r - eps) / norm
-    kq = p.discharge_coefficient * math.sqrt(2.0 / p.density_kg_m3)
-    pc2 = p.critical_pressure_Pa**2
-    pt = p.tank_pressure_Pa
-
-    def orifice(dp: Any) -> tuple[Any, Any]:
-        s = dp * dp + pc2
-        q4 = s**0.25
-        return kq * dp / q4, kq * (0.5 * dp * dp + pc2) / (s * q4)
-
-    o_sh, g_sh = orifice(p_s - ph)
-    o_ht, g_ht = orifice(ph - pt)
-    o_sr, g_sr = orifice(p_s - pr)
-    o_rt, g_rt = orifice(pr - pt)
-    q_h = p.valve_area_head_m2 * (a_pos * o_sh - a_neg * o_ht)
-    dqh = -p.valve_area_head_m2 * (a_pos * g_sh + a_neg * g_ht)
-    a_vent = p.vent_area_rod_m2 * (1.0 - a_neg)
-    q_r = p.valve_area_rod_m2 * a_neg * o_sr - a_vent * o_rt
-    dqr = -(p.valve_area_rod_m2 * a_neg * g_sr + a_vent * g_rt)
-    cl = p.leakage_m3_s_Pa
-    q_l = cl * (ph - pr)
-    ah, ar, beta, m = p.area_head_m2, p.area_rod_m2, p.bulk_modulus_Pa, p.mass_kg
-    v_h = p.dead_volume_head_m3 + ah * y
-    v_r = p.dead_volume_rod_m3 + ar * (p.stroke_m - y)
-    ch, cr = beta / v_h, beta / v_r
-    dph = ch * (q_h - ah * v - q_l)
-    dpr = cr * (q_r + ar * v + q_l)
-    k, c = p.stiffness_N_m, p.damping_N_s_m
-    acc = (ph * ah - pr * ar - k * (y - p.free_position_m) - c * v) / m
-    jac = (
-        (ch * (dqh - cl), ch * cl, -ah / v_h * dph, -ch * ah),
-        (cr * cl, cr * (dqr - cl), ar / v_r * dpr, cr * ar),
-        (0.0, 0.0, 0.0, 1.0),
-        (ah / m, -ar / m, -k / m, -c / m),
-    )
-    return (dph, dpr, v, acc), jac
-
-
 class ReducedModel:
-    """Reduced model with numpy/float evaluation, hand-derived Jacobian and a CasADi twin."""
+    """Reduced model with numpy/float evaluation and a CasADi twin."""
 
     def __init__(self, params: PlantParams) -> None:
         self.p = params
@@ -132,15 +85,6 @@ class ReducedModel:
         return np.array(
             _rhs_generic(self.p, x, u, p_s, k, self.p.free_position_m, math.sqrt), dtype=float
         )
-
-    def rhs_and_jacobian(
-        self, x: NDArray[np.float64], u: float, p_s: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """dX/dt (4,) and the hand-derived Jacobian d(dX/dt)/dX (4, 4) at fixed u, p_s."""
-        f, jac = _rhs_jacobian_generic(
-            self.p, (float(x[0]), float(x[1]), float(x[2]), float(x[3])), u, p_s, math.sqrt
-        )
-        return np.array(f), np.array(jac)
 
     def casadi_function(self) -> ca.Function:
         """CasADi SX Function f(x[4], u, theta[3]) -> dX/dt[4]; theta = [p_s, k_eq, y0]."""
@@ -200,11 +144,13 @@ class ReducedPlant:
         """Current tension [N]."""
         return float(self.x[0] * self.p.area_head_m2 - self.x[1] * self.p.area_rod_m2)
 
-    def step(self, u: float, p_s: float, k_eq: float | None = None) -> NDArray[np.float64]:
-        """Advance one dt with opening u held and supply pressure p_s [Pa]; return X (4,)."""
+    def step(self, u: float, p_s: float, k_eq: float | None = None,
+             y0: float | None = None) -> NDArray[np.float64]:
+        """Advance one dt with opening u held and supply pressure p_s [Pa]; return X (4,).
+        k_eq [N/m] and y0 [m] default to the parameters' stiffness and free position."""
         p = self.p
         k = p.stiffness_N_m if k_eq is None else k_eq
-        y0 = p.free_position_m
+        y0 = p.free_position_m if y0 is None else y0
         h = self.dt / self.substeps
         x = tuple(float(v) for v in self.x)
         for _ in range(self.substeps):

@@ -14,6 +14,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from trackmj.control.governor import feasible_band, govern
 from trackmj.control.model import ReducedModel
 from trackmj.control.ocp import X_SCALE, Ocp, build_ocp, initial_guess, parameter_vector
 from trackmj.control.params import ControllerParams, MpcParams
@@ -99,10 +100,19 @@ class _MpcBase:
     def __call__(
         self, estimate: NDArray[np.float64], reference_preview: NDArray[np.float64], t: float
     ) -> ControlOutput:
-        """Opening u for the coming period from the state estimate (4,) and the reference
-        preview F_ref(t + i Ts), i = 0..N (N+1,) [N]."""
+        """Opening u for the coming period from the state estimate (4,) or (5,) and the
+        reference preview F_ref(t + i Ts), i = 0..N (N+1,) [N].
+
+        A fifth estimate entry is the estimated free position y0 [m] (the estimators'
+        disturbance state); it becomes the model's online y0. The preview is saturated by
+        the reference governor (:mod:`trackmj.control.governor`) at the current supply.
+        A solve that fails is still used if its plan is finite (counted as a fallback), so
+        the controller keeps acting; otherwise the previous plan is shifted on.
+        """
         n, lb = self.mpc.horizon_steps, self.mpc.block_steps
-        x0 = np.array(estimate, dtype=float)
+        x0 = np.array(estimate[:4], dtype=float)
+        if len(estimate) > 4:
+            self.theta[2] = float(estimate[4])
         # gauge pressures below p_min are estimator noise; a hard bound at node 1 would make
         # the problem locally infeasible, so the initial state is projected onto p >= p_min
         p_min = self.ctrl.pressure_min_Pa
@@ -110,7 +120,8 @@ class _MpcBase:
             x0[0] = p_min
         if x0[1] < p_min:
             x0[1] = p_min
-        p = self._parameters(x0, np.asarray(reference_preview, float))
+        band = feasible_band(self.ctrl, self.model.p, float(self.theta[0]))
+        p = self._parameters(x0, govern(np.asarray(reference_preview, float), band))
         w0 = self._shifted_guess(x0)
         t0 = time.perf_counter()
         try:
@@ -120,19 +131,21 @@ class _MpcBase:
         dt = time.perf_counter() - t0
         self.solve_times.append(dt)
         overrun = dt > self.mpc.time_budget_s
-        ok = ok and bool(np.isfinite(w).all())
-        if ok:
-            self._w, self._lam_g = w, lam_g
-        if ok and not overrun:
+        finite = bool(np.isfinite(w).all() and np.isfinite(lam_g).all())
+        ok = ok and finite
+        if finite:
+            self._w, self._lam_g = w, lam_g   # the next solve continues from this iterate
+        if finite and not overrun:
             self._plan = np.repeat(w[: self.ocp.n_blocks], lb)
             self._plan_age = 0
             u = min(max(float(w[0]), self.ctrl.u_min), self.ctrl.u_max)
         else:
+            self._plan_age += 1
+            u = float(self._plan[self._plan_age]) if self._plan_age < n else 0.0
+        if not (ok and not overrun):
             self.failures += not ok
             self.overruns += overrun
             self.fallbacks += 1
-            self._plan_age += 1
-            u = float(self._plan[self._plan_age]) if self._plan_age < n else 0.0
         self.u_prev = u
         return ControlOutput(u, ok and not overrun, dt, iters, not (ok and not overrun))
 

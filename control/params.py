@@ -113,6 +113,11 @@ class EstimatorParams(Parameters):
         "p_rod, y)")
     initial_std: tuple[float, float, float, float] = param(
         0.0, 1e8, open_low=True, unit="Pa, Pa, m, m/s", doc="initial state std")
+    free_position_process_std_m: float = param(
+        0.0, 1e-2, open_low=True, doc="random-walk std per sample of the disturbance state "
+        "y0 (the stroke at which the equivalent idler is unloaded)")
+    free_position_initial_std_m: float = param(0.0, 0.1, open_low=True,
+                                               doc="initial std of y0")
     ukf_alpha: float = param(0.1, 1.0, unit="1", doc="UKF sigma-point spread alpha")
     ukf_beta: float = param(0.0, 10.0, unit="1", doc="UKF prior-distribution beta")
     ukf_kappa: float = param(-3.0, 10.0, unit="1", doc="UKF secondary scaling kappa")
@@ -129,6 +134,10 @@ class ControllerParams(Parameters):
     pressure_max_Pa: float = param(-1e5, 5e7, doc="upper chamber pressure limit")
     u_min: float = param(-1.0, 0.0, unit="1", doc="lowest valve opening (-1: full release)")
     u_max: float = param(0.0, 1.0, unit="1", doc="highest valve opening (+1: full pressurize)")
+    reference_margin_N: float = param(0.0, 1e5, doc="the reference governor keeps the tracked "
+                                      "reference this far inside [F_min, F_max]")
+    governor_valve_drop_Pa: float = param(0.0, 1e7, doc="smallest pressure drop across the head "
+                                          "path the governor leaves below the supply")
 
     def cross_check(self, at: Location) -> None:
         if self.force_max_N < self.force_min_N:

@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numpy.typing import NDArray
 
+from trackmj.control.governor import feasible_band, govern
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControllerParams, PidParams
 from trackmj.ports import ControlOutput
@@ -51,6 +53,7 @@ class PidController:
     ) -> None:
         self.model, self.ctrl, self.pid = model, ctrl, pid
         self.dt = self.period_s = ctrl.period_s
+        self.supply_pressure_Pa = model.p.supply_pressure_Pa
         self.horizon_steps = 0  # the PID acts on the current reference only
         k_rate = model.tension_rate_gain(operating_force_N)  # [N/s per unit u]
         lam = pid.closed_loop_time_s + pid.dead_time_s
@@ -64,12 +67,15 @@ class PidController:
         self.u = 0.0
 
     def set_parameters(self, *, supply_pressure_Pa: float | None = None) -> None:
-        """The controller port's parameter update; the PID's gains are fixed by its tuning
-        rule at the operating force, so the supply pressure does not change them."""
+        """The controller port's parameter update: the supply pressure [Pa] the reference
+        governor uses (the gains stay those of the tuning rule at the operating force)."""
+        if supply_pressure_Pa is not None:
+            self.supply_pressure_Pa = supply_pressure_Pa
 
     def __call__(self, estimate: NDArray, reference_preview: NDArray, t: float) -> ControlOutput:
         f = self.model.force(estimate)
-        e_raw = float(reference_preview[0]) - f
+        band = feasible_band(self.ctrl, self.model.p, self.supply_pressure_Pa)
+        e_raw = float(govern(np.asarray(reference_preview[:1], float), band)[0]) - f
         e = math.copysign(max(abs(e_raw) - self.pid.error_dead_band_N, 0.0), e_raw)
         # conditional integration: the valve->tension plant is integrating, so the integral
         # is only needed against slow disturbances (leakage, supply), not to reach a step

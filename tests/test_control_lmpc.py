@@ -1,6 +1,5 @@
 """Linear MPC in closed loop on the reduced plant, reported beside NMPC and PID."""
 
-import dataclasses
 
 import numpy as np
 
@@ -13,11 +12,7 @@ from trackmj.control.pid import PidController
 from trackmj.sim.config import nominal_plant_params
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
-# weight_input rescaled for the derived plant's tension-rate gain: see test_control_nmpc.py
-WEIGHT_INPUT_FOR_DERIVED_PLANT = 0.6
-_FILE = load_config()
-CFG = dataclasses.replace(
-    _FILE, mpc=dataclasses.replace(_FILE.mpc, weight_input=WEIGHT_INPUT_FOR_DERIVED_PLANT))
+CFG = load_config()
 PLANT = nominal_plant_params(control_config=CFG)
 
 

@@ -14,20 +14,7 @@ from trackmj.ports import steps_per_period
 from trackmj.sim.config import nominal_plant_params
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
-# The closed loops run on the reduced plant derived from the hydraulic and idler files, whose
-# head node includes the hose compliance (V_head = 3.64e-3 m^3): 3 kN at full opening takes
-# 0.63 s. lf1352_control.toml's weight_input = 3 was tuned by step tests on the old control
-# file's stiffer plant (3e-4 m^3, 0.29 s). The MPC trades (e/kN)^2 against w_u·u^2 and the
-# tension moved per opening scales with the rate gain g, so the same trade-off needs w_u
-# scaled by g^2 = (0.29 / 0.63)^2 = 0.21: 3 -> 0.6. With 3 on this plant the MPC moves in
-# single minimum-dwell pulses and stops ~350 N short, its u inside the valve dead zone
-# (settling 2.4 s or none within 3 s over seeds 1-4); with 0.6 it settles in 0.6-0.75 s.
-# The shipped weight stays (on the coupled track 0.6 is not uniformly better: W2 RMSE and
-# valve switching rise); these tests check the algorithm at the rescaled weight.
-WEIGHT_INPUT_FOR_DERIVED_PLANT = 0.6
-_FILE = load_config()
-CFG = dataclasses.replace(
-    _FILE, mpc=dataclasses.replace(_FILE.mpc, weight_input=WEIGHT_INPUT_FOR_DERIVED_PLANT))
+CFG = load_config()
 PLANT = nominal_plant_params(control_config=CFG)
 
 

@@ -160,7 +160,7 @@ def test_scenario_files_need_no_source(tmp_path) -> None:
 @pytest.mark.parametrize(("kind", "item", "read"), [
     ("model", "model.chassis.mass_kg=1300", lambda p: p.chassis.mass_kg),
     ("hydraulics", "hydraulics.fluid.bulk_modulus_Pa=1.2e9", lambda p: p.fluid.bulk_modulus_Pa),
-    ("control", "control.mpc.weight_input=0.6", lambda p: p.mpc.weight_input),
+    ("control", "control.mpc.weight_input=1.5", lambda p: p.mpc.weight_input),
     ("scenario", "scenario.track.speed_m_s=2.0", lambda p: p.track.speed_m_s),
 ])
 def test_valid_override_changes_the_loaded_value(kind: str, item: str, read) -> None:

@@ -32,8 +32,9 @@ from trackmj.sim.registry import ESTIMATORS
 @dataclass
 class LoopResult:
     """Time series at the plant step (n steps): t [s] (end of step), true and estimated
-    tension [N], reference [N], true and estimated state (n, 4), applied valve mode,
-    opening u; the controller's solve times [s] and the valve switch count."""
+    tension [N], reference [N], true state (n, 4) and estimate (n, 5, with the disturbance
+    state y0 [m] last), applied valve mode, opening u; the controller's solve times [s] and
+    the valve switch count."""
 
     t: NDArray[np.float64]
     force: NDArray[np.float64]
@@ -48,12 +49,12 @@ class LoopResult:
 
 
 class _StateProbe:
-    """Observer keeping the plant's true state and the estimator's posterior of every step,
-    each (steps, 4)."""
+    """Observer keeping the plant's true state (steps, 4) and the estimator's posterior
+    (steps, 5: the four plant states and the disturbance state y0) of every step."""
 
     def __init__(self, plant: ReducedLoopPlant, estimator: Estimator, steps: int) -> None:
         self.plant, self.estimator = plant, estimator
-        self.truth, self.estimate = np.empty((steps, 4)), np.empty((steps, 4))
+        self.truth, self.estimate = np.empty((steps, 4)), np.empty((steps, 5))
 
     def on_step(self, k: int, readout: Readout, command: Command) -> None:
         self.truth[k] = self.plant.state
