@@ -74,6 +74,7 @@ COLUMN_UNITS: dict[str, str] = {
 """Contract columns of a closed-loop run in order, with their units ("1": dimensionless)."""
 
 INT_COLUMNS = {"valve_mode": pa.int8()}
+NUMPY_TYPES = {pa.float64(): np.float64, pa.int8(): np.int8}
 RUN_KEYS = ("scenario", "architecture", "controller", "estimator", "seed", "trackmj_version",
             "machine")
 TIMESERIES = "timeseries.parquet"
@@ -85,6 +86,30 @@ METRICS = "metrics.json"
 class ResultDirectoryError(OSError):
     """An output directory cannot take a result (a file, not writable, someone else's
     directory, or locked by another writer); the message says which and why."""
+
+
+def _arrow_array(values: np.ndarray, dtype: pa.DataType) -> pa.Array:
+    """1-D numpy array as an Arrow array of ``dtype`` (NaN stays a value, not a null).
+
+    Built from the array's buffer rather than with ``pa.array``, which imports pandas when
+    it is installed (~0.5 s on the first run of every process, e.g. each Dask worker)."""
+    values = np.ascontiguousarray(values, dtype=NUMPY_TYPES[dtype])
+    if values.ndim != 1:
+        raise ValueError(f"columns are 1-D, got shape {values.shape}")
+    return pa.Array.from_buffers(dtype, len(values), [None, pa.py_buffer(values)])
+
+
+def _numpy(column: pa.ChunkedArray) -> np.ndarray:
+    """A column as a read-only numpy view of its buffer (float64 and int8 without nulls;
+    anything else through ``to_numpy``, which imports pandas when it is installed)."""
+    array = column.combine_chunks()
+    dtype = NUMPY_TYPES.get(array.type)
+    if dtype is None or array.null_count:
+        return array.to_numpy(zero_copy_only=False)
+    view = np.frombuffer(array.buffers()[1], dtype=dtype, count=len(array),
+                         offset=array.offset * np.dtype(dtype).itemsize)
+    view.flags.writeable = False
+    return view
 
 
 def make_table(columns: Mapping[str, np.ndarray], units: Mapping[str, str],
@@ -106,7 +131,7 @@ def make_table(columns: Mapping[str, np.ndarray], units: Mapping[str, str],
         values = np.asarray(columns[name])
         if dtype == pa.int8():
             values = np.rint(values).astype(np.int8)
-        arrays.append(pa.array(values, type=dtype))
+        arrays.append(_arrow_array(values, dtype))
         fields.append(pa.field(name, dtype, metadata={"unit": units[name]}))
     meta = {str(k): str(v) for k, v in metadata.items()}
     return pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata=meta))
@@ -168,8 +193,9 @@ class Result:
                 for f in self.timeseries.schema}
 
     def columns(self) -> dict[str, np.ndarray]:
-        """Column name -> numpy array (e.g. for :func:`trackmj.metrics.compute_metrics`)."""
-        return {n: self.timeseries.column(n).to_numpy() for n in self.timeseries.column_names}
+        """Column name -> numpy array (e.g. for :func:`trackmj.metrics.compute_metrics`);
+        read-only views of the table's buffers."""
+        return {n: _numpy(self.timeseries.column(n)) for n in self.timeseries.column_names}
 
 
 # ----------------------------------------------------------------------------- writing
