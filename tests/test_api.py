@@ -112,3 +112,27 @@ def test_read_result_names_what_is_missing(result, tmp_path) -> None:
     (out / "timeseries.parquet").unlink()
     with pytest.raises(FileNotFoundError, match=r"no timeseries\.parquet"):
         trackmj.read_result(out)
+
+
+def test_a_repeated_track_restores_its_settled_state_bit_for_bit(monkeypatch) -> None:
+    """Runs on the same track (here: another bulk modulus) reuse the settled state of the
+    first instead of settling again; the result is the one a fresh settle gives."""
+    from trackmj.sim import architectures
+
+    monkeypatch.setattr(architectures, "_settled", {})
+    settles = []
+    original = architectures.TrackPlant.run
+
+    def counted(plant, *args, **kwargs):
+        settles.append(args)
+        return original(plant, *args, **kwargs)
+
+    monkeypatch.setattr(architectures.TrackPlant, "run", counted)
+    first = trackmj.simulate("W1", duration=DURATION_S, seed=1)
+    stiffer = trackmj.simulate("W1", duration=DURATION_S, seed=1,
+                               set={"hydraulics.fluid.bulk_modulus_Pa": 2.0e9})
+    again = trackmj.simulate("W1", duration=DURATION_S, seed=1)
+    assert len(settles) == 1
+    for name, values in first.columns().items():
+        np.testing.assert_array_equal(again.columns()[name], values, err_msg=name)
+    assert not np.array_equal(stiffer.columns()["p_head_Pa"], first.columns()["p_head_Pa"])
