@@ -110,6 +110,23 @@ def test_nested_metric_tables_become_dotted_columns() -> None:
                     "energy_J.losses.orifices": 3.0, "ok": 1.0}
 
 
+def test_scattered_samples_are_plotted_per_metric(tmp_path) -> None:
+    """Rows of an LHS sweep (no two points share the other key's value), one failed: a
+    figure per metric with a finite value, the failed row left out."""
+    from trackmj.sweeps import _write_table, plot_sweep
+
+    rows = [{"run_key": f"k{i}", "point": i, "scenario": "W1", "architecture": "tp",
+             "controller": "nmpc", "estimator": "ekf", "variant": "nominal", "seed": 0,
+             "duration_s": 1.5, "inputs": "{}", SPEED: 0.5 + 0.25 * i, BULK: 1e9 * (1 + i),
+             "rmse_N": 100.0 * i, "only_nan_N": math.nan, "wall_time_s": 1.0, "error": None}
+            for i in range(5)]
+    rows[4] |= {"rmse_N": None, "error": "PhysicsError: ..."}
+    _write_table(rows, tmp_path / "results.parquet")
+    figures = plot_sweep(tmp_path)
+    assert sorted(p.name for p in figures) == ["rmse_N.png", "wall_time_s.png"]
+    assert all(p.read_bytes()[:4] == b"\x89PNG" for p in figures)
+
+
 # ----------------------------------------------------------------------------- on Dask
 
 @pytest.fixture(scope="module")

@@ -910,7 +910,7 @@ def _sortable(value: Any) -> tuple[int, Any]:
 def _series_label(case: tuple, cases: list[tuple], others: list[str], line: tuple) -> str:
     """Legend text: the case (if there are several) and the other keys' values."""
     parts = [_case_label(case, cases)] if len(cases) > 1 else []
-    for key, value in zip(others, line, strict=True):
+    for key, value in zip(others, line, strict=False):   # () for scattered samples
         if value is not None:
             scale, unit = _display(column_unit(key))
             shown = f" {unit}" if unit and unit != "1" else ""
