@@ -228,3 +228,24 @@ def test_cli_sweep_refuses_a_bad_spec_naming_it(tmp_path, capsys) -> None:
     assert not (tmp_path / "out").exists()
     assert main(["sweep"]) == 2
     assert "sweep needs a spec file" in capsys.readouterr().err
+
+
+def test_a_run_that_kills_its_worker_is_an_outcome_with_the_error(executor, monkeypatch):
+    """A run that takes its worker process down (here: os._exit, as a segfault would) is
+    retried on restarted workers by Dask and then reported as failed; the batch goes on."""
+    from trackmj.executor import RunSpec
+
+    submit = executor.client.submit
+
+    def dying_for_seed_99(fn, spec, *args, **kwargs):
+        if spec.seed == 99:
+            def die(*_):
+                os._exit(3)
+            return submit(die, spec, *args, **kwargs)
+        return submit(fn, spec, *args, **kwargs)
+
+    monkeypatch.setattr(executor.client, "submit", dying_for_seed_99)
+    fine, dying = RunSpec("W1", duration=DURATION_S, seed=0), RunSpec("W1", seed=99)
+    outcomes = executor.map([fine, dying])
+    assert outcomes[0].ok and outcomes[0].result.seed == 0
+    assert outcomes[1].error.startswith("KilledWorker")

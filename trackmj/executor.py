@@ -162,7 +162,10 @@ class Executor:
                 spec = wanted.pop(future.key, None)
                 if spec is None:    # a tp run computed only for its dp-a dependants
                     continue
-                outcome = future.result()
+                try:
+                    outcome = future.result()
+                except Exception as exc:   # the worker died (e.g. KilledWorker), not the run
+                    outcome = RunOutcome(spec, error=f"{type(exc).__name__}: {exc}")
                 future.release()
                 if bar is not None:
                     bar.done(outcome)
