@@ -262,6 +262,7 @@ VIEWER_START_S = 5.0
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
     from trackmj.scenarios import BUILTIN, load_scenario
+    from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS
 
     loaded = [load_scenario(name) for name in BUILTIN]
     width = max(len(sc.name) for sc in loaded) + 2
@@ -270,6 +271,12 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
         print(f"{sc.name:<{width}}{sc.title} ({sc.duration_s:g} s, {sc.controller}/"
               f"{sc.estimator}{variants})")
     print("or any scenario TOML file in the same format (experiments/*.toml)")
+    for title, registry in (("architectures (--arch)", ARCHITECTURES),
+                            ("controllers (--controller)", CONTROLLERS),
+                            ("estimators (--estimator)", ESTIMATORS)):
+        print(f"\n{title}")
+        for name, entry in registry.items():
+            print(f"{name:<{width + 5}}{entry.description}")
     return 0
 
 
@@ -280,6 +287,9 @@ def _cmd_keys(args: argparse.Namespace) -> int:
     unknown = [k for k in args.kinds if k not in FILE_KINDS]
     if unknown:
         raise ValueError(f"keys {unknown[0]!r}: allowed {', '.join(FILE_KINDS)}")
+    print("# --set KIND.TABLE.KEY=VALUE and sweep keys: type, unit, range - meaning; '[]' is "
+          "an array of tables, give the index (scenario.load_pulses.0.hitch_N), '<name>' a "
+          "named table")
     for kind in args.kinds or FILE_KINDS:
         print(f"# {kind}")
         for row in describe_schema(file_schema(kind)):
@@ -490,6 +500,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("trackmj: interrupted; earlier results were left as they were", file=sys.stderr)
         return 130
+    except BrokenPipeError:   # e.g. 'trackmj keys | head': the reader has gone
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except PhysicsError as exc:
         print(f"trackmj: stopped: {exc}", file=sys.stderr)
         return 3
