@@ -58,6 +58,19 @@ def test_latin_hypercube_puts_one_sample_in_each_stratum_of_each_key() -> None:
     assert [p[SPEED] for p in other] != list(speed)
 
 
+def test_the_readme_spec_is_valid_and_plans_every_combination(tmp_path) -> None:
+    from pathlib import Path
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    block = readme.split("## Parameter studies", 1)[1].split("```toml\n", 1)[1]
+    spec = tmp_path / "study.toml"
+    spec.write_text(block.split("```", 1)[0])
+    runs = plan(load_sweep(spec))
+    # 3 areas x 3 bulk moduli x 2 controllers x 2 seeds, each a distinct run
+    assert len(runs) == len({r.key for r in runs}) == 36
+    assert {r.identity["controller"] for r in runs} == {"nmpc", "pid"}
+
+
 def test_integer_keys_take_integers() -> None:
     key = "control.mpc.horizon_steps"
     points = parameter_points(load_sweep(_spec(parameters=[{"key": key, "values": [10, 20]}])))
