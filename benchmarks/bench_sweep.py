@@ -95,14 +95,16 @@ def main():
     with Executor(workers=WORKERS) as ex:
         t_up = time.perf_counter()
         cpu0 = ex.client.run(time.process_time)
+        main0 = time.process_time()
         outcomes = ex.map(specs)
         t_end = time.perf_counter()
+        main1 = time.process_time()
         cpu1 = ex.client.run(time.process_time)
     failed = [o.error for o in outcomes if not o.ok]
     cpu = sum(cpu1[w] - cpu0[w] for w in cpu0)
     print(json.dumps({"start_s": t_up - t0, "total_s": t_end - t0, "runs_s": t_end - t_up,
                       "run_wall_s": [o.wall_time_s for o in outcomes], "failed": failed,
-                      "worker_cpu_s": cpu}))
+                      "worker_cpu_s": cpu, "main_cpu_s": main1 - main0}))
 if __name__ == "__main__":
     main()
 """
@@ -167,8 +169,9 @@ def scaling(runs: int, duration: float, repeat: int) -> None:
         print(f"{workers} worker(s): cluster start {best['start_s']:.2f} s, {runs} runs done "
               f"after {best['total_s']:.2f} s -> {rate[workers][0]:.0f} runs/h end to end, "
               f"{rate[workers][1]:.0f} runs/h after the start; run wall time "
-              f"{min(walls):.2f}..{max(walls):.2f} s, worker CPU {cpu[workers]:.2f} s per run "
-              f"({_load()})")
+              f"{min(walls):.2f}..{max(walls):.2f} s, CPU per run: workers "
+              f"{cpu[workers]:.2f} s, this process (client, scheduler, nannies) "
+              f"{best['main_cpu_s'] / runs:.3f} s ({_load()})")
     print(f"2 workers / 1 worker: {rate[2][0] / rate[1][0]:.2f}x end to end, "
           f"{rate[2][1] / rate[1][1]:.2f}x after the start; CPU per run "
           f"{cpu[2] / cpu[1]:.2f}x (1.00x: the workers do not slow each other down, so with "
