@@ -4,8 +4,9 @@
 By default a :class:`distributed.LocalCluster` with one single-threaded worker process per
 core (BLAS/OpenMP/numba threads pinned to 1 in each, warmed by :mod:`trackmj.worker`), or
 ``workers`` of them; with ``scheduler`` an existing cluster (started with ``dask scheduler``
-and ``dask worker tcp://HOST:8786 --nthreads 1 --preload trackmj.worker`` on each machine;
-the workers need trackmj installed and the parameter files at the same paths). A dp-a run
+and, on each machine, ``dask worker tcp://HOST:8786 --nworkers N --nthreads 1 --preload
+trackmj.worker``; the workers need trackmj installed and the parameter files at the same
+paths). A dp-a run
 replays the track load of the tp run of the same case, so its tp run is computed first
 (once, shared by every dp-a run that needs it, and reported itself if it was asked for). A
 failed run becomes an outcome with its error, never a lost batch.
