@@ -140,6 +140,23 @@ def test_scattered_samples_are_plotted_per_metric(tmp_path) -> None:
     assert all(p.read_bytes()[:4] == b"\x89PNG" for p in figures)
 
 
+def test_results_are_rewritten_at_most_every_period_and_flushed(tmp_path, monkeypatch) -> None:
+    """Rewriting grows with the rows, so it is throttled; what arrived is always flushed."""
+    import trackmj.sweeps as sweeps
+
+    writes = []
+    monkeypatch.setattr(sweeps, "_write_table", lambda rows, path: writes.append(len(rows)))
+    writer = sweeps._TableWriter(tmp_path / "results.parquet")
+    rows = {}
+    for i in range(5):
+        rows[f"k{i}"] = {"run_key": f"k{i}"}
+        writer.changed(rows)
+    assert writes == [1]              # the first row at once, the next within the period
+    writer.flush(rows)
+    writer.flush(rows)
+    assert writes == [1, 5]           # pending rows once, nothing when nothing is new
+
+
 # ----------------------------------------------------------------------------- on Dask
 
 @pytest.fixture(scope="module")
