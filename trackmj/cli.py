@@ -1,6 +1,8 @@
-"""``trackmj`` command line.
+"""``trackmj`` command line (also ``python -m trackmj``).
 
-Display units (kN, mm, MPa) appear only here; everything inside is SI.
+Display units (kN, mm, MPa) appear only here; everything inside is SI. Errors in the input
+(a bad option, file, key or value) end with exit code 2 and one line naming what is wrong;
+a run that leaves physics with exit code 3; Ctrl-C with 130.
 """
 
 from __future__ import annotations
@@ -25,25 +27,34 @@ def _cmd_model_info(args: argparse.Namespace) -> int:
     contact_pairs = sum(1 for i in range(m.ngeom) for j in range(i + 1, m.ngeom)
                         if (m.geom_contype[i] & m.geom_conaffinity[j])
                         or (m.geom_contype[j] & m.geom_conaffinity[i]))
-    print(f"model            {MODEL_NAME} ({plant.model_path})")
-    print(f"bodies           {m.nbody - 1} (+ world)")
-    print(f"degrees of freedom {m.nv}   (generalised coordinates {m.nq})")
-    print(f"links            {plant.link_count}, pitch {p.track.pitch_m * 1e3:.1f} mm, "
-          f"loop {plant.link_count * p.track.pitch_m:.2f} m")
-    print(f"road wheels      {p.road_wheels.count}, sprocket teeth {p.sprocket.tooth_count} "
-          f"(pitch radius {p.sprocket_pitch_radius_m * 1e3:.1f} mm)")
-    print(f"masses           total {total_mass:.0f} kg, chassis {p.chassis.mass_kg:.0f} kg, "
-          f"track {link_mass:.0f} kg")
-    print(f"geoms            {m.ngeom} ({contact_pairs} geom pairs can collide)")
-    print(f"equalities       {m.neq} (one connect per pin), actuators {m.nu}: "
-          f"{', '.join(m.actuator(i).name for i in range(m.nu))}")
-    print(f"timestep         {m.opt.timestep * 1e3:.3f} ms, integrator "
-          f"{mujoco.mjtIntegrator(m.opt.integrator).name}")
-    print(f"home keyframe    contacts {d.ncon}, closure error {plant.closure_error_m * 1e3:.3f} mm,"
-          f" stroke {plant.stroke_m * 1e3:.1f} mm")
     tension = plant.pin_tensions_N()
-    print(f"pin tension      {tension.min() / 1e3:.2f} .. {tension.max() / 1e3:.2f} kN "
-          f"(mean upper strand {tension[plant.upper_strand_pins()].mean() / 1e3:.2f} kN)")
+    rows = [
+        ("model", f"{MODEL_NAME} ({plant.model_path})"),
+        ("bodies", f"{m.nbody - 1} (+ world)"),
+        ("degrees of freedom", f"{m.nv} (generalised coordinates {m.nq})"),
+        ("links", f"{plant.link_count}, pitch {p.track.pitch_m * 1e3:.1f} mm, "
+                  f"loop {plant.link_count * p.track.pitch_m:.2f} m"),
+        ("road wheels", f"{p.road_wheels.count}, sprocket teeth {p.sprocket.tooth_count} "
+                        f"(pitch radius {p.sprocket_pitch_radius_m * 1e3:.1f} mm)"),
+        ("mass", f"{total_mass:.0f} kg: one track side with its share of the chassis "
+                 "(x2 for the vehicle)"),
+        ("", f"chassis share {p.chassis.mass_kg:.0f} kg, track {link_mass:.0f} kg, wheels "
+             f"and carrier {total_mass - p.chassis.mass_kg - link_mass:.0f} kg"),
+        ("geoms", f"{m.ngeom} ({contact_pairs} geom pairs can collide)"),
+        ("equalities", f"{m.neq} (one connect per pin)"),
+        ("actuators", f"{m.nu}: {', '.join(m.actuator(i).name for i in range(m.nu))}"),
+        ("timestep", f"{m.opt.timestep * 1e3:.3f} ms, integrator "
+                     f"{mujoco.mjtIntegrator(m.opt.integrator).name}"),
+        ("home keyframe", f"contacts {d.ncon}, closure error "
+                          f"{plant.closure_error_m * 1e3:.3f} mm, stroke "
+                          f"{plant.stroke_m * 1e3:.1f} mm"),
+        ("pin tension", f"{tension.min() / 1e3:.2f} .. {tension.max() / 1e3:.2f} kN (mean "
+                        f"upper strand {tension[plant.upper_strand_pins()].mean() / 1e3:.2f} "
+                        "kN)"),
+    ]
+    width = max(len(label) for label, _ in rows) + 2
+    for label, text in rows:
+        print(f"{label:<{width}}{text}")
     return 0
 
 
@@ -131,12 +142,6 @@ def _summary_table(results: list, title: str) -> str:
     return "\n".join(lines)
 
 
-def _run_one(kwargs: dict):
-    from trackmj.sim.run import simulate
-
-    return simulate(**kwargs)
-
-
 def _files(args: argparse.Namespace) -> dict:
     """The parameter files and ``--set`` overrides given on the command line."""
     return dict(model=args.model, hydraulics=args.hydraulics, control=args.control,
@@ -222,17 +227,153 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_view(args: argparse.Namespace) -> int:
-    from trackmj.playback import open_viewer
+    import os
+    import subprocess
 
-    open_viewer(args.path)
+    from trackmj.playback import open_viewer, resolve_rrd
+
+    rrd = resolve_rrd(args.path)
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        print(f"trackmj: error: no display (DISPLAY and WAYLAND_DISPLAY are unset), so the "
+              f"Rerun viewer cannot open here; copy {rrd} to a machine with a display and "
+              f"run 'rerun {rrd.name}' there, or serve it to a browser with "
+              f"'python -m rerun --web-viewer {rrd}'", file=sys.stderr)
+        return 1
+    viewer = open_viewer(rrd)
+    try:   # a viewer that cannot start (no GPU, broken install) exits within seconds
+        code = viewer.wait(timeout=VIEWER_START_S)
+    except subprocess.TimeoutExpired:
+        print(f"viewer open on {rrd}")
+        return 0
+    if code != 0:
+        print(f"trackmj: error: the Rerun viewer exited with code {code} without opening "
+              f"{rrd} (its messages are above)", file=sys.stderr)
+        return 1
     return 0
 
 
+VIEWER_START_S = 5.0
+"""How long ``view`` waits for the viewer to fail before it reports it open [s]."""
+
+
+def _cmd_scenarios(args: argparse.Namespace) -> int:
+    from trackmj.scenarios import BUILTIN, load_scenario
+    from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS
+
+    loaded = [load_scenario(name) for name in BUILTIN]
+    width = max(len(sc.name) for sc in loaded) + 2
+    for sc in loaded:
+        variants = f", {len(sc.variants)} variants" if len(sc.variants) > 1 else ""
+        print(f"{sc.name:<{width}}{sc.title} ({sc.duration_s:g} s, {sc.controller}/"
+              f"{sc.estimator}{variants})")
+    print("or any scenario TOML file in the same format (experiments/*.toml)")
+    for title, registry in (("architectures (--arch)", ARCHITECTURES),
+                            ("controllers (--controller)", CONTROLLERS),
+                            ("estimators (--estimator)", ESTIMATORS)):
+        print(f"\n{title}")
+        for name, entry in registry.items():
+            print(f"{name:<{width + 5}}{entry.description}")
+    return 0
+
+
+def _cmd_keys(args: argparse.Namespace) -> int:
+    from trackmj.params import FILE_KINDS, describe_schema
+    from trackmj.sweeps import file_schema
+
+    unknown = [k for k in args.kinds if k not in FILE_KINDS]
+    if unknown:
+        raise ValueError(f"keys {unknown[0]!r}: allowed {', '.join(FILE_KINDS)}")
+    print("# --set KIND.TABLE.KEY=VALUE and sweep keys: type, unit, range - meaning; '[]' is "
+          "an array of tables, give the index (scenario.load_pulses.0.hitch_N), '<name>' a "
+          "named table")
+    for kind in args.kinds or FILE_KINDS:
+        print(f"# {kind}")
+        for row in describe_schema(file_schema(kind)):
+            print(f"{kind}.{row}")
+    return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from trackmj.sweeps import plot_sweep, sweep
+
+    if args.plot is not None:
+        if args.spec is not None:
+            raise ValueError("give a sweep spec to run, or --plot DIR to redraw, not both")
+        figures = plot_sweep(args.plot)
+        print(f"{len(figures)} figures -> {Path(args.plot) / 'figures'}")
+        return 0
+    if args.spec is None:
+        raise ValueError("sweep needs a spec file (or --plot DIR); see 'trackmj sweep -h'")
+    out = Path(args.out or f"runs/sweep-{Path(args.spec).stem}")
+    summary = sweep(args.spec, out, workers=args.workers, scheduler=args.scheduler,
+                    keep_runs=args.keep_runs, retry_failed=args.retry_failed)
+    print(summary)
+    print(f"{len(summary.figures)} figures -> {out / 'figures'}")
+    return 1 if summary.failed else 0
+
+
+def _nonnegative_int(text: str) -> int:
+    value = _integer(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} is negative; must be an integer >= 0")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    value = _integer(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value}: must be an integer >= 1")
+    return value
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+
+
+def _duration(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not 0.0 < value <= 3600.0:
+        raise argparse.ArgumentTypeError(f"{text} s: allowed (0, 3600] s")
+    return value
+
+
+class _HelpFormatter(argparse.HelpFormatter):
+    """Help that states each option's default (unless it has none or says it itself)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if ("default" in text or default is None or default is False or default == []
+                or default is argparse.SUPPRESS or not action.option_strings):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose help shows defaults (subcommands inherit it)."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs.setdefault("formatter_class", _HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from trackmj import __version__
     from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS, choices
 
-    parser = argparse.ArgumentParser(prog="trackmj", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = _Parser(prog="trackmj", description="trackmj: electro-hydraulic track tensioning "
+                     "simulator (MuJoCo track, hydraulic plugin, NMPC control)",
+                     epilog="'trackmj COMMAND -h' explains a command; 'trackmj scenarios' lists "
+                            "the operating conditions, 'trackmj keys' the --set keys")
+    parser.add_argument("--version", action="version", version=f"trackmj {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def model_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--model", help="MJCF file (default: packaged models/lf1352.xml)")
@@ -270,8 +411,8 @@ def build_parser() -> argparse.ArgumentParser:
                             "--set scenario.track.speed_m_s=2.0")
 
     def executor_args(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--workers", type=int, help="Dask worker processes of the local "
-                       "cluster (default: one per core)")
+        p.add_argument("--workers", type=_positive_int, help="Dask worker processes of the "
+                       "local cluster (default: one per core)")
         p.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler, "
                        "e.g. tcp://HOST:8786, instead of a local cluster")
 
@@ -279,15 +420,19 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("scenario", help="W1..W5 or a scenario TOML file")
         p.add_argument("--estimator", choices=choices(ESTIMATORS),
                        help="default: the scenario's")
-        p.add_argument("--seed", type=int, default=0, help="noise and terrain seed")
-        p.add_argument("--duration", type=float, help="simulated time [s] (default: scenario)")
-        p.add_argument("--out", help="output directory")
+        p.add_argument("--seed", type=_nonnegative_int, default=0,
+                       help="noise and terrain seed")
+        p.add_argument("--duration", type=_duration,
+                       help="simulated time [s] (default: the scenario's)")
+        p.add_argument("--out", metavar="DIR", help="output directory")
         file_args(p)
 
     run = sub.add_parser("run", help="one closed-loop run of a scenario")
     run_args(run)
-    run.add_argument("--arch", default="tp", choices=choices(ARCHITECTURES))
-    run.add_argument("--controller", choices=choices(CONTROLLERS))
+    run.add_argument("--arch", default="tp", choices=choices(ARCHITECTURES),
+                     help="coupling architecture")
+    run.add_argument("--controller", choices=choices(CONTROLLERS),
+                     help="default: the scenario's")
     run.add_argument("--variant", default="nominal", help="W5 variant name")
     run.add_argument("--csv", action="store_true", help="also write timeseries.csv")
     run.add_argument("--rrd", action="store_true", help="also write a Rerun recording")
@@ -315,6 +460,35 @@ def build_parser() -> argparse.ArgumentParser:
                         help="output directory; runs already complete in it are kept")
     report.set_defaults(func=_cmd_report)
 
+    sweep = sub.add_parser(
+        "sweep", help="parameter study from a TOML spec -> DIR/results.parquet, figures",
+        description="Run every point of a sweep spec (grid or Latin hypercube over --set "
+                    "keys, x scenarios x architectures x controllers x seeds) on Dask; one "
+                    "row per run in DIR/results.parquet, written as runs finish; runs "
+                    "already there are skipped (resume); a failed run is a row with its "
+                    "error. The spec format is in the README ('Parameter studies').")
+    sweep.add_argument("spec", nargs="?", help="sweep spec TOML file")
+    sweep.add_argument("--out", metavar="DIR",
+                       help="output directory, resumed if it holds a sweep "
+                            "(default: runs/sweep-SPEC_NAME)")
+    sweep.add_argument("--plot", metavar="DIR",
+                       help="only redraw DIR/figures from DIR/results.parquet")
+    sweep.add_argument("--keep-runs", action="store_true",
+                       help="also write each run's result directory under DIR/runs/")
+    sweep.add_argument("--retry-failed", action="store_true",
+                       help="run again the runs whose rows hold an error")
+    executor_args(sweep)
+    sweep.set_defaults(func=_cmd_sweep)
+
+    scenarios = sub.add_parser("scenarios", help="list the built-in operating conditions")
+    scenarios.set_defaults(func=_cmd_scenarios)
+
+    keys = sub.add_parser("keys", help="list the --set keys (and sweep keys) with units, "
+                                       "ranges and meaning")
+    keys.add_argument("kinds", nargs="*", metavar="KIND",
+                      help="model, hydraulics, control or scenario (default: all)")
+    keys.set_defaults(func=_cmd_keys)
+
     view = sub.add_parser("view", help="open a run's Rerun recording in the viewer")
     view.add_argument("path", help="run directory or .rrd file")
     view.set_defaults(func=_cmd_view)
@@ -332,6 +506,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("trackmj: interrupted; earlier results were left as they were", file=sys.stderr)
         return 130
+    except BrokenPipeError:   # e.g. 'trackmj keys | head': the reader has gone
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except PhysicsError as exc:
         print(f"trackmj: stopped: {exc}", file=sys.stderr)
         return 3

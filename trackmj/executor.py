@@ -2,28 +2,28 @@
 ``sweep`` share this one executor.
 
 By default a :class:`distributed.LocalCluster` with one single-threaded worker process per
-core (BLAS/OpenMP threads pinned to 1 in each), or ``workers`` of them; with ``scheduler``
-an existing cluster (started with ``dask scheduler`` and ``dask worker tcp://HOST:8786
---nthreads 1`` on each machine; the workers need trackmj installed). A dp-a run replays the
-track load of the tp run of the same case, so its tp run is computed first (once, shared
-by every dp-a run that needs it, and reported itself if it was asked for). A failed run
-becomes an outcome with its error, never a lost batch.
+core (BLAS/OpenMP/numba threads pinned to 1 in each, warmed by :mod:`trackmj.worker`), or
+``workers`` of them; with ``scheduler`` an existing cluster (started with ``dask scheduler``
+and, on each machine, ``dask worker tcp://HOST:8786 --nworkers N --nthreads 1 --preload
+trackmj.worker``; the workers need trackmj installed and the parameter files at the same
+paths). A dp-a run
+replays the track load of the tp run of the same case, so its tp run is computed first
+(once, shared by every dp-a run that needs it, and reported itself if it was asked for). A
+failed run becomes an outcome with its error, never a lost batch.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+import uuid
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from trackmj.results import Result
-
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                    "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS")
-"""Thread-pool sizes pinned to 1 in every worker: one run per core, no oversubscription."""
 
 
 @dataclass(frozen=True)
@@ -96,6 +96,12 @@ class Executor:
 
     workers: worker processes of the local cluster (default: one per core); scheduler:
     address of an existing Dask scheduler (``tcp://HOST:8786``) instead of a local cluster.
+
+    The local cluster's workers are forked from one forkserver that imported
+    :mod:`trackmj.worker` first (threads pinned, run code imported, model, idler and
+    hydraulic kernels loaded), so each worker starts warm and the start-up is paid once per
+    process, not once per worker. Like every multiprocessing pool, a script that starts one
+    must guard its entry point with ``if __name__ == "__main__":``.
     """
 
     workers: int | None = None
@@ -104,21 +110,19 @@ class Executor:
     _cluster: Any = field(default=None, init=False)
 
     def __enter__(self) -> Executor:
-        import dask
         from distributed import Client, LocalCluster
 
-        dask.config.set({"distributed.worker.daemon": False,
-                         "distributed.nanny.pre-spawn-environ":
-                         dict.fromkeys(THREAD_VARIABLES, "1")})
         if self.scheduler is not None:
             self.client = Client(self.scheduler, timeout="20s")
-        else:
-            n = self.workers or os.cpu_count() or 1
-            if n < 1:
-                raise ValueError(f"workers = {n}: need at least one")
-            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                         dashboard_address=None, silence_logs=50)
-            self.client = Client(self._cluster)
+            return self
+        n = os.cpu_count() or 1 if self.workers is None else self.workers
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise ValueError(f"workers = {self.workers!r}: need an integer >= 1")
+        _configure_local_workers()
+        self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                     dashboard_address=None, silence_logs=50,
+                                     scheduler_kwargs={"dashboard_address": ":0"})
+        self.client = Client(self._cluster)
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -128,17 +132,16 @@ class Executor:
             self._cluster.close()
         self.client = self._cluster = None
 
-    def map(self, specs: Iterable[RunSpec], *,
-            on_done: Callable[[RunOutcome], None] | None = None,
-            progress: str | None = None) -> list[RunOutcome]:
-        """Run every spec; returns the outcomes in the order of ``specs``.
+    def as_completed(self, specs: Iterable[RunSpec], *,
+                     progress: str | None = None) -> Iterator[RunOutcome]:
+        """Run every spec; yields each asked-for run's outcome as it finishes (a spec given
+        twice runs once). Each result is released from the cluster once yielded, so a long
+        batch holds only what the caller keeps.
 
-        on_done(outcome) is called in this process as each asked-for run finishes (e.g. to
-        write it at once); progress: description of a progress bar over the runs.
+        progress: description of a progress bar over the simulated seconds of the runs.
         """
         from distributed import as_completed
 
-        specs = list(specs)
         if self.client is None:
             raise RuntimeError("use the Executor as a context manager")
         futures: dict[RunSpec, Any] = {}
@@ -146,31 +149,116 @@ class Executor:
         def submit(spec: RunSpec) -> Any:
             if spec not in futures:
                 tp = submit(spec.as_tp()) if _replays_tp(spec) else None
-                futures[spec] = self.client.submit(execute, spec, tp, pure=False,
-                                                   key=f"run-{len(futures)}-{spec.architecture}")
+                futures[spec] = self.client.submit(
+                    execute, spec, tp, pure=False,
+                    key=f"run-{spec.architecture}-{uuid.uuid4().hex}")
             return futures[spec]
 
         wanted = {submit(spec).key: spec for spec in specs}
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=len(wanted), unit="run", desc=progress, mininterval=0.5)
-        done: dict[RunSpec, RunOutcome] = {}
+        bar = _ProgressBar(list(wanted.values()), progress) if progress else None
+        pending = as_completed(list(futures.values()))
+        futures.clear()   # the as_completed iterator and the tasks' inputs hold the rest
         try:
-            for future in as_completed(list(futures.values())):
-                if future.key not in wanted:
+            for future in pending:
+                spec = wanted.pop(future.key, None)
+                if spec is None:    # a tp run computed only for its dp-a dependants
                     continue
-                outcome = future.result()
-                done[wanted[future.key]] = outcome
-                if on_done is not None:
-                    on_done(outcome)
+                try:
+                    outcome = future.result()
+                except Exception as exc:   # the worker died (e.g. KilledWorker), not the run
+                    outcome = RunOutcome(spec, error=f"{type(exc).__name__}: {exc}")
+                future.release()
                 if bar is not None:
-                    bar.update(1)
+                    bar.done(outcome)
+                yield outcome
         finally:
             if bar is not None:
                 bar.close()
+
+    def map(self, specs: Iterable[RunSpec], *,
+            on_done: Callable[[RunOutcome], None] | None = None,
+            progress: str | None = None) -> list[RunOutcome]:
+        """Run every spec; returns the outcomes in the order of ``specs``.
+
+        on_done(outcome) is called in this process as each asked-for run finishes (e.g. to
+        write it at once); progress: description of a progress bar over the simulated
+        seconds of the runs.
+        """
+        specs = list(specs)
+        done: dict[RunSpec, RunOutcome] = {}
+        for outcome in self.as_completed(specs, progress=progress):
+            done[outcome.spec] = outcome
+            if on_done is not None:
+                on_done(outcome)
         return [done[spec] for spec in specs]
+
+
+def _configure_local_workers() -> None:
+    """Dask settings for the local cluster: worker processes forked from a forkserver that
+    imports :mod:`trackmj.worker` first (it pins the BLAS/OpenMP/numba thread pools to one
+    thread before numpy is imported, then warms the run code), non-daemonic workers."""
+    import multiprocessing
+
+    import dask
+    from distributed import utils
+
+    dask.config.set({"distributed.worker.daemon": False,
+                     "distributed.worker.multiprocessing-method": "forkserver"})
+    # distributed sets its own preload list at its first use of the context; take that
+    # turn first, then put trackmj.worker ahead of it (no effect once the server runs)
+    utils.get_mp_context()
+    multiprocessing.get_context("forkserver").set_forkserver_preload(
+        ["trackmj.worker", "distributed"])
+
+
+class _ProgressBar:
+    """tqdm bar over the simulated seconds of ``specs``, with runs done and failed."""
+
+    def __init__(self, specs: Sequence[RunSpec], description: str) -> None:
+        from tqdm import tqdm
+
+        self.seconds = {spec: simulated_seconds(spec) for spec in specs}
+        self.runs, self.finished, self.failed = len(specs), 0, 0
+        self.bar = tqdm(total=sum(self.seconds.values()), desc=description, mininterval=0.5,
+                        unit="simulated s",
+                        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} "
+                                   "simulated s [{elapsed}<{remaining}{postfix}]")
+        self._postfix()
+
+    def _postfix(self) -> None:
+        failed = f", {self.failed} failed" if self.failed else ""
+        self.bar.set_postfix_str(f"runs {self.finished}/{self.runs}{failed}", refresh=False)
+
+    def done(self, outcome: RunOutcome) -> None:
+        self.finished += 1
+        self.failed += not outcome.ok
+        self._postfix()
+        self.bar.update(self.seconds.get(outcome.spec, 0.0))
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def simulated_seconds(spec: RunSpec) -> float:
+    """Simulated time of ``spec`` [s]: its duration or its scenario's (0 if the scenario
+    cannot be read; the run itself will report why)."""
+    if spec.duration is not None:
+        return float(spec.duration)
+    from trackmj.params import ParameterError
+
+    scenario_keys = tuple((k.partition(".")[2], v) for k, v in spec.overrides
+                          if k.startswith("scenario."))
+    try:
+        return _scenario_duration(spec.scenario, scenario_keys)
+    except ParameterError:
+        return 0.0
+
+
+@functools.cache
+def _scenario_duration(scenario: str, overrides: tuple[tuple[str, Any], ...]) -> float:
+    from trackmj.scenarios import load_scenario
+
+    return load_scenario(scenario, overrides=dict(overrides)).duration_s
 
 
 def _replays_tp(spec: RunSpec) -> bool:

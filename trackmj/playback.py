@@ -63,6 +63,12 @@ CIRCLE_SEGMENTS = 48
 WHEEL_BODIES = ("sprocket", "idler", "road_wheel_", "return_roller_")
 """Bodies whose visual cylinders are drawn as outlines (prefixes end with ``_``)."""
 
+EYE_DISTANCE_PER_LENGTH = 0.92
+EYE_HEIGHT_PER_LENGTH = 0.26
+"""Eye offset from the scene centre per metre of scene length (−y, +z) of the 3D view."""
+HOME_SCENE_BOUNDS_M = (np.array([-1.30, -0.80, 0.0]), np.array([1.60, 0.10, 1.0]))
+"""Scene box of the packaged track at home [m] (the framing when no plant is given)."""
+
 # blue -> cyan -> green -> yellow -> red, for pin tension colours
 _RAMP = np.array([[40, 60, 220], [0, 190, 230], [40, 200, 60], [240, 210, 0], [230, 30, 30]],
                  dtype=float)
@@ -187,7 +193,7 @@ class PlaybackRecorder:
             self.stream = rr.RecordingStream(APPLICATION_ID)
             self.stream.set_log_tick_enabled(False)
             self.stream.set_log_time_enabled(False)
-            self.stream.save(self._tmp, default_blueprint=self.blueprint())
+            self.stream.save(self._tmp, default_blueprint=self.blueprint(self.scene_bounds()))
             self._log_static()
         except BaseException:
             self._tmp.unlink(missing_ok=True)
@@ -255,27 +261,53 @@ class PlaybackRecorder:
         return np.array([[cx - half, cz], [cx + half, cz]])
 
     # ------------------------------------------------------------------ layout
+    def scene_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World box (low, high) [m], shape (3,) each, around the pins and the chassis and
+        idler-carrier boxes in the plant's current state (what the 3D view must show)."""
+        m, d = self.plant.model, self.plant.data
+        points = [d.geom_xpos[self._pin_geoms]]
+        for g in self._boxes.values():
+            corners = np.array(np.meshgrid(*[[-1.0, 1.0]] * 3)).reshape(3, -1).T
+            points.append(d.geom_xpos[g] + (corners * m.geom_size[g]) @ d.geom_xmat[g]
+                          .reshape(3, 3).T)
+        cloud = np.concatenate(points)
+        return cloud.min(axis=0), cloud.max(axis=0)
+
     @staticmethod
-    def blueprint() -> rrb.Blueprint:
-        """Viewer layout: large 3D scene over the pin-tension bar chart on the left, the
-        time-series panels stacked on the right."""
+    def framing(low: np.ndarray, high: np.ndarray) -> tuple[list[float], list[float]]:
+        """Eye position and look target [m] that frame the world box (low, high) in the 3D
+        view: from the −y side, slightly above, far enough that the box's length fills
+        about two thirds of a landscape view (checked on screenshots of the viewer)."""
+        low, high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
+        center = 0.5 * (low + high)
+        length = float(high[0] - low[0])
+        eye = center + length * np.array([0.0, -EYE_DISTANCE_PER_LENGTH,
+                                          EYE_HEIGHT_PER_LENGTH])
+        return eye.tolist(), center.tolist()
+
+    @staticmethod
+    def blueprint(bounds: tuple[np.ndarray, np.ndarray] | None = None) -> rrb.Blueprint:
+        """Viewer layout: the 3D scene (framed on ``bounds``, default: the packaged track
+        at home) over the pin-tension bar chart on the left, the time-series panels stacked
+        on the right."""
         def plot(origin: str, name: str) -> rrb.TimeSeriesView:
             return rrb.TimeSeriesView(origin=origin, name=name,
                                       plot_legend=rrb.PlotLegend(visible=True))
 
+        position, target = PlaybackRecorder.framing(*(bounds or HOME_SCENE_BOUNDS_M))
         scene = rrb.Spatial3DView(
             origin="scene", name="Track",
-            eye_controls=rrb.EyeControls3D(position=[0.0, -9.0, 2.0],
-                                           look_target=[0.0, 0.0, 0.6],
+            eye_controls=rrb.EyeControls3D(position=position, look_target=target,
                                            eye_up=[0.0, 0.0, 1.0],
                                            tracking_entity="scene/chassis"))
+        # the grid brings the y tick labels [kN]; the legend would only repeat the entity
+        bars = rrb.BarChartView(origin="plots/pin_tension",
+                                name="Pin tension [kN] (y) by pin index 0..81 (x)",
+                                plot_legend=rrb.PlotLegend(visible=False),
+                                background=rrb.archetypes.PlotBackground(show_grid=True))
         return rrb.Blueprint(
             rrb.Horizontal(
-                rrb.Vertical(
-                    scene,
-                    rrb.BarChartView(origin="plots/pin_tension",
-                                     name="Pin tension [kN] by pin index"),
-                    row_shares=[3.0, 1.0]),
+                rrb.Vertical(scene, bars, row_shares=[2.0, 1.0]),
                 rrb.Vertical(
                     plot("plots/tension", "Tension [kN]"),
                     plot("plots/pressure", "Pressures [MPa]"),

@@ -74,6 +74,7 @@ COLUMN_UNITS: dict[str, str] = {
 """Contract columns of a closed-loop run in order, with their units ("1": dimensionless)."""
 
 INT_COLUMNS = {"valve_mode": pa.int8()}
+NUMPY_TYPES = {pa.float64(): np.float64, pa.int8(): np.int8}
 RUN_KEYS = ("scenario", "architecture", "controller", "estimator", "seed", "trackmj_version",
             "machine")
 TIMESERIES = "timeseries.parquet"
@@ -85,6 +86,30 @@ METRICS = "metrics.json"
 class ResultDirectoryError(OSError):
     """An output directory cannot take a result (a file, not writable, someone else's
     directory, or locked by another writer); the message says which and why."""
+
+
+def _arrow_array(values: np.ndarray, dtype: pa.DataType) -> pa.Array:
+    """1-D numpy array as an Arrow array of ``dtype`` (NaN stays a value, not a null).
+
+    Built from the array's buffer rather than with ``pa.array``, which imports pandas when
+    it is installed (~0.5 s on the first run of every process, e.g. each Dask worker)."""
+    values = np.ascontiguousarray(values, dtype=NUMPY_TYPES[dtype])
+    if values.ndim != 1:
+        raise ValueError(f"columns are 1-D, got shape {values.shape}")
+    return pa.Array.from_buffers(dtype, len(values), [None, pa.py_buffer(values)])
+
+
+def _numpy(column: pa.ChunkedArray) -> np.ndarray:
+    """A column as a read-only numpy view of its buffer (float64 and int8 without nulls;
+    anything else through ``to_numpy``, which imports pandas when it is installed)."""
+    array = column.combine_chunks()
+    dtype = NUMPY_TYPES.get(array.type)
+    if dtype is None or array.null_count:
+        return array.to_numpy(zero_copy_only=False)
+    view = np.frombuffer(array.buffers()[1], dtype=dtype, count=len(array),
+                         offset=array.offset * np.dtype(dtype).itemsize)
+    view.flags.writeable = False
+    return view
 
 
 def make_table(columns: Mapping[str, np.ndarray], units: Mapping[str, str],
@@ -106,7 +131,7 @@ def make_table(columns: Mapping[str, np.ndarray], units: Mapping[str, str],
         values = np.asarray(columns[name])
         if dtype == pa.int8():
             values = np.rint(values).astype(np.int8)
-        arrays.append(pa.array(values, type=dtype))
+        arrays.append(_arrow_array(values, dtype))
         fields.append(pa.field(name, dtype, metadata={"unit": units[name]}))
     meta = {str(k): str(v) for k, v in metadata.items()}
     return pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata=meta))
@@ -127,7 +152,18 @@ def run_metadata(scenario: str, architecture: str, controller: str, estimator: s
                    for k, v in extra.items()}
 
 
-@dataclass
+def _require(module: str, what: str, install: str) -> Any:
+    """Import optional ``module`` for ``what``; ImportError saying what to install."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise ImportError(f"{what} needs {module}, an optional dependency: "
+                          f"pip install '{install}'") from None
+
+
+@dataclass(repr=False)
 class Result:
     """One run: ``timeseries`` (Arrow table, contract above) and ``metrics`` (name -> value
     or table; names carry their units). Run identity is read from the table metadata."""
@@ -167,9 +203,45 @@ class Result:
         return {f.name: (f.metadata or {}).get(b"unit", b"").decode()
                 for f in self.timeseries.schema}
 
+    def __repr__(self) -> str:
+        meta, rows = self.metadata, self.timeseries.num_rows
+        rmse = self.metrics.get("rmse_N")
+        tail = f", rmse_N={rmse:.4g}" if isinstance(rmse, float) else ""
+        return (f"Result({meta.get('scenario', '?')} {meta.get('architecture', '?')} "
+                f"{meta.get('controller', '?')}/{meta.get('estimator', '?')} seed "
+                f"{meta.get('seed', '?')}, {rows} rows x {self.timeseries.num_columns} columns"
+                f", {len(self.metrics)} metrics{tail})")
+
+    def to_pandas(self) -> Any:
+        """The timeseries as a :class:`pandas.DataFrame` (needs ``pip install
+        'trackmj[pandas]'``).
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per 1 ms step, the contract columns in SI; ``df.attrs["units"]`` maps
+            each column to its unit, ``df.attrs["run"]`` holds the run metadata (scenario,
+            architecture, controller, estimator, seed, ...) and ``df.attrs["metrics"]``
+            the metrics.
+        """
+        _require("pandas", "Result.to_pandas()", "'trackmj[pandas]'")
+        frame = self.timeseries.to_pandas()
+        frame.attrs["units"] = self.units
+        frame.attrs["run"] = self.metadata
+        frame.attrs["metrics"] = dict(self.metrics)
+        return frame
+
+    def to_polars(self) -> Any:
+        """The timeseries as a :class:`polars.DataFrame` (needs ``pip install
+        'trackmj[polars]'``);
+        polars keeps no units on a frame: they are :attr:`units`."""
+        polars = _require("polars", "Result.to_polars()", "'trackmj[polars]'")
+        return polars.from_arrow(self.timeseries)
+
     def columns(self) -> dict[str, np.ndarray]:
-        """Column name -> numpy array (e.g. for :func:`trackmj.metrics.compute_metrics`)."""
-        return {n: self.timeseries.column(n).to_numpy() for n in self.timeseries.column_names}
+        """Column name -> numpy array (e.g. for :func:`trackmj.metrics.compute_metrics`);
+        read-only views of the table's buffers."""
+        return {n: _numpy(self.timeseries.column(n)) for n in self.timeseries.column_names}
 
 
 # ----------------------------------------------------------------------------- writing
@@ -340,14 +412,39 @@ def write_result(result: Result, out_dir: str | Path, *, csv: bool = False,
 
 
 def read_result(run_dir: str | Path) -> Result:
-    """Read a result directory written by :func:`write_result`.
+    """Read a result directory written by :func:`write_result` (``trackmj run --out``).
 
-    FileNotFoundError if ``metrics.json`` or the Parquet file is absent.
+    Parameters
+    ----------
+    run_dir : str or Path
+        The directory; it holds ``metrics.json`` and ``timeseries.parquet`` (see the module
+        docstring for the layout).
+
+    Returns
+    -------
+    Result
+        The timeseries with its units and run metadata (``result.units``,
+        ``result.metadata``) and the metrics; non-finite metrics (``null`` in the JSON)
+        come back as NaN.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``metrics.json`` or ``timeseries.parquet`` is missing (an incomplete directory).
+
+    Notes
+    -----
+    Other tools read the same files directly: ``pandas.read_parquet(run_dir /
+    "timeseries.parquet")``, or the optional plain CSV ``pandas.read_csv(run_dir /
+    "timeseries.csv")`` (one header row; the units are in ``units.json``, never in the
+    CSV, so any CSV reader sees numbers only).
     """
     run_dir = Path(run_dir)
     if not (run_dir / METRICS).is_file():
         raise FileNotFoundError(f"{run_dir}: no {METRICS}; not a complete result directory")
+    if not (run_dir / TIMESERIES).is_file():
+        raise FileNotFoundError(f"{run_dir}: no {TIMESERIES}; not a complete result "
+                                "directory")
     doc = json.loads((run_dir / METRICS).read_text())
     table = pq.read_table(run_dir / TIMESERIES)
     return Result(timeseries=table, metrics=_json_read(doc["metrics"]))
-

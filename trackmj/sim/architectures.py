@@ -24,7 +24,9 @@ dp-a sees them through the replayed tp track load.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import hashlib
 import math
 from dataclasses import dataclass
 
@@ -37,7 +39,7 @@ from trackmj.control.params import ControlConfig
 from trackmj.elements import ConstantForce, IdealForceSource
 from trackmj.hydraulics import HydraulicTensioner
 from trackmj.plant import TrackPlant
-from trackmj.ports import Mechanics
+from trackmj.ports import ForceLaw, Mechanics
 from trackmj.results import Result
 from trackmj.sim.config import reduced_plant_params
 from trackmj.sim.plants import CoupledPlant, EquivalentIdlerMechanics, ValvedElement
@@ -68,15 +70,36 @@ class Assembly:
     initial_estimate: NDArray[np.float64]
 
 
+SETTLED_KEPT = 4
+"""Settled track states kept per process (see :func:`_settled_track`)."""
+_settled: dict[tuple, tuple[mujoco.MjData, np.ndarray, ForceLaw | None]] = {}
+
+
 def _settled_track(setup: RunSetup, force_N: float) -> TrackPlant:
     """The track of the run (terrain of the seed, W5 contact scale), settled standing under
-    ``force_N`` [N] on the idler for SETTLE_S, with its clock reset to 0."""
-    model = mujoco.MjModel.from_xml_string(setup.mjcf(setup.scenario.terrain_profile(
-        setup.seed, setup.duration_s)))
-    plant = TrackPlant(model, setup.model)
-    if setup.variant.contact_stiffness_scale != 1.0:
-        plant.scale_contact_stiffness(setup.variant.contact_stiffness_scale)
-    plant.run(ConstantForce(force_N, SETTLE_DAMPING_N_S_M), SETTLE_S)
+    ``force_N`` [N] on the idler for SETTLE_S, with its clock reset to 0.
+
+    The settled state is kept per process for the same MJCF, contact scale, force and model
+    parameters (runs that differ only in hydraulics, control, controller, or the seed on
+    flat ground): a later run restores it (every MjData buffer, the tensioner's bias
+    parameters, the last force law) instead of settling again, bit for bit the same."""
+    text = setup.mjcf(setup.scenario.terrain_profile(setup.seed, setup.duration_s))
+    plant = TrackPlant(mujoco.MjModel.from_xml_string(text), setup.model)
+    scale = setup.variant.contact_stiffness_scale
+    if scale != 1.0:
+        plant.scale_contact_stiffness(scale)
+    key = (hashlib.sha256(text.encode()).digest(), scale, force_N, setup.model)
+    kept = _settled.get(key)
+    if kept is None:
+        plant.run(ConstantForce(force_N, SETTLE_DAMPING_N_S_M), SETTLE_S)
+        if len(_settled) >= SETTLED_KEPT:
+            del _settled[next(iter(_settled))]
+        _settled[key] = (copy.copy(plant.data), plant.model.actuator_biasprm.copy(),
+                         plant.last_law)
+    else:
+        data, biasprm, plant.last_law = kept
+        mujoco.mj_copyData(plant.data, plant.model, data)
+        plant.model.actuator_biasprm[:] = biasprm
     plant.time_s = 0.0
     return plant
 

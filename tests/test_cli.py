@@ -1,0 +1,111 @@
+"""The command line explains itself: version, scenarios, keys, named option errors, help
+with defaults and choices, view's exit code, model info."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+
+import pytest
+
+import trackmj
+from trackmj.cli import main
+from trackmj.scenarios import BUILTIN, load_scenario
+
+
+def test_version_and_python_dash_m() -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    out = subprocess.run([sys.executable, "-m", "trackmj", "--version"], capture_output=True,
+                         text=True, check=True).stdout
+    assert out.strip() == f"trackmj {trackmj.__version__}"
+
+
+def test_scenarios_lists_each_builtin_on_one_line(capsys) -> None:
+    assert main(["scenarios"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    for name in BUILTIN:
+        (line,) = [ln for ln in lines if ln.startswith(name + " ")]
+        assert load_scenario(name).title in line
+
+
+def test_unknown_scenario_answers_with_the_names_that_exist(capsys) -> None:
+    assert main(["run", "W9", "--duration", "1.2"]) == 2
+    err = capsys.readouterr().err
+    assert "W9" in err and "W1, W2, W3, W4, W5" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize(("argv", "option"), [
+    (["run", "W1", "--seed", "-1"], "--seed"),
+    (["run", "W1", "--duration", "0"], "--duration"),
+    (["compare", "W1", "--workers", "0"], "--workers"),
+    (["run", "W1", "--arch", "tq"], "--arch"),
+])
+def test_bad_option_values_name_the_option(capsys, argv, option) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    assert f"argument {option}" in capsys.readouterr().err
+
+
+def test_help_shows_defaults_and_choices(capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["run", "-h"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "{tp,tp-weak,dp-a,dp-b}" in text and "{nmpc,lmpc,pid}" in text
+    assert "noise and terrain seed (default: 0)" in text
+    assert "coupling architecture (default: tp)" in text
+
+
+def test_keys_lists_the_set_keys_with_units_and_ranges(capsys) -> None:
+    assert main(["keys", "hydraulics"]) == 0
+    out = capsys.readouterr().out
+    assert "hydraulics.fluid.bulk_modulus_Pa: a number, Pa, (0, 1e+11]" in out
+    assert main(["keys", "pneumatics"]) == 2
+
+
+def test_view_without_a_display_fails_with_a_reason(tmp_path, monkeypatch, capsys) -> None:
+    rrd = tmp_path / "run.rrd"
+    rrd.write_bytes(b"")
+    monkeypatch.setattr(sys, "platform", "linux")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", str(rrd)]) == 1
+    assert "no display" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("viewer", "code"), [("import sys; sys.exit(4)", 1),
+                                              ("import time; time.sleep(30)", 0)])
+def test_view_exit_code_follows_the_viewer(tmp_path, monkeypatch, viewer, code) -> None:
+    """A viewer that dies at start makes ``view`` fail; one that stays up is success."""
+    rrd = tmp_path / "run.rrd"
+    rrd.write_bytes(b"")
+    monkeypatch.setenv("DISPLAY", ":99")
+    started = []
+
+    def fake_viewer(path):
+        started.append(subprocess.Popen([sys.executable, "-c", viewer]))
+        return started[-1]
+
+    monkeypatch.setattr("trackmj.playback.open_viewer", fake_viewer)
+    monkeypatch.setattr("trackmj.cli.VIEWER_START_S", 1.0)
+    try:
+        assert main(["view", str(rrd)]) == code
+    finally:
+        started[0].kill()
+        started[0].wait()
+
+
+def test_model_info_columns_are_aligned_and_the_mass_is_explained(capsys) -> None:
+    from trackmj.plant import TrackPlant
+
+    assert main(["model", "info"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    starts = {len(line) - len(line.lstrip()) if line.startswith(" ") else
+              re.match(r"\S+( \S+)*\s{2,}", line).end() for line in lines}
+    assert len(starts) == 1, lines
+    (mass,) = [ln for ln in lines if ln.startswith("mass ")]
+    plant = TrackPlant.load()
+    assert f"{plant.model.body_mass.sum():.0f} kg: one track side" in mass
