@@ -55,7 +55,7 @@ def schedule(setup: RunSetup, horizon_steps: int, period_s: float) -> Schedule:
     t_start = t_end - h
     speed = sc.track_speed_m_s(t_end)
     pull, down = sc.hitch_force_N(t_start)
-    supply = sc.supply_pressure_Pa(t_end)
+    supply = sc.supply_setpoint_Pa(t_end, setup.hydraulics.supply.setpoint_Pa)
     inputs = [StepInputs(*row) for row in zip(speed.tolist(), pull.tolist(), down.tolist(),
                                                supply.tolist(), strict=True)]
     t_control = h * np.arange(0, steps, steps_per_period(period_s, h))
