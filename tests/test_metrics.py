@@ -182,7 +182,7 @@ def test_compute_metrics_standard_set() -> None:
     assert out["chassis_acc_rms_8_12Hz_m_s2"] == pytest.approx(1 / math.sqrt(2), rel=0.01)
     assert out["valve_switches"] == 2.0
     assert out["valve_switch_rate_Hz"] == pytest.approx(2 / 19.0)
-    assert out["supply_energy_J"] == pytest.approx(300.0, rel=1e-3)
+    assert "supply_energy_J" not in out    # the energy breakdown is trackmj.energy's
     assert out["interface_energy_residual_J"] == pytest.approx(0.02)
     assert out["constraint_violation_s"] == 0.0
     assert out["disturbance_peak_error_N"] == pytest.approx(200.0, rel=1e-3)

@@ -302,9 +302,11 @@ def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *
     - ``constraint_violation_s``: time with tension outside [force_min_N, force_max_N].
     - ``valve_switch_rate_Hz``: valve mode changes per second; ``valve_switches``: count.
     - ``control_increment_rms``: RMS of Δu per control period (u dimensionless).
-    - ``supply_energy_J``: e_supply_J(end) − e_supply_J(evaluation start).
     - ``interface_energy_residual_J``: p_work_J − mech_work_J at the end (∫Σp·A·v dt vs
       ∫F·v dt; zero for a power-conserving interface).
+
+    The energy breakdown of a run (``energy_J``, pump to track) comes from the tensioner's
+    own ledger, not from the timeseries: :mod:`trackmj.energy`.
     - ``solve_time_median_s``, ``solve_time_max_s``, ``solve_failures``: if solve times given.
     - ``real_time_factor``: simulated time / ``wall_time_s`` if given (> 1: faster than real).
     """
@@ -367,9 +369,6 @@ def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *
     stride = max(1, round(w.control_period_s / sample_period(t)))
     out["control_increment_rms"] = control_increment_rms(np.asarray(columns["u"])[ev_mask],
                                                          stride)
-    e_sup = np.asarray(columns["e_supply_J"], dtype=float)
-    out["supply_energy_J"] = (float(e_sup[-1] - e_sup[ev_mask][0]) if ev_mask.any()
-                              else math.nan)
     out["interface_energy_residual_J"] = float(np.asarray(columns["p_work_J"])[-1]
                                                - np.asarray(columns["mech_work_J"])[-1])
     if solve_times_s is not None:

@@ -171,6 +171,6 @@ def build_dp_b(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
     lag = 2.0 * math.pi / math.sqrt(oil_k / idler.mass_kg) / 4.0
     element = IdealForceSource(setup.force0_N, model.tension_rate_gain(setup.force0_N), lag,
                                2.0 * hyd.cylinder.viscous_friction_N_s_m, two_ah, two_ar,
-                               hyd.tank_pressure_Pa)
+                               hyd.tank_pressure_Pa, volume / hyd.fluid.bulk_modulus_Pa)
     return Assembly(CoupledPlant(track, element), track, element, track, cfg, model,
                     _estimate0(setup, track.stroke_m))

@@ -21,6 +21,8 @@ import numpy as np
 
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
+from trackmj.elements import IdealForceSource
+from trackmj.energy import energy_table, ideal_actuator_table
 from trackmj.hydraulics import HydraulicTensioner
 from trackmj.hydraulics.tensioner import NODE_NAMES
 from trackmj.machine import machine
@@ -186,6 +188,9 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
         m["interface_energy_residual_J"] = ledger.interface_residual_J
         m["friction_loss_J"] = ledger.friction_J
         m["ledger_balance_error_J"] = ledger.balance_error_J
+        m["energy_J"] = energy_table(ledger, asm.element.supply_model, setup.duration_s)
+    elif isinstance(asm.element, IdealForceSource):
+        m["energy_J"] = ideal_actuator_table(asm.element, setup.duration_s)
     m["controller_fallbacks"] = float(getattr(controller, "fallbacks", 0))
     m["controller_overruns"] = float(np.sum(np.array(recorder.solve_times_s)
                                             > controller.period_s))
