@@ -545,10 +545,10 @@ class HydraulicTensioner:
             a_pb = series_area(a_ener, met.rod_feed_area_m2)
             a_vl = series_area(a_l, met.head_branch_area_m2)
             a_vr = series_area(a_r, met.head_branch_area_m2)
-            self._state[k.GAIN:k.GAIN + 6] = (g(a_rest), g(a_ener), g(a_pb), g(a_rest),
-                                              g(a_vl), g(a_vr))
-            self._state[k.FRAC:k.FRAC + 3] = (_valve_share(a_ener, a_pb),
-                                              _valve_share(a_l, a_vl), _valve_share(a_r, a_vr))
+            # GAIN and FRAC are adjacent in the state: one assignment for both
+            self._state[k.GAIN:k.FRAC + 3] = (
+                g(a_rest), g(a_ener), g(a_pb), g(a_rest), g(a_vl), g(a_vr),
+                _valve_share(a_ener, a_pb), _valve_share(a_l, a_vl), _valve_share(a_r, a_vr))
 
 
 def _valve_share(valve_area_m2: float, series_area_m2: float) -> float:
