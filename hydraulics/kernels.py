@@ -31,8 +31,10 @@ C_PCR, C_LEAK         orifice critical pressure [Pa], head->rod leakage [m^3/(s�
 C_FLOOR, C_BAND       cavitation limiter: 0 at floor, 1 at floor + band [Pa]
 C_MU_OPEN, C_MU_WIDTH make-up check valves: crack pressure p_t − crack [Pa], opening band [Pa]
 C_K_MU                make-up valve orifice gain [m^3/(s·Pa^0.5)]
-C_REL_CRACK, C_REL_WIDTH, C_K_REL  relief S->T: crack [Pa], opening band [Pa], gain
-C_Q_PUMP              pump flow into the supply node [m^3/s] (0 with a prescribed supply)
+C_REL_CRACK, C_REL_WIDTH, C_K_REL  relief S->T: crack pressure of the safety relief
+                      (compensated, unloading; fixed_relief's relief cracks at the set-point)
+                      [Pa], opening band [Pa], orifice gain when fully open
+C_Q_PUMP              fixed pump: delivered flow [m^3/s] (fixed_relief; unloading when loaded)
 C_ACC_V0, C_ACC_P0    accumulator gas volume at precharge [m^3], precharge [Pa]
 C_P_ATM, C_ACC_N      atmospheric pressure [Pa abs], polytropic exponent [-]
 C_FRIC_C, C_FRIC_VS, C_FRIC_B  per-cylinder Coulomb force [N], tanh velocity [m/s],
@@ -40,7 +42,18 @@ C_FRIC_C, C_FRIC_VS, C_FRIC_B  per-cylinder Coulomb force [N], tanh velocity [m/
 C_ES_K, C_ES_C        per-cylinder end-stop stiffness [N/m], damping [N·s/m]
 C_TOL, C_MAX_ITER     Newton tolerance on |dp|∞ [Pa], iteration limit [-]
 C_V_CORR, C_MAX_CORR  NEPCE correction: min |v| [m/s], bound [N]
-C_PRESCRIBED          1.0 with a prescribed supply pressure, 0.0 with pump + accumulator
+C_PRESCRIBED          1.0 with a prescribed supply pressure (model "prescribed"), else 0.0
+C_MODEL               supply model: MODEL_PRESCRIBED, MODEL_FIXED_RELIEF,
+                      MODEL_COMPENSATED or MODEL_UNLOADING
+C_ACC                 1.0 if the gas accumulator sits on the supply node, else 0.0
+C_QG_MAX, C_DROOP     variable pump: geometric flow at full stroke [m^3/s]; compensator
+                      regulation range (full stroke at setting − droop, none at the setting) [Pa]
+C_TAU, C_K_PUMP_LEAK  variable pump: displacement time constant [s]; internal leakage
+                      Q_L = k·p_S [m^3/(s·Pa)]
+C_ETA_V, C_ETA_HM     pump volumetric efficiency (fixed pump; 1 for the variable pump, whose
+                      leakage is explicit) and hydro-mechanical efficiency [-]
+C_P_UNLOADED          unloading model: pump outlet pressure while unloaded [Pa]
+C_CUT_IN_REL          unloading model: cut-in pressure / cut-out pressure [-]
 ====================  ===========================================================
 
 ``state`` layout (offset, length: content [unit]):
@@ -51,7 +64,12 @@ VOL, 5                 node volumes V^k at the last completed stroke [m^3]
 VOIL, 1                accumulator oil volume V_oil,acc(p_S^k) [m^3]
 GAIN, 6                orifice gains of the step [m^3/(s·Pa^0.5)]: main P->A, A->T, P->B
                        (with the rod-feed restrictor), B->T, V_L, V_R (with restrictors)
-PS_NEXT, 1             prescribed supply pressure at the end of the step [Pa]
+FRAC, 3                valve share of the throttling loss of the series paths P->B + rod-feed
+                       restrictor, V_L + head restrictor, V_R + head restrictor [-]
+SET_NEXT, 1            supply set-point p_set(t_{k+1}) [Pa]: the prescribed pressure, the
+                       relief or compensator setting, the unloading valve's cut-out
+PUMP_X, 1              variable pump displacement x^k of the last completed step [-]
+LOADED, 1              unloading model: 1.0 while the pump charges, 0.0 while unloaded
 V_PREV, 1              start velocity of the previous force_law [m/s]
 CARRY, 1               cumulative interface residual E_c [J]
 LAW, 2                 force law of the step: F0 [N], Z [N·s/m]
@@ -60,7 +78,7 @@ P_STAR, 5              strong: pressures solved at the predicted velocity v* [Pa
 DPDV, 5                strong: dp/dv at v* [Pa·s/m]
 V_STAR, 1              strong: predicted end-of-step velocity v* [m/s]
 JAC, 18                factorised Jacobian of the last Newton solve (see ``_factorise``)
-FLOWS, 12              flows of the last completed step, FLOW_NAMES order [m^3/s]
+FLOWS, 13              flows of the last completed step, FLOW_NAMES order [m^3/s]
 ITERS, 1               corrections of the last solve (Newton or chord) [-]
 BACKTRACKS, 1          line-search halvings since the last force_law [-]
 STEP_BACKTRACKS, 1     halvings in all solves of the last completed step [-]
@@ -70,9 +88,25 @@ REC, 6                 last completed step: t [s], stroke [m], velocity [m/s], f
                        [N] (opposes motion), end-stop force [N] (> 0 outward), piston
                        force A_h(p_HL + p_HR) − 2·A_r·p_B [N]
 LOG, 9                 LogRow of the last completed step (see ``tensioner.LogRow``)
-STEP_LEDGER, 19        energy terms of the last step [J], LEDGER_FIELDS order
-LEDGER, 19             cumulative energy terms [J], LEDGER_FIELDS order
+STEP_LEDGER, 30        energy terms of the last step [J], LEDGER_FIELDS order
+LEDGER, 30             cumulative energy terms [J], LEDGER_FIELDS order
 =====================  ==========================================================
+
+Supply models (supply row of the residual, node S). ``prescribed``: p_S = p_set(t_{k+1}), an
+ideal pressure source. The others integrate
+(V_S/β)(p_S − p_S^k) + V_oil,acc(p_S) − V_oil,acc(p_S^k) = h·(Q_pump − Q_PA − Q_PB − Q_rel):
+
+* fixed_relief: Q_pump = Q_d (fixed pump), gas accumulator, relief cracking at p_set;
+* compensated: Q_pump = Q_g,max·x_{k+1} − k_L·p_S with x_{k+1} = (x_k + a·x*)/(1 + a),
+  a = h/τ, x* = clip((p_set − p_S)/droop, 0, 1) (backward Euler of τ·dx/dt = x* − x); no
+  accumulator; safety relief;
+* unloading: Q_pump = Q_d while loaded, 0 while unloaded (the pump then circulates to tank
+  at p_unloaded); unloads once p_S reaches p_set (cut-out), loads again once p_S falls to
+  cut_in_rel·p_set; the state switches between steps; gas accumulator; safety relief.
+
+Pump shaft energy per step (from the prime mover): fixed pump h·p_out·Q_d/(η_v·η_hm) with
+p_out = p_S loaded and p_unloaded unloaded; variable pump h·p_S·Q_g/η_hm with the geometric
+flow Q_g = Q_pump + k_L·p_S; an ideal source h·p_S·(Q_PA + Q_PB).
 """
 
 from __future__ import annotations
@@ -86,27 +120,39 @@ from numba import njit
 (C_AH, C_AR, C_VOL_A, C_VOL_S, C_VOL_DH, C_VOL_DR, C_VOL_LB, C_S_MAX, C_BETA, C_PT, C_PCR,
  C_LEAK, C_FLOOR, C_BAND, C_MU_OPEN, C_MU_WIDTH, C_K_MU, C_REL_CRACK, C_REL_WIDTH, C_K_REL,
  C_Q_PUMP, C_ACC_V0, C_ACC_P0, C_P_ATM, C_ACC_N, C_FRIC_C, C_FRIC_VS, C_FRIC_B, C_ES_K,
- C_ES_C, C_TOL, C_MAX_ITER, C_V_CORR, C_MAX_CORR, C_PRESCRIBED) = range(35)
-N_CONST = 35
+ C_ES_C, C_TOL, C_MAX_ITER, C_V_CORR, C_MAX_CORR, C_PRESCRIBED, C_MODEL, C_ACC, C_QG_MAX,
+ C_DROOP, C_TAU, C_K_PUMP_LEAK, C_ETA_V, C_ETA_HM, C_P_UNLOADED, C_CUT_IN_REL) = range(45)
+N_CONST = 45
+MODEL_PRESCRIBED, MODEL_FIXED_RELIEF, MODEL_COMPENSATED, MODEL_UNLOADING = 0.0, 1.0, 2.0, 3.0
+MODEL_CODES = {"prescribed": MODEL_PRESCRIBED, "fixed_relief": MODEL_FIXED_RELIEF,
+               "compensated": MODEL_COMPENSATED, "unloading": MODEL_UNLOADING}
+"""C_MODEL value of each supply model."""
 
-LEDGER_FIELDS = ("supply_J", "to_tank_J", "throttle_main_J", "throttle_VL_J",
-                 "throttle_VR_J", "throttle_relief_J", "throttle_makeup_J", "leakage_J",
-                 "friction_J", "endstop_J", "numerical_J", "volume_term_J", "piston_work_J",
-                 "mech_work_J", "interface_residual_J", "oil_energy_J", "gas_energy_J",
-                 "oil_energy_start_J", "gas_energy_start_J")
+LEDGER_FIELDS = ("pump_J", "pump_volumetric_J", "pump_mechanical_J", "unloaded_J",
+                 "delivered_J", "relief_J", "circuit_J", "to_tank_J", "throttle_main_J",
+                 "throttle_rod_restrictor_J", "throttle_VL_J", "throttle_VR_J",
+                 "throttle_head_restrictor_L_J", "throttle_head_restrictor_R_J",
+                 "throttle_makeup_J", "leakage_J", "friction_J", "endstop_J",
+                 "numerical_supply_J", "numerical_J", "volume_term_J", "piston_work_J",
+                 "mech_work_J", "interface_residual_J", "oil_supply_energy_J", "oil_energy_J",
+                 "gas_energy_J", "oil_supply_energy_start_J", "oil_energy_start_J",
+                 "gas_energy_start_J")
 """EnergyLedger fields in array order; the first N_FLOW_TERMS accumulate step by step."""
-(L_SUPPLY, L_TO_TANK, L_THROTTLE_MAIN, L_THROTTLE_VL, L_THROTTLE_VR, L_THROTTLE_RELIEF,
- L_THROTTLE_MAKEUP, L_LEAKAGE, L_FRICTION, L_ENDSTOP, L_NUMERICAL, L_VOLUME_TERM,
- L_PISTON_WORK, L_MECH_WORK, L_INTERFACE_RESIDUAL, L_OIL_ENERGY, L_GAS_ENERGY,
- L_OIL_ENERGY_START, L_GAS_ENERGY_START) = range(19)
-N_LEDGER = 19
-N_FLOW_TERMS = 15
+(L_PUMP, L_PUMP_VOLUMETRIC, L_PUMP_MECHANICAL, L_UNLOADED, L_DELIVERED, L_RELIEF, L_CIRCUIT,
+ L_TO_TANK, L_THROTTLE_MAIN, L_THROTTLE_ROD_RESTRICTOR, L_THROTTLE_VL, L_THROTTLE_VR,
+ L_THROTTLE_HEAD_RESTRICTOR_L, L_THROTTLE_HEAD_RESTRICTOR_R, L_THROTTLE_MAKEUP, L_LEAKAGE,
+ L_FRICTION, L_ENDSTOP, L_NUMERICAL_SUPPLY, L_NUMERICAL, L_VOLUME_TERM, L_PISTON_WORK,
+ L_MECH_WORK, L_INTERFACE_RESIDUAL, L_OIL_SUPPLY_ENERGY, L_OIL_ENERGY, L_GAS_ENERGY,
+ L_OIL_SUPPLY_ENERGY_START, L_OIL_ENERGY_START, L_GAS_ENERGY_START) = range(30)
+N_LEDGER = 30
+N_FLOW_TERMS = 24
 
-P, VOL, VOIL, GAIN, PS_NEXT, V_PREV, CARRY, LAW, CORRECTION = 0, 5, 10, 11, 17, 18, 19, 20, 22
-P_STAR, DPDV, V_STAR, JAC, FLOWS, ITERS = 23, 28, 33, 34, 52, 64
-BACKTRACKS, STEP_BACKTRACKS, BACKTRACKS_TOTAL, LAST_DP, REC, LOG = 65, 66, 67, 68, 69, 75
-STEP_LEDGER, LEDGER = 84, 103
-N_STATE = 122
+P, VOL, VOIL, GAIN, FRAC, SET_NEXT, PUMP_X, LOADED = 0, 5, 10, 11, 17, 20, 21, 22
+V_PREV, CARRY, LAW, CORRECTION, P_STAR, DPDV, V_STAR, JAC = 23, 24, 25, 27, 28, 33, 38, 39
+FLOWS, ITERS, BACKTRACKS, STEP_BACKTRACKS, BACKTRACKS_TOTAL, LAST_DP = 57, 70, 71, 72, 73, 74
+REC, LOG, STEP_LEDGER, LEDGER = 75, 81, 90, 120
+N_STATE = 150
+N_FLOWS = 13
 
 OK, NOT_CONVERGED, LEFT_PHYSICS = 0, 1, 2
 MAX_BACKTRACKS = 12  # line-search halvings per Newton iteration (alpha >= 2^-12)
@@ -242,12 +288,31 @@ def _nodes(state: np.ndarray, at: int) -> tuple[float, float, float, float, floa
 
 
 @njit(cache=True)
-def _oil_energy(const: np.ndarray, p: tuple, V: tuple) -> float:
-    """Stored oil energy Σ p²V/(2β) [J] (the supply node only with an accumulator)."""
+def _oil_energy(const: np.ndarray, p: tuple, V: tuple) -> tuple[float, float]:
+    """Stored oil energy p²V/(2β) [J] of the circuit nodes (line A, heads, rod node) and of
+    the supply node (0 with a prescribed supply pressure, which is no state)."""
+    ib2 = 0.5 / const[C_BETA]
     e = p[0] * p[0] * V[0] + (p[1] * p[1] + p[2] * p[2]) * V[1] + p[3] * p[3] * V[3]
-    if const[C_PRESCRIBED] == 0.0:
-        e += p[4] * p[4] * V[4]
-    return e * (0.5 / const[C_BETA])
+    es = 0.0 if const[C_PRESCRIBED] != 0.0 else p[4] * p[4] * V[4] * ib2
+    return e * ib2, es
+
+
+@njit(cache=True)
+def _variable_pump(const: np.ndarray, state: np.ndarray, h: float,
+                   pS: float) -> tuple[float, float, float]:
+    """Pressure-compensated pump over a step of h [s] ending at supply pressure pS [Pa]:
+    (net delivery Q_g,max·x_{k+1} − k_L·pS [m^3/s], its d/dpS [m^3/(s·Pa)], x_{k+1} [-])."""
+    a = h / const[C_TAU]
+    droop = const[C_DROOP]
+    target = (state[SET_NEXT] - pS) / droop
+    dtarget = -1.0 / droop
+    if target <= 0.0:
+        target, dtarget = 0.0, 0.0
+    elif target >= 1.0:
+        target, dtarget = 1.0, 0.0
+    x1 = (state[PUMP_X] + a * target) / (1.0 + a)
+    qg, k_leak = const[C_QG_MAX], const[C_K_PUMP_LEAK]
+    return qg * x1 - k_leak * pS, qg * a / (1.0 + a) * dtarget - k_leak, x1
 
 
 # ----------------------------------------------------------- residual and solve
@@ -258,13 +323,14 @@ def _evaluate(const: np.ndarray, state: np.ndarray, h: float, c: tuple, v: float
 
     R: R/h of the five nodes [m^3/s]; c = V_i(s_{k+1})/(β·h) [m^3/(s·Pa)]. J: the nonzero
     Jacobian entries ∂R/∂p (JAA, JAHL, JAHR, JAS, JHA, JHH, JRA, JRR, JBB, JBS, JSS, JSA,
-    JSB) besides J_HB = J_RB = J_BH = J_BR = −leak (H, R = heads L, R). flows: the twelve
-    FLOW_NAMES flows [m^3/s]. With a prescribed supply the supply row is p_S = p_S(t_{k+1}).
+    JSB) besides J_HB = J_RB = J_BH = J_BR = −leak (H, R = heads L, R). flows: the thirteen
+    FLOW_NAMES flows [m^3/s]. With a prescribed supply the supply row is p_S = p_set(t_{k+1});
+    the other supply models: see the module docstring.
     """
     pA, pHL, pHR, pB, pS = p
     prescribed = const[C_PRESCRIBED] != 0.0
     if prescribed:
-        pS = state[PS_NEXT]
+        pS = state[SET_NEXT]
     pT, pcr, leak = const[C_PT], const[C_PCR], const[C_LEAK]
     KPA, KAT, KPB, KBT = state[GAIN], state[GAIN + 1], state[GAIN + 2], state[GAIN + 3]
     KVL, KVR = state[GAIN + 4], state[GAIN + 5]
@@ -289,28 +355,37 @@ def _evaluate(const: np.ndarray, state: np.ndarray, h: float, c: tuple, v: float
     rHL = cHL * (pHL - state[P + 1]) - qVL + qlL - qmL + Ahv
     rHR = cHR * (pHR - state[P + 2]) - qVR + qlR - qmR + Ahv
     rB = cB * (pB - state[P + 3]) - qPB + qBT - qlL - qlR - qmB - Arv2
-    qrel = 0.0
+    qrel = qpump = 0.0
     if prescribed:
         rS, JSS, JSA, JSB = 0.0, 1.0, 0.0, 0.0
     else:
+        model = const[C_MODEL]
+        dpump = 0.0
+        if model == MODEL_COMPENSATED:
+            qpump, dpump, _ = _variable_pump(const, state, h, pS)
+        elif model == MODEL_FIXED_RELIEF or state[LOADED] != 0.0:
+            qpump = const[C_Q_PUMP]
+        crack = state[SET_NEXT] if model == MODEL_FIXED_RELIEF else const[C_REL_CRACK]
         drel = 0.0
-        if pS > const[C_REL_CRACK]:  # relief S -> T, opening over its band (smoothstep)
+        if pS > crack:  # relief S -> T, opening over its band (smoothstep)
             w = const[C_REL_WIDTH]
-            s, ds = smoothstep((pS - const[C_REL_CRACK]) / w)
+            s, ds = smoothstep((pS - crack) / w)
             f, df = orifice_flow(pS - pT, const[C_K_REL], pcr)
             qrel, drel = s * f, ds / w * f + s * df
-        voil1, dvoil = accumulator_oil_volume(pS, const[C_ACC_V0], const[C_ACC_P0],
-                                              const[C_P_ATM], const[C_ACC_N])
+        voil1 = dvoil = 0.0
+        if const[C_ACC] != 0.0:
+            voil1, dvoil = accumulator_oil_volume(pS, const[C_ACC_V0], const[C_ACC_P0],
+                                                  const[C_P_ATM], const[C_ACC_N])
         ih = 1.0 / h
         rS = (cS * (pS - state[P + 4]) + (voil1 - state[VOIL]) * ih
-              - const[C_Q_PUMP] + qPA + qPB + qrel)
-        JSS = cS + dvoil * ih + aPA_S + aPB_S + drel
+              - qpump + qPA + qPB + qrel)
+        JSS = cS + dvoil * ih + aPA_S + aPB_S + drel - dpump
         JSA, JSB = aPA_A, aPB_B
     J = (cA - aPA_A + aAT_A + aVL_A + aVR_A, aVL_H, aVR_H, -aPA_S,
          -aVL_A, cHL - aVL_H - dmL + leak, -aVR_A, cHR - aVR_H - dmR + leak,
          cB - aPB_B + aBT_B - dmB + 2.0 * leak, -aPB_S, JSS, JSA, JSB)
     return ((rA, rHL, rHR, rB, rS), J,
-            (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR))
+            (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR, qpump))
 
 
 @njit(cache=True)
@@ -414,7 +489,7 @@ def _newton(const: np.ndarray, state: np.ndarray, h: float, s1: float, v: float,
         d = _solve(F, R, leak)
         n_prev, full = n, alpha == 1.0
     if const[C_PRESCRIBED] != 0.0:
-        p = (p[0], p[1], p[2], p[3], state[PS_NEXT])
+        p = (p[0], p[1], p[2], p[3], state[SET_NEXT])
     return converged, p, it, backtracks, F, flows, V, n
 
 
@@ -440,7 +515,7 @@ def _chord(const: np.ndarray, state: np.ndarray, h: float, s1: float, v: float, 
         p = (p[0] - d[0], p[1] - d[1], p[2] - d[2], p[3] - d[3], p[4] - d[4])
         if n < tol:
             if const[C_PRESCRIBED] != 0.0:
-                p = (p[0], p[1], p[2], p[3], state[PS_NEXT])
+                p = (p[0], p[1], p[2], p[3], state[SET_NEXT])
             return True, p, it, flows, V
         n_prev = n
     return False, p, MAX_CHORD, flows, V
@@ -469,11 +544,55 @@ def _enter(state: np.ndarray, i: int, x: float, accumulate: bool) -> None:
 
 
 @njit(cache=True)
+def _book_supply(const: np.ndarray, state: np.ndarray, pS: float, q_out: float, h: float,
+                 accumulate: bool) -> None:
+    """Book the source side of a step ending at supply pressure pS [Pa] with the supply
+    node's outflow q_out = Q_PA + Q_PB [m^3/s]: pump shaft energy, pump losses, unloaded
+    circulation, delivered energy (into the supply node); commit the variable pump's
+    displacement and switch the unloading valve for the next step."""
+    model, sl, a = const[C_MODEL], STEP_LEDGER, accumulate
+    delivered = vol = mech = unloaded = 0.0
+    if model == MODEL_PRESCRIBED:   # ideal pressure source
+        delivered = h * pS * q_out
+        pump = delivered
+    elif model == MODEL_COMPENSATED:
+        q, _, x1 = _variable_pump(const, state, h, pS)
+        geometric = h * pS * (q + const[C_K_PUMP_LEAK] * pS)   # p_S·Q_g·h
+        delivered = h * pS * q
+        vol = geometric - delivered                              # leakage k_L·p_S²·h
+        pump = geometric / const[C_ETA_HM]
+        mech = pump - geometric
+        state[PUMP_X] = x1
+    else:
+        loaded = model == MODEL_FIXED_RELIEF or state[LOADED] != 0.0
+        p_out = pS if loaded else const[C_P_UNLOADED]
+        hydraulic = h * p_out * const[C_Q_PUMP]
+        if loaded:
+            delivered = hydraulic
+        else:
+            unloaded = hydraulic
+        geometric = hydraulic / const[C_ETA_V]
+        vol = geometric - hydraulic
+        pump = geometric / const[C_ETA_HM]
+        mech = pump - geometric
+        if model == MODEL_UNLOADING:
+            if loaded and pS >= state[SET_NEXT]:
+                state[LOADED] = 0.0
+            elif not loaded and pS <= const[C_CUT_IN_REL] * state[SET_NEXT]:
+                state[LOADED] = 1.0
+    _enter(state, sl + L_PUMP, pump, a)
+    _enter(state, sl + L_PUMP_VOLUMETRIC, vol, a)
+    _enter(state, sl + L_PUMP_MECHANICAL, mech, a)
+    _enter(state, sl + L_UNLOADED, unloaded, a)
+    _enter(state, sl + L_DELIVERED, delivered, a)
+
+
+@njit(cache=True)
 def _commit(const: np.ndarray, state: np.ndarray, p1: tuple, V1: tuple, flows: tuple,
             v: float, h: float, accumulate: bool) -> None:
     """Take p1, V1 as the new state and book the step's hydraulic energy terms into the step
     ledger (added to its terms when ``accumulate``, else replacing them)."""
-    qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR = flows
+    qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR, _ = flows
     pA, pHL, pHR, pB, pS = p1
     pT, prescribed = const[C_PT], const[C_PRESCRIBED] != 0.0
     p0 = _nodes(state, P)
@@ -481,46 +600,51 @@ def _commit(const: np.ndarray, state: np.ndarray, p1: tuple, V1: tuple, flows: t
     ib2 = 0.5 / const[C_BETA]
     # Σ over nodes; V_HL = V_HR, and V_A, V_S do not change with the stroke
     d0, d1, d2, d3 = pA - p0[0], pHL - p0[1], pHR - p0[2], pB - p0[3]
-    num = V1[0] * d0 * d0 + V1[1] * (d1 * d1 + d2 * d2) + V1[3] * d3 * d3
-    vol = ((V1[1] - V0[1]) * (p0[1] * p0[1] + p0[2] * p0[2])
-           + (V1[3] - V0[3]) * p0[3] * p0[3])
-    oil = _oil_energy(const, p1, V1)
-    gas = 0.0
+    num = (V1[0] * d0 * d0 + V1[1] * (d1 * d1 + d2 * d2) + V1[3] * d3 * d3) * ib2
+    vol = -ib2 * ((V1[1] - V0[1]) * (p0[1] * p0[1] + p0[2] * p0[2])
+                  + (V1[3] - V0[3]) * p0[3] * p0[3])
+    oil, oil_supply = _oil_energy(const, p1, V1)
+    gas = num_supply = 0.0
     if not prescribed:
         d4 = pS - p0[4]
-        num += V1[4] * d4 * d4
-    num *= ib2
-    vol *= -ib2
-    if not prescribed:
-        v0, pc, pa, n = const[C_ACC_V0], const[C_ACC_P0], const[C_P_ATM], const[C_ACC_N]
-        voil = accumulator_oil_volume(pS, v0, pc, pa, n)[0]
-        gas = accumulator_energy(pS, voil, v0, pc, pa, n)
-        num += pS * (voil - state[VOIL]) - (gas - state[LEDGER + L_GAS_ENERGY])
-        state[VOIL] = voil
+        num_supply = V1[4] * d4 * d4 * ib2
+        if const[C_ACC] != 0.0:
+            v0, pc, pa, n = const[C_ACC_V0], const[C_ACC_P0], const[C_P_ATM], const[C_ACC_N]
+            voil = accumulator_oil_volume(pS, v0, pc, pa, n)[0]
+            gas = accumulator_energy(pS, voil, v0, pc, pa, n)
+            num_supply += pS * (voil - state[VOIL]) - (gas - state[LEDGER + L_GAS_ENERGY])
+            state[VOIL] = voil
     makeup = 0.0
     if qmL != 0.0 or qmR != 0.0 or qmB != 0.0:
         makeup = h * ((pT - pHL) * qmL + (pT - pHR) * qmR + (pT - pB) * qmB)
+    f_pb, f_vl, f_vr = state[FRAC], state[FRAC + 1], state[FRAC + 2]
+    loss_pb, loss_vl, loss_vr = h * (pS - pB) * qPB, h * (pA - pHL) * qVL, h * (pA - pHR) * qVR
     sl, a = STEP_LEDGER, accumulate
-    _enter(state, sl + L_SUPPLY, h * (pS * (qPA + qPB) if prescribed else pS * const[C_Q_PUMP]),
-           a)
-    _enter(state, sl + L_TO_TANK, h * pT * (qAT + qBT + qrel - qmL - qmR - qmB), a)
+    _book_supply(const, state, pS, qPA + qPB, h, a)
+    _enter(state, sl + L_RELIEF, h * pS * qrel, a)
+    _enter(state, sl + L_CIRCUIT, h * pS * (qPA + qPB), a)
+    _enter(state, sl + L_TO_TANK, h * pT * (qAT + qBT - qmL - qmR - qmB), a)
     _enter(state, sl + L_THROTTLE_MAIN,
-           h * ((pS - pA) * qPA + (pA - pT) * qAT + (pS - pB) * qPB + (pB - pT) * qBT), a)
-    _enter(state, sl + L_THROTTLE_VL, h * (pA - pHL) * qVL, a)
-    _enter(state, sl + L_THROTTLE_VR, h * (pA - pHR) * qVR, a)
-    _enter(state, sl + L_THROTTLE_RELIEF, h * (pS - pT) * qrel, a)
+           h * ((pS - pA) * qPA + (pA - pT) * qAT + (pB - pT) * qBT) + f_pb * loss_pb, a)
+    _enter(state, sl + L_THROTTLE_ROD_RESTRICTOR, (1.0 - f_pb) * loss_pb, a)
+    _enter(state, sl + L_THROTTLE_VL, f_vl * loss_vl, a)
+    _enter(state, sl + L_THROTTLE_VR, f_vr * loss_vr, a)
+    _enter(state, sl + L_THROTTLE_HEAD_RESTRICTOR_L, (1.0 - f_vl) * loss_vl, a)
+    _enter(state, sl + L_THROTTLE_HEAD_RESTRICTOR_R, (1.0 - f_vr) * loss_vr, a)
     _enter(state, sl + L_THROTTLE_MAKEUP, makeup, a)
     _enter(state, sl + L_LEAKAGE, h * ((pHL - pB) * qlL + (pHR - pB) * qlR), a)
+    _enter(state, sl + L_NUMERICAL_SUPPLY, num_supply, a)
     _enter(state, sl + L_NUMERICAL, num, a)
     _enter(state, sl + L_VOLUME_TERM, vol, a)
     _enter(state, sl + L_PISTON_WORK,
            h * v * (const[C_AH] * (pHL + pHR) - 2.0 * const[C_AR] * pB), a)
+    state[sl + L_OIL_SUPPLY_ENERGY] = state[LEDGER + L_OIL_SUPPLY_ENERGY] = oil_supply
     state[sl + L_OIL_ENERGY] = state[LEDGER + L_OIL_ENERGY] = oil
     state[sl + L_GAS_ENERGY] = state[LEDGER + L_GAS_ENERGY] = gas
     for i in range(5):
         state[P + i] = p1[i]
         state[VOL + i] = V1[i]
-    for i in range(12):
+    for i in range(N_FLOWS):
         state[FLOWS + i] = flows[i]
 
 
@@ -551,7 +675,7 @@ def book_step(const: np.ndarray, state: np.ndarray, t1: float, h: float, s1: flo
                                                                   state[P + 4])
     state[LOG + 4] = state[FLOWS] + state[FLOWS + 2]
     state[LOG + 5] = fp - ff + fes
-    state[LOG + 6] = state[led + L_SUPPLY]
+    state[LOG + 6] = state[led + L_PUMP]
     state[LOG + 7] = state[led + L_PISTON_WORK]
     state[LOG + 8] = state[led + L_MECH_WORK]
 
@@ -564,13 +688,14 @@ def initialise(const: np.ndarray, state: np.ndarray, stroke_m: float) -> None:
     p = _nodes(state, P)
     V = _volumes(const, stroke_m)
     gas = 0.0
-    if const[C_PRESCRIBED] == 0.0:
+    if const[C_PRESCRIBED] == 0.0 and const[C_ACC] != 0.0:
         v0, pc, pa, n = const[C_ACC_V0], const[C_ACC_P0], const[C_P_ATM], const[C_ACC_N]
         state[VOIL] = accumulator_oil_volume(p[4], v0, pc, pa, n)[0]
         gas = accumulator_energy(p[4], state[VOIL], v0, pc, pa, n)
-    oil = _oil_energy(const, p, V)
+    oil, oil_supply = _oil_energy(const, p, V)
     for i in range(5):
         state[VOL + i] = V[i]
+    state[LEDGER + L_OIL_SUPPLY_ENERGY] = state[LEDGER + L_OIL_SUPPLY_ENERGY_START] = oil_supply
     state[LEDGER + L_OIL_ENERGY] = state[LEDGER + L_OIL_ENERGY_START] = oil
     state[LEDGER + L_GAS_ENERGY] = state[LEDGER + L_GAS_ENERGY_START] = gas
     state[LAW] = const[C_AH] * (p[1] + p[2]) - 2.0 * const[C_AR] * p[3]

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal, get_args
 
 from trackmj.params import Location, Parameters, load_file, param, sources_field
 
@@ -70,16 +70,78 @@ class Cavitation(Parameters):
                            f"{self.makeup_crack_below_tank_Pa!r}")
 
 
+SupplyModel = Literal["fixed_relief", "compensated", "unloading", "prescribed"]
+"""Supply models (docs/sizing.md): ``fixed_relief`` fixed pump + gas accumulator + relief
+(the study's), ``compensated`` pressure-compensated variable pump, ``unloading`` fixed pump
+charging the gas accumulator through an unloading valve, ``prescribed`` an ideal pressure
+source p_s(t) = p_set(t)."""
+SUPPLY_MODELS: tuple[str, ...] = get_args(SupplyModel)
+
+
 @dataclass(frozen=True, slots=True)
 class Supply(Parameters):
-    """Supply node: pump + accumulator + relief, or a prescribed pressure p_s(t)."""
+    """Supply node and its pressure setting; the supply models' hardware has its own tables."""
 
-    mode: Literal["accumulator", "prescribed"] = param(
-        doc="'accumulator' (pump + gas accumulator + relief) or 'prescribed' (a profile "
-            "passed to HydraulicTensioner)")
-    pump_flow_m3_s: float = param(0.0, 1.0, doc="constant pump flow into the supply node")
+    default_model: SupplyModel = param(  # noqa: RUF009 (param() returns a dataclasses.Field)
+        doc="supply model of a run whose scenario names none (see SupplyModel)")
+    setpoint_Pa: float = param(0.0, 1e8, open_low=True,
+                               doc="nominal supply pressure setting p_set: the relief setting "
+                               "(fixed_relief), the compensator setting (compensated), the "
+                               "cut-out pressure (unloading), the pressure (prescribed)")
     line_volume_m3: float = param(0.0, 1.0, open_low=True,
                                   doc="oil volume of the supply node (hose + valve block)")
+
+
+@dataclass(frozen=True, slots=True)
+class FixedPump(Parameters):
+    """Fixed-displacement pump (fixed_relief and unloading): constant delivered flow,
+    constant efficiencies; shaft power p_out·Q_d/(η_v·η_hm)."""
+
+    flow_m3_s: float = param(0.0, 1.0, open_low=True,
+                             doc="delivered flow Q_d (geometric flow × volumetric efficiency)")
+    volumetric_efficiency: float = param(0.0, 1.0, open_low=True, unit="1",
+                                         doc="η_v = delivered / geometric flow")
+    mechanical_efficiency: float = param(0.0, 1.0, open_low=True, unit="1",
+                                         doc="hydro-mechanical efficiency η_hm")
+
+
+@dataclass(frozen=True, slots=True)
+class VariablePump(Parameters):
+    """Pressure-compensated variable pump (compensated): displacement x ∈ [0, 1] follows
+    x* = clip((p_set − p_s)/droop, 0, 1) with a first-order lag; delivery
+    Q = Q_g,max·x − k_L·p_s with the laminar leakage k_L = standby flow / p_set; shaft power
+    p_s·Q_g,max·x/η_hm."""
+
+    max_flow_m3_s: float = param(0.0, 1.0, open_low=True,
+                                 doc="geometric flow at full displacement Q_g,max")
+    droop_Pa: float = param(0.0, 1e7, open_low=True,
+                            doc="compensator regulation range: full displacement at "
+                            "p_set − droop, zero at p_set")
+    time_constant_s: float = param(0.0, 1.0, open_low=True,
+                                   doc="first-order lag of the displacement")
+    standby_flow_m3_s: float = param(0.0, 1.0,
+                                     doc="internal leakage at p_set the compensator strokes "
+                                     "for with no demand (standby)")
+    mechanical_efficiency: float = param(0.0, 1.0, open_low=True, unit="1",
+                                         doc="hydro-mechanical efficiency η_hm")
+
+    def cross_check(self, at: Location) -> None:
+        if self.standby_flow_m3_s >= self.max_flow_m3_s:
+            raise at.error("standby_flow_m3_s", self.standby_flow_m3_s,
+                           f"must be < max_flow_m3_s = {self.max_flow_m3_s!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class UnloadingValve(Parameters):
+    """Accumulator charging (unloading) valve (unloading): the fixed pump charges the
+    accumulator until p_s reaches the cut-out p_set, then circulates to tank at
+    unloaded_pressure_Pa until p_s falls to the cut-in (1 − differential_rel)·p_set."""
+
+    differential_rel: float = param(0.0, 0.5, open_low=True, unit="1",
+                                    doc="cut-in below the cut-out, relative to the cut-out")
+    unloaded_pressure_Pa: float = param(0.0, 1e7,
+                                        doc="pump outlet pressure while unloaded (return "
+                                        "line + open unloading valve)")
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,16 +158,16 @@ class Accumulator(Parameters):
 
 @dataclass(frozen=True, slots=True)
 class Relief(Parameters):
-    """Relief valve supply -> tank."""
+    """Relief valve supply -> tank: cracks at the set-point with fixed_relief (the pressure
+    regulator) and safety_margin_rel above the initial set-point otherwise (a safety valve);
+    fully open band_Pa above its crack pressure."""
 
-    crack_Pa: float = param(0.0, 1e8, open_low=True, doc="starts opening")
-    full_open_Pa: float = param(0.0, 1e8, open_low=True, doc="fully open")
+    band_Pa: float = param(0.0, 1e7, open_low=True,
+                           doc="pressure rise from cracking to fully open")
     full_area_m2: float = param(0.0, 1.0, doc="opening area when fully open")
-
-    def cross_check(self, at: Location) -> None:
-        if self.full_open_Pa <= self.crack_Pa:
-            raise at.error("full_open_Pa", self.full_open_Pa,
-                           f"must be > crack_Pa = {self.crack_Pa!r}")
+    safety_margin_rel: float = param(0.0, 1.0, open_low=True, unit="1",
+                                     doc="safety relief's crack above the set-point "
+                                     "(compensated, unloading), relative to it")
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,7 +247,8 @@ class Coupling(Parameters):
 
 @dataclass(frozen=True, slots=True)
 class PressureProfile(Parameters):
-    """Piecewise-linear supply pressure p_s(t) [Pa gauge] over times [s]; held at the ends."""
+    """Piecewise-linear supply set-point p_set(t) [Pa gauge] over times [s]; held at the ends
+    (built from a scenario's set-point changes, see ``trackmj.scenarios``)."""
 
     times_s: tuple[float, ...] = param(0.0, None, doc="breakpoints, strictly increasing")
     pressures_Pa: tuple[float, ...] = param(0.0, None, doc="pressure at each breakpoint")
@@ -221,6 +284,9 @@ class HydraulicParams(Parameters):
     tank: Tank
     cavitation: Cavitation
     supply: Supply
+    fixed_pump: FixedPump
+    variable_pump: VariablePump
+    unloading_valve: UnloadingValve
     accumulator: Accumulator
     relief: Relief
     main_valve: Valve
@@ -229,9 +295,6 @@ class HydraulicParams(Parameters):
     lines: Lines
     cylinder: Cylinder
     coupling: Coupling
-    profiles: Mapping[str, PressureProfile] = param(
-        default_factory=dict,
-        doc="named supply-pressure profiles (optional: a circuit needs none)")
     sources: Mapping[str, str] = sources_field()
 
     file_kind: ClassVar[str] = "hydraulics"
@@ -241,10 +304,19 @@ class HydraulicParams(Parameters):
         """Tank pressure p_t [Pa gauge]."""
         return self.tank.pressure_Pa
 
+    def cut_in_Pa(self, setpoint_Pa: float) -> float:
+        """Unloading valve's cut-in pressure [Pa] at cut-out ``setpoint_Pa`` [Pa]."""
+        return (1.0 - self.unloading_valve.differential_rel) * setpoint_Pa
+
     def cross_check(self, at: Location) -> None:
         if self.cavitation.floor_Pa >= self.tank.pressure_Pa:
             raise at.error(("cavitation", "floor_Pa"), self.cavitation.floor_Pa,
                            f"must be below [tank].pressure_Pa = {self.tank.pressure_Pa!r}")
+        if self.unloading_valve.unloaded_pressure_Pa < self.tank.pressure_Pa:
+            raise at.error(("unloading_valve", "unloaded_pressure_Pa"),
+                           self.unloading_valve.unloaded_pressure_Pa,
+                           f"must be >= [tank].pressure_Pa = {self.tank.pressure_Pa!r} (the "
+                           "unloaded pump flow returns through the tank line)")
 
 
 def default_path() -> Path:

@@ -1,8 +1,10 @@
 """Hydraulic tensioner: two cylinders, 4/2 main valve, V_L/V_R, supply; implicit coupling.
 
 Circuit and sizing: see models/lf1352_hydraulics.toml (header) and docs/sizing.md. In short:
-supply S -> main 4/2 (rest P->A, B->T; energised P->B, A->T) -> line A -> V_L / V_R (NC
-2/2, each with a 2.75e-8 m^2 restrictor in series) -> heads; line B feeds both rod chambers,
+supply S (one of four supply models: fixed pump + accumulator + relief, pressure-compensated
+variable pump, fixed pump + accumulator + unloading valve, or a prescribed pressure) -> main
+4/2 (rest P->A, B->T; energised P->B, A->T) -> line A -> V_L / V_R (NC 2/2, each with a
+head-branch restrictor in series) -> heads; line B feeds both rod chambers,
 with a 5.5e-8 m^2 restrictor in the release feed P->B only (the rods vent B->T freely). The
 restrictors make a 3 kN tension change against the identified track stiffness (~9.4e6 N/m)
 take ~0.3 s at 12 MPa supply, i.e. 1.2e-6 m^3 of oil at ~4.2e-6 m^3/s.
@@ -22,7 +24,7 @@ from trackmj.ports import ForceLaw
 from . import kernels as k
 from .components import Solenoid, orifice_gain, series_area, valve_area
 from .ledger import EnergyLedger
-from .params import HydraulicParams, load_hydraulic_params
+from .params import SUPPLY_MODELS, HydraulicParams, SupplyModel, load_hydraulic_params
 
 Coupling = Literal["strong", "weak", "multirate"]
 MODES: dict[int, tuple[float, float, float]] = {
@@ -34,7 +36,7 @@ _tuple_new = tuple.__new__  # LogRow(...) without NamedTuple's keyword-capable _
 NODE_NAMES = ("line A", "head L", "head R", "rod node", "supply")
 """Names of the pressure nodes in ``HydraulicTensioner.pressures`` order."""
 FLOW_NAMES = ("main_PA", "main_AT", "main_PB", "main_BT", "V_L", "V_R", "relief",
-              "makeup_L", "makeup_R", "makeup_rod", "leak_L", "leak_R")
+              "makeup_L", "makeup_R", "makeup_rod", "leak_L", "leak_R", "pump")
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,8 +45,9 @@ class StepRecord:
 
     flows_m3_s keys: FLOW_NAMES ("main_PA" = S->A, "main_AT" = A->T, "main_PB" = S->rod node,
     "main_BT" = rod node->T, "V_L"/"V_R" = A->head, "relief" = S->T, "makeup_*" = T->chamber,
-    "leak_*" = head->rod). p_rod_L_Pa == p_rod_R_Pa (one rod node). dF_dp_m2 maps a chamber
-    to ∂F/∂p (A_head or −A_rod); dv_dQ_1_m2 maps it to ∂v/∂Q for flow INTO that chamber
+    "leak_*" = head->rod, "pump" = net pump delivery into S, 0 with a prescribed supply).
+    q_pump_m3_s = flows_m3_s["pump"]. p_rod_L_Pa == p_rod_R_Pa (one rod node). dF_dp_m2 maps
+    a chamber to ∂F/∂p (A_head or −A_rod); dv_dQ_1_m2 maps it to ∂v/∂Q for flow INTO that chamber
     (1/A_head, −1/A_rod), per cylinder. newton_iterations: corrections (Newton, or chord in
     a strong complete_step) of the last solve; newton_backtracks: line-search halvings in
     all solves of the step.
@@ -89,7 +92,8 @@ class LogRow(NamedTuple):
 
     p_head_Pa is the mean of the two head pressures, q_supply_m3_s the flow out of the supply
     node through the main valve (S->A + S->rod node), force_N the cylinder force on the idler
-    (> 0 outward; = StepRecord.force_N); the *_J values are the cumulative ledger terms.
+    (> 0 outward; = StepRecord.force_N); the *_J values are cumulative ledger terms, supply_J
+    the energy the supply drew from its prime mover (``EnergyLedger.pump_J``).
     """
 
     t_s: float
@@ -107,8 +111,8 @@ class HydraulicTensioner:
     """Two-cylinder hydraulic tensioner implementing ``trackmj.ports.TensionerElement``.
 
     State (gauge Pa): ``pressures = (p_A, p_HL, p_HR, p_B, p_S)`` = line-A node, head L, head R,
-    rod node (line B + both rod chambers), supply node (a state in accumulator mode,
-    prescribed otherwise). Stroke s [m] grows outward, v = ds/dt; F > 0 pushes the idler
+    rod node (line B + both rod chambers), supply node (a state with a pump, prescribed with
+    the ``prescribed`` supply model). Stroke s [m] grows outward, v = ds/dt; F > 0 pushes the idler
     outward; F = A_h(p_HL + p_HR) − 2·A_r·p_B − F_fric(v) + F_endstop(s, v). Flows positive
     in the named direction (see StepRecord). Node volumes V_HL = V_dh + A_h·s,
     V_B = V_lineB + 2(V_dr + A_r(s_max − s)).
@@ -159,6 +163,16 @@ class HydraulicTensioner:
     Valves: ``set_mode(+1/0/−1)`` or ``set_command(main, v_l, v_r)`` (each in [0, 1]) at the
     time of the last call; solenoid delay and first-order opening apply inside.
 
+    Supply (``supply_model``, the kernels module docstring has the equations): ``fixed_relief``
+    (fixed pump + gas accumulator + relief cracking at the set-point, the study's),
+    ``compensated`` (pressure-compensated variable pump, its displacement following the
+    set-point error with droop and lag, no accumulator, a safety relief), ``unloading``
+    (fixed pump charging the accumulator up to the set-point, the cut-out, unloaded until
+    the cut-in; safety relief) or ``prescribed`` (p_s(t) = set-point, an ideal source). The
+    set-point p_set(t) [Pa] is the relief or compensator setting, the cut-out pressure or
+    the prescribed pressure; a varying set-point (``setpoint_Pa`` a callable) is evaluated
+    at the end of every step (sub-step in multi-rate).
+
     Output: ``record`` builds the full StepRecord of the last completed step on access
     (~7 µs); ``log()`` returns the per-step logging values as a LogRow (~0.4 µs);
     ``ledger`` (cumulative) and ``step_ledger`` (last step) are EnergyLedger views of the
@@ -170,7 +184,7 @@ class HydraulicTensioner:
     and Newton constants) and ``_state`` (float64[kernels.N_STATE]: pressures, volumes,
     orifice gains, strong coupling's linearisation, flows, record and log values, both
     ledgers) are laid out, with units, in the kernels module docstring. Python keeps the
-    solenoids, the supply profile and the input checks, and turns a kernel's failure status
+    solenoids, the set-point profile and the input checks, and turns a kernel's failure status
     into a RuntimeError (Newton did not converge; strong and weak coupling).
 
     Parameters
@@ -183,9 +197,15 @@ class HydraulicTensioner:
         Initial stroke s_0 [m] (0 fully retracted, ``cylinder.stroke_max_m`` extended).
     head_pressure_Pa : float, optional
         Initial pressure of both heads [Pa gauge]; default: 15 kN with the rods at tank.
-    supply_profile : callable or str, optional
-        Prescribed supply pressure p_s(t) [Pa gauge] (a callable of t [s], or the name of a
-        ``[profiles.*]`` table); None: pump + accumulator + relief.
+    supply_model : {"fixed_relief", "compensated", "unloading", "prescribed"}, optional
+        Supply model; default: the file's ``[supply].default_model`` (``"prescribed"`` when
+        ``supply_profile`` is given).
+    setpoint_Pa : float or callable, optional
+        Supply set-point p_set [Pa gauge], constant or a callable of t [s]; default: the
+        file's ``[supply].setpoint_Pa``. The unloading model takes a constant only.
+    supply_profile : callable, optional
+        Prescribed supply pressure p_s(t) [Pa gauge]: shorthand for
+        ``supply_model="prescribed", setpoint_Pa=supply_profile``.
     coupling : {"strong", "weak", "multirate"}
         Coupling scheme (see above).
     exchange_steps : int
@@ -195,13 +215,17 @@ class HydraulicTensioner:
     t0_s : float
         Initial time [s].
     supply_pressure_Pa : float, optional
-        Initial supply pressure with the accumulator [Pa gauge]; default: the relief's
-        cracking pressure.
+        Initial supply pressure with a pump [Pa gauge]; default: the model's steady state at
+        the initial set-point without demand (fixed_relief: the relief's crack pressure;
+        compensated: p_set/(1 + droop·k_L/Q_g,max); unloading: the cut-out, pump unloaded;
+        below the cut-out the unloading pump starts loaded).
     """
 
     def __init__(self, params: HydraulicParams | None = None, *, dt_s: float = 1e-3,
                  stroke_m: float = 0.05, head_pressure_Pa: float | None = None,
-                 supply_profile: Callable[[float], float] | str | None = None,
+                 supply_model: SupplyModel | None = None,
+                 setpoint_Pa: float | Callable[[float], float] | None = None,
+                 supply_profile: Callable[[float], float] | None = None,
                  coupling: Coupling = "strong", exchange_steps: int = 5,
                  substep_s: float = 1e-4, t0_s: float = 0.0,
                  supply_pressure_Pa: float | None = None) -> None:
@@ -217,12 +241,33 @@ class HydraulicTensioner:
         self.coupling = coupling
         self.exchange_steps = exchange_steps
         self.n_sub = max(1, round(dt_s / substep_s))
-        if isinstance(supply_profile, str):
-            supply_profile = prm.profiles[supply_profile]
-        self.profile = supply_profile
-        self.prescribed = supply_profile is not None or prm.supply.mode == "prescribed"
-        if self.prescribed and supply_profile is None:
-            raise ValueError("supply.mode = 'prescribed' needs a supply_profile")
+        if supply_profile is not None:
+            if supply_model not in (None, "prescribed") or setpoint_Pa is not None:
+                raise ValueError("supply_profile is the prescribed model's set-point: give "
+                                 "it alone, or supply_model and setpoint_Pa")
+            supply_model, setpoint_Pa = "prescribed", supply_profile
+        model = prm.supply.default_model if supply_model is None else supply_model
+        if model not in SUPPLY_MODELS:
+            raise ValueError(f"supply_model = {model!r} must be one of {list(SUPPLY_MODELS)}")
+        if setpoint_Pa is None:
+            setpoint_Pa = prm.supply.setpoint_Pa
+        if callable(setpoint_Pa):
+            if model == "unloading":
+                raise ValueError("the unloading model takes a constant setpoint_Pa: with the "
+                                 "pump unloaded and the check valve closed nothing lowers the "
+                                 "accumulator pressure when the cut-out is lowered")
+            self.setpoint: Callable[[float], float] | None = setpoint_Pa
+        else:
+            self.setpoint = None
+            self._check_input("setpoint_Pa", setpoint_Pa)
+        self.supply_model: SupplyModel = model
+        self.prescribed = model == "prescribed"
+        p_set0 = self._setpoint_at(t0_s) if self.setpoint is not None else float(setpoint_Pa)
+        if model == "unloading" and prm.accumulator.precharge_Pa >= prm.cut_in_Pa(p_set0):
+            raise ValueError(f"unloading supply: the cut-in {prm.cut_in_Pa(p_set0):g} Pa "
+                             "must exceed the accumulator precharge "
+                             f"{prm.accumulator.precharge_Pa:g} Pa, or the accumulator is "
+                             "empty before the pump loads")
         cyl, cav, rel, acc, cp = prm.cylinder, prm.cavitation, prm.relief, prm.accumulator, \
             prm.coupling
         self.Ah, self.Ar = cyl.area_head_m2, cyl.area_rod_m2
@@ -231,7 +276,8 @@ class HydraulicTensioner:
         self.mu_open = self.pT - cav.makeup_crack_below_tank_Pa
         self.mu_width = cav.makeup_full_below_tank_Pa - cav.makeup_crack_below_tank_Pa
         self.p_atm = acc.atmospheric_pressure_Pa_abs
-        self.Q_pump = 0.0 if self.prescribed else prm.supply.pump_flow_m3_s
+        fp, vp, uv = prm.fixed_pump, prm.variable_pump, prm.unloading_valve
+        k_leak = vp.standby_flow_m3_s / prm.supply.setpoint_Pa
         cq, rho = prm.orifice.discharge_coefficient, prm.fluid.density_kg_m3
         self._gain = lambda a: orifice_gain(cq, a, rho)
         c = np.zeros(k.N_CONST)  # layout: kernels module docstring
@@ -244,9 +290,9 @@ class HydraulicTensioner:
         c[k.C_FLOOR], c[k.C_BAND] = self.floor, cav.band_Pa
         c[k.C_MU_OPEN], c[k.C_MU_WIDTH] = self.mu_open, self.mu_width
         c[k.C_K_MU] = self._gain(cav.makeup_area_m2)
-        c[k.C_REL_CRACK], c[k.C_REL_WIDTH] = rel.crack_Pa, rel.full_open_Pa - rel.crack_Pa
-        c[k.C_K_REL] = self._gain(rel.full_area_m2)
-        c[k.C_Q_PUMP] = self.Q_pump
+        c[k.C_REL_CRACK] = (1.0 + rel.safety_margin_rel) * p_set0
+        c[k.C_REL_WIDTH], c[k.C_K_REL] = rel.band_Pa, self._gain(rel.full_area_m2)
+        c[k.C_Q_PUMP] = fp.flow_m3_s
         c[k.C_ACC_V0], c[k.C_ACC_P0] = acc.gas_volume_m3, acc.precharge_Pa
         c[k.C_P_ATM], c[k.C_ACC_N] = self.p_atm, acc.polytropic_exponent
         c[k.C_FRIC_C], c[k.C_FRIC_VS] = cyl.coulomb_friction_N, cyl.coulomb_velocity_m_s
@@ -255,6 +301,16 @@ class HydraulicTensioner:
         c[k.C_TOL], c[k.C_MAX_ITER] = cp.newton_tol_Pa, cp.newton_max_iter
         c[k.C_V_CORR], c[k.C_MAX_CORR] = cp.min_correction_velocity_m_s, cp.max_correction_N
         c[k.C_PRESCRIBED] = 1.0 if self.prescribed else 0.0
+        c[k.C_MODEL] = k.MODEL_CODES[model]
+        c[k.C_ACC] = 1.0 if model in ("fixed_relief", "unloading") else 0.0
+        c[k.C_QG_MAX], c[k.C_DROOP], c[k.C_TAU] = (vp.max_flow_m3_s, vp.droop_Pa,
+                                                   vp.time_constant_s)
+        c[k.C_K_PUMP_LEAK] = k_leak
+        variable = model == "compensated"
+        c[k.C_ETA_V] = 1.0 if variable else fp.volumetric_efficiency
+        c[k.C_ETA_HM] = vp.mechanical_efficiency if variable else fp.mechanical_efficiency
+        c[k.C_P_UNLOADED] = uv.unloaded_pressure_Pa
+        c[k.C_CUT_IN_REL] = 1.0 - uv.differential_rel
         self._const = c
         self._state = st = np.zeros(k.N_STATE)  # layout: kernels module docstring
         self.main = Solenoid(prm.main_valve)
@@ -265,11 +321,14 @@ class HydraulicTensioner:
         self.v = 0.0
         if head_pressure_Pa is None:  # 15 kN with the rods at tank pressure
             head_pressure_Pa = (15e3 + 2.0 * self.Ar * self.pT) / (2.0 * self.Ah)
-        if self.prescribed:
-            ps = self._supply_pressure(self.t)
+        st[k.SET_NEXT] = p_set0
+        if self.prescribed or supply_pressure_Pa is None:
+            ps = p_set0 / (1.0 + vp.droop_Pa * k_leak / vp.max_flow_m3_s) if variable else p_set0
         else:
-            ps = prm.relief.crack_Pa if supply_pressure_Pa is None else supply_pressure_Pa
+            ps = float(supply_pressure_Pa)
             self._check_input("supply_pressure_Pa", ps)
+        st[k.PUMP_X] = min(1.0, k_leak * ps / vp.max_flow_m3_s)
+        st[k.LOADED] = 1.0 if model == "unloading" and ps < p_set0 else 0.0
         st[k.P:k.P + 5] = (ps, head_pressure_Pa, head_pressure_Pa, self.pT, ps)
         k.initialise(c, st, self.s)
         self.step_ledger = EnergyLedger.view(st[k.STEP_LEDGER:k.STEP_LEDGER + k.N_LEDGER])
@@ -370,7 +429,7 @@ class HydraulicTensioner:
         st = self._state
         t, s, v, ff, fes, fp = st[k.REC:k.REC + 6].tolist()
         pA, pHL, pHR, pB, pS = st[k.P:k.P + 5].tolist()
-        fl = st[k.FLOWS:k.FLOWS + 12].tolist()
+        fl = st[k.FLOWS:k.FLOWS + k.N_FLOWS].tolist()
         V = st[k.VOL:k.VOL + 5].tolist()
         ah, ar = self.Ah, self.Ar
         law = self._law
@@ -378,7 +437,7 @@ class HydraulicTensioner:
         return StepRecord(
             t_s=t, stroke_m=s, velocity_m_s=v, p_head_L_Pa=pHL, p_head_R_Pa=pHR,
             p_rod_L_Pa=pB, p_rod_R_Pa=pB, p_line_A_Pa=pA, p_supply_Pa=pS,
-            p_tank_Pa=self.pT, q_supply_m3_s=fl[0] + fl[2], q_pump_m3_s=self.Q_pump,
+            p_tank_Pa=self.pT, q_supply_m3_s=fl[0] + fl[2], q_pump_m3_s=fl[12],
             flows_m3_s=dict(zip(FLOW_NAMES, fl, strict=True)),
             V_head_L_m3=V[1], V_head_R_m3=V[2], V_rod_L_m3=vrod, V_rod_R_m3=vrod,
             V_line_A_m3=V[0], force_N=fp - ff + fes, piston_force_N=fp, friction_N=ff,
@@ -403,6 +462,16 @@ class HydraulicTensioner:
     def pressures(self) -> tuple[float, float, float, float, float]:
         """(p_A, p_head_L, p_head_R, p_rod, p_supply) [Pa gauge] now."""
         return tuple(self._state[k.P:k.P + 5].tolist())
+
+    @property
+    def pump_displacement(self) -> float:
+        """Variable pump's displacement x [-] (0..1) after the last completed step."""
+        return self._state.item(k.PUMP_X)
+
+    @property
+    def pump_loaded(self) -> bool:
+        """Unloading model: the pump charges the accumulator (False: unloaded)."""
+        return self._state.item(k.LOADED) != 0.0
 
     @property
     def carry_J(self) -> float:
@@ -436,10 +505,10 @@ class HydraulicTensioner:
                            f"{self.params.coupling.newton_max_iter} iterations (t = {self.t} s, "
                            f"last |dp| = {self._state.item(k.LAST_DP)} Pa)")
 
-    def _supply_pressure(self, t_s: float) -> float:
-        ps = float(self.profile(t_s))
+    def _setpoint_at(self, t_s: float) -> float:
+        ps = float(self.setpoint(t_s))
         if not (math.isfinite(ps) and ps >= 0.0):
-            raise ValueError(f"supply profile gave p_s = {ps!r} Pa at t = {t_s} s")
+            raise ValueError(f"supply set-point gave p_set = {ps!r} Pa at t = {t_s} s")
         return ps
 
     def _advance_valves(self, t_s: float, h: float) -> None:
@@ -453,14 +522,14 @@ class HydraulicTensioner:
             vr.advance(t_s, h)
 
     def _set_gains(self, t_s: float, h: float) -> None:
-        """Valve positions at t_s + h (not committed) -> orifice gains of the step; with a
-        prescribed supply also p_S(t_s + h).
+        """Valve positions at t_s + h (not committed) -> orifice gains of the step and the
+        valve shares of the series paths' losses; with a varying set-point also p_set(t_s + h).
 
         The gains are recomputed only when one of the four edge areas changed (valves at
         rest, or moving inside their overlap, keep the cached gains).
         """
-        if self.prescribed:
-            self._state[k.PS_NEXT] = self._supply_pressure(t_s + h)
+        if self.setpoint is not None:
+            self._state[k.SET_NEXT] = self._setpoint_at(t_s + h)
         if self._areas and not (self.main.moving or self.vl.moving or self.vr.moving):
             return
         prm = self.params
@@ -473,7 +542,18 @@ class HydraulicTensioner:
             self._areas = areas
             a_rest, a_ener, a_l, a_r = areas
             met, g = prm.metering, self._gain
-            self._state[k.GAIN:k.GAIN + 6] = (
-                g(a_rest), g(a_ener), g(series_area(a_ener, met.rod_feed_area_m2)), g(a_rest),
-                g(series_area(a_l, met.head_branch_area_m2)),
-                g(series_area(a_r, met.head_branch_area_m2)))
+            a_pb = series_area(a_ener, met.rod_feed_area_m2)
+            a_vl = series_area(a_l, met.head_branch_area_m2)
+            a_vr = series_area(a_r, met.head_branch_area_m2)
+            # GAIN and FRAC are adjacent in the state: one assignment for both
+            self._state[k.GAIN:k.FRAC + 3] = (
+                g(a_rest), g(a_ener), g(a_pb), g(a_rest), g(a_vl), g(a_vr),
+                _valve_share(a_ener, a_pb), _valve_share(a_l, a_vl), _valve_share(a_r, a_vr))
+
+
+def _valve_share(valve_area_m2: float, series_area_m2: float) -> float:
+    """Share of a valve + restrictor series path's throttling loss taken by the valve:
+    Δp_valve/Δp = (A_eff/A_valve)² for turbulent orifices in series; 1 when closed."""
+    if valve_area_m2 <= 0.0 or series_area_m2 <= 0.0:
+        return 1.0
+    return (series_area_m2 / valve_area_m2) ** 2

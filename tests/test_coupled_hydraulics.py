@@ -62,7 +62,7 @@ def test_hold_mode_with_track_driven() -> None:
     force_from_pressure = 2 * tensioner.Ah * rows[:, 1] - 2 * tensioner.Ar * rows[:, 3]
     assert np.abs(force_from_pressure - rows[:, 6]).max() < 0.05 * np.abs(rows[:, 6]).max()
     ledger = tensioner.ledger
-    scale = abs(ledger.supply_J) + abs(ledger.mech_work_J) + abs(ledger.oil_energy_J) + 1.0
+    scale = abs(ledger.pump_J) + abs(ledger.mech_work_J) + abs(ledger.oil_energy_J) + 1.0
     assert abs(ledger.balance_error_J) < 5e-3 * scale
     assert not plant.derailment().any
 

@@ -11,7 +11,7 @@ from importlib.resources import files
 
 import pytest
 
-from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
+from trackmj.hydraulics import HydraulicTensioner, PressureProfile, load_hydraulic_params
 from trackmj.hydraulics.params import HydraulicParams
 from trackmj.params import ParameterError, build
 from trackmj.ports import TensionerElement
@@ -27,15 +27,15 @@ def test_packaged_file_loads_with_sizing_sheet_values() -> None:
     assert p.cylinder.area_head_m2 == pytest.approx(math.pi * 0.02**2, rel=1e-3)
     assert p.cylinder.area_rod_m2 == pytest.approx(math.pi * (0.02**2 - 0.0125**2), rel=1e-3)
     assert p.fluid.bulk_modulus_Pa == 1.4e9 and p.tank_pressure_Pa == 0.2e6
-    assert p.profiles["W4"](16.0) == 9.0e6 and p.profiles["W4"](5.0) == 12.0e6
+    assert p.supply.setpoint_Pa == 12.0e6 and p.supply.default_model == "compensated"
+    assert p.cut_in_Pa(12.0e6) == pytest.approx(10.2e6)
 
 
 def test_every_table_states_its_source() -> None:
     """Every table's source is kept (table path -> source), and one missing is refused."""
     p = load_hydraulic_params()
     doc = _doc()
-    expected = {name: table["source"] for name, table in doc.items() if name != "profiles"}
-    expected |= {f"profiles.{k}": t["source"] for k, t in doc["profiles"].items()}
+    expected = {name: table["source"] for name, table in doc.items()}
     assert dict(p.sources) == expected
     del doc["relief"]["source"]
     with pytest.raises(ParameterError, match=r"h\.toml \[relief\]: missing key 'source'"):
@@ -74,11 +74,17 @@ def test_importing_the_plugin_does_not_import_mujoco() -> None:
         ("main_valve", "leak_area_m2", -1e-9, r"\[main_valve\]\.leak_area_m2 = -1e-09 is outside"),
         ("main_valve", "leak_area_m2", 1e-3, r"\[main_valve\]\.leak_area_m2 = 0\.001 must be <= "
          r"open_area_m2 = 0\.0001"),
-        ("relief", "full_open_Pa", 11e6, r"\[relief\]\.full_open_Pa = 11000000\.0 must be > "
-         r"crack_Pa = 12000000\.0"),
+        ("relief", "band_Pa", 0.0, r"\[relief\]\.band_Pa = 0\.0 is outside the allowed range "
+         r"\(0, 1e\+07\] Pa"),
+        ("variable_pump", "standby_flow_m3_s", 1e-4, r"\[variable_pump\]\.standby_flow_m3_s = "
+         r"0\.0001 must be < max_flow_m3_s = 3\.333e-05"),
+        ("unloading_valve", "unloaded_pressure_Pa", 1e5, r"\[unloading_valve\]\."
+         r"unloaded_pressure_Pa = 100000\.0 must be >= \[tank\]\.pressure_Pa = 200000\.0"),
+        ("fixed_pump", "volumetric_efficiency", 1.1, r"\[fixed_pump\]\.volumetric_efficiency = "
+         r"1\.1 is outside the allowed range \(0, 1\]$"),
         ("accumulator", "polytropic_exponent", 0.9, r"\[accumulator\]\.polytropic_exponent = 0\.9"),
-        ("supply", "mode", "pump", r"\[supply\]\.mode = 'pump' is not one of \['accumulator', "
-         r"'prescribed'\]"),
+        ("supply", "default_model", "pump", r"\[supply\]\.default_model = 'pump' is not one of "
+         r"\['fixed_relief', 'compensated', 'unloading', 'prescribed'\]"),
         ("coupling", "newton_max_iter", 30.0, r"\[coupling\]\.newton_max_iter = 30\.0: expected an "
          r"integer, got a float"),
         ("lines", "line_a_volume_m3", [5e-5],
@@ -96,7 +102,7 @@ def test_bad_parameter_raises_naming_file_table_and_key(table: str, key: str, va
         build(HydraulicParams, doc, file="h.toml")
 
 
-def test_missing_key_table_and_profile_order_are_named() -> None:
+def test_missing_key_and_table_are_named() -> None:
     doc = _doc()
     del doc["cylinder"]["stroke_max_m"]
     with pytest.raises(ParameterError, match=r"h\.toml \[cylinder\]: missing key 'stroke_max_m' "
@@ -106,11 +112,14 @@ def test_missing_key_table_and_profile_order_are_named() -> None:
     del doc["tank"]
     with pytest.raises(ParameterError, match=r"h\.toml: missing table \[tank\]"):
         build(HydraulicParams, doc, file="h.toml")
-    doc = _doc()
-    doc["profiles"]["W4"]["times_s"] = [0.0, 12.0, 12.0, 20.0, 20.1]
-    with pytest.raises(ParameterError, match=r"h\.toml \[profiles\.W4\]\.times_s\[2\] = 12\.0 "
-                       r"must be > times_s\[1\] = 12\.0 \(strictly increasing\)"):
-        build(HydraulicParams, doc, file="h.toml")
+
+
+
+def test_setpoint_profile_order_is_checked() -> None:
+    with pytest.raises(ParameterError, match=r"^PressureProfile\.times_s\[2\] = 12\.0 must be > "
+                       r"times_s\[1\] = 12\.0 \(strictly increasing\)"):
+        PressureProfile((0.0, 12.0, 12.0), (12e6, 12e6, 9e6))
+    assert PressureProfile((0.0, 12.0, 12.1), (12e6, 12e6, 9e6))(12.05) == pytest.approx(10.5e6)
 
 
 def test_code_construction_is_checked_too() -> None:

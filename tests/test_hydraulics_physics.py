@@ -102,8 +102,10 @@ def test_trapped_oil_spring_frequency() -> None:
 
 
 def _fill_supply(prm, p_start: float, duration: float, h: float = 1e-3) -> HydraulicTensioner:
-    """Accumulator mode, hold, every valve leak-free: the pump fills the supply node + line A."""
-    ht = HydraulicTensioner(prm, supply_pressure_Pa=p_start)
+    """Fixed pump + accumulator, hold, every valve leak-free, the relief (cracking at the
+    set-point) out of reach: the pump fills the supply node + line A."""
+    ht = HydraulicTensioner(prm, supply_model="fixed_relief", setpoint_Pa=6e7,
+                            supply_pressure_Pa=p_start)
     for i in range(round(duration / h)):
         ht.force_law(i * h, 0.05, 0.0)
         ht.complete_step((i + 1) * h, 0.05, 0.0)
@@ -112,7 +114,7 @@ def _fill_supply(prm, p_start: float, duration: float, h: float = 1e-3) -> Hydra
 
 def _sealed(**acc):
     return _replace(P, main_valve={"leak_area_m2": 0.0}, switching_valves={"leak_area_m2": 0.0},
-                    relief={"crack_Pa": 6e7, "full_open_Pa": 7e7}, accumulator=acc)
+                    accumulator=acc)
 
 
 def test_pressure_rise_under_constant_inflow_is_beta_over_v_times_q() -> None:
@@ -120,7 +122,7 @@ def test_pressure_rise_under_constant_inflow_is_beta_over_v_times_q() -> None:
     ht = _fill_supply(prm, 1e6, 0.02)
     vol = prm.supply.line_volume_m3 + prm.lines.line_a_volume_m3
     rate = (ht.record.p_supply_Pa - 1e6) / 0.02
-    expected = prm.fluid.bulk_modulus_Pa / vol * prm.supply.pump_flow_m3_s
+    expected = prm.fluid.bulk_modulus_Pa / vol * prm.fixed_pump.flow_m3_s
     assert rate == pytest.approx(expected, rel=5e-3)
 
 
@@ -135,7 +137,7 @@ def test_accumulator_follows_polytropic_law() -> None:
     def gas_volume(p: float) -> float:
         return acc.gas_volume_m3 * ((acc.precharge_Pa + p_atm) / (p + p_atm)) ** (1.0 / n)
 
-    pumped = prm.supply.pump_flow_m3_s * duration  # = oil compression + gas displaced
+    pumped = prm.fixed_pump.flow_m3_s * duration  # = oil compression + gas displaced
     expected = brentq(lambda p: c_oil * (p - p_start) + gas_volume(p_start) - gas_volume(p)
                       - pumped, p_start, 5e7)
     p_end = ht.record.p_supply_Pa

@@ -69,7 +69,7 @@ def test_replay_pressures_stay_physical(replay) -> None:
 def test_replay_ledger_closes(replay) -> None:
     ht, _ = replay
     led = ht.ledger
-    scale = abs(led.supply_J) + abs(led.piston_work_J) + abs(led.oil_energy_J)
+    scale = abs(led.pump_J) + abs(led.piston_work_J) + abs(led.oil_energy_J)
     assert abs(led.balance_error_J) <= 1e-6 * scale
 
 

@@ -19,7 +19,7 @@ def test_builtin_scenarios_load_with_defaults(name: str) -> None:
     assert s.duration_s == 30.0 and s.seeds == (0, 1, 2, 3, 4)
     assert (s.controller, s.estimator) == ("nmpc", "ekf")
     assert (s.limits.force_min_N, s.limits.force_max_N) == (10e3, 20e3)
-    assert s.supply.nominal_Pa == 12e6
+    assert s.supply.model is None    # the hydraulic file's default supply model
 
 
 def test_w1_reference_step_and_ramp() -> None:
@@ -41,15 +41,24 @@ def test_other_references_are_constant_15kN() -> None:
         np.testing.assert_array_equal(load_scenario(name).reference_N(t), 15e3)
 
 
-def test_w4_supply_drop_profile() -> None:
+def test_w4_supply_setpoint_drop() -> None:
+    """W4 lowers the set-point from the hydraulic file's nominal to 9 MPa and back; the
+    profile handed to the plugin is the same piecewise-linear signal."""
     s = load_scenario("W4")
-    assert s.supply.mode == "prescribed"
     t = np.array([0.0, 11.99, 12.05, 12.1, 16.0, 20.0, 20.05, 20.1, 29.0])
-    np.testing.assert_allclose(
-        s.supply_pressure_Pa(t), [12e6, 12e6, 10.5e6, 9e6, 9e6, 9e6, 10.5e6, 12e6, 12e6]
-    )
+    expected = [12e6, 12e6, 10.5e6, 9e6, 9e6, 9e6, 10.5e6, 12e6, 12e6]
+    np.testing.assert_allclose(s.supply_setpoint_Pa(t, 12e6), expected)
+    profile = s.supply_setpoint_profile(12e6)
+    np.testing.assert_allclose([profile(x) for x in t], expected, rtol=1e-12)
     assert s.metric_windows().disturbances == ((12.0, 20.0),)
-    np.testing.assert_array_equal(load_scenario("W1").supply_pressure_Pa(t), 12e6)
+    np.testing.assert_array_equal(load_scenario("W1").supply_setpoint_Pa(t, 12e6), 12e6)
+    assert load_scenario("W1").supply_setpoint_profile(12e6) is None
+
+
+def test_zero_transition_drop_is_a_step_for_the_plugin() -> None:
+    s = load_scenario("W4", overrides={"supply.drops.0.transition_s": 0.0})
+    profile = s.supply_setpoint_profile(12e6)
+    assert [profile(x) for x in (11.999, 12.0, 19.999, 20.0)] == [12e6, 9e6, 9e6, 12e6]
 
 
 def test_w3_load_pulses() -> None:
@@ -182,12 +191,13 @@ MALFORMED = [
     ("W1", "time_s = 3.0", "time_s = 30.0",
      r"\[\[reference\.steps\]\]\[0\]\.time_s = 30\.0 is at or after the end of the run "
      r"\(\[scenario\]\.duration_s = 30\.0\)"),
-    ("W1", "nominal_Pa = 12.0e6", "nominal_Pa = nan",
-     r"\[supply\]\.nominal_Pa = nan: must be finite"),
-    ("W1", "nominal_Pa = 12.0e6", 'nominal_Pa = "12 MPa"',
-     r"\[supply\]\.nominal_Pa = '12 MPa': expected a number, got a string"),
-    ("W1", 'mode = "accumulator"', 'mode = "pump"',
-     r"\[supply\]\.mode = 'pump' is not one of \['accumulator', 'prescribed'\]"),
+    ("W1", "[terrain]", '[supply]\nmodel = "pump"\n[terrain]',
+     r"\[supply\]\.model = 'pump' is not one of \['fixed_relief', 'compensated', 'unloading', "
+     r"'prescribed'\]"),
+    ("W1", "[terrain]", "[supply]\nnominal_Pa = 12e6\n[terrain]",
+     r"^bad\.toml \[supply\]: unknown key 'nominal_Pa'"),
+    ("W4", "[[supply.drops]]", '[supply]\nmodel = "unloading"\n[[supply.drops]]',
+     r"\[supply\]\.model = 'unloading' takes no \[\[supply\.drops\]\]"),
     ("W1", 'kind = "flat"', 'kind = "bumpy"',
      r"\[terrain\]\.kind = 'bumpy' is not one of \['flat', 'iso8608'\]"),
     ("W1", "force_max_N = 20.0e3", "force_max_N = 5.0e3",
@@ -224,8 +234,6 @@ MALFORMED = [
     ("W1", "[scenario]", "track = 1.5\n[scenario]\n", r"^bad\.toml: malformed TOML"),
     ("W1", "[track]\n", "[track]\n[track.fast]\n",
      r"^bad\.toml \[track\]: unknown key 'fast'"),
-    ("W4", 'mode = "prescribed"', 'mode = "accumulator"',
-     r"\[supply\]\.mode = 'accumulator' but \[\[supply\.drops\]\] need mode = 'prescribed'"),
     ("W4", "transition_s = 0.1", "transition_s = 0.1\n\n[[supply.drops]]\nstart_s = 15.0\n"
      "end_s = 25.0\npressure_Pa = 10e6\ntransition_s = 0.1",
      r"\[\[supply\.drops\]\]\[1\]\.start_s = 15\.0 overlaps the drop from 12\.0 to 20\.1 s"),
@@ -295,7 +303,7 @@ def test_custom_file_with_every_table_loads(tmp_path) -> None:
                     "[track]\nspeed_m_s = 1\nramp_s = 0.5\n"
                     "[reference]\ninitial_N = 14e3\n"
                     "[[reference.ramps]]\nstart_s = 2.0\nrate_N_s = 100.0\n"
-                    '[supply]\nmode = "accumulator"\nnominal_Pa = 12e6\n'
+                    '[supply]\nmodel = "fixed_relief"\n'
                     '[terrain]\nkind = "flat"\n'
                     "[limits]\nforce_min_N = 10e3\nforce_max_N = 20e3\n"
                     "[evaluation]\nstart_s = 1.0\nsteady_start_s = 4.0\nsettle_band_rel = 0.02\n"

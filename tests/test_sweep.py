@@ -218,7 +218,7 @@ def test_resume_skips_the_rows_already_written(grid, executor) -> None:
 def test_figures_per_metric_and_redraw(grid, tmp_path) -> None:
     out, _, summary = grid
     names = {p.name for p in summary.figures}
-    assert {"rmse_N.png", "supply_energy_J.png", "wall_time_s.png"} <= names
+    assert {"rmse_N.png", "energy_J.pump.png", "wall_time_s.png"} <= names
     assert "fluctuation_N.png" not in names   # NaN in a 1.5 s run (steady window from 5 s)
     for path in summary.figures:
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -6,7 +6,8 @@ from __future__ import annotations
 import math
 import re
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -20,9 +21,12 @@ from trackmj.model import ModelParams, default_param_path, load_model_params, mo
 from trackmj.params import (
     FILE_KINDS,
     ParameterError,
+    Parameters,
+    build,
     describe_schema,
     file_fields,
     numeric_fields,
+    param,
     parameter_classes,
     parse_overrides,
     unit_from_name,
@@ -184,8 +188,8 @@ def test_valid_override_changes_the_loaded_value(kind: str, item: str, read) -> 
      r"-1\.0 is outside the allowed range \(0, 1e\+11\] Pa$"),
     ("hydraulics", "fluid.bulk_modulus_Pa", True, r"^--set hydraulics\.fluid\.bulk_modulus_Pa = "
      r"True: expected a number, got a boolean$"),
-    ("hydraulics", "profiles.W5.times_s", [0.0], r"^--set hydraulics\.profiles\.W5\.times_s: the "
-     r"file has no table \[profiles\.W5\] \(has: W4\)$"),
+    ("hydraulics", "supply.default_model", "pump", r"^--set hydraulics\.supply\.default_model = "
+     r"'pump' is not one of \['fixed_relief', 'compensated', 'unloading', 'prescribed'\]$"),
     ("hydraulics", "fluid.bulk_modulus_Pa.x", 1.0, r"^--set hydraulics\.fluid\.bulk_modulus_Pa\.x"
      r": fluid\.bulk_modulus_Pa is a value, not a table$"),
     ("control", "mpc.horizon_steps", 16, r"^--set control\.mpc\.horizon_steps = 16 must be a "
@@ -267,14 +271,35 @@ def test_unit_suffixes(name: str, unit: str | None) -> None:
 def test_schema_description_lists_every_key_of_the_hydraulic_file() -> None:
     rows = {r.key: r for r in describe_schema(HydraulicParams)}
     data = tomllib.loads(hydraulics_path().read_text(encoding="utf-8"))
-    keys = {f"{t}.{k}" for t, table in data.items() if t != "profiles"
-            for k in table if k != "source"}
-    keys |= {f"profiles.<name>.{k}" for k in data["profiles"]["W4"] if k != "source"}
+    keys = {f"{t}.{k}" for t, table in data.items() for k in table if k != "source"}
     assert set(rows) == keys
     assert str(rows["fluid.bulk_modulus_Pa"]) == (
         "fluid.bulk_modulus_Pa: a number, Pa, (0, 1e+11] - effective bulk modulus of the oil")
-    assert rows["supply.mode"].range == "" and rows["supply.mode"].type == (
-        "one of ['accumulator', 'prescribed']")
+    assert rows["supply.default_model"].range == "" and rows["supply.default_model"].type == (
+        "one of ['fixed_relief', 'compensated', 'unloading', 'prescribed']")
+
+
+@dataclass(frozen=True)
+class _Profile(Parameters):
+    times_s: tuple[float, ...] = param(0.0, None, doc="breakpoints")
+
+
+@dataclass(frozen=True)
+class _NamedTables(Parameters):
+    profiles: Mapping[str, _Profile] = param(default_factory=dict, doc="named tables")
+
+
+def test_named_tables_load_and_overrides_name_a_missing_table() -> None:
+    """A table of named tables ([profiles.NAME]); no packaged file has one."""
+    data = {"profiles": {"W4": {"source": "assumed: test", "times_s": [0.0, 1.0]}}}
+    assert build(_NamedTables, data, file="n.toml").profiles["W4"].times_s == (0.0, 1.0)
+    with pytest.raises(ParameterError, match=r"^--set profiles\.W5\.times_s: the file has no "
+                       r"table \[profiles\.W5\] \(has: W4\)$"):
+        build(_NamedTables, data, file="n.toml", overrides={"profiles.W5.times_s": [0.0]})
+    with pytest.raises(ParameterError, match=r"^n\.toml \[profiles\.W4\]\.times_s\[1\] = -1\.0 "
+                       r"is outside the allowed range \[0, inf\] s$"):
+        build(_NamedTables, {"profiles": {"W4": {"source": "x", "times_s": [0.0, -1.0]}}},
+              file="n.toml")
 
 
 def test_optional_keys_are_documented_as_optional() -> None:

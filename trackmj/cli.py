@@ -98,13 +98,23 @@ SUMMARY_METRICS = ("rmse_lp_N", "rmse_N", "ripple_rms_N", "ripple_band_rms_N.too
                    "ripple_band_rms_N.body_mode", "peak_error_lp_N", "peak_error_N",
                    "overshoot_lp_N", "settling_time_lp_s", "disturbance_peak_error_lp_N",
                    "recovery_time_lp_s", "fluctuation_N", "constraint_violation_s",
-                   "energy_in_J", "valve_switch_rate_Hz", "interface_energy_residual_J",
+                   "energy_J.pump", "energy_J.circuit", "energy_J.mechanical",
+                   "valve_switch_rate_Hz", "interface_energy_residual_J",
                    "solve_time_median_s", "solve_time_max_s", "real_time_factor")
 """Rows of the summary table, metric keys (dotted for a table entry; labels and display
 units in :data:`trackmj.metrics.METRIC_DISPLAY`)."""
 STEP_METRICS = ("overshoot_lp_N", "settling_time_lp_s")
 DISTURBANCE_METRICS = ("disturbance_peak_error_lp_N", "recovery_time_lp_s")
 UNSETTLED = ("settling_time_lp_s", "recovery_time_lp_s")
+
+
+def _metric(metrics: dict, key: str) -> float:
+    """The metric at dotted ``key`` (``energy_J.pump`` is a term of the energy table); NaN
+    where the run has none."""
+    value = metrics
+    for part in key.split("."):
+        value = value.get(part, float("nan")) if isinstance(value, dict) else float("nan")
+    return value if isinstance(value, float) else float("nan")
 
 
 def _summary_table(results: list, title: str) -> str:

@@ -49,19 +49,28 @@ class IdealForceSource:
     F_c += mode·rate_N_s·h, F_l += (F_c − F_l)·h/(τ + h) (implicit lag), and the law is
     F(v) = F_l − c·v with c the cylinders' viscous damping [N·s/m]. Equivalent pressures for
     the sensors: p_head = (F_l + A_r·p_t)/A_h, p_rod = p_t (A the lumped areas). There is
-    no supply node (p_supply and q_supply are NaN); ``supply_J`` is the positive mechanical
-    work the source delivered, ``work_J`` its net work F·v·h.
+    no supply node (p_supply and q_supply are NaN). ``work_J``: the net work into the track
+    Σ F·v·h. ``supply_J``: the energy an ideal actuator with the same cylinders would draw:
+    lossless valves, no leakage or seal friction, the head oil column (compliance C_h [m^3/Pa])
+    a lossless store of the energy the track returns, so the supply delivers only what the
+    head side ever needs beyond it: the running maximum of E(t) = Σ p_head·A_h·v·h +
+    C_h·(p_head² − p_head,0²)/2 (a hold against the track's ripple draws nothing, as a
+    closed cylinder does not).
     """
 
     def __init__(self, force_N: float, rate_N_s: float, lag_s: float, damping_N_s_m: float,
-                 area_head_m2: float, area_rod_m2: float, tank_Pa: float) -> None:
+                 area_head_m2: float, area_rod_m2: float, tank_Pa: float,
+                 head_compliance_m3_Pa: float) -> None:
         self.command_N = self.force_N = force_N
         self.rate_N_s, self.lag_s, self.damping = rate_N_s, lag_s, damping_N_s_m
         self.area_head, self.area_rod, self.tank = area_head_m2, area_rod_m2, tank_Pa
+        self.head_compliance = head_compliance_m3_Pa
         self.mode = 0
         self.t_s = 0.0
         self.work_J = 0.0
         self.supply_J = 0.0
+        self._head_work_J = 0.0
+        self._p_head0 = self.p_head_Pa
         self._law = ForceLaw(force_N, -damping_N_s_m)
 
     def set_mode(self, mode: int) -> None:
@@ -76,9 +85,13 @@ class IdealForceSource:
         return self._law
 
     def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
-        power = self._law.at(velocity_m_s) * velocity_m_s
-        self.work_J += power * COUPLING_STEP_S
-        self.supply_J += max(power, 0.0) * COUPLING_STEP_S
+        h = COUPLING_STEP_S
+        p_head = self.p_head_Pa
+        self.work_J += self._law.at(velocity_m_s) * velocity_m_s * h
+        self._head_work_J += p_head * self.area_head * velocity_m_s * h
+        needed = self._head_work_J + 0.5 * self.head_compliance * (p_head * p_head
+                                                                   - self._p_head0 ** 2)
+        self.supply_J = max(self.supply_J, needed)
         self.t_s = t_s
 
     @property

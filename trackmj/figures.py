@@ -50,10 +50,12 @@ ENERGY_STYLES: dict[str, tuple[str, str]] = {
     "relief": ("#E69F00", ""), "throttling": ("#56B4E9", "//"), "leakage": ("#009E73", "\\\\"),
     "friction": ("#F0E442", ".."), "makeup": ("#0072B2", "xx"),
     "stored_change": ("#D55E00", "--"), "mechanical": ("#CC79A7", "oo"),
-    "residual": ("#999999", "++"), "supply": ("#BBBBBB", "")}
+    "residual": ("#999999", "++"), "return_line": ("#44AA99", "||"),
+    "endstop": ("#332288", "o"), "numerical": ("#DDCC77", "x"),
+    "pump_losses": ("#882255", "\\\\//")}
 """Colour and hatch of each energy term in the breakdown bars."""
-ENERGY_ORDER = ("throttling", "leakage", "friction", "makeup", "mechanical", "stored_change",
-                "residual", "relief", "supply")
+ENERGY_ORDER = ("throttling", "leakage", "friction", "makeup", "return_line", "endstop",
+                "mechanical", "stored_change", "numerical", "residual", "relief", "pump_losses")
 """Stacking order of the energy terms (terms not listed go on top)."""
 RAW_COLOUR = "0.78"
 BAND_COLOUR = "#009E73"

@@ -482,12 +482,14 @@ def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *
       ``valve_switches`` and ``valve_switch_rate_Hz``: valve mode changes (count, per s);
     - ``control_increment_rms``: RMS of Δu per control period (u dimensionless; NaN unless
       ``control_period_s`` is given);
-    - ``supply_energy_J``: e_supply_J(end) − e_supply_J(evaluation start);
-      ``interface_energy_residual_J``: p_work_J − mech_work_J at the end (∫Σp·A·v dt vs
+    - ``interface_energy_residual_J``: p_work_J − mech_work_J at the end (∫Σp·A·v dt vs
       ∫F·v dt; zero for a power-conserving interface);
     - ``solve_time_median_s``, ``solve_time_max_s``, ``solve_failures``: if solve times
       given; ``real_time_factor``: simulated time / ``wall_time_s`` if given (> 1: faster
       than real time).
+
+    The energy breakdown of a run (``energy_J``, pump to track) comes from the tensioner's
+    own ledger, not from the timeseries: :mod:`trackmj.energy`.
 
     ``evaluation``: the windows themselves (:meth:`MetricWindows.as_table`), so a result
     states what its metrics were measured on. Floats are NaN where undefined (no step, an
@@ -539,9 +541,6 @@ def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *
         stride = max(1, round(control_period_s / sample_period(t)))
         out["control_increment_rms"] = control_increment_rms(
             np.asarray(columns["u"])[ev_mask], stride)
-    e_sup = np.asarray(columns["e_supply_J"], dtype=float)
-    out["supply_energy_J"] = (float(e_sup[-1] - e_sup[ev_mask][0]) if ev_mask.any()
-                              else math.nan)
     out["interface_energy_residual_J"] = float(np.asarray(columns["p_work_J"])[-1]
                                                - np.asarray(columns["mech_work_J"])[-1])
     if solve_times_s is not None:
@@ -561,7 +560,7 @@ def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *
 
 ENERGY_TOTALS = ("pump", "circuit")
 """Terms of an ``energy_J`` table that are totals (energy put in), not parts of a breakdown."""
-ENERGY_HEADLINE = ("pump", "circuit", "mechanical", "supply")
+ENERGY_HEADLINE = ("pump", "circuit", "mechanical")
 """Energy compared between runs: the first of these both runs have (finite)."""
 
 
@@ -569,7 +568,7 @@ class EnergyTerms(NamedTuple):
     """A run's energy terms [J] (name -> value; a table of sub-terms, e.g. throttling by
     valve, summed), the notes the table carries (its text or flag entries, e.g. that a dp-b
     circuit is an ideal actuator's) and where they came from (``energy_J`` or
-    ``supply_energy_J``)."""
+    none)."""
 
     terms: dict[str, float]
     notes: list[str]
@@ -589,8 +588,8 @@ def _total(value: Any) -> float:
 def energy_terms(metrics: Mapping[str, Any]) -> EnergyTerms:
     """The energy terms of a run's metrics: the ``energy_J`` table if the run has one (keys
     such as pump, circuit, relief, throttling (by valve), leakage, friction, makeup,
-    stored_change, mechanical, residual), else ``supply_energy_J`` alone as ``supply``
-    with a note saying so; empty if neither exists."""
+    stored_change, mechanical, residual; :mod:`trackmj.energy`), tables summed; empty with a
+    note if the run has none."""
     table = metrics.get("energy_J")
     if isinstance(table, Mapping):
         terms, notes = {}, []
@@ -603,11 +602,7 @@ def energy_terms(metrics: Mapping[str, Any]) -> EnergyTerms:
             else:
                 terms[key] = _total(value)
         return EnergyTerms(terms, notes, "energy_J")
-    if "supply_energy_J" in metrics:
-        return EnergyTerms({"supply": float(metrics["supply_energy_J"])},
-                           ["no energy_J table in this run: supply energy only"],
-                           "supply_energy_J")
-    return EnergyTerms({}, ["no energy figures in this run"], "none")
+    return EnergyTerms({}, ["no energy table in this run"], "none")
 
 
 def headline_energy(a: EnergyTerms, b: EnergyTerms) -> str | None:
@@ -682,7 +677,10 @@ METRIC_DISPLAY: dict[str, tuple[str, float, str]] = {
     "p_head_max_Pa": ("peak head pressure", 1e-6, "MPa"),
     "valve_switch_rate_Hz": ("valve switching", 1.0, "Hz"),
     "chassis_acc_body_mode_rms_m_s2": ("chassis acc. RMS, body-mode band", 1.0, "m/s²"),
-    "energy_in_J": ("energy in (pump, else supply)", 1e-3, "kJ"),
+    "energy_in_J": ("energy in (pump; dp-b: ideal circuit)", 1e-3, "kJ"),
+    "energy_J.pump": ("pump energy", 1e-3, "kJ"),
+    "energy_J.circuit": ("circuit energy (through the main valve's P port)", 1e-3, "kJ"),
+    "energy_J.mechanical": ("work into the track", 1e-3, "kJ"),
     "interface_energy_residual_J": ("interface energy residual", 1.0, "J"),
     "solve_time_median_s": ("solve time median", 1e3, "ms"),
     "solve_time_max_s": ("solve time max", 1e3, "ms"),
@@ -698,10 +696,10 @@ METRIC_DISPLAY: dict[str, tuple[str, float, str]] = {
 def lookup(metrics: Mapping[str, Any], key: str) -> float:
     """A metric by dotted key (``ripple_band_rms_N.tooth_passing``); NaN if absent or not a
     number. ``energy_in_J``: the run's energy input, the first finite of the energy terms
-    pump, supply, circuit (:func:`energy_terms`)."""
+    pump, circuit (dp-b has only its ideal actuator's circuit; :func:`energy_terms`)."""
     if key == "energy_in_J":
         terms = energy_terms(metrics).terms
-        for name in ("pump", "supply", "circuit"):
+        for name in ("pump", "circuit"):
             if math.isfinite(terms.get(name, math.nan)):
                 return terms[name]
         return math.nan

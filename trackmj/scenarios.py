@@ -5,17 +5,20 @@
 the one validator (:mod:`trackmj.params`) into :class:`ScenarioFile`, whose tables mirror
 the file; invalid files raise :class:`~trackmj.params.ParameterError` naming the file, the
 table, the key, the value and the allowed range or choices, before anything is built.
+The supply hardware and its nominal set-point are the hydraulic file's
+(``models/lf1352_hydraulics.toml`` [supply]); a scenario chooses the supply model and
+prescribes set-point changes (docs/sizing.md says what a drop means for each model).
 Units are SI: s, N, Pa, m/s; forces are F_ten (the cylinder force on the idler carrier, see
 README "Tension convention").
 
-File layout; every table is required, the arrays of tables are optional (a condition has
-no steps, ramps, drops, pulses or variants unless it lists them)::
+File layout; every table is required except [supply], the arrays of tables are optional
+(a condition has no steps, ramps, drops, pulses or variants unless it lists them)::
 
     [scenario]    name, title, duration_s, seeds, controller, estimator
     [track]       speed_m_s, ramp_s
     [reference]   initial_N; [[reference.steps]] time_s, delta_N;
                   [[reference.ramps]] start_s, rate_N_s, end_s (optional: to the end)
-    [supply]      mode, nominal_Pa; [[supply.drops]] start_s, end_s, pressure_Pa, transition_s
+    [supply]      model (optional); [[supply.drops]] start_s, end_s, pressure_Pa, transition_s
     [terrain]     kind; for kind = "iso8608" also road_class, n_min_cycles_m, n_max_cycles_m,
                   dx_m, x_start_m, flat_until_m, taper_m, margin_m (for "flat" they are
                   optional and unused, so ``--set scenario.terrain.kind=flat`` works on W2)
@@ -46,6 +49,7 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 
+from trackmj.hydraulics.params import PressureProfile, SupplyModel
 from trackmj.metrics import MetricWindows
 from trackmj.params import Location, ParameterError, Parameters, construct, load_file, param
 from trackmj.ports import COUPLING_STEP_S
@@ -59,6 +63,9 @@ NAME_PATTERN = r"[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 """Scenario and variant names: they become parts of run directory names."""
 REFERENCE_MAX_N = 50e3
 """F_ref must stay within [0, REFERENCE_MAX_N] over the run [N]."""
+ZERO_TRANSITION_S = 1e-6
+"""A set-point drop with transition_s = 0 reaches the HydraulicTensioner as a ramp this long
+ending at the edge [s] (a profile's times are strictly increasing; steps are 1 ms)."""
 
 
 def _edge(t: np.ndarray, t0: float, rise_s: float) -> np.ndarray:
@@ -133,12 +140,13 @@ class Reference(Parameters):
 
 @dataclass(frozen=True)
 class SupplyDrop(Parameters):
-    """Supply pressure held at pressure_Pa from start_s to end_s [s], linear transitions of
-    transition_s [s] at both ends (starting at start_s and at end_s)."""
+    """Supply set-point held at pressure_Pa from start_s to end_s [s], linear transitions of
+    transition_s [s] at both ends (starting at start_s and at end_s), back to the nominal
+    set-point of the hydraulic file."""
 
     start_s: float = param(0.0, None, doc="start of the first transition")
     end_s: float = param(0.0, None, doc="start of the transition back to nominal")
-    pressure_Pa: float = param(0.0, 30e6, doc="supply pressure during the drop")
+    pressure_Pa: float = param(0.0, 30e6, doc="supply set-point during the drop")
     transition_s: float = param(0.0, 5.0, doc="duration of each linear transition")
 
     def cross_check(self, at: Location) -> None:
@@ -147,17 +155,22 @@ class SupplyDrop(Parameters):
 
 @dataclass(frozen=True)
 class Supply(Parameters):
-    """Supply: ``accumulator`` (pump + accumulator + relief model; nominal_Pa is its initial
-    pressure) or ``prescribed`` (p_s(t) = nominal_Pa with the drops applied) [Pa gauge]."""
+    """The run's supply: which supply model of the hydraulic file feeds the circuit, and the
+    changes of its set-point p_set [Pa gauge] (a relief or compensator setting, a prescribed
+    pressure; see docs/sizing.md)."""
 
-    mode: Literal["accumulator", "prescribed"] = param(doc="supply model")
-    nominal_Pa: float = param(1e6, 30e6, doc="nominal supply pressure")
+    model: SupplyModel | None = param(  # noqa: RUF009 (param() returns a dataclasses.Field)
+        default=None, doc="supply model; optional: the hydraulic file's [supply].default_model")
     drops: tuple[SupplyDrop, ...] = param(default=(),
-                                          doc="optional drops (need mode = 'prescribed')")
+                                          doc="optional set-point drops (not with 'unloading')")
 
     def cross_check(self, at: Location) -> None:
-        if self.drops and self.mode != "prescribed":
-            raise at.error("mode", self.mode, "but [[supply.drops]] need mode = 'prescribed'")
+        if self.drops and self.model == "unloading":
+            raise at.error("model", self.model,
+                           "takes no [[supply.drops]]: with the pump unloaded and its check "
+                           "valve closed nothing lowers the accumulator pressure when the "
+                           "cut-out is lowered; use 'compensated', 'fixed_relief' or "
+                           "'prescribed'")
         ordered = sorted(enumerate(self.drops), key=lambda d: d[1].start_s)
         for (_, a), (j, b) in itertools.pairwise(ordered):
             if b.start_s < a.end_s + a.transition_s:
@@ -316,10 +329,12 @@ class ScenarioFile(Parameters):
     scenario: Header
     track: Track
     reference: Reference
-    supply: Supply
     terrain: Terrain
     limits: Limits
     evaluation: Evaluation
+    supply: Supply = param(  # noqa: RUF009 (param() returns a dataclasses.Field)
+        default=Supply(), doc="optional: the hydraulic file's default supply at its nominal "
+        "set-point")
     load_pulses: tuple[LoadPulse, ...] = param(default=(), doc="optional load pulses")
     variants: tuple[Variant, ...] = param(default=(), doc="optional parameter variants")
 
@@ -417,17 +432,30 @@ class Scenario:
         """F_ref at t0 + k·dt for k = 0..n−1 [N], shape (n,) (the controller's preview)."""
         return self.reference_N(t0_s + dt_s * np.arange(n))
 
-    def supply_pressure_Pa(self, t_s: np.ndarray | float) -> np.ndarray:
-        """Prescribed supply pressure p_s(t) [Pa] (nominal with the drops), shape of t_s.
-
-        In ``accumulator`` mode this is the set value the supply model starts from.
-        """
+    def supply_setpoint_Pa(self, t_s: np.ndarray | float, nominal_Pa: float) -> np.ndarray:
+        """Supply set-point p_set(t) [Pa]: ``nominal_Pa`` (the hydraulic file's
+        [supply].setpoint_Pa) with the drops applied, shape of t_s (vectorised)."""
         t = np.asarray(t_s, dtype=float)
-        p = np.full(t.shape, self.supply.nominal_Pa)
+        p = np.full(t.shape, float(nominal_Pa))
         for d in self.supply.drops:
             on = _edge(t, d.start_s, d.transition_s) - _edge(t, d.end_s, d.transition_s)
-            p = p + (d.pressure_Pa - self.supply.nominal_Pa) * on
+            p = p + (d.pressure_Pa - nominal_Pa) * on
         return p
+
+    def supply_setpoint_profile(self, nominal_Pa: float) -> PressureProfile | None:
+        """:meth:`supply_setpoint_Pa` as a piecewise-linear profile with breakpoints at the
+        drops' edges (a zero transition becomes a 1 µs ramp ending at the edge), or None
+        without drops (constant ``nominal_Pa``)."""
+        if not self.supply.drops:
+            return None
+        times = {0.0}
+        for d in self.supply.drops:
+            for edge in (d.start_s, d.end_s):
+                times |= {edge, edge + d.transition_s if d.transition_s > 0.0
+                          else max(edge - ZERO_TRANSITION_S, 0.0)}
+        t = np.array(sorted(times))
+        return PressureProfile(tuple(t.tolist()),
+                               tuple(self.supply_setpoint_Pa(t, nominal_Pa).tolist()))
 
     def track_speed_m_s(self, t_s: np.ndarray | float) -> np.ndarray:
         """Commanded track speed [m/s]: linear ramp from 0 over ramp_s, then constant."""

@@ -38,6 +38,7 @@ from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig
 from trackmj.elements import ConstantForce, IdealForceSource
 from trackmj.hydraulics import HydraulicTensioner
+from trackmj.params import ParameterError
 from trackmj.plant import TrackPlant
 from trackmj.ports import ForceLaw, Mechanics
 from trackmj.results import Result
@@ -119,12 +120,20 @@ def _control(setup: RunSetup, free_position_m: float) -> tuple[ControlConfig, Re
 
 
 def _hydraulic_element(setup: RunSetup, stroke_m: float, coupling: str) -> HydraulicTensioner:
+    """The plugin with the scenario's supply model (default: the hydraulic file's) at the
+    hydraulic file's set-point with the scenario's changes, each model starting in its
+    steady state without demand; all valves closed (hold)."""
     hyd, sc = setup.hydraulics, setup.scenario
-    prescribed = sc.supply.mode == "prescribed"
+    nominal = hyd.supply.setpoint_Pa
+    profile = sc.supply_setpoint_profile(nominal)
+    if profile is not None and (sc.supply.model or hyd.supply.default_model) == "unloading":
+        raise ParameterError(f"{sc.source.name} [[supply.drops]]: the supply model "
+                             "'unloading' (the hydraulic file's [supply].default_model) takes "
+                             "no set-point drops; name another [supply].model")
     element = HydraulicTensioner(
         hyd, stroke_m=stroke_m, head_pressure_Pa=setup.head_pressure0_Pa,
-        supply_profile=(lambda t: float(sc.supply_pressure_Pa(t))) if prescribed else None,
-        supply_pressure_Pa=None if prescribed else setup.supply0_Pa, coupling=coupling)
+        supply_model=sc.supply.model, setpoint_Pa=nominal if profile is None else profile,
+        coupling=coupling)
     element.set_mode(0)
     return element
 
@@ -185,6 +194,6 @@ def build_dp_b(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
     lag = 2.0 * math.pi / math.sqrt(oil_k / idler.mass_kg) / 4.0
     element = IdealForceSource(setup.force0_N, model.tension_rate_gain(setup.force0_N), lag,
                                2.0 * hyd.cylinder.viscous_friction_N_s_m, two_ah, two_ar,
-                               hyd.tank_pressure_Pa)
+                               hyd.tank_pressure_Pa, volume / hyd.fluid.bulk_modulus_Pa)
     return Assembly(CoupledPlant(track, element), track, element, track, cfg, model,
                     _estimate0(setup, track.stroke_m))

@@ -21,6 +21,8 @@ import numpy as np
 
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
+from trackmj.elements import IdealForceSource
+from trackmj.energy import energy_table, ideal_actuator_table
 from trackmj.hydraulics import HydraulicTensioner
 from trackmj.hydraulics.tensioner import NODE_NAMES
 from trackmj.machine import machine
@@ -55,7 +57,7 @@ def schedule(setup: RunSetup, horizon_steps: int, period_s: float) -> Schedule:
     t_start = t_end - h
     speed = sc.track_speed_m_s(t_end)
     pull, down = sc.hitch_force_N(t_start)
-    supply = sc.supply_pressure_Pa(t_end)
+    supply = sc.supply_setpoint_Pa(t_end, setup.hydraulics.supply.setpoint_Pa)
     inputs = [StepInputs(*row) for row in zip(speed.tolist(), pull.tolist(), down.tolist(),
                                                supply.tolist(), strict=True)]
     t_control = h * np.arange(0, steps, steps_per_period(period_s, h))
@@ -188,6 +190,9 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
         m["interface_energy_residual_J"] = ledger.interface_residual_J
         m["friction_loss_J"] = ledger.friction_J
         m["ledger_balance_error_J"] = ledger.balance_error_J
+        m["energy_J"] = energy_table(ledger, asm.element.supply_model, setup.duration_s)
+    elif isinstance(asm.element, IdealForceSource):
+        m["energy_J"] = ideal_actuator_table(asm.element, setup.duration_s)
     m["controller_fallbacks"] = float(getattr(controller, "fallbacks", 0))
     m["controller_overruns"] = float(np.sum(np.array(recorder.solve_times_s)
                                             > controller.period_s))

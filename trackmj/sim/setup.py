@@ -91,8 +91,9 @@ class RunSetup:
 
     @property
     def supply0_Pa(self) -> float:
-        """Supply pressure at t = 0 [Pa gauge]."""
-        return float(self.scenario.supply_pressure_Pa(0.0))
+        """Supply set-point at t = 0 [Pa gauge] (the hydraulic file's, with the scenario's
+        set-point changes)."""
+        return float(self.scenario.supply_setpoint_Pa(0.0, self.hydraulics.supply.setpoint_Pa))
 
     @property
     def head_pressure0_Pa(self) -> float:
