@@ -189,7 +189,9 @@ class NonlinearMpc(_MpcBase):
         super().__init__(model, ctrl, mpc, ocp)
         opts = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"]}} if jit else {}
         self.sqp = CondensedSqp(ocp, mpc.horizon_steps, mpc.collocation_degree, mpc.max_iter,
-                                tol_pr=1e-6, tol_du=1e-4, function_options=opts)
+                                tol_pr=1e-6, tol_du=1e-4, function_options=opts,
+                                accept_iter=mpc.accept_iter,
+                                accept_violation=FEASIBILITY_TOL)
 
     def _solve(
         self, w0: NDArray[np.float64], p: NDArray[np.float64]

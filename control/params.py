@@ -166,7 +166,9 @@ class MpcParams(Parameters):
     weight_input_rate: float = param(0.0, 1e6, unit="1", doc="weight on the u increments")
     weight_force_slack_per_kN2: float = param(0.0, 1e9, open_low=True, unit="1/kN^2",
                                               doc="weight on the soft F_min/F_max slack")
-    max_iter: int = param(1, 1000, doc="NMPC SQP iterations per period")
+    max_iter: int = param(1, 1000, doc="NMPC SQP iterations per period, at most")
+    accept_iter: int = param(1, 1000, doc="NMPC SQP iterations after which a plan feasible "
+                             "within the feasibility tolerance is used without more")
     qp_max_iter: int = param(1, 100000, doc="LMPC OSQP iteration cap per QP")
     qp_tolerance: float = param(0.0, 1.0, open_low=True, unit="1",
                                 doc="LMPC OSQP eps_abs = eps_rel (scaled units)")

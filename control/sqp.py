@@ -81,8 +81,11 @@ class CondensedSqp:
     """
 
     def __init__(self, ocp: Ocp, n_steps: int, degree: int, max_iter: int, tol_pr: float,
-                 tol_du: float, function_options: dict | None = None) -> None:
+                 tol_du: float, function_options: dict | None = None,
+                 accept_iter: int | None = None, accept_violation: float = 0.0) -> None:
         self.max_iter, self.tol_pr, self.tol_du = max_iter, tol_pr, tol_du
+        self.accept_iter = max_iter if accept_iter is None else accept_iter
+        self.accept_violation = accept_violation
         w, p, f, g = ocp.w, ocp.p, ocp.f, ocp.g
         nb, n, nxb = ocp.n_blocks, n_steps, 4 * degree
         nw, ng, nz = w.numel(), g.numel(), ocp.n_blocks + n_steps
@@ -259,6 +262,10 @@ class CondensedSqp:
                 lam_x += t * self.dlam_x
                 w += t * self.dx
             step_inf = t * dx_inf
+            if it >= self.accept_iter and max_viol <= self.accept_violation:
+                # a truncated SQP whose plan is feasible enough is used as it is (real-time
+                # iterations); the remaining iterations are spent only on infeasible plans
+                return self._result(max_viol, it, True)
             if it >= self.max_iter:
                 # sqpmethod would re-linearise here only to test convergence; success and
                 # the iteration limit are both accepted, so the merit call's violation suffices

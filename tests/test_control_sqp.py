@@ -14,7 +14,7 @@ from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.ocp import X_SCALE, initial_guess
 from trackmj.control.params import load_config
-from trackmj.control.sqp import BETA, C1, MAX_ITER_LS, MIN_STEP
+from trackmj.control.sqp import BETA, C1, MAX_ITER_LS, MIN_STEP, CondensedSqp
 from trackmj.sim.config import nominal_plant_params
 
 CFG = load_config()
@@ -80,6 +80,9 @@ def _problems(ctrl: NonlinearMpc) -> dict[str, tuple[np.ndarray, np.ndarray, obj
 
 CTRL = NonlinearMpc(ReducedModel(PLANT), CFG.controller, CFG.mpc)
 PROBLEMS = _problems(CTRL)
+# sqpmethod has no early acceptance of a feasible truncated plan: compare the iterations
+# with it switched off (the rule only ends the loop sooner, it changes no iterate)
+CTRL.sqp.accept_iter = CTRL.sqp.max_iter
 REF = _sqpmethod(CTRL)
 
 
@@ -102,3 +105,25 @@ def test_condensed_sqp_matches_sqpmethod_qpoases(name: str) -> None:
     # whole iterate (slacks and scaled states) too, and the problem must be non-trivial
     assert np.abs(ours.w - w_ref).max() <= RTOL * max(1.0, np.abs(w_ref).max())
     assert np.abs(u_ref).max() > 1e-3 or name == "at_reference_cold"
+
+
+def test_early_acceptance_stops_at_a_feasible_truncated_plan() -> None:
+    """With accept_iter = 2 a plan within the feasibility tolerance after two iterations is
+    returned there, identical to a 2-iteration SQP's; one that is not gets the full
+    iterations, identical to the SQP without the rule."""
+    args = (CTRL.ocp, CFG.mpc.horizon_steps, CFG.mpc.collocation_degree)
+    early = CondensedSqp(*args, 6, tol_pr=1e-6, tol_du=1e-4, accept_iter=2,
+                         accept_violation=0.1)
+    two = CondensedSqp(*args, 2, tol_pr=1e-6, tol_du=1e-4)
+    full = CondensedSqp(*args, 6, tol_pr=1e-6, tol_du=1e-4)
+    took_early = 0
+    for w0, p, lam0 in PROBLEMS.values():
+        r_two, r_early, r_full = (s.solve(w0, p, lam0) for s in (two, early, full))
+        if r_two.iterations == 2 and r_two.max_violation <= 0.1:
+            took_early += 1
+            assert r_early.iterations == 2 and r_early.ok
+            np.testing.assert_array_equal(r_early.w, r_two.w)
+        else:
+            assert r_early.iterations == r_full.iterations
+            np.testing.assert_array_equal(r_early.w, r_full.w)
+    assert took_early >= 1

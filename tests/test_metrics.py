@@ -365,3 +365,39 @@ def test_energy_terms_of_a_table_of_a_fallback_and_of_nothing() -> None:
     ideal = M.energy_terms({"energy_J": {"pump": math.nan, "circuit": 7e3}})
     assert M.headline_energy(e, ideal) == "circuit"
     assert M.headline_energy(e, none) is None
+
+
+def test_trailing_mean_is_causal_and_exact() -> None:
+    t = _t(2.0)
+    y = np.where(t >= 1.0, 1000.0, 0.0)
+    m = M.trailing_mean(t, y, 0.5)
+    assert m[t < 1.0].max() == 0.0                       # nothing from the future
+    i = np.searchsorted(t, 1.25)                         # half the window past the step
+    assert m[i] == pytest.approx(1000.0 * 251 / 500, rel=1e-9)
+    assert m[t >= 1.5].min() == pytest.approx(1000.0)
+
+
+def test_acceptance_of_a_decaying_load_disturbance() -> None:
+    """A 2 kN disturbance at 6 s decaying with tau = 0.4 s on 15 kN: the trailing 0.5 s mean
+    is back within 5 % (750 N) when the mean of the decay over the last 0.5 s is 750 N,
+    i.e. 2000·tau·(1 − exp(−0.5/tau))·exp(−(t − 6 − 0.5)/tau)/0.5 = 750, solved by hand; a
+    second edge at 8 s with no disturbance recovers at once; a 200 N offset from 9 s on is a
+    1.33 % steady offset, the worst of the steady windows."""
+    tau, ref = 0.4, 15e3
+    t = _t(20.0)
+    y = np.full_like(t, ref)
+    on = t >= 6.0
+    y[on] += 2000.0 * np.exp(-(t[on] - 6.0) / tau)
+    y[t >= 9.0] += 200.0
+    w = _windows(disturbances=((6.0, 8.0),), evaluation_start_s=1.0)
+    a = M.acceptance(t, y, np.full_like(t, ref), w)
+    # mean over [t - 0.5, t] for t > 6.5: 2000 tau (1 - e^{-0.5/tau}) e^{-(t-6.5)/tau} / 0.5
+    amp = 2000.0 * tau * (1.0 - math.exp(-0.5 / tau)) / 0.5
+    expected = 0.5 + tau * math.log(amp / 750.0)
+    assert a["edge_recovery_s"]["6"] == pytest.approx(expected, abs=2e-3)
+    assert a["edge_recovery_s"]["8"] == 0.0
+    assert a["steady_offset_max_rel"] == pytest.approx(200.0 / ref, rel=0.02)
+    # the mean rises while the window fills with the decay (6 - 6.5 s), then falls: its
+    # maximum is ref + amp at 6.5 s
+    assert a["mean_max_N"] == pytest.approx(ref + amp, rel=1e-4)
+    assert a["mean_min_N"] == pytest.approx(ref)

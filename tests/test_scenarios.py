@@ -309,7 +309,8 @@ def test_custom_file_with_every_table_loads(tmp_path) -> None:
                     "[evaluation]\nstart_s = 1.0\nsteady_start_s = 4.0\nsettle_band_rel = 0.02\n"
                     "min_hold_s = 0.5\nlowpass_cutoff_Hz = 2.0\ntooth_band_rel = 0.1\n"
                     "body_mode_band_Hz = [8.0, 12.0]\npsd_resolution_Hz = 0.5\n"
-                    "psd_max_Hz = 50.0\n")
+                    "psd_max_Hz = 50.0\nmean_window_s = 0.5\nrecovery_band_rel = 0.05\n"
+                    "steady_window_s = 5.0\n")
     s = load_scenario(path)
     assert (s.duration_s, s.seeds, s.controller, s.estimator) == (8.0, (7,), "pid", "ukf")
     assert type(s.duration_s) is float and type(s.track.speed_m_s) is float

@@ -98,6 +98,8 @@ SUMMARY_METRICS = ("rmse_lp_N", "rmse_N", "ripple_rms_N", "ripple_band_rms_N.too
                    "ripple_band_rms_N.body_mode", "peak_error_lp_N", "peak_error_N",
                    "overshoot_lp_N", "settling_time_lp_s", "disturbance_peak_error_lp_N",
                    "recovery_time_lp_s", "fluctuation_N", "constraint_violation_s",
+                   "acceptance.mean_min_N", "acceptance.mean_max_N",
+                   "acceptance.recovery_max_s", "acceptance.steady_offset_max_rel",
                    "energy_J.pump", "energy_J.circuit", "energy_J.mechanical",
                    "valve_switch_rate_Hz", "interface_energy_residual_J",
                    "solve_time_median_s", "solve_time_max_s", "real_time_factor")

@@ -331,6 +331,10 @@ class MetricWindows:
     scenario's tooth_band_rel (None: no track, or its pitch unknown); road_band_Hz: the
     band the road excites (speed × the ISO 8608 spatial band; None on flat ground), marked
     on figures only. psd_resolution_Hz, psd_max_Hz: resolution and upper end of the spectra.
+    mean_window_s, recovery_band_rel, steady_window_s, reference_events_s: the
+    :func:`acceptance` checks (trailing-mean length, recovery band relative to the
+    reference, steady-window length, and the reference's steps and ramp starts, which end a
+    steady window like a disturbance edge does).
     """
 
     force_min_N: float
@@ -349,6 +353,10 @@ class MetricWindows:
     disturbance_labels: tuple[str, ...] = ()
     steady: tuple[float, float] | None = None
     recovery_band_N: float | None = None
+    mean_window_s: float = 0.5
+    recovery_band_rel: float = 0.05
+    steady_window_s: float = 5.0
+    reference_events_s: tuple[float, ...] = ()
 
     def ripple_bands_Hz(self) -> dict[str, tuple[float, float]]:
         """Named bands the ripple is split into: ``tooth_passing`` (if known), ``body_mode``."""
@@ -437,6 +445,68 @@ def ripple_band_rms(t: np.ndarray, ripple: np.ndarray, bands: Mapping[str, tuple
         inside |= (f >= lo) & (f <= hi)
     out["rest"] = float(np.sqrt(np.sum(density[~inside]) * (f[1] - f[0])))
     return out
+
+
+def trailing_mean(t: np.ndarray, y: np.ndarray, window_s: float) -> np.ndarray:
+    """Mean of y over the last ``window_s`` [s] up to each sample (causal boxcar; the first
+    samples average what there is), same shape as y."""
+    n = max(1, round(window_s / sample_period(t)))
+    c = np.concatenate(([0.0], np.cumsum(np.asarray(y, dtype=float))))
+    k = np.arange(1, len(y) + 1)
+    lo = np.maximum(k - n, 0)
+    return (c[k] - c[lo]) / (k - lo)
+
+
+def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
+               w: MetricWindows) -> dict[str, Any]:
+    """The tensioner's acceptance figures on the trailing ``mean_window_s`` mean of F_ten.
+
+    - ``mean_min_N``, ``mean_max_N``: its extremes from the evaluation start (to be inside
+      [force_min_N, force_max_N]);
+    - ``edge_recovery_s``: for each disturbance edge (onset and end of a load pulse or a
+      supply drop; table keyed by the edge time), the time until the mean stays within
+      ±``recovery_band_rel``·F_ref up to the next edge (0 if it never leaves; NaN if it
+      does not return); ``recovery_max_s`` the largest of them (NaN if one never returns);
+    - ``steady_offset_max_rel``: the largest |mean(F − F_ref)| / mean(F_ref) over the
+      ``steady_window_s`` windows (sliding by 1 s) that lie 2 s or more after any edge or
+      reference step/ramp start and end before the next one;
+    - the settings they were taken with.
+    """
+    t = np.asarray(t, dtype=float)
+    mean = trailing_mean(t, y, w.mean_window_s)
+    err = mean - np.asarray(ref, dtype=float)
+    ev = t >= w.evaluation_start_s
+    edges = sorted({e for pair in w.disturbances for e in pair if e < t[-1]})
+    recovery = {}
+    for i, edge in enumerate(edges):
+        until = edges[i + 1] if i + 1 < len(edges) else t[-1]
+        m = (t >= edge) & (t <= until)
+        outside = np.flatnonzero(np.abs(err[m]) > w.recovery_band_rel * np.abs(ref[m]))
+        if len(outside) == 0:
+            recovery[f"{edge:g}"] = 0.0
+        elif outside[-1] == m.sum() - 1:
+            recovery[f"{edge:g}"] = math.nan
+        else:
+            recovery[f"{edge:g}"] = float(t[m][outside[-1] + 1] - edge)
+    events = sorted({*edges, *w.reference_events_s})
+    worst = math.nan
+    start = w.evaluation_start_s
+    while start + w.steady_window_s <= t[-1] + 1e-9:
+        end = start + w.steady_window_s
+        last = max([e for e in events if e <= end] or [-math.inf])
+        if start >= last + 2.0:
+            m = (t >= start) & (t <= end)
+            offset = abs(float(np.mean(y[m] - ref[m]))) / float(np.mean(ref[m]))
+            worst = offset if math.isnan(worst) else max(worst, offset)
+        start += 1.0
+    return {"mean_window_s": w.mean_window_s, "recovery_band_rel": w.recovery_band_rel,
+            "steady_window_s": w.steady_window_s,
+            "mean_min_N": float(mean[ev].min()) if ev.any() else math.nan,
+            "mean_max_N": float(mean[ev].max()) if ev.any() else math.nan,
+            "edge_recovery_s": recovery,
+            "recovery_max_s": (max(recovery.values()) if recovery
+                               and not any(map(math.isnan, recovery.values())) else math.nan),
+            "steady_offset_max_rel": worst}
 
 
 def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *,
@@ -552,6 +622,7 @@ def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *
     if wall_time_s is not None:
         out["real_time_factor"] = ((t_end - float(t[0])) / wall_time_s if wall_time_s > 0
                                    else math.nan)
+    out["acceptance"] = acceptance(t, y, ref, w)
     out["evaluation"] = w.as_table()
     return out
 
@@ -678,6 +749,10 @@ METRIC_DISPLAY: dict[str, tuple[str, float, str]] = {
     "valve_switch_rate_Hz": ("valve switching", 1.0, "Hz"),
     "chassis_acc_body_mode_rms_m_s2": ("chassis acc. RMS, body-mode band", 1.0, "m/s²"),
     "energy_in_J": ("energy in (pump; dp-b: ideal circuit)", 1e-3, "kJ"),
+    "acceptance.mean_min_N": ("0.5 s mean, lowest", 1e-3, "kN"),
+    "acceptance.mean_max_N": ("0.5 s mean, highest", 1e-3, "kN"),
+    "acceptance.recovery_max_s": ("back within 5 % after an edge", 1.0, "s"),
+    "acceptance.steady_offset_max_rel": ("worst steady 5 s offset", 100.0, "%"),
     "energy_J.pump": ("pump energy", 1e-3, "kJ"),
     "energy_J.circuit": ("circuit energy (through the main valve's P port)", 1e-3, "kJ"),
     "energy_J.mechanical": ("work into the track", 1e-3, "kJ"),

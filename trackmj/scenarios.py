@@ -307,6 +307,12 @@ class Evaluation(Parameters):
                                      doc="frequency resolution of the spectra (Welch "
                                      "segments of 1/resolution s)")
     psd_max_Hz: float = param(1.0, 500.0, doc="spectra written up to here")
+    mean_window_s: float = param(0.01, 10.0, doc="trailing mean of the acceptance checks")
+    recovery_band_rel: float = param(0.0, 0.5, open_low=True,
+                                     doc="acceptance: band around the reference the mean "
+                                     "returns to after a disturbance edge")
+    steady_window_s: float = param(0.1, 100.0, doc="acceptance: length of a steady window "
+                                   "whose mean error is the steady offset")
 
     def cross_check(self, at: Location) -> None:
         low, high = self.body_mode_band_Hz
@@ -537,7 +543,10 @@ class Scenario:
             min_hold_s=ev.min_hold_s, lowpass_cutoff_Hz=ev.lowpass_cutoff_Hz,
             body_mode_band_Hz=ev.body_mode_band_Hz, tooth_passing_band_Hz=tooth,
             road_band_Hz=road, psd_resolution_Hz=ev.psd_resolution_Hz,
-            psd_max_Hz=ev.psd_max_Hz)
+            psd_max_Hz=ev.psd_max_Hz, mean_window_s=ev.mean_window_s,
+            recovery_band_rel=ev.recovery_band_rel, steady_window_s=ev.steady_window_s,
+            reference_events_s=tuple(sorted({*(s.time_s for s in self.reference.steps),
+                                             *(r.start_s for r in self.reference.ramps)})))
 
 
 # ---------------------------------------------------------------------- loading
