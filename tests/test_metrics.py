@@ -359,7 +359,7 @@ def test_energy_terms_of_a_table_of_a_fallback_and_of_nothing() -> None:
     assert e.source == "energy_J" and e.terms["throttling"] == 4e3
     assert set(e.terms) == {"pump", "circuit", "relief", "throttling", "leakage",
                             "mechanical", "residual"}
-    assert e.notes == ["circuit_is_ideal_actuator", "note: dp-b: ideal force source"]
+    assert e.notes == ["circuit is ideal actuator", "dp-b: ideal force source"]
     none = M.energy_terms({})
     assert none.terms == {} and none.source == "none" and none.notes
     ideal = M.energy_terms({"energy_J": {"pump": math.nan, "circuit": 7e3}})

@@ -264,7 +264,7 @@ def test_malformed_scenarios_are_refused_naming_file_table_and_key(
 
 def test_unreadable_files_are_refused_naming_the_file(tmp_path) -> None:
     with pytest.raises(ParameterError, match=r"scenario file not found: .*nope\.toml \(built-in "
-                       r"scenarios: W1, W2, W3, W4, W5\)"):
+                       r"scenarios: W1, W2, W3, W4, W5, NL1\)"):
         load_scenario(tmp_path / "nope.toml")
     with pytest.raises(ParameterError, match=r"bad\.toml: malformed TOML"):
         load_scenario(_bad(tmp_path, "[track]", "[track"))

@@ -108,14 +108,13 @@ def accounted_J(table: dict[str, Any]) -> float:
 
 def ideal_actuator_table(source: IdealForceSource, t_end_s: float) -> dict[str, Any]:
     """dp-b's energy table: the work into the track and, as ``circuit``, what an ideal
-    actuator with the same cylinders would draw (see :class:`IdealForceSource`)."""
+    actuator with the same cylinders would draw: lossless valves, no leakage or seal
+    friction, the head oil column storing what the track returns (the running maximum of the
+    head-side work plus the oil column's energy change; see :class:`IdealForceSource`)."""
     return {
         "ideal_actuator": True,
-        "note": "dp-b has no hydraulics: circuit is what an ideal actuator with the same "
-                "cylinders would draw (lossless valves, no leakage or seal friction, the head "
-                "oil column storing what the track returns: the running maximum of the "
-                "head-side work plus the oil column's energy change); mechanical is the work "
-                "into the track",
+        "note": "no hydraulics: circuit is what an ideal actuator with the same cylinders "
+                "would draw (trackmj.energy.ideal_actuator_table)",
         "circuit": float(source.supply_J),
         "mechanical": float(source.work_J),
     }

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import io
 import math
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -105,15 +106,19 @@ def _legend_above(ax: Axes, ncol: int | None = None, **kwargs: Any) -> None:
                   handlelength=3.0, borderaxespad=0.0, columnspacing=1.2, **kwargs)
 
 
-def _shade_events(ax: Axes, w: MetricWindows, label: bool = True) -> None:
-    """Grey spans over the disturbance windows; a dotted line at the reference step."""
+def _shade_events(ax: Axes, w: MetricWindows, t_end: float, label: bool = True) -> None:
+    """Grey spans over the disturbance windows up to the run's end ``t_end`` [s] (a window
+    after the end of a shortened run is not drawn); a dotted line at the reference step."""
     named = set()
     for k, (on, off) in enumerate(w.disturbances):
+        if on >= t_end:
+            continue
+        off = min(off, t_end)
         kind = _disturbance_kind(w, k)
         ax.axvspan(on, off, color=EVENT_COLOUR, alpha=0.15, lw=0,
                    label=f"{kind} window" if label and kind not in named else None)
         named.add(kind)
-    if w.step is not None:
+    if w.step is not None and w.step[0] < t_end:
         ax.axvline(w.step[0], color=EVENT_COLOUR, ls="-.", lw=1.0,
                    label=f"reference step at {w.step[0]:g} s" if label else None)
 
@@ -181,7 +186,7 @@ def _tension_panel(ax: Axes, runs: Sequence[tuple[str, Result]], w: MetricWindow
     ax.plot(t[sel], c["tension_ref_N"][sel] / 1e3, color="black", lw=1.0, ls=(0, (1, 1.5)),
             label="reference F_ref")
     _force_band(ax, w, label=legend)
-    _shade_events(ax, w, label=legend)
+    _shade_events(ax, w, float(t[-1]), label=legend)
     ax.set_ylabel("F_ten [kN]")
     if t_range is not None:
         ax.set_xlim(*t_range)
@@ -230,17 +235,19 @@ def _energy_bars(ax: Axes, labels: Sequence[str], results: Sequence[Result]) -> 
     for lab, e in zip(labels, terms, strict=True):
         for n in e.notes:
             by_note.setdefault(n, []).append(lab)
-    if by_note:     # in head room above the bars, not over them
+    lines = [textwrap.fill(f"{', '.join(labs)}: {n}", 70) for n, labs in by_note.items()]
+    if lines:     # in head room above the bars, not over them
         low, high = ax.get_ylim()
-        ax.set_ylim(low, high + 0.12 * len(by_note) * (high - low) + 0.1 * (high - low))
-        ax.text(0.02, 0.98, "\n".join(f"{', '.join(labs)}: {n}" for n, labs in by_note.items()),
-                transform=ax.transAxes, va="top", fontsize=7)
+        rows = sum(line.count("\n") + 1 for line in lines)
+        ax.set_ylim(low, high + (0.1 * rows + 0.1) * (high - low))
+        ax.text(0.02, 0.98, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=7)
     ax.axhline(0.0, color="black", lw=0.6)
     ax.set_xticks(range(len(labels)), labels, rotation=20)
     ax.set_xlim(-0.6, len(labels) - 0.4)
     ax.set_ylabel("energy [kJ]")
     ax.grid(axis="y", alpha=0.3)
-    _legend_above(ax, ncol=3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, fontsize=7,
+              borderaxespad=0.0)   # beside the bars: the breakdown has a dozen terms
 
 
 def run_figure(result: Result, path: str | Path) -> Path:
@@ -274,7 +281,7 @@ def run_figure(result: Result, path: str | Path) -> Path:
                       lw=1.1, label=f"{label} {w.lowpass_cutoff_Hz:g} Hz low-pass")
         else:
             ax_p.plot([], [], color="black", ls=ls, label=f"{label}: none in this architecture")
-    _shade_events(ax_p, w, label=False)
+    _shade_events(ax_p, w, float(t[-1]), label=False)
     ax_p.set_ylabel("pressure [MPa]")
     ax_p.grid(alpha=0.3)
     _legend_above(ax_p)
@@ -282,12 +289,12 @@ def run_figure(result: Result, path: str | Path) -> Path:
     ax_v.set_yticks([-1, 0, 1], ["−1 release", "0 hold", "+1 pressurize"])
     ax_v.set_ylim(-1.4, 1.4)
     ax_v.set_ylabel("mode [-]")
-    _shade_events(ax_v, w, label=False)
+    _shade_events(ax_v, w, float(t[-1]), label=False)
     ax_v.grid(alpha=0.3)
     ax_u.plot(t, c["u"], color="#0072B2", lw=0.6, label="valve opening u")
     ax_u.set_ylabel("u [-]")
     ax_u.set_xlabel("time [s]")
-    _shade_events(ax_u, w, label=False)
+    _shade_events(ax_u, w, float(t[-1]), label=False)
     ax_u.grid(alpha=0.3)
     for ax in (ax_f, ax_p, ax_v):
         ax.tick_params(labelbottom=False)
@@ -333,7 +340,7 @@ def _bars(ax: Axes, labels: Sequence[str], series: Mapping[str, Sequence[float]]
     low, high = min(min(finite), 0.0), max(max(finite), 0.0)
     pad = 0.18 * (high - low or 1.0)       # room for the value labels
     ax.set_ylim(low - pad if low < 0.0 else 0.0, high + pad)
-    _legend_above(ax, ncol=len(series))
+    _legend_above(ax, ncol=1)      # stacked: a narrow panel's entries would overlap its neighbour
 
 
 def overlay_figure(results: Sequence[Result], path: str | Path, *,
@@ -352,8 +359,8 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
     t_end = float(results[0].columns()["t_s"][-1])
     zooms = _zoom_windows(w, t_end)[:4]
     bar_axes = 4 if predictions else 2
-    fig = plt.figure(figsize=(17, 14), layout="constrained")
-    grid = fig.add_gridspec(4, 1, height_ratios=(3.0, 2.0, 2.0, 2.3))
+    fig = plt.figure(figsize=(17, 15), layout="constrained")
+    grid = fig.add_gridspec(4, 1, height_ratios=(3.0, 2.0, 2.0, 3.0))
     ax_f = fig.add_subplot(grid[0])
     _tension_panel(ax_f, runs, w)
     ax_f.set_xlabel("time [s]")
@@ -368,7 +375,7 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
     if np.isfinite(supply).any():
         ax_p.plot(results[0].columns()["t_s"], supply / 1e6, color="0.45", lw=1.0,
                   ls=(0, (4, 1, 1, 1)), label=f"{labels[0]} p_supply")
-    _shade_events(ax_p, w, label=False)
+    _shade_events(ax_p, w, float(results[0].columns()["t_s"][-1]), label=False)
     ax_p.set_ylabel("pressure [MPa]")
     ax_p.set_xlabel("time [s]")
     ax_p.grid(alpha=0.3)
@@ -380,7 +387,7 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
         _tension_panel(ax, runs, w, (t0, t1), legend=False, raw_as_line=True)
         ax.set_title(f"zoom: {name}", fontsize=9, loc="left")
         ax.set_xlabel("time [s]")
-    bars = grid[3].subgridspec(1, bar_axes, width_ratios=(*[1.0] * (bar_axes - 1), 1.6))
+    bars = grid[3].subgridspec(1, bar_axes, width_ratios=(*[1.0] * (bar_axes - 1), 2.4))
     if predictions:
         others = [lab for lab in labels if lab in predictions and lab != "tp"]
         _bars(fig.add_subplot(bars[0]), others, {

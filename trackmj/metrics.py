@@ -665,11 +665,11 @@ def energy_terms(metrics: Mapping[str, Any]) -> EnergyTerms:
     if isinstance(table, Mapping):
         terms, notes = {}, []
         for key, value in table.items():
-            if isinstance(value, str):
-                notes.append(f"{key}: {value}")
+            if isinstance(value, str):     # a "note" entry is its text, other texts named
+                notes.append(value if key == "note" else f"{key}: {value}")
             elif isinstance(value, bool):
                 if value:
-                    notes.append(key)
+                    notes.append(key.replace("_", " "))
             else:
                 terms[key] = _total(value)
         return EnergyTerms(terms, notes, "energy_J")

@@ -1,4 +1,5 @@
-"""Operating conditions W1-W5 as frozen dataclasses loaded from TOML.
+"""Operating conditions as frozen dataclasses loaded from TOML: the study's W1-W5 and NL1
+(added: large tension steps at a reduced supply, where the nonlinearity binds).
 
 ``load_scenario("W1")`` reads ``experiments/W1.toml`` from the installed package
 ``trackmj.experiments``; any other argument is a path to a custom file. The file is read by
@@ -56,7 +57,7 @@ from trackmj.ports import COUPLING_STEP_S
 from trackmj.sim.registry import CONTROLLERS, ESTIMATORS, choices
 from trackmj.terrain import ISO8608_GD_N0_M3, RoadProfile, road_profile, taper_start
 
-BUILTIN = ("W1", "W2", "W3", "W4", "W5")
+BUILTIN = ("W1", "W2", "W3", "W4", "W5", "NL1")
 TERRAIN_SEED_SALT = 8608
 """Terrain RNG = default_rng([seed, 8608]): independent of the noise stream of the same seed."""
 NAME_PATTERN = r"[A-Za-z0-9_-][A-Za-z0-9_.-]*"
