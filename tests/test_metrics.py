@@ -401,3 +401,21 @@ def test_acceptance_of_a_decaying_load_disturbance() -> None:
     # maximum is ref + amp at 6.5 s
     assert a["mean_max_N"] == pytest.approx(ref + amp, rel=1e-4)
     assert a["mean_min_N"] == pytest.approx(ref)
+
+
+def test_a_condition_held_from_the_start_is_not_an_edge() -> None:
+    """A supply drop in place from t = 0 to the run's end (NL1's 9 MPa) is the run's
+    condition: no edge is judged, so a reference step inside it is not read as a slow
+    recovery; an onset after the evaluation start is judged as before."""
+    t = _t(20.0)
+    ref = np.where(t >= 5.0, 18e3, 12e3)
+    y = ref + np.where((t >= 5.0) & (t < 8.0), -3e3, 0.0)      # a 3 s rise lag on the step
+    held = _windows(disturbances=((0.0, 20.0),))
+    a = M.acceptance(t, y, ref, held)
+    assert a["edge_recovery_s"] == {} and math.isnan(a["recovery_max_s"])
+    out = M.compute_metrics(_contract_columns(t), held, control_period_s=0.01)
+    assert math.isnan(out["recovery_time_s"]) and math.isnan(out["disturbance_peak_error_N"])
+    later = M.acceptance(t, y, ref, _windows(disturbances=((4.0, 20.0),)))
+    # the 0.5 s mean of the -3 kN lag ending at 8 s is within 5 % of 18 kN (900 N) once
+    # 3000 (8.5 - t) / 0.5 <= 900, i.e. from t = 8.35 s: 4.35 s after the edge at 4 s
+    assert later["edge_recovery_s"]["4"] == pytest.approx(4.35, abs=2e-3)

@@ -140,6 +140,32 @@ def test_scattered_samples_are_plotted_per_metric(tmp_path) -> None:
     assert all(p.read_bytes()[:4] == b"\x89PNG" for p in figures)
 
 
+def test_a_sweep_without_swept_keys_gets_bars_per_scenario_and_case(tmp_path,
+                                                                    monkeypatch) -> None:
+    """A controller comparison (no swept key): a figure per metric with a group of bars per
+    scenario and a bar per controller at the mean over seeds."""
+    from trackmj.sweeps import _write_table, plot_sweep
+
+    rows = [{"run_key": f"{sc}{c}{seed}", "point": 0, "scenario": sc, "architecture": "tp",
+             "controller": c, "estimator": "ekf", "variant": "nominal", "seed": seed,
+             "duration_s": 1.5, "inputs": "{}", "rmse_N": 100.0 * k + seed,
+             "wall_time_s": 1.0, "error": None}
+            for sc in ("NL1", "W1") for k, c in enumerate(("nmpc", "pid")) for seed in (0, 2)]
+    _write_table(rows, tmp_path / "results.parquet")
+    import trackmj.sweeps as sweeps
+
+    captured, original = [], sweeps._case_figure
+    monkeypatch.setattr(sweeps, "_case_figure",
+                        lambda *args: captured.append(original(*args)) or captured[-1])
+    figures = plot_sweep(tmp_path)
+    assert sorted(p.name for p in figures) == ["rmse_N.png", "wall_time_s.png"]
+    ax = captured[0].axes[0]
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["W1", "NL1"]   # built-in order
+    assert ax.get_legend_handles_labels()[1] == ["nmpc", "pid"]
+    heights = sorted(round(p.get_height(), 9) for p in ax.patches)
+    assert heights == [1e-3, 1e-3, 0.101, 0.101]          # kN: means over seeds 0 and 2
+
+
 def test_results_are_rewritten_at_most_every_period_and_flushed(tmp_path, monkeypatch) -> None:
     """Rewriting grows with the rows, so it is throttled; what arrived is always flushed."""
     import trackmj.sweeps as sweeps

@@ -322,7 +322,9 @@ class MetricWindows:
     the mean tension and the spectra. step: (t_step, initial, final, t_end) of a reference
     step, its overshoot and settling evaluated in [t_step, t_end]. disturbances: (onset,
     end) windows of load pulses or supply drops, disturbance_labels what each one is (for
-    figures; empty: unnamed). settle_band_rel: settling and recovery band
+    figures; empty: unnamed); an onset or end before evaluation_start_s is the run's initial
+    condition (e.g. NL1's supply held at 9 MPa from t = 0), not an edge the disturbance and
+    acceptance metrics judge. settle_band_rel: settling and recovery band
     relative to the final value (recovery: to the reference at the onset), unless
     recovery_band_N is given. min_hold_s: how long a response must stay inside its band
     before the window ends to count as settled/recovered. lowpass_cutoff_Hz: cut-off of
@@ -413,7 +415,7 @@ def _tracking(t: np.ndarray, y: np.ndarray, ref: np.ndarray, w: MetricWindows,
     out[_name("overshoot", "N", lowpassed)] = over.value
     out[_name("overshoot", "pct", lowpassed)] = over.percent
     out[_name("settling_time", "s", lowpassed)] = settle
-    onsets = sorted(on for on, _ in w.disturbances if on < t_end)
+    onsets = sorted(on for on, _ in w.disturbances if w.evaluation_start_s <= on < t_end)
     peaks, recoveries = [], []
     for k, on in enumerate(onsets):
         until = onsets[k + 1] if k + 1 < len(onsets) else t_end
@@ -464,9 +466,10 @@ def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
     - ``mean_min_N``, ``mean_max_N``: its extremes from the evaluation start (to be inside
       [force_min_N, force_max_N]);
     - ``edge_recovery_s``: for each disturbance edge (onset and end of a load pulse or a
-      supply drop; table keyed by the edge time), the time until the mean stays within
-      ±``recovery_band_rel``·F_ref up to the next edge (0 if it never leaves; NaN if it
-      does not return); ``recovery_max_s`` the largest of them (NaN if one never returns);
+      supply drop, from the evaluation start; table keyed by the edge time), the time until
+      the mean stays within ±``recovery_band_rel``·F_ref up to the next edge (0 if it never
+      leaves; NaN if it does not return); ``recovery_max_s`` the largest of them (NaN if
+      one never returns or there is no edge);
     - ``steady_offset_max_rel``: the largest |mean(F − F_ref)| / mean(F_ref) over the
       ``steady_window_s`` windows (sliding by 1 s) that lie 2 s or more after any edge or
       reference step/ramp start and end before the next one;
@@ -476,7 +479,8 @@ def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
     mean = trailing_mean(t, y, w.mean_window_s)
     err = mean - np.asarray(ref, dtype=float)
     ev = t >= w.evaluation_start_s
-    edges = sorted({e for pair in w.disturbances for e in pair if e < t[-1]})
+    edges = sorted({e for pair in w.disturbances for e in pair
+                    if w.evaluation_start_s <= e < t[-1]})
     recovery = {}
     for i, edge in enumerate(edges):
         until = edges[i + 1] if i + 1 < len(edges) else t[-1]

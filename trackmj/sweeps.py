@@ -822,7 +822,9 @@ def plot_sweep(out_dir: str | Path, *, keys: set[str] | None = None) -> list[Pat
     (and the wall time) one panel per swept parameter, the metric's mean ± std over seeds
     at each parameter point; a line per case (scenario, architecture, controller, ...)
     and per combination of the other swept parameters (points that share none, e.g. Latin
-    hypercube samples, stand alone). Failed runs are left out.
+    hypercube samples, stand alone). A sweep without swept parameters (e.g. a controller
+    comparison) gets bars instead: a group per scenario, a bar per case within it, mean ±
+    std over seeds. Failed runs are left out.
 
     keys: only the rows of these runs (default: every row). Returns the figure paths.
     """
@@ -834,8 +836,6 @@ def plot_sweep(out_dir: str | Path, *, keys: set[str] | None = None) -> list[Pat
     if not rows:
         return []
     swept = sorted({k for r in rows for k in r if is_key_column(k)})
-    if not swept:
-        return []
     skip = set(IDENTITY) | set(swept) | {"error"}
     metrics = sorted({k for r in rows for k in r if k not in skip
                       and isinstance(r[k], int | float)})
@@ -844,8 +844,9 @@ def plot_sweep(out_dir: str | Path, *, keys: set[str] | None = None) -> list[Pat
         values = [r.get(metric) for r in rows]
         if not any(v is not None and math.isfinite(v) for v in values):
             continue
-        paths.append(_save(_metric_figure(rows, metric, swept, np),
-                           out / FIGURES / f"{metric}.png"))
+        fig = (_metric_figure(rows, metric, swept, np) if swept
+               else _case_figure(rows, metric, np))
+        paths.append(_save(fig, out / FIGURES / f"{metric}.png"))
     return paths
 
 
@@ -931,6 +932,57 @@ def _metric_figure(rows: list[dict[str, Any]], metric: str, swept: list[str], np
     fig.suptitle(f"{metric}: mean ± std over {n_seeds} seed{'s' * (n_seeds > 1)} "
                  f"({case_text})", fontsize=10)
     return fig
+
+
+HATCHES = ("", "//", "..", "xx", "\\\\", "++", "oo", "--")
+"""Bar hatches, so that the cases of a bar figure read in grayscale too."""
+
+
+def _case_figure(rows: list[dict[str, Any]], metric: str, np: Any) -> Any:
+    """Grouped bars: a group per scenario, a bar per other case (architecture, controller,
+    ...: the fields that differ) with its mean ± std over seeds and its value above it."""
+    import matplotlib
+    from matplotlib.figure import Figure
+
+    scenarios = sorted({r["scenario"] for r in rows}, key=_scenario_order)
+    cases = sorted({tuple(r.get(c) for c in CASE[1:]) for r in rows}, key=str)
+    labels = [_case_label(("", *case), [("", *c) for c in cases]).strip() for case in cases]
+    colors = matplotlib.colormaps["tab10"]
+    m_scale = _display(column_unit(metric))[0]
+    width, height = max(6.0, 1.1 * len(scenarios) * max(1, len(cases)) / 2 + 2.6), 4.4
+    fig = Figure(figsize=(width, height))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=0.85 / width, right=1.0 - 1.7 / width, bottom=0.6 / height,
+                        top=1.0 - 0.45 / height)
+    bar = 0.8 / len(cases)
+    for j, (case, label) in enumerate(zip(cases, labels, strict=True)):
+        stats = np.array([_mean_std([_finite(r.get(metric)) for r in rows
+                                     if r["scenario"] == sc
+                                     and tuple(r.get(c) for c in CASE[1:]) == case], np)
+                          for sc in scenarios]) * m_scale
+        x = np.arange(len(scenarios)) - 0.4 + bar * (j + 0.5)
+        ax.bar(x, stats[:, 0], bar, yerr=stats[:, 1], capsize=2, color=colors(j % 10),
+               hatch=HATCHES[j % len(HATCHES)], edgecolor="black", lw=0.5, label=label)
+        for xi, (value, std) in zip(x, stats, strict=True):   # above the error bar
+            if math.isfinite(value):
+                ax.text(xi, value + std if value >= 0 else value - std, f"{value:.3g}",
+                        ha="center", va="bottom" if value >= 0 else "top", fontsize=6)
+    ax.set_xticks(range(len(scenarios)), scenarios)
+    ax.axhline(0.0, color="black", lw=0.6)
+    ax.grid(axis="y", alpha=0.3)
+    ax.set_ylabel(_label(metric, column_unit(metric)))
+    ax.set_xlabel("scenario")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    n_seeds = len({r["seed"] for r in rows})
+    fig.suptitle(f"{metric}: mean ± std over {n_seeds} seed{'s' * (n_seeds > 1)}",
+                 fontsize=10)
+    return fig
+
+
+def _scenario_order(name: str) -> tuple[int, str]:
+    """Built-in scenarios in their order (W1-W5, NL1), then the others by name."""
+    builtin = _builtin_scenarios()
+    return (builtin.index(name), "") if name in builtin else (len(builtin), name)
 
 
 def _finite(value: Any) -> float:
