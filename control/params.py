@@ -187,7 +187,11 @@ class PidParams(Parameters):
     band and conditional-integration band, output hysteresis thresholds on |u| (see
     ``trackmj.control.pid``)."""
 
-    dead_time_s: float = param(0.0, 10.0, doc="effective dead time theta of the SIMC rule")
+    dead_time_s: float = param(0.0, 10.0, doc="effective dead time theta of the SIMC rule "
+                               "without the measurement filter")
+    measurement_filter_s: float = param(0.0, 1.0, doc="time constant of the first-order "
+                                        "filter on the tension the PID acts on (0: none); "
+                                        "added to the SIMC dead time")
     closed_loop_time_s: float = param(0.0, 100.0, open_low=True,
                                       doc="SIMC closed-loop time constant tau_c")
     derivative_filter_N: float = param(1.0, 100.0, unit="1",
@@ -195,7 +199,8 @@ class PidParams(Parameters):
                                        "dimensionless despite the suffix")
     back_calculation_gain: float = param(0.0, 100.0, open_low=True, unit="1",
                                          doc="anti-windup Tt = Ti / gain")
-    error_dead_band_N: float = param(0.0, 1e5, doc="errors inside are zero")
+    error_dead_band_N: float = param(0.0, 1e5, doc="errors inside are zero for the "
+                                     "proportional part")
     integration_band_N: float = param(0.0, 1e6, doc="integrate only while |error| <= this")
     output_on: float = param(0.0, 1.0, unit="1", doc="leave hold when |u| exceeds this")
     output_off: float = param(0.0, 1.0, unit="1", doc="return to hold below this")

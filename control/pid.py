@@ -1,16 +1,23 @@
 """PID baseline on tension: anti-windup by back-calculation, derivative on the filtered
 measurement, error dead band and output hysteresis, explicit dt = controller period [s].
 
+The PID acts on the estimated tension through a first-order measurement filter
+(``measurement_filter_s``), so that the track's tooth-passing ripple (~20 Hz) does not
+switch the valves by itself.
+
 Tuning rule (SIMC, Skogestad 2003, integrating plant with dead time): dF/dt = k' u with
 k' [N/s per unit u] from ``ReducedModel.tension_rate_gain`` at the operating tension and the
-effective dead time theta (solenoid delay + half the minimum hold + half the period):
+effective dead time theta (solenoid delay + half the minimum hold + half the period, plus
+the measurement filter's time constant: a lag counts as dead time):
 Kc = 1 / (k' (tau_c + theta)) [1/N], Ti = 4 (tau_c + theta) [s]; Td = theta / 2 (assumed),
 first-order measurement filter Tf = Td / N for the derivative; tracking time Tt = Ti / gain.
 
 Noise and valve quantisation (one 30 ms dwell pulse moves the tension ~300 N on the identified
-track, the tension estimate carries ~100 N rms after the period mean): errors inside
-+-``error_dead_band_N`` count as zero (the integral holds), and the output is hysteretic: it
-leaves 0 only when |v| >= ``output_on`` and returns to 0 when |v| < ``output_off``. The
+track, the tension estimate carries ~100 N rms after the period mean): the proportional
+part counts errors inside +-``error_dead_band_N`` as zero, the integral takes the error as
+it is (a dead-banded integral froze inside the band and left the offset there), and the
+output is hysteretic: it leaves 0 only when |v| >= ``output_on`` and returns to 0 when
+|v| < ``output_off``. The
 integral runs only while |error| <= ``integration_band_N`` (conditional integration): with
 integration during the whole rise the step overshot ~4 % and settled in 1.8-2.5 s.
 """
@@ -56,14 +63,16 @@ class PidController:
         self.supply_pressure_Pa = model.p.supply_pressure_Pa
         self.horizon_steps = 0  # the PID acts on the current reference only
         k_rate = model.tension_rate_gain(operating_force_N)  # [N/s per unit u]
-        lam = pid.closed_loop_time_s + pid.dead_time_s
+        theta = pid.dead_time_s + pid.measurement_filter_s   # a lag counts as dead time
+        lam = pid.closed_loop_time_s + theta
         self.kc = 1.0 / (k_rate * lam)  # [1/N]
         self.ti = 4.0 * lam
-        self.td = 0.5 * pid.dead_time_s
+        self.td = 0.5 * theta
         self.tf = self.td / pid.derivative_filter_N
         self.tt = self.ti / pid.back_calculation_gain
         self.integral = 0.0
-        self.f_filtered: float | None = None
+        self.f_measured: float | None = None   # the tension through measurement_filter_s
+        self.f_filtered: float | None = None   # ... and through the derivative filter Tf
         self.u = 0.0
 
     def set_parameters(self, *, supply_pressure_Pa: float | None = None) -> None:
@@ -73,13 +82,16 @@ class PidController:
             self.supply_pressure_Pa = supply_pressure_Pa
 
     def __call__(self, estimate: NDArray, reference_preview: NDArray, t: float) -> ControlOutput:
-        f = self.model.force(estimate)
+        f_now = self.model.force(estimate)
+        f_prev_m = f_now if self.f_measured is None else self.f_measured
+        self.f_measured = f = f_prev_m + self.dt / (self.pid.measurement_filter_s + self.dt) * (
+            f_now - f_prev_m)
         band = feasible_band(self.ctrl, self.model.p, self.supply_pressure_Pa)
         e_raw = float(govern(np.asarray(reference_preview[:1], float), band)[0]) - f
         e = math.copysign(max(abs(e_raw) - self.pid.error_dead_band_N, 0.0), e_raw)
         # conditional integration: the valve->tension plant is integrating, so the integral
         # is only needed against slow disturbances (leakage, supply), not to reach a step
-        e_int = e if abs(e_raw) <= self.pid.integration_band_N else 0.0
+        e_int = e_raw if abs(e_raw) <= self.pid.integration_band_N else 0.0
         # derivative on the first-order filtered measurement (Tf), backward difference
         f_prev = f if self.f_filtered is None else self.f_filtered
         self.f_filtered = f_prev + self.dt / (self.tf + self.dt) * (f - f_prev)

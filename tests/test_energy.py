@@ -24,13 +24,17 @@ P = load_hydraulic_params()
 
 @pytest.fixture(scope="module")
 def runs() -> dict:
-    """W1 (tp) with NMPC and PID, on the default supply and on the study's fixed_relief."""
+    """W1 (tp) with NMPC and PID, on the default supply and on the study's fixed_relief.
+    The PID runs without its measurement filter: the tooth-passing ripple then switches its
+    valves at ~30 Hz, a deliberately busy controller to set against the NMPC."""
     out = {}
     for controller in ("nmpc", "pid"):
-        out["default", controller] = simulate("W1", controller=controller, duration=DURATION_S)
+        busy = {"control.pid.measurement_filter_s": 0.0} if controller == "pid" else {}
+        out["default", controller] = simulate("W1", controller=controller, duration=DURATION_S,
+                                              set=busy)
         out["fixed_relief", controller] = simulate(
             "W1", controller=controller, duration=DURATION_S,
-            set={"scenario.supply.model": "fixed_relief"})
+            set={"scenario.supply.model": "fixed_relief", **busy})
     return out
 
 
@@ -140,3 +144,48 @@ def test_ideal_actuator_draws_one_half_stroke_against_a_ripple_and_the_compressi
     assert ramp.supply_J == pytest.approx(0.5 * ramp.head_compliance * (p1**2 - p0**2),
                                           rel=1e-12)
     assert ramp.work_J == 0.0
+
+
+def _valve_cycle_dissipation(h: float) -> tuple[float, float]:
+    """(numerical, throttling) dissipation [J] of the circuit over a 2 s valve cycle
+    (pressurize, hold, release, hold, 60 ms each) on the identified idler (90.6 kg,
+    4.4e6 N/m, 3.55e4 N·s/m) whose spring end carries a 0.3 mm, 20 Hz track ripple, at
+    step h [s]."""
+    import numpy as np
+
+    from trackmj.hydraulics import HydraulicTensioner
+
+    m, k, c = 90.6, 4.4e6, 3.55e4
+    tensioner = HydraulicTensioner(dt_s=h, coupling="strong")
+    s, v = 0.05, 0.0
+    s_free = s - 15e3 / k
+    period = round(0.06 / h)
+    for i in range(round(2.0 / h)):
+        if i % period == 0:
+            tensioner.set_mode((1, 0, -1, 0)[(i // period) % 4])
+        t = i * h
+        end = s_free + 0.3e-3 * np.sin(2 * np.pi * 20.0 * t)
+        law = tensioner.force_law(t, s, v)
+        v = (v + h * (law.force_N - k * (s - end)) / m) / (1 - h * (law.damping_N_s_m - c) / m)
+        s += h * v
+        tensioner.complete_step(t + h, s, v)
+    led = tensioner.ledger
+    throttling = sum(getattr(led, name) for name in dir(led)
+                     if name.startswith("throttle") and name.endswith("_J"))
+    return led.numerical_J, throttling
+
+
+def test_numerical_term_is_the_orifice_loss_of_transients_faster_than_the_step() -> None:
+    """The circuit's ``numerical`` term, V·Δp²/(2β) per backward-Euler step, is what a node
+    loses when its pressure moves within one step; the real circuit loses that energy in
+    the orifices feeding the node (charging a capacitance through any resistance dissipates
+    ½·C·ΔU²). Refining the step moves it into ``throttling``: the numerical term falls
+    roughly with h, the total dissipation converges, and at the 1 ms coupling step it is
+    within 10 % of the total at 0.1 ms (measured: 15.7 -> 2.4 J numerical, 209 -> 222 J
+    total)."""
+    coarse = _valve_cycle_dissipation(COUPLING_STEP_S)
+    fine = _valve_cycle_dissipation(COUPLING_STEP_S / 10)
+    assert fine[0] < 0.25 * coarse[0]
+    assert fine[1] > coarse[1]                     # throttling takes over the transient
+    assert sum(coarse) == pytest.approx(sum(fine), rel=0.10)
+    assert coarse[0] < 0.10 * sum(fine)

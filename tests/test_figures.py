@@ -115,10 +115,14 @@ def test_energy_bars_stack_the_ledger_terms_and_mark_the_totals() -> None:
     plt.close(fig)
 
 
-@pytest.mark.parametrize(("scenario", "starts"), [("W1", [2.5]), ("W2", [5.0]),
+@pytest.mark.parametrize(("scenario", "starts"), [("W1", [2.5, 14.5]), ("W2", [5.0]),
                                                    ("W3", [5.5, 7.5, 17.5, 19.5]),
-                                                   ("W4", [11.5, 19.5])])
+                                                   ("W4", [11.5, 19.5]),
+                                                   ("NL1", [2.5, 8.5])])
 def test_zooms_follow_each_conditions_events(scenario: str, starts: list[float]) -> None:
+    """The step and the next reference change (W1's ramp, NL1's first release), each
+    disturbance edge, or steady running; NL1's supply held at 9 MPa from t = 0 is its
+    condition, not an edge."""
     w = load_scenario(scenario).metric_windows(link_pitch_m=0.075)
     zooms = figures._zoom_windows(w, 30.0)
     assert [z[1] for z in zooms] == starts

@@ -429,7 +429,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "e.g. tcp://HOST:8786, instead of a local cluster")
 
     def run_args(p: argparse.ArgumentParser) -> None:
-        p.add_argument("scenario", help="W1..W5 or a scenario TOML file")
+        p.add_argument("scenario", help="a built-in scenario (W1-W5, NL1; trackmj "
+                       "scenarios) or a scenario TOML file")
         p.add_argument("--estimator", choices=choices(ESTIMATORS),
                        help="default: the scenario's")
         p.add_argument("--seed", type=_nonnegative_int, default=0,

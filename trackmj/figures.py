@@ -139,15 +139,20 @@ def _force_band(ax: Axes, w: MetricWindows, label: bool = True) -> None:
 
 def _zoom_windows(w: MetricWindows, t_end: float) -> list[tuple[str, float, float]]:
     """(title, t0, t1) of the zoom panels: the reference step, each disturbance edge (onset
-    and end), or, with neither, one second of steady running."""
+    and end) from the evaluation start (an earlier one is the run's initial condition), or,
+    with none, the next reference change after the step (NL1's first release), or, with
+    neither, one second of steady running."""
     zooms = []
     if w.step is not None and w.step[0] < t_end:
         zooms.append((f"step at {w.step[0]:g} s", w.step[0] - 0.5, w.step[0] + 3.0))
     for k, (on, off) in enumerate(w.disturbances):
         what = w.disturbance_labels[k] if k < len(w.disturbance_labels) else "disturbance"
         for edge, name in ((on, "onset"), (off, "end")):
-            if edge < t_end:
+            if w.evaluation_start_s <= edge < t_end:
                 zooms.append((f"{what}, {name} at {edge:g} s", edge - 0.5, edge + 2.5))
+    later = [e for e in w.reference_events_s if w.step is not None and w.step[0] < e < t_end]
+    if len(zooms) == 1 and later:
+        zooms.append((f"reference change at {later[0]:g} s", later[0] - 0.5, later[0] + 3.0))
     if not zooms:
         t0 = w.steady[0] if w.steady is not None else w.evaluation_start_s
         t0 = t0 if t0 + 1.0 <= t_end else max(t_end - 1.0, 0.0)   # a short run: its last second
