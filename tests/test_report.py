@@ -63,7 +63,7 @@ def test_claims_on_synthetic_runs_state_what_they_measure(tmp_path) -> None:
     energy = claims["TP uses less energy than DP-A"]
     assert energy["verdict"] == "supported" and "W1 TP lower by 13 ± 0 %" in energy["ours"]
     assert claims["TP uses less energy than DP-B"]["verdict"] == "not comparable"
-    assert "circuit_is_ideal_actuator" in claims["TP uses less energy than DP-B"]["ours"]
+    assert "circuit is ideal actuator" in claims["TP uses less energy than DP-B"]["ours"]
     # pid is tp + 900 N: lower error for NMPC in every seed, by 24 % raw, 30 % low-pass
     assert claims["NMPC tracks better than PID (TP)"]["verdict"] == \
         "direction only (raw); direction only (low-pass)"
