@@ -17,9 +17,9 @@ track, the tension estimate carries ~100 N rms after the period mean): the propo
 part counts errors inside +-``error_dead_band_N`` as zero, the integral takes the error as
 it is (a dead-banded integral froze inside the band and left the offset there), and the
 output is hysteretic: it leaves 0 only when |v| >= ``output_on`` and returns to 0 when
-|v| < ``output_off``. The
-integral runs only while |error| <= ``integration_band_N`` (conditional integration): with
-integration during the whole rise the step overshot ~4 % and settled in 1.8-2.5 s.
+|v| < ``output_off``. The integral runs only while |error| <= ``integration_band_N``
+(conditional integration): with integration during the whole rise the step overshot ~4 %
+and settled in 1.8-2.5 s.
 """
 
 from __future__ import annotations

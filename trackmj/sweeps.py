@@ -49,7 +49,8 @@ Output directory ``DIR``:
   in its worker) and ``error`` (null, or ``"Type: message"`` for a run that failed).
   Each column's unit is in its Arrow field metadata (``unit``) where the name states one.
 - ``sweep.toml``: the spec as given; ``figures/<metric>.png``: each metric against each
-  swept parameter, mean ± std over seeds; ``runs/<case>/``: every run's result directory
+  swept parameter, mean ± std over seeds (without swept parameters: bars per scenario and
+  case); ``runs/<case>/``: every run's result directory
   with ``keep_runs``.
 
 Resume: a run whose ``run_key`` already has a row is skipped (a failed one too, unless
@@ -955,11 +956,13 @@ def _case_figure(rows: list[dict[str, Any]], metric: str, np: Any) -> Any:
     fig.subplots_adjust(left=0.85 / width, right=1.0 - 1.7 / width, bottom=0.6 / height,
                         top=1.0 - 0.45 / height)
     bar = 0.8 / len(cases)
+    measured = np.zeros(len(scenarios), bool)
     for j, (case, label) in enumerate(zip(cases, labels, strict=True)):
         stats = np.array([_mean_std([_finite(r.get(metric)) for r in rows
                                      if r["scenario"] == sc
                                      and tuple(r.get(c) for c in CASE[1:]) == case], np)
                           for sc in scenarios]) * m_scale
+        measured |= np.isfinite(stats[:, 0])
         x = np.arange(len(scenarios)) - 0.4 + bar * (j + 0.5)
         ax.bar(x, stats[:, 0], bar, yerr=stats[:, 1], capsize=2, color=colors(j % 10),
                hatch=HATCHES[j % len(HATCHES)], edgecolor="black", lw=0.5, label=label)
@@ -967,7 +970,10 @@ def _case_figure(rows: list[dict[str, Any]], metric: str, np: Any) -> Any:
             if math.isfinite(value):
                 ax.text(xi, value + std if value >= 0 else value - std, f"{value:.3g}",
                         ha="center", va="bottom" if value >= 0 else "top", fontsize=6)
+    for i in np.flatnonzero(~measured):    # e.g. a settling time where nothing steps
+        ax.text(i, 0.0, "no value", ha="center", va="bottom", fontsize=7, color="0.4")
     ax.set_xticks(range(len(scenarios)), scenarios)
+    ax.set_xlim(-0.5, len(scenarios) - 0.5)      # groups without a value keep their place
     ax.axhline(0.0, color="black", lw=0.6)
     ax.grid(axis="y", alpha=0.3)
     ax.set_ylabel(_label(metric, column_unit(metric)))
