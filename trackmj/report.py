@@ -556,6 +556,13 @@ def _event_claims(m: Matrix, scenario: str, what: str, study: Mapping[str, tuple
             band += ("; no run recovers: even the low-passed error does not stay inside the "
                      "band before the next onset or the end (tp's low-passed RMSE over the "
                      f"run: {_kn(m.values(scenario, 'tp', 'rmse_lp_N'))})")
+        accepted = m.values(scenario, "tp", "acceptance.recovery_max_s")
+        if _finite(accepted.values()):
+            after = ("never leaves it" if max(_finite(accepted.values())) == 0.0
+                     else f"is back after {mean_std(accepted.values())} s (worst edge)")
+            band += (f"; on the {w.mean_window_s:g} s trailing mean with a "
+                     f"±{w.recovery_band_rel * 100:g} % band (the acceptance view, README "
+                     f"Metrics) tp {after}")
     out.append(Finding(
         f"{scenario}: TP {what[0]} / {what[1]}",
         f"{study['tp'][0] / 1e3:g} kN / {study['tp'][1]:g} s",
