@@ -130,3 +130,19 @@ def test_out_that_is_a_file_is_refused_before_the_run(tmp_path, capsys, monkeypa
     assert main(["run", "W1", "--duration", "1.5", "--out", str(target)]) == 2
     assert "is a file" in capsys.readouterr().err
     assert target.read_text() == "keep me"
+
+
+def test_a_judged_band_the_controller_does_not_enforce_is_refused() -> None:
+    """The scenario's [limits] (what the metrics judge) and the control file's [controller]
+    band (what the controllers enforce) are one F_min/F_max: a mismatch is refused before
+    anything is built, naming both; changed together they run."""
+    from trackmj.params import ParameterError
+    from trackmj.sim.setup import prepare
+
+    with pytest.raises(ParameterError, match=r"W1\.toml \[limits\] force_min_N, force_max_N = "
+                       r"10000, 18000 N but the control file \(packaged\) \[controller\] has "
+                       r"10000, 20000 N"):
+        prepare("W1", overrides={"scenario.limits.force_max_N": 18e3})
+    setup = prepare("W1", overrides={"scenario.limits.force_max_N": 18e3,
+                                     "control.controller.force_max_N": 18e3})
+    assert setup.control.controller.force_max_N == 18e3

@@ -151,6 +151,21 @@ def scaled_hydraulics(base: HydraulicParams, variant: Variant) -> HydraulicParam
     return dataclasses.replace(base, fluid=fluid, cylinder=cylinder)
 
 
+def _check_bands_agree(sc: Scenario, control: ControlConfig, control_file: str) -> None:
+    """The scenario's [limits] band (what the metrics judge) must be the control file's
+    [controller] band (what the controllers enforce): a run judged on a band its controller
+    does not know would read as a controller failure."""
+    judged = (sc.limits.force_min_N, sc.limits.force_max_N)
+    enforced = (control.controller.force_min_N, control.controller.force_max_N)
+    if judged != enforced:
+        raise ParameterError(
+            f"{sc.source.name} [limits] force_min_N, force_max_N = {judged[0]:g}, "
+            f"{judged[1]:g} N but the control file ({control_file}) [controller] has "
+            f"{enforced[0]:g}, {enforced[1]:g} N: the band the metrics judge must be the one "
+            "the controllers enforce; set both (e.g. --set scenario.limits.force_max_N=... "
+            "--set control.controller.force_max_N=...)")
+
+
 def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
             controller: str | None = None, estimator: str | None = None, seed: int = 0,
             duration: float | None = None, variant: str = "nominal",
@@ -190,11 +205,13 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
              "control": str(control) if control else "packaged"}
     model_params = (load_model_params(model, overrides=sets["model"])
                     if model or sets["model"] else _packaged_model())
+    control_config = load_config(control, overrides=sets["control"])
+    _check_bands_agree(sc, control_config, files["control"])
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,
         estimator=estimator, seed=seed, duration_s=duration_s, model=model_params,
         hydraulics=scaled_hydraulics(load_hydraulic_params(hydraulics,
                                                            overrides=sets["hydraulics"]), var),
-        control=load_config(control, overrides=sets["control"]), files=files,
+        control=control_config, files=files,
         overrides={f"{kind}.{key}": value for kind, keys in sets.items()
                    for key, value in keys.items()})
