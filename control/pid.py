@@ -81,11 +81,16 @@ class PidController:
         if supply_pressure_Pa is not None:
             self.supply_pressure_Pa = supply_pressure_Pa
 
+    def _lag(self, previous: float | None, x: float, tau_s: float) -> float:
+        """One period of the first-order lag with time constant ``tau_s`` [s] (backward
+        Euler; 0: none) from ``previous`` (None: start at ``x``) towards ``x``."""
+        if previous is None:
+            return x
+        return previous + self.dt / (tau_s + self.dt) * (x - previous)
+
     def __call__(self, estimate: NDArray, reference_preview: NDArray, t: float) -> ControlOutput:
-        f_now = self.model.force(estimate)
-        f_prev_m = f_now if self.f_measured is None else self.f_measured
-        self.f_measured = f = f_prev_m + self.dt / (self.pid.measurement_filter_s + self.dt) * (
-            f_now - f_prev_m)
+        self.f_measured = f = self._lag(self.f_measured, self.model.force(estimate),
+                                        self.pid.measurement_filter_s)
         band = feasible_band(self.ctrl, self.model.p, self.supply_pressure_Pa)
         e_raw = float(govern(np.asarray(reference_preview[:1], float), band)[0]) - f
         e = math.copysign(max(abs(e_raw) - self.pid.error_dead_band_N, 0.0), e_raw)
@@ -94,7 +99,7 @@ class PidController:
         e_int = e_raw if abs(e_raw) <= self.pid.integration_band_N else 0.0
         # derivative on the first-order filtered measurement (Tf), backward difference
         f_prev = f if self.f_filtered is None else self.f_filtered
-        self.f_filtered = f_prev + self.dt / (self.tf + self.dt) * (f - f_prev)
+        self.f_filtered = self._lag(f_prev, f, self.tf)
         deriv = -self.kc * self.td * (self.f_filtered - f_prev) / self.dt
         v = self.kc * e + self.integral + deriv
         u_sat = min(self.ctrl.u_max, max(self.ctrl.u_min, v))

@@ -148,7 +148,7 @@ def _zoom_windows(w: MetricWindows, t_end: float) -> list[tuple[str, float, floa
     for k, (on, off) in enumerate(w.disturbances):
         what = w.disturbance_labels[k] if k < len(w.disturbance_labels) else "disturbance"
         for edge, name in ((on, "onset"), (off, "end")):
-            if w.evaluation_start_s <= edge < t_end:
+            if w.judges_edge(edge, t_end):
                 zooms.append((f"{what}, {name} at {edge:g} s", edge - 0.5, edge + 2.5))
     later = [e for e in w.reference_events_s if w.step is not None and w.step[0] < e < t_end]
     if len(zooms) == 1 and later:
@@ -380,7 +380,7 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
     if np.isfinite(supply).any():
         ax_p.plot(results[0].columns()["t_s"], supply / 1e6, color="0.45", lw=1.0,
                   ls=(0, (4, 1, 1, 1)), label=f"{labels[0]} p_supply")
-    _shade_events(ax_p, w, float(results[0].columns()["t_s"][-1]), label=False)
+    _shade_events(ax_p, w, t_end, label=False)
     ax_p.set_ylabel("pressure [MPa]")
     ax_p.set_xlabel("time [s]")
     ax_p.grid(alpha=0.3)

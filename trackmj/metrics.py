@@ -360,6 +360,12 @@ class MetricWindows:
     steady_window_s: float = 5.0
     reference_events_s: tuple[float, ...] = ()
 
+    def judges_edge(self, t_s: float, t_end_s: float) -> bool:
+        """Whether a disturbance edge at ``t_s`` [s] is judged in a run ending at ``t_end_s``:
+        from the evaluation start (an earlier edge is the run's initial condition) to the
+        end."""
+        return self.evaluation_start_s <= t_s < t_end_s
+
     def ripple_bands_Hz(self) -> dict[str, tuple[float, float]]:
         """Named bands the ripple is split into: ``tooth_passing`` (if known), ``body_mode``."""
         bands = {} if self.tooth_passing_band_Hz is None else {
@@ -415,7 +421,7 @@ def _tracking(t: np.ndarray, y: np.ndarray, ref: np.ndarray, w: MetricWindows,
     out[_name("overshoot", "N", lowpassed)] = over.value
     out[_name("overshoot", "pct", lowpassed)] = over.percent
     out[_name("settling_time", "s", lowpassed)] = settle
-    onsets = sorted(on for on, _ in w.disturbances if w.evaluation_start_s <= on < t_end)
+    onsets = sorted(on for on, _ in w.disturbances if w.judges_edge(on, t_end))
     peaks, recoveries = [], []
     for k, on in enumerate(onsets):
         until = onsets[k + 1] if k + 1 < len(onsets) else t_end
@@ -479,8 +485,7 @@ def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
     mean = trailing_mean(t, y, w.mean_window_s)
     err = mean - np.asarray(ref, dtype=float)
     ev = t >= w.evaluation_start_s
-    edges = sorted({e for pair in w.disturbances for e in pair
-                    if w.evaluation_start_s <= e < t[-1]})
+    edges = sorted({e for pair in w.disturbances for e in pair if w.judges_edge(e, t[-1])})
     recovery = {}
     for i, edge in enumerate(edges):
         until = edges[i + 1] if i + 1 < len(edges) else t[-1]
