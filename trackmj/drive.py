@@ -16,16 +16,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from trackmj.machine import machine
 from trackmj.plant import PassiveTensioner, TrackPlant
@@ -132,32 +128,16 @@ def _steady_means(series: dict[str, np.ndarray], from_s: float) -> dict[str, flo
 
 
 def write_drive(out_dir: str | Path, metrics: dict, series: dict[str, np.ndarray]) -> Path:
-    """Write metrics.json and timeseries.parquet into ``out_dir`` as a whole: both go to a
-    temporary sibling directory, which then replaces ``out_dir``."""
-    out = Path(out_dir)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}."))
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o777 & ~umask)
-    try:
-        fields = [pa.field(name, pa.float64(), metadata={"unit": TIMESERIES_UNITS[name]})
-                  for name in series]
-        table = pa.Table.from_arrays([pa.array(v) for v in series.values()],
-                                     schema=pa.schema(fields))
-        pq.write_table(table, tmp / "timeseries.parquet")
-        (tmp / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-        for name in ("timeseries.parquet", "metrics.json"):
-            with open(tmp / name, "rb") as fh:
-                os.fsync(fh.fileno())
-        if out.exists():
-            old = out.with_name(f".{out.name}.old-{os.getpid()}")
-            os.replace(out, old)
-            os.replace(tmp, out)
-            shutil.rmtree(old)
-        else:
-            os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return out
+    """Write metrics.json and timeseries.parquet into ``out_dir`` as a whole, the same way a
+    run's result directory is written (:class:`trackmj.results.ResultWriter`: staged, locked
+    and swapped in)."""
+    from trackmj.results import ResultWriter, parquet_bytes
+
+    fields = [pa.field(name, pa.float64(), metadata={"unit": TIMESERIES_UNITS[name]})
+              for name in series]
+    table = pa.Table.from_arrays([pa.array(v) for v in series.values()],
+                                 schema=pa.schema(fields))
+    with ResultWriter(out_dir) as writer:
+        return writer.commit_files({
+            "timeseries.parquet": parquet_bytes(table),
+            "metrics.json": (json.dumps(metrics, indent=2) + "\n").encode()})

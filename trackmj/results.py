@@ -246,7 +246,8 @@ class Result:
 
 # ----------------------------------------------------------------------------- writing
 
-def _parquet_bytes(table: pa.Table) -> bytes:
+def parquet_bytes(table: pa.Table) -> bytes:
+    """``table`` as a zstd-compressed Parquet file (its field metadata, e.g. units, kept)."""
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, compression="zstd")
     return sink.getvalue().to_pybytes()
@@ -369,17 +370,25 @@ class ResultWriter:
                extras: Mapping[str, Callable[[Path], Any]] | None = None) -> Path:
         """Write ``result`` (parquet, units, metrics, optional CSV) and each ``extras`` entry
         (file name -> writer(path)) into the stage, then swap the stage in as ``out``."""
+        table = result.timeseries
+        files = {TIMESERIES: parquet_bytes(table),
+                 UNITS: (json.dumps(result.units, indent=2) + "\n").encode()}
+        if csv:
+            files[CSV] = _csv_bytes(table)
+        files[METRICS] = metrics_json(result).encode()
+        return self.commit_files(files, extras=extras)
+
+    def commit_files(self, files: Mapping[str, bytes], *,
+                     extras: Mapping[str, Callable[[Path], Any]] | None = None) -> Path:
+        """Write ``files`` (file name -> contents, each fsynced) and each ``extras`` entry
+        (file name -> writer(path)) into the stage, then swap the stage in as ``out``."""
         stage = self.stage
         if stage is None or self.committed:
             raise RuntimeError("commit() needs an open, uncommitted ResultWriter")
-        table = result.timeseries
-        _write(stage / TIMESERIES, _parquet_bytes(table))
-        _write(stage / UNITS, (json.dumps(result.units, indent=2) + "\n").encode())
-        if csv:
-            _write(stage / CSV, _csv_bytes(table))
+        for name, payload in files.items():
+            _write(stage / name, payload)
         for name, writer in (extras or {}).items():
             writer(stage / name)
-        _write(stage / METRICS, metrics_json(result).encode())
         os.chmod(stage, 0o777 & ~current_umask())
         if not self.out.exists():
             os.rename(stage, self.out)
