@@ -262,7 +262,8 @@ def run_figure(result: Result, path: str | Path) -> Path:
     w = windows_of(result)
     c = result.columns()
     t = c["t_s"]
-    zooms = _zoom_windows(w, float(t[-1]))
+    t_end = float(t[-1])
+    zooms = _zoom_windows(w, t_end)
     fig = plt.figure(figsize=(16, 11), layout="constrained")
     outer = fig.add_gridspec(1, 2, width_ratios=(2.2, 1.0))
     left = outer[0].subgridspec(4, 1, height_ratios=(3.0, 2.0, 1.1, 1.1))
@@ -286,7 +287,7 @@ def run_figure(result: Result, path: str | Path) -> Path:
                       lw=1.1, label=f"{label} {w.lowpass_cutoff_Hz:g} Hz low-pass")
         else:
             ax_p.plot([], [], color="black", ls=ls, label=f"{label}: none in this architecture")
-    _shade_events(ax_p, w, float(t[-1]), label=False)
+    _shade_events(ax_p, w, t_end, label=False)
     ax_p.set_ylabel("pressure [MPa]")
     ax_p.grid(alpha=0.3)
     _legend_above(ax_p)
@@ -294,12 +295,12 @@ def run_figure(result: Result, path: str | Path) -> Path:
     ax_v.set_yticks([-1, 0, 1], ["−1 release", "0 hold", "+1 pressurize"])
     ax_v.set_ylim(-1.4, 1.4)
     ax_v.set_ylabel("mode [-]")
-    _shade_events(ax_v, w, float(t[-1]), label=False)
+    _shade_events(ax_v, w, t_end, label=False)
     ax_v.grid(alpha=0.3)
     ax_u.plot(t, c["u"], color="#0072B2", lw=0.6, label="valve opening u")
     ax_u.set_ylabel("u [-]")
     ax_u.set_xlabel("time [s]")
-    _shade_events(ax_u, w, float(t[-1]), label=False)
+    _shade_events(ax_u, w, t_end, label=False)
     ax_u.grid(alpha=0.3)
     for ax in (ax_f, ax_p, ax_v):
         ax.tick_params(labelbottom=False)
