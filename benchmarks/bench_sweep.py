@@ -33,6 +33,7 @@ t0 = time.perf_counter()
 import trackmj.sim.run as run_module
 t_import = time.perf_counter() - t0
 from collections import defaultdict
+import trackmj.elements as elements
 import trackmj.sim.architectures as arch
 import trackmj.sim.registry as registry
 import mujoco
@@ -61,14 +62,14 @@ class TimedMujoco:   # arch.mujoco with MjModel.from_xml_string timed
 arch.mujoco = TimedMujoco()
 wrap(run_module, "prepare", "prepare (files, validation)")
 wrap(arch.TrackPlant, "run", "settle (1 s standing, MuJoCo)")
-wrap(arch, "_hydraulic_element", "hydraulic element (numba kernels)")
+wrap(elements, "build_hydraulic", "hydraulic element (numba kernels)")
 wrap(arch, "_control", "reduced model")
 wrap(run_module, "run_loop", "closed loop")
 wrap(run_module, "compute_metrics", "metrics")
 for registry_dict, bucket in ((registry.CONTROLLERS, "controller build (NMPC)"),
                               (registry.ESTIMATORS, "estimator build")):
     for name, e in list(registry_dict.items()):
-        registry_dict[name] = registry.Entry(e.description, timed(e.build, bucket))
+        registry_dict[name] = registry.Entry(e.description, timed(e.build, bucket), e.needs)
 runs = []
 for seed in range(3):
     SPENT.clear()

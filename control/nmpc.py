@@ -19,7 +19,7 @@ from trackmj.control.model import ReducedModel
 from trackmj.control.ocp import X_SCALE, Ocp, build_ocp, initial_guess, parameter_vector
 from trackmj.control.params import ControllerParams, MpcParams
 from trackmj.control.sqp import CondensedSqp
-from trackmj.ports import ControlOutput
+from trackmj.ports import ControllerStatistics, ControlOutput
 
 #: Largest constraint violation (scaled units: MPa, mm, kN, ...) accepted from a truncated SQP.
 FEASIBILITY_TOL = 0.1
@@ -68,6 +68,10 @@ class _MpcBase:
                     "pressure_max_Pa": pressure_max_Pa,
                 }
             )
+
+    def statistics(self) -> ControllerStatistics:
+        """The controller port's counts: solves whose plan the fallback replaced."""
+        return ControllerStatistics(fallbacks=self.fallbacks)
 
     def _parameters(self, x0: NDArray[np.float64], ref: NDArray[np.float64]) -> NDArray[np.float64]:
         """OCP parameter vector for initial state x0 (4,) and preview ref (N+1,) [N]."""

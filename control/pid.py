@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from trackmj.control.governor import feasible_band, govern
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControllerParams, PidParams
-from trackmj.ports import ControlOutput
+from trackmj.ports import ControllerStatistics, ControlOutput
 
 
 class PidController:
@@ -80,6 +80,10 @@ class PidController:
         governor uses (the gains stay those of the tuning rule at the operating force)."""
         if supply_pressure_Pa is not None:
             self.supply_pressure_Pa = supply_pressure_Pa
+
+    def statistics(self) -> ControllerStatistics:
+        """The controller port's counts: a PID has no plan to fall back from (0)."""
+        return ControllerStatistics()
 
     def _lag(self, previous: float | None, x: float, tau_s: float) -> float:
         """One period of the first-order lag with time constant ``tau_s`` [s] (backward

@@ -87,7 +87,7 @@ LAST_DP, 1             |dp|∞ of the last Newton iteration of a failed solve [P
 REC, 6                 last completed step: t [s], stroke [m], velocity [m/s], friction
                        [N] (opposes motion), end-stop force [N] (> 0 outward), piston
                        force A_h(p_HL + p_HR) − 2·A_r·p_B [N]
-LOG, 9                 LogRow of the last completed step (see ``tensioner.LogRow``)
+LOG, 9                 ElementLog of the last completed step (``trackmj.ports.ElementLog``)
 STEP_LEDGER, 30        energy terms of the last step [J], LEDGER_FIELDS order
 LEDGER, 30             cumulative energy terms [J], LEDGER_FIELDS order
 =====================  ==========================================================

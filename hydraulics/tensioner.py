@@ -15,11 +15,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal, NamedTuple
+from typing import Literal
 
 import numpy as np
 
-from trackmj.ports import ForceLaw
+from trackmj.ports import ElementLog, ForceLaw
 
 from . import kernels as k
 from .components import Solenoid, orifice_gain, series_area, valve_area
@@ -32,7 +32,7 @@ MODES: dict[int, tuple[float, float, float]] = {
     0: (0.0, 0.0, 0.0),    # hold: main at rest, V_L and V_R closed
     -1: (1.0, 1.0, 1.0),   # release: main energised (P->B, A->T), V_L and V_R open
 }
-_tuple_new = tuple.__new__  # LogRow(...) without NamedTuple's keyword-capable __new__
+_tuple_new = tuple.__new__  # ElementLog(...) without NamedTuple's keyword-capable __new__
 NODE_NAMES = ("line A", "head L", "head R", "rod node", "supply")
 """Names of the pressure nodes in ``HydraulicTensioner.pressures`` order."""
 FLOW_NAMES = ("main_PA", "main_AT", "main_PB", "main_BT", "V_L", "V_R", "relief",
@@ -85,26 +85,6 @@ class StepRecord:
     newton_iterations: int
     newton_backtracks: int
     interface_residual_J: float
-
-
-class LogRow(NamedTuple):
-    """The per-step logging values of a completed step (cheap; see ``HydraulicTensioner.log``).
-
-    p_head_Pa is the mean of the two head pressures, q_supply_m3_s the flow out of the supply
-    node through the main valve (S->A + S->rod node), force_N the cylinder force on the idler
-    (> 0 outward; = StepRecord.force_N); the *_J values are cumulative ledger terms, supply_J
-    the energy the supply drew from its prime mover (``EnergyLedger.pump_J``).
-    """
-
-    t_s: float
-    p_head_Pa: float
-    p_rod_Pa: float
-    p_supply_Pa: float
-    q_supply_m3_s: float
-    force_N: float
-    supply_J: float
-    piston_work_J: float
-    mech_work_J: float
 
 
 class HydraulicTensioner:
@@ -174,7 +154,9 @@ class HydraulicTensioner:
     at the end of every step (sub-step in multi-rate).
 
     Output: ``record`` builds the full StepRecord of the last completed step on access
-    (~7 µs); ``log()`` returns the per-step logging values as a LogRow (~0.4 µs);
+    (~7 µs); ``log()`` returns the per-step logging values as a ``trackmj.ports.ElementLog``
+    (~0.4 µs: p_head the mean of the two heads, q_supply the flow S->A + S->rod node,
+    force the cylinder force = StepRecord.force_N, supply_J = ``EnergyLedger.pump_J``);
     ``ledger`` (cumulative) and ``step_ledger`` (last step) are EnergyLedger views of the
     state array, so a held reference always shows the current values.
 
@@ -452,11 +434,11 @@ class HydraulicTensioner:
             interface_residual_J=self.step_ledger.interface_residual_J,
         )
 
-    def log(self) -> LogRow:
+    def log(self) -> ElementLog:
         """The handful of values logged every step, without building a StepRecord."""
         if not self._completed:
             raise RuntimeError("no step completed yet")
-        return _tuple_new(LogRow, self._state[k.LOG:k.LOG + 9].tolist())
+        return _tuple_new(ElementLog, self._state[k.LOG:k.LOG + 9].tolist())
 
     @property
     def pressures(self) -> tuple[float, float, float, float, float]:

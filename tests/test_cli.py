@@ -54,7 +54,8 @@ def test_help_shows_defaults_and_choices(capsys) -> None:
     with pytest.raises(SystemExit):
         main(["run", "-h"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "{tp,tp-weak,dp-a,dp-b}" in text and "{nmpc,lmpc,pid}" in text
+    assert "{tp,tp-weak,dp-a,dp-b}" in text
+    assert "nmpc, lmpc, pid, or fmu:FILE.toml for a controller FMU" in text
     assert "noise and terrain seed (default: 0)" in text
     assert "coupling architecture (default: tp)" in text
 

@@ -135,7 +135,7 @@ def test_ideal_actuator_draws_one_half_stroke_against_a_ripple_and_the_compressi
     assert src.work_J == pytest.approx(-src.damping * V**2 * steps * h / 2, rel=1e-3)
     ramp = _ideal(rate_N_s=2e3)
     p0 = ramp.p_head_Pa
-    ramp.set_mode(1)
+    ramp.set_valves(1, 1.0, 0.0)
     for k in range(1000):
         ramp.force_law(k * h, 0.05, 0.0)
         ramp.complete_step((k + 1) * h, 0.05, 0.0)

@@ -12,9 +12,8 @@ import numpy as np
 import pytest
 
 from trackmj.cli import main
-from trackmj.ports import ControlOutput, Readout
+from trackmj.ports import Command, ControlOutput, Readout
 from trackmj.scenarios import load_scenario
-from trackmj.sim.loop import Command
 from trackmj.sim.observers import (
     PhysicsError,
     PhysicsGuard,

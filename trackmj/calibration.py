@@ -36,7 +36,7 @@ from trackmj.hydraulics import HydraulicTensioner
 from trackmj.plant import TrackPlant
 from trackmj.ports import COUPLING_STEP_S, StepInputs
 from trackmj.scenarios import LoadPulse, Scenario, Supply
-from trackmj.sim.architectures import build_tp
+from trackmj.sim.architectures import assemble
 from trackmj.sim.setup import prepare
 
 START_S = 3.0
@@ -52,8 +52,8 @@ def hold_mode_run(scenario: Scenario) -> tuple[TrackPlant, HydraulicTensioner]:
     reference, with the hydraulic plugin in hold mode and the study's supply: the open-loop
     calibration rig."""
     rig = dataclasses.replace(scenario, supply=Supply(model=RIG_SUPPLY_MODEL))
-    asm = build_tp(prepare(rig))
-    return asm.track, asm.element
+    asm = assemble(prepare(rig))
+    return asm.track, asm.element.tensioner
 
 
 def idler_force_history(scenario: Scenario, pulse: LoadPulse) -> np.ndarray:

@@ -444,8 +444,9 @@ def build_parser() -> argparse.ArgumentParser:
     run_args(run)
     run.add_argument("--arch", default="tp", choices=choices(ARCHITECTURES),
                      help="coupling architecture")
-    run.add_argument("--controller", choices=choices(CONTROLLERS),
-                     help="default: the scenario's")
+    run.add_argument("--controller", metavar="NAME",
+                     help=f"{', '.join(c for c in CONTROLLERS if c != 'fmu')}, or "
+                          "fmu:FILE.toml for a controller FMU (default: the scenario's)")
     run.add_argument("--variant", default="nominal", help="W5 variant name")
     run.add_argument("--csv", action="store_true", help="also write timeseries.csv")
     run.add_argument("--rrd", action="store_true", help="also write a Rerun recording")

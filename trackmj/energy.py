@@ -41,10 +41,11 @@ same cylinders would draw.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from trackmj.elements import IdealForceSource
-from trackmj.hydraulics import EnergyLedger
+if TYPE_CHECKING:
+    from trackmj.elements import IdealForceSource
+    from trackmj.hydraulics import EnergyLedger
 
 
 def energy_table(ledger: EnergyLedger, supply_model: str, t_end_s: float) -> dict[str, Any]:

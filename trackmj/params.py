@@ -20,6 +20,9 @@ annotation                accepted value
 a Parameters dataclass    a table ``[name]``
 ``tuple[D, ...]``         an array of tables ``[[name]]`` (may be empty)
 ``Mapping[str, D]``       a table of named tables ``[name.key]`` (or ``dict[str, D]``)
+``D | None = None``       an optional table ``[name]`` (None when the file has none)
+``Mapping[str, X]``       a table of values of type X (``Any``: a number, boolean or string),
+                          e.g. a map of names chosen by the file
 ========================  =====================================================================
 
 Every check runs in ``__post_init__``, so objects built in code (``dataclasses.replace``)
@@ -381,10 +384,15 @@ def _coerce(value: Any, hint: Any, spec: Spec, at: Location,
             raise fail(f"expected {_expected(hint)}, got {_kind(value)}")
         return value
     if origin in (dict, Mapping):
-        if not isinstance(value, dict) or not all(
-                isinstance(k, str) and isinstance(v, args[1]) for k, v in value.items()):
-            raise fail(f"expected {_expected(hint)} of {args[1].__name__} tables")
-        return value
+        item = args[1]
+        if dataclasses.is_dataclass(item):
+            if not isinstance(value, dict) or not all(
+                    isinstance(k, str) and isinstance(v, item) for k, v in value.items()):
+                raise fail(f"expected {_expected(hint)} of {item.__name__} tables")
+            return value
+        if not isinstance(value, dict) or not all(isinstance(k, str) for k in value):
+            raise fail(f"expected {_expected(hint)}, got {_kind(value)}")
+        return {k: _coerce_item(v, item, spec, at, (*parts, k)) for k, v in value.items()}
     if origin is tuple:
         if not isinstance(value, list | tuple):
             raise fail(f"expected {_expected(hint)}, got {_kind(value)}")
@@ -424,6 +432,28 @@ def _coerce(value: Any, hint: Any, spec: Spec, at: Location,
         _check_range(value, spec, fail)
         return value if type(value) is float else float(value)
     raise TypeError(f"{at.key(*parts)}: unsupported parameter type {hint!r}")
+
+
+def _coerce_item(value: Any, hint: Any, spec: Spec, at: Location,
+                 parts: tuple[str | int, ...]) -> Any:
+    """One value of a ``Mapping[str, X]`` table: ``X`` checked as a field is, ``Any`` a
+    number, boolean or string (no arrays or tables)."""
+    if hint is not Any:
+        return _coerce(value, hint, spec, at, parts)
+    if isinstance(value, bool | int | float | str) and not (
+            isinstance(value, float) and not math.isfinite(value)):
+        return value
+    raise ParameterError(f"{at.key(*parts)} = {_show(value)}: expected a finite number, a "
+                         f"boolean or a string, got {_kind(value)}")
+
+
+def _optional_table(hint: Any) -> Any:
+    """The table class of an optional table field ``D | None``; other hints unchanged."""
+    if get_origin(hint) in (typing.Union, types.UnionType):
+        inner = [a for a in get_args(hint) if a is not type(None)]
+        if len(inner) == 1 and dataclasses.is_dataclass(inner[0]):
+            return inner[0]
+    return hint
 
 
 def _check_range(value: float, spec: Spec, fail: Any) -> None:
@@ -533,7 +563,9 @@ def _copy(data: Any) -> Any:
 
 
 def _table_kind(hint: Any) -> str | None:
-    """'table', 'array' (of tables), 'named' (dict of tables) or None (a value)."""
+    """'table' (optional or not), 'array' (of tables), 'named' (dict of tables) or None (a
+    value)."""
+    hint = _optional_table(hint)
     if dataclasses.is_dataclass(hint):
         return "table"
     origin, args = get_origin(hint), get_args(hint)
@@ -600,7 +632,8 @@ def _build(cls: type, raw: Any, at: Location, require_source: bool,
             if not isinstance(value, dict):
                 raise ParameterError(f"{at.key(name)} = {_show(value)}: expected a table "
                                      f"{_path_text((*at.path, name))}, got {_kind(value)}")
-            value = _build(fld.hint, value, at.child(name), require_source, sources)
+            value = _build(_optional_table(fld.hint), value, at.child(name), require_source,
+                           sources)
         elif kind == "array":
             if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
                 raise ParameterError(f"{at.key(name)} = {_show(value)}: expected an array of "
@@ -722,7 +755,7 @@ def _override_step(option: str, node: Any, hint: Any, path: list[str | int],
     if kind in ("table", "named") and not isinstance(node, dict):
         raise ParameterError(f"{option}: the file's {here} is {_kind(node)}, not a table")
     if kind == "table":
-        fields = file_fields(hint)
+        fields = file_fields(_optional_table(hint))
         if part not in fields:
             close = difflib.get_close_matches(part, list(fields), n=1)
             raise ParameterError(f"{option}: {here} has no key {part!r}"
@@ -774,7 +807,7 @@ def describe_schema(cls: type, prefix: str = "") -> list[KeySpec]:
     for name, fld in file_fields(cls).items():
         key, kind = prefix + name, _table_kind(fld.hint)
         if kind == "table":
-            rows += describe_schema(fld.hint, key + ".")
+            rows += describe_schema(_optional_table(fld.hint), key + ".")
         elif kind == "array":
             rows += describe_schema(get_args(fld.hint)[0], key + "[].")
         elif kind == "named":
@@ -800,7 +833,7 @@ def parameter_classes(root: type) -> list[type]:
         for fld in file_fields(cls).values():
             kind = _table_kind(fld.hint)
             if kind == "table":
-                walk(fld.hint)
+                walk(_optional_table(fld.hint))
             elif kind == "array":
                 walk(get_args(fld.hint)[0])
             elif kind == "named":

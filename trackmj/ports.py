@@ -25,13 +25,20 @@ mechanical work received by the track over one step is ``F(v_{k+1}) * v_{k+1} * 
 (MuJoCo's semi-implicit Euler moves the position by ``h * v_{k+1}``).
 
 Valve modes: +1 pressurize, 0 hold, -1 release (see ``docs/sizing.md``).
+
+Element port (the tensioner element of the closed loop, :class:`Element`): the tensioner port
+above plus what the loop and the run need of any element, so that the loop never asks which
+element it has: ``set_valves(mode, u, supply_set_Pa)`` every step before the mechanics step,
+``log()`` (an :class:`ElementLog`) after it, ``pressure_nodes`` / ``node_pressures()`` for the
+physics guard, ``stroke_range_m`` (the travel the guard allows) and, at the end,
+``run_metrics(duration_s)`` (its own metrics and its energy table ``energy_J``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple, Protocol, runtime_checkable
+from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -78,6 +85,23 @@ class ControlOutput:
     solve_time_s: float = 0.0
     iterations: int = 0
     fallback: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class ControllerStatistics:
+    """What a controller counts over a run: ``fallbacks``, solves whose plan was replaced by
+    the fallback (the shifted previous plan, or hold) [-]."""
+
+    fallbacks: int = 0
+
+
+class Command(NamedTuple):
+    """What drives the valves at a step: applied ``mode`` (+1/0/−1), the opening ``u`` [-]
+    in force, and ``solved``, the controller's output when it ran at this step (else None)."""
+
+    mode: int
+    u: float
+    solved: ControlOutput | None
 
 
 class StepInputs(NamedTuple):
@@ -130,6 +154,28 @@ READOUT_UNITS: dict[str, str] = {
 """Unit of every :class:`Readout` field ("1": dimensionless)."""
 
 
+class ElementLog(NamedTuple):
+    """An element's per-step values after a completed step (SI, gauge Pa; NaN where the element
+    has no such quantity).
+
+    p_head_Pa is the mean of the head pressures, q_supply_m3_s the flow out of the supply
+    node into the circuit, force_N the element's own force on the idler (> 0 outward); the
+    *_J values are cumulative from t = 0: supply_J the energy drawn from the prime mover,
+    piston_work_J the work of the pressures on the pistons (∫Σp·A·v dt), mech_work_J the
+    work into the mechanics (∫F·v dt).
+    """
+
+    t_s: float
+    p_head_Pa: float
+    p_rod_Pa: float
+    p_supply_Pa: float
+    q_supply_m3_s: float
+    force_N: float
+    supply_J: float
+    piston_work_J: float
+    mech_work_J: float
+
+
 @runtime_checkable
 class TensionerElement(Protocol):
     """A tensioner force element acting on the idler carrier (see module docstring)."""
@@ -140,6 +186,36 @@ class TensionerElement(Protocol):
 
     def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
         """Finish the step with the end-of-step state the mechanics produced."""
+        ...
+
+
+class Element(TensionerElement, Protocol):
+    """A tensioner element of the closed loop (see the module docstring, element port).
+
+    pressure_nodes: names of the values ``node_pressures()`` returns [Pa gauge] (empty for an
+    element without pressures); stroke_range_m: (lowest, highest) stroke [m] the element's
+    travel (with its end stops' allowance) admits, checked by the physics guard.
+    """
+
+    pressure_nodes: tuple[str, ...]
+    stroke_range_m: tuple[float, float]
+
+    def set_valves(self, mode: int, u: float, supply_set_Pa: float) -> None:
+        """The step's valve command: applied mode +1/0/−1, the controller's opening u [-],
+        and the supply set value [Pa gauge]; called before every mechanics step."""
+        ...
+
+    def log(self) -> ElementLog:
+        """The element's values after the last completed step."""
+        ...
+
+    def node_pressures(self) -> Sequence[float]:
+        """Every node pressure now [Pa gauge], in ``pressure_nodes`` order."""
+        ...
+
+    def run_metrics(self, duration_s: float) -> dict[str, Any]:
+        """The element's own metrics at the end of a run of ``duration_s`` [s], with its
+        energy table under ``energy_J`` (see :mod:`trackmj.energy`)."""
         ...
 
 
@@ -175,11 +251,11 @@ class Mechanics(Protocol):
 
 
 class Plant(Protocol):
-    """Everything between the valve command and the sensors: ``step(mode, inputs)``
-    applies valve mode +1/0/-1 and the step's inputs, advances one coupling step and
-    returns its :class:`Readout`."""
+    """Everything between the valve command and the sensors: ``step(command, inputs)``
+    applies the :class:`Command` (valve mode +1/0/-1, opening u) and the step's inputs,
+    advances one coupling step and returns its :class:`Readout`."""
 
-    def step(self, mode: int, inputs: StepInputs) -> Readout: ...
+    def step(self, command: Command, inputs: StepInputs) -> Readout: ...
 
 
 class Sensors(Protocol):
@@ -198,7 +274,8 @@ class Estimator(Protocol):
 
 class Controller(Protocol):
     """``controller(estimate (4,), reference preview F_ref(t + i·period), i = 0..N [N], t [s])
-    -> ControlOutput``, told the supply pressure [Pa] each period by ``set_parameters``."""
+    -> ControlOutput``, told the supply pressure [Pa] each period by ``set_parameters``;
+    ``statistics()`` gives its counts at the end of a run."""
 
     period_s: float
     horizon_steps: int
@@ -208,6 +285,8 @@ class Controller(Protocol):
 
     def set_parameters(self, *, supply_pressure_Pa: float | None = None) -> None: ...
 
+    def statistics(self) -> ControllerStatistics: ...
+
 
 class ValveLogic(Protocol):
     """Continuous opening u in [-1, 1] -> applied valve mode (+1, 0, -1) every step."""
@@ -216,7 +295,7 @@ class ValveLogic(Protocol):
 
 
 class Observer(Protocol):
-    """Sees every completed step: its index k, the plant's readout and the command in
-    force; raising stops the run (e.g. a physics guard)."""
+    """Sees every completed step: its index k, the plant's readout and the :class:`Command`
+    in force; raising stops the run (e.g. a physics guard)."""
 
-    def on_step(self, k: int, readout: Readout, command: ControlOutput) -> None: ...
+    def on_step(self, k: int, readout: Readout, command: Command) -> None: ...

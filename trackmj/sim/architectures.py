@@ -1,4 +1,7 @@
-"""Coupling architectures: each registry entry builds the plant of one run from its setup.
+"""Coupling architectures: an architecture is mechanics × element
+(:data:`trackmj.sim.registry.ARCHITECTURES`); :func:`assemble` builds the plant of one run
+from its setup, the mechanics from :data:`~trackmj.sim.registry.MECHANICS` and the element
+from :data:`~trackmj.sim.registry.ELEMENTS`.
 
 Same controller, weights, horizons, steps and references in all:
 
@@ -27,8 +30,8 @@ from __future__ import annotations
 import copy
 import dataclasses
 import hashlib
-import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -36,20 +39,46 @@ from numpy.typing import NDArray
 
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig
-from trackmj.elements import ConstantForce, IdealForceSource
-from trackmj.hydraulics import HydraulicTensioner
-from trackmj.params import ParameterError
+from trackmj.elements import ConstantForce
 from trackmj.plant import TrackPlant
-from trackmj.ports import ForceLaw, Mechanics
+from trackmj.ports import Element, ForceLaw, Mechanics
 from trackmj.results import Result
 from trackmj.sim.config import reduced_plant_params
-from trackmj.sim.plants import CoupledPlant, EquivalentIdlerMechanics, ValvedElement
+from trackmj.sim.plants import CoupledPlant, EquivalentIdlerMechanics
+from trackmj.sim.registry import ARCHITECTURES, ELEMENTS, MECHANICS
 from trackmj.sim.setup import RunSetup
+
+if TYPE_CHECKING:
+    from trackmj.tensioner import TensionerFile
 
 SETTLE_S = 1.0
 """Standing settle under the initial reference force before t = 0 [s]."""
 SETTLE_DAMPING_N_S_M = 2e4
 """Implicit damping of the settling load [N·s/m]: brings the track to rest in the settle."""
+
+
+@dataclass(frozen=True)
+class BuiltMechanics:
+    """What a mechanics builder returns: the ``ports.Mechanics``, the MuJoCo track (None
+    without one) and the free position y0 [m] of the equivalent idler spring (where the
+    controller's reduced model puts zero force)."""
+
+    mechanics: Mechanics
+    track: TrackPlant | None
+    free_position_m: float
+
+
+@dataclass(frozen=True)
+class ElementContext:
+    """What an element builder gets: the run's setup, the mechanics' initial stroke [m], the
+    controller's reduced model, the architecture's coupling ("strong" or "weak") and the
+    run's tensioner file (None: the built-in element)."""
+
+    setup: RunSetup
+    stroke_m: float
+    model: ReducedModel
+    coupling: str
+    tensioner: TensionerFile | None
 
 
 @dataclass
@@ -64,11 +93,27 @@ class Assembly:
 
     plant: CoupledPlant
     mechanics: Mechanics
-    element: ValvedElement
+    element: Element
     track: TrackPlant | None
     control: ControlConfig
     model: ReducedModel
     initial_estimate: NDArray[np.float64]
+
+
+def assemble(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
+    """The run's plant: its architecture's mechanics (given what the mechanics declares it
+    needs, e.g. dp-a's ``tp_result``), the control configuration on the mechanics' free
+    position, and the run's element (``setup.element``) on the mechanics' stroke."""
+    arch = ARCHITECTURES[setup.architecture]
+    entry = MECHANICS[arch.mechanics]
+    available = {"tp_result": tp_result}
+    built = entry.build(setup, **{name: available[name] for name in entry.needs})
+    cfg, model = _control(setup, built.free_position_m)
+    stroke = built.mechanics.stroke_m
+    element = ELEMENTS[setup.element].build(
+        ElementContext(setup, stroke, model, arch.coupling, setup.tensioner))
+    return Assembly(CoupledPlant(built.mechanics, element), built.mechanics, element,
+                    built.track, cfg, model, _estimate0(setup, stroke))
 
 
 SETTLED_KEPT = 4
@@ -119,53 +164,22 @@ def _control(setup: RunSetup, free_position_m: float) -> tuple[ControlConfig, Re
     return cfg, ReducedModel(plant)
 
 
-def _hydraulic_element(setup: RunSetup, stroke_m: float, coupling: str) -> HydraulicTensioner:
-    """The plugin with the scenario's supply model (default: the hydraulic file's) at the
-    hydraulic file's set-point with the scenario's changes, each model starting in its
-    steady state without demand; all valves closed (hold)."""
-    hyd, sc = setup.hydraulics, setup.scenario
-    nominal = hyd.supply.setpoint_Pa
-    profile = sc.supply_setpoint_profile(nominal)
-    if profile is not None and (sc.supply.model or hyd.supply.default_model) == "unloading":
-        raise ParameterError(f"{sc.source.name} [[supply.drops]]: the supply model "
-                             "'unloading' (the hydraulic file's [supply].default_model) takes "
-                             "no set-point drops; name another [supply].model")
-    element = HydraulicTensioner(
-        hyd, stroke_m=stroke_m, head_pressure_Pa=setup.head_pressure0_Pa,
-        supply_model=sc.supply.model, setpoint_Pa=nominal if profile is None else profile,
-        coupling=coupling)
-    element.set_mode(0)
-    return element
-
-
 def _estimate0(setup: RunSetup, stroke_m: float) -> NDArray[np.float64]:
     """Initial estimate: at rest, heads at the pressure of the initial force, rods at tank
     (the state both the plugin and the ideal force source start from)."""
     return np.array((setup.head_pressure0_Pa, setup.hydraulics.tank_pressure_Pa, stroke_m, 0.0))
 
 
-def _track_with_hydraulics(setup: RunSetup, coupling: str) -> Assembly:
+def build_track(setup: RunSetup) -> BuiltMechanics:
+    """The MuJoCo track of the run, settled under the initial force; its equivalent spring is
+    free at the settled stroke less force0 / k."""
     track = _settled_track(setup, setup.force0_N)
-    cfg, model = _control(setup, track.stroke_m - setup.force0_N / setup.idler.stiffness_N_m)
-    element = _hydraulic_element(setup, track.stroke_m, coupling)
-    return Assembly(CoupledPlant(track, element), track, element, track, cfg, model,
-                    _estimate0(setup, track.stroke_m))
+    return BuiltMechanics(track, track,
+                          track.stroke_m - setup.force0_N / setup.idler.stiffness_N_m)
 
 
-def build_tp(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
-    """tp: the track with the hydraulic plugin, strong coupling."""
-    return _track_with_hydraulics(setup, "strong")
-
-
-def build_tp_weak(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
-    """tp-weak: the track with the hydraulic plugin, weak coupling."""
-    return _track_with_hydraulics(setup, "weak")
-
-
-def build_dp_a(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
-    """dp-a: the plugin on the equivalent idler loaded by ``tp_result``'s track load."""
-    if tp_result is None:
-        raise ValueError("dp-a replays the track load of a tp run: pass tp_result")
+def build_equivalent_idler(setup: RunSetup, tp_result: Result) -> BuiltMechanics:
+    """dp-a's mechanics: the equivalent idler loaded by ``tp_result``'s track load."""
     idler = setup.idler
     cols = tp_result.columns()
     if len(cols["t_s"]) < setup.steps:
@@ -176,24 +190,5 @@ def build_dp_a(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
     # the load acting over step k is the one the tp run had at the end of step k
     load = (cols["tension_N"] - idler.stiffness_N_m * (stroke_tp - y0)
             - idler.damping_N_s_m * cols["stroke_velocity_m_s"])
-    mechanics = EquivalentIdlerMechanics(idler, y0, float(stroke_tp[0]), load)
-    cfg, model = _control(setup, y0)
-    element = _hydraulic_element(setup, mechanics.stroke_m, "strong")
-    return Assembly(CoupledPlant(mechanics, element), mechanics, element, None, cfg, model,
-                    _estimate0(setup, mechanics.stroke_m))
-
-
-def build_dp_b(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
-    """dp-b: the track with the ideal force source."""
-    hyd, idler = setup.hydraulics, setup.idler
-    track = _settled_track(setup, setup.force0_N)
-    cfg, model = _control(setup, track.stroke_m - setup.force0_N / idler.stiffness_N_m)
-    two_ah, two_ar = 2.0 * hyd.cylinder.area_head_m2, 2.0 * hyd.cylinder.area_rod_m2
-    volume = 2.0 * hyd.cylinder.dead_volume_head_m3 + two_ah * track.stroke_m
-    oil_k = hyd.fluid.bulk_modulus_Pa * two_ah ** 2 / volume
-    lag = 2.0 * math.pi / math.sqrt(oil_k / idler.mass_kg) / 4.0
-    element = IdealForceSource(setup.force0_N, model.tension_rate_gain(setup.force0_N), lag,
-                               2.0 * hyd.cylinder.viscous_friction_N_s_m, two_ah, two_ar,
-                               hyd.tank_pressure_Pa, volume / hyd.fluid.bulk_modulus_Pa)
-    return Assembly(CoupledPlant(track, element), track, element, track, cfg, model,
-                    _estimate0(setup, track.stroke_m))
+    return BuiltMechanics(EquivalentIdlerMechanics(idler, y0, float(stroke_tp[0]), load),
+                          None, y0)

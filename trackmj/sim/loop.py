@@ -16,15 +16,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.ports import (
     COUPLING_STEP_S,
+    Command,
     Controller,
-    ControlOutput,
     Estimator,
     Observer,
     Plant,
@@ -33,15 +32,6 @@ from trackmj.ports import (
     ValveLogic,
     steps_per_period,
 )
-
-
-class Command(NamedTuple):
-    """What drives the valves at a step: applied ``mode`` (+1/0/−1), the opening ``u`` [-]
-    in force, and ``solved``, the controller's output when it ran at this step (else None)."""
-
-    mode: int
-    u: float
-    solved: ControlOutput | None
 
 
 @dataclass(frozen=True)
@@ -83,9 +73,9 @@ def run_loop(schedule: Schedule, *, controller: Controller, valves: ValveLogic, 
             solved = controller(estimator.period_mean(), schedule.previews[k // ratio], k * h)
             u = solved.u
         mode = valves.step(u)
-        readout = plant.step(mode, inputs)
+        command = Command(mode, u, solved)
+        readout = plant.step(command, inputs)
         z = sensors.measure((readout.p_head_Pa, readout.p_rod_Pa, readout.stroke_m))
         estimator.step(z, float(mode), inputs.supply_set_Pa)
-        command = Command(mode, u, solved)
         for observer in observers:
             observer.on_step(k, readout, command)

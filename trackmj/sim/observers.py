@@ -18,9 +18,9 @@ import mujoco
 import numpy as np
 import pyarrow as pa
 
-from trackmj.ports import COUPLING_STEP_S, READOUT_UNITS, Readout
+from trackmj.ports import COUPLING_STEP_S, READOUT_UNITS, Command, Readout
 from trackmj.results import make_table
-from trackmj.sim.loop import Command, Schedule
+from trackmj.sim.loop import Schedule
 
 COMMAND_UNITS = {"valve_mode": "1", "u": "1"}
 """Columns the recorder takes from the command (valve mode −1/0/+1, opening u [-])."""
@@ -99,7 +99,8 @@ class PhysicsGuard:
     closure gap beyond ``closure_max_m``.
 
     pressures: optional callable returning every node pressure of the element [Pa gauge],
-    named by ``pressure_names`` (the readout's head pressure is the mean of the two heads);
+    named by ``pressure_names`` (``ports.Element.node_pressures``; the readout's head
+    pressure is the mean of the two heads; an element without pressures returns none);
     without it the readout's head, rod and supply pressures are checked.
     """
 
@@ -120,8 +121,9 @@ class PhysicsGuard:
             self._fail(r, f"MuJoCo warning: {self.warnings[0]}")
         if not math.isfinite(r.tension_N + r.p_head_Pa + r.p_rod_Pa + r.stroke_m
                              + r.stroke_velocity_m_s):
-            bad = [f"{name} = {getattr(r, name)!r}" for name in _STATE
-                   if not math.isfinite(getattr(r, name))]
+            fields = r._asdict()
+            bad = [f"{name} = {fields[name]!r}" for name in _STATE
+                   if not math.isfinite(fields[name])]
             self._fail(r, "non-finite state (" + ", ".join(bad) + ")")
         if not self._lo <= r.stroke_m <= self._hi:
             self._fail(r, f"stroke {r.stroke_m * 1e3:.1f} mm outside the travel "
@@ -135,7 +137,7 @@ class PhysicsGuard:
         else:
             values, names = (r.p_head_Pa, r.p_rod_Pa, r.p_supply_Pa), ("head", "rod", "supply")
         vacuum = self.limits.vacuum_Pa
-        if min(values) < vacuum:   # NaN (no such node) never compares below
+        if values and min(values) < vacuum:   # NaN (no such node) never compares below
             name, value = min(zip(names, values, strict=True), key=lambda nv: nv[1])
             self._fail(r, f"{name} pressure {value / 1e6:.3f} MPa gauge below vacuum "
                           f"({vacuum / 1e6:.3f} MPa gauge)")

@@ -1,8 +1,8 @@
 """Plants of the closed loop (``ports.Plant``): mechanics + tensioner element, or the reduced
 model integrated on its own.
 
-* :class:`CoupledPlant`: valve mode -> tensioner element -> mechanics (the MuJoCo track,
-  or :class:`EquivalentIdlerMechanics`) through the tensioner port.
+* :class:`CoupledPlant`: valve command -> tensioner element (``ports.Element``) -> mechanics
+  (the MuJoCo track, or :class:`EquivalentIdlerMechanics`) through the tensioner port.
 * :class:`EquivalentIdlerMechanics`: dp-a's mechanics, the identified equivalent idler on the
   stroke with the track load replayed from a tp run.
 * :class:`ReducedLoopPlant`: the controller's own reduced model as the plant (control tests).
@@ -11,48 +11,44 @@ model integrated on its own.
 from __future__ import annotations
 
 import math
-from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.model import ReducedPlant
 from trackmj.control.params import PlantParams
-from trackmj.hydraulics import LogRow
 from trackmj.identify import EquivalentIdler
-from trackmj.ports import COUPLING_STEP_S, ForceLaw, Mechanics, Readout, StepInputs
-from trackmj.ports import TensionerElement as _Element
+from trackmj.ports import (
+    COUPLING_STEP_S,
+    Command,
+    Element,
+    ForceLaw,
+    Mechanics,
+    Readout,
+    StepInputs,
+    TensionerElement,
+)
 
 NAN = math.nan
 
 
-class ValvedElement(_Element, Protocol):
-    """A tensioner element driven by valve modes that logs its per-step values."""
-
-    def set_mode(self, mode: int) -> None: ...
-
-    def log(self) -> LogRow: ...
-
-
 class CoupledPlant:
-    """Mechanics driven by a valved tensioner element through the tensioner port.
+    """Mechanics driven by a tensioner element through the element port.
 
-    ``step(mode, inputs)``: the element takes the valve mode (solenoid delays inside), the
-    mechanics its scenario inputs, then one coupling step exchanges the force law; the
-    readout combines the element's log (pressures, supply, energies) with the mechanics'
-    named readouts (applied force F_ten, stroke, chassis, closure).
+    ``step(command, inputs)``: the element takes the valve command and the supply set value
+    (solenoid delays inside), the mechanics its scenario inputs, then one coupling step
+    exchanges the force law; the readout combines the element's log (pressures, supply,
+    energies) with the mechanics' named readouts (applied force F_ten, stroke, chassis,
+    closure).
     """
 
-    def __init__(self, mechanics: Mechanics, element: ValvedElement) -> None:
+    def __init__(self, mechanics: Mechanics, element: Element) -> None:
         self.mechanics = mechanics
         self.element = element
-        self._mode: int | None = None
 
-    def step(self, mode: int, inputs: StepInputs) -> Readout:
+    def step(self, command: Command, inputs: StepInputs) -> Readout:
         mech, element = self.mechanics, self.element
-        if mode != self._mode:
-            element.set_mode(mode)
-            self._mode = mode
+        element.set_valves(command.mode, command.u, inputs.supply_set_Pa)
         mech.apply(inputs)
         mech.step(element)
         row = element.log()
@@ -87,7 +83,7 @@ class EquivalentIdlerMechanics:
     def apply(self, inputs: StepInputs) -> None:
         """No scenario input acts here: the track's response is in the replayed load."""
 
-    def step(self, element: _Element) -> ForceLaw:
+    def step(self, element: TensionerElement) -> ForceLaw:
         h, m = COUPLING_STEP_S, self.idler.mass_kg
         k, c = self.idler.stiffness_N_m, self.idler.damping_N_s_m
         law = element.force_law(self.time_s, self.stroke_m, self.stroke_velocity_m_s)
@@ -119,8 +115,8 @@ class ReducedLoopPlant:
         """True state (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s]), shape (4,)."""
         return self.plant.x
 
-    def step(self, mode: int, inputs: StepInputs) -> Readout:
-        x = self.plant.step(float(mode), inputs.supply_set_Pa)
+    def step(self, command: Command, inputs: StepInputs) -> Readout:
+        x = self.plant.step(float(command.mode), inputs.supply_set_Pa)
         return Readout(self.plant.t, self.plant.force, float(x[0]), float(x[1]),
                        inputs.supply_set_Pa, float(x[2]), float(x[3]), NAN, NAN, NAN, NAN,
                        NAN, NAN)

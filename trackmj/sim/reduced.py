@@ -17,13 +17,14 @@ from trackmj.control.valves import ValveLogic
 from trackmj.metrics import overshoot, settling_time
 from trackmj.ports import (
     COUPLING_STEP_S,
+    Command,
     Controller,
     Estimator,
     Readout,
     StepInputs,
     steps_per_period,
 )
-from trackmj.sim.loop import Command, Schedule, run_loop
+from trackmj.sim.loop import Schedule, run_loop
 from trackmj.sim.observers import Recorder
 from trackmj.sim.plants import ReducedLoopPlant
 from trackmj.sim.registry import ESTIMATORS

@@ -1,8 +1,10 @@
-"""Registries of the interchangeable blocks: controllers, estimators, coupling architectures.
+"""Registries of the interchangeable blocks: controllers, estimators, mechanics, tensioner
+elements and the coupling architectures made of them.
 
 Each registry maps a name to a builder; the CLI, the report and scenario validation take
 their choices from these keys, so a name is written once. Builders import their modules
-when called, so importing this module stays cheap.
+when called, so importing this module stays cheap. A new element is its own module with a
+``build(context) -> ports.Element`` function and one line in :data:`ELEMENTS`.
 """
 
 from __future__ import annotations
@@ -15,12 +17,30 @@ from typing import Any
 
 @dataclass(frozen=True)
 class Entry:
-    """One registered block: a one-line description, its builder, and (architectures) whether
-    it replays the track load of a tp run of the same case."""
+    """One registered block: a one-line description, its builder, and the names of the run
+    products its builder needs besides the setup (mechanics: ``"tp_result"``, the tp run of
+    the same case whose track load dp-a replays)."""
 
     description: str
     build: Callable[..., Any]
-    replays_tp: bool = False
+    needs: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Architecture:
+    """A coupling architecture: a key of :data:`MECHANICS` × a key of :data:`ELEMENTS`, with
+    the coupling the element is asked for ("strong": the affine law with dF/dv; "weak": the
+    last step's force held)."""
+
+    description: str
+    mechanics: str
+    element: str
+    coupling: str = "strong"
+
+    @property
+    def replays_tp(self) -> bool:
+        """Whether its mechanics replays the track load of a tp run of the same case."""
+        return "tp_result" in MECHANICS[self.mechanics].needs
 
 
 def _lazy(module: str, name: str) -> Callable[..., Any]:
@@ -67,8 +87,11 @@ CONTROLLERS: dict[str, Entry] = {
     "nmpc": Entry("nonlinear MPC (Gauss-Newton SQP, condensed QPs by DAQP)", _nmpc),
     "lmpc": Entry("linear MPC on the model linearised at hold (OSQP)", _lmpc),
     "pid": Entry("PID with SIMC tuning and back-calculation anti-windup", _pid),
+    "fmu": Entry("a controller FMU, --controller fmu:FILE.toml (e.g. exported from Simulink)",
+                 _lazy("trackmj.fmi.controller", "build_fmu_controller"),
+                 needs=("controller_file",)),
 }
-"""Controller builders ``build(reduced_model, control_config) -> Controller``."""
+"""Controller builders ``build(reduced_model, control_config, **needs) -> Controller``."""
 
 ESTIMATORS: dict[str, Entry] = {
     "ekf": Entry("extended Kalman filter", _ekf),
@@ -77,19 +100,45 @@ ESTIMATORS: dict[str, Entry] = {
 """Estimator builders ``build(reduced_model, control_config, dt_s, x0) -> Estimator``."""
 
 _ARCH = "trackmj.sim.architectures"
-ARCHITECTURES: dict[str, Entry] = {
-    "tp": Entry("track + hydraulic plugin, strong coupling", _lazy(_ARCH, "build_tp")),
-    "tp-weak": Entry("track + hydraulic plugin, weak (explicit) coupling",
-                     _lazy(_ARCH, "build_tp_weak")),
-    "dp-a": Entry("hydraulics on the identified equivalent idler, tp track load replayed",
-                  _lazy(_ARCH, "build_dp_a"), replays_tp=True),
-    "dp-b": Entry("track with an ideal force source instead of the hydraulics",
-                  _lazy(_ARCH, "build_dp_b")),
+MECHANICS: dict[str, Entry] = {
+    "track": Entry("the MuJoCo track of the machine, settled under the initial force",
+                   _lazy(_ARCH, "build_track")),
+    "equivalent-idler": Entry("the identified equivalent idler, the track load of the tp run "
+                              "replayed", _lazy(_ARCH, "build_equivalent_idler"),
+                              needs=("tp_result",)),
 }
-"""Coupling architectures ``build(setup, tp_result) -> Assembly`` (see
+"""Mechanics builders ``build(setup, **needs) -> BuiltMechanics`` (see
 :mod:`trackmj.sim.architectures`)."""
 
+_ELEMENTS = "trackmj.elements"
+ELEMENTS: dict[str, Entry] = {
+    "hydraulic": Entry("the hydraulic plugin (trackmj.hydraulics)",
+                       _lazy(_ELEMENTS, "build_hydraulic")),
+    "ideal": Entry("an ideal force source at the hydraulic tension rate (dp-b)",
+                   _lazy(_ELEMENTS, "build_ideal")),
+    "passive": Entry("a preload spring-damper, valves ignored (a tensioner file's [passive])",
+                     _lazy(_ELEMENTS, "build_passive")),
+    "fmu": Entry("an FMU, FMI 2.0/3.0, co-simulation or model exchange (a tensioner file's "
+                 "[fmu])", _lazy("trackmj.fmi.element", "build_fmu")),
+}
+"""Tensioner element builders ``build(ElementContext) -> ports.Element``."""
 
-def choices(registry: dict[str, Entry]) -> tuple[str, ...]:
+REPLACEABLE_ELEMENT = "hydraulic"
+"""The element a tensioner file replaces: architectures built on another element (dp-b's
+ideal source) keep theirs."""
+
+ARCHITECTURES: dict[str, Architecture] = {
+    "tp": Architecture("track + hydraulic plugin, strong coupling", "track", "hydraulic"),
+    "tp-weak": Architecture("track + hydraulic plugin, weak (explicit) coupling", "track",
+                            "hydraulic", "weak"),
+    "dp-a": Architecture("hydraulics on the identified equivalent idler, tp track load "
+                         "replayed", "equivalent-idler", "hydraulic"),
+    "dp-b": Architecture("track with an ideal force source instead of the hydraulics",
+                         "track", "ideal"),
+}
+"""Coupling architectures, mechanics × element (see :mod:`trackmj.sim.architectures`)."""
+
+
+def choices(registry: dict[str, Any]) -> tuple[str, ...]:
     """The registered names, in registration order."""
     return tuple(registry)

@@ -21,15 +21,12 @@ import numpy as np
 
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
-from trackmj.elements import IdealForceSource
-from trackmj.energy import energy_table, ideal_actuator_table
-from trackmj.hydraulics import HydraulicTensioner
-from trackmj.hydraulics.tensioner import NODE_NAMES
 from trackmj.machine import machine
 from trackmj.metrics import compute_metrics
 from trackmj.ports import COUPLING_STEP_S, StepInputs, steps_per_period
 from trackmj.results import Result, run_metadata
 from trackmj.scenarios import Scenario
+from trackmj.sim.architectures import assemble
 from trackmj.sim.loop import Schedule, run_loop
 from trackmj.sim.observers import (
     PhysicsGuard,
@@ -42,9 +39,6 @@ from trackmj.sim.observers import (
 from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS
 from trackmj.sim.setup import Overrides, RunSetup, prepare
 
-END_STOP_ALLOWANCE_M = 5e-3
-"""End-stop penetration a physical run may reach beyond the cylinder travel [m] (50 kN per
-cylinder on the 1e7 N/m stops): beyond it the stops are not holding the stroke."""
 FRAME_EVERY_STEPS = 20
 """Rerun scene frames every 20 ms of simulated time."""
 
@@ -65,13 +59,12 @@ def schedule(setup: RunSetup, horizon_steps: int, period_s: float) -> Schedule:
     return Schedule(inputs, previews * scale, sc.reference_N(t_end) * scale)
 
 
-def physics_limits(setup: RunSetup) -> PhysicsLimits:
-    """Vacuum at the hydraulic file's atmospheric pressure; the cylinder travel plus the
-    end-stop allowance."""
+def physics_limits(setup: RunSetup, stroke_range_m: tuple[float, float]) -> PhysicsLimits:
+    """Vacuum at the hydraulic file's atmospheric pressure; the element's travel
+    ``stroke_range_m`` [m] (``ports.Element.stroke_range_m``)."""
     hyd = setup.hydraulics
     return PhysicsLimits(vacuum_Pa=-hyd.accumulator.atmospheric_pressure_Pa_abs,
-                         stroke_range_m=(-END_STOP_ALLOWANCE_M,
-                                         hyd.cylinder.stroke_max_m + END_STOP_ALLOWANCE_M))
+                         stroke_range_m=stroke_range_m)
 
 
 def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
@@ -80,7 +73,7 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
              model: str | Path | None = None, hydraulics: str | Path | None = None,
              control: str | Path | None = None, set: Overrides | None = None,
              rrd: str | Path | None = None, progress: bool = False,
-             tp_result: Result | None = None) -> Result:
+             tp_result: Result | None = None, tensioner: str | Path | None = None) -> Result:
     """Run one operating condition in closed loop.
 
     Parameters
@@ -91,7 +84,8 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
         Coupling architecture, a key of :data:`trackmj.sim.registry.ARCHITECTURES`
         (``"tp"``, ``"tp-weak"``, ``"dp-a"``, ``"dp-b"``).
     controller, estimator : str, optional
-        Keys of the controller and estimator registries; default: the scenario's.
+        Keys of the controller and estimator registries; default: the scenario's. A
+        controller FMU: ``"fmu:FILE.toml"`` (see :mod:`trackmj.fmi.controller`).
     seed : int
         Sensor-noise and terrain seed (>= 0).
     duration : float, optional
@@ -110,6 +104,9 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
         Show a progress bar over simulated seconds.
     tp_result : Result, optional
         For ``dp-a``: the tp run whose track load is replayed (run here if None).
+    tensioner : str or Path, optional
+        A tensioner file (:mod:`trackmj.tensioner`: an FMU or a passive spring-damper)
+        replacing the hydraulic plugin of tp, tp-weak and dp-a.
 
     Returns
     -------
@@ -122,24 +119,28 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
         An input is invalid (raised before anything is built).
     trackmj.sim.observers.PhysicsError
         The run left physics (MuJoCo warning, non-finite state, pressure below vacuum,
-        stroke outside the travel, loop closure broken).
+        stroke outside the travel, loop closure broken; an FMU's force beyond its limit).
+    trackmj.fmi.FmuError
+        An FMU failed during the run (the message names the FMU and the call).
     """
     setup = prepare(scenario, architecture=architecture, controller=controller,
                     estimator=estimator, seed=seed, duration=duration, variant=variant,
-                    model=model, hydraulics=hydraulics, control=control, overrides=set)
+                    model=model, hydraulics=hydraulics, control=control, overrides=set,
+                    tensioner=tensioner)
     return run(setup, rrd=rrd, progress=progress, tp_result=tp_result)
 
 
 def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = False,
         tp_result: Result | None = None) -> Result:
     """Run a prepared setup (see :func:`simulate` for the arguments and the result)."""
-    entry = ARCHITECTURES[setup.architecture]
-    if entry.replays_tp and tp_result is None:
+    if ARCHITECTURES[setup.architecture].replays_tp and tp_result is None:
         tp_result = run(dataclasses.replace(setup, architecture="tp"))
     with capture_mujoco_warnings() as warnings:
-        asm = entry.build(setup, tp_result)
+        asm = assemble(setup, tp_result)
         cfg = asm.control
-        controller = CONTROLLERS[setup.controller].build(asm.model, cfg)
+        entry = CONTROLLERS[setup.controller]
+        available = {"controller_file": setup.controller_file}
+        controller = entry.build(asm.model, cfg, **{n: available[n] for n in entry.needs})
         estimator = ESTIMATORS[setup.estimator].build(asm.model, cfg, COUPLING_STEP_S,
                                                       asm.initial_estimate)
         # the run owns this generator: its noise can be drawn a second ahead (same numbers)
@@ -147,9 +148,8 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
         sched = schedule(setup, controller.horizon_steps, controller.period_s)
         recorder = Recorder(sched)
         element = asm.element
-        guard = (PhysicsGuard(physics_limits(setup), warnings, lambda: element.pressures,
-                              NODE_NAMES) if isinstance(element, HydraulicTensioner)
-                 else PhysicsGuard(physics_limits(setup), warnings))
+        guard = PhysicsGuard(physics_limits(setup, element.stroke_range_m), warnings,
+                             element.node_pressures, element.pressure_nodes)
         observers = [recorder, guard]
         bar = Progress(setup.steps, f"{setup.scenario.name} {setup.architecture}") \
             if progress else None
@@ -185,15 +185,8 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
     m = compute_metrics(result.columns(), windows, control_period_s=controller.period_s,
                         solve_times_s=np.array(recorder.solve_times_s),
                         solve_success=np.array(recorder.solve_success), wall_time_s=wall)
-    if isinstance(asm.element, HydraulicTensioner):
-        ledger = asm.element.ledger
-        m["interface_energy_residual_J"] = ledger.interface_residual_J
-        m["friction_loss_J"] = ledger.friction_J
-        m["ledger_balance_error_J"] = ledger.balance_error_J
-        m["energy_J"] = energy_table(ledger, asm.element.supply_model, setup.duration_s)
-    elif isinstance(asm.element, IdealForceSource):
-        m["energy_J"] = ideal_actuator_table(asm.element, setup.duration_s)
-    m["controller_fallbacks"] = float(getattr(controller, "fallbacks", 0))
+    m |= asm.element.run_metrics(setup.duration_s)
+    m["controller_fallbacks"] = float(controller.statistics().fallbacks)
     m["controller_overruns"] = float(np.sum(np.array(recorder.solve_times_s)
                                             > controller.period_s))
     if asm.track is not None:

@@ -28,7 +28,13 @@ from trackmj.plant import TrackPlant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.scenarios import Scenario, Variant, load_scenario
 from trackmj.sim.config import load_idler
-from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS
+from trackmj.sim.registry import (
+    ARCHITECTURES,
+    CONTROLLERS,
+    ESTIMATORS,
+    REPLACEABLE_ELEMENT,
+)
+from trackmj.tensioner import TensionerFile, load_tensioner
 from trackmj.terrain import RoadProfile
 
 MAX_DURATION_S = 3600.0
@@ -61,9 +67,14 @@ def _idler(params: ModelParams) -> EquivalentIdler:
 class RunSetup:
     """A validated run: scenario, choices and parameters (SI).
 
-    files: the parameter file of each kind ("model", "hydraulics", "control", "scenario")
-    that made the run ("packaged" for the package's own); overrides: the ``--set`` items.
-    ``hydraulics`` carries the variant's bulk-modulus and friction scales already.
+    files: the parameter file of each kind ("model", "hydraulics", "control", "scenario",
+    "tensioner", "controller") that made the run ("packaged" for the package's own, "built-in"
+    for the architecture's own element and a registered controller); overrides: the
+    ``--set`` items. ``hydraulics`` carries the variant's bulk-modulus and friction scales
+    already. element: the key of ``ELEMENTS`` the run's tensioner is (the architecture's, or
+    the tensioner file's); tensioner: the loaded tensioner file (None: built-in);
+    controller_file: the loaded controller FMU file of ``--controller fmu:FILE`` (None: a
+    registered controller).
     """
 
     scenario: Scenario
@@ -78,6 +89,9 @@ class RunSetup:
     control: ControlConfig
     files: dict[str, str] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)
+    element: str = "hydraulic"
+    tensioner: TensionerFile | None = None
+    controller_file: Any = None
 
     @property
     def steps(self) -> int:
@@ -140,6 +154,21 @@ def _choice(kind: str, value: str, allowed: dict[str, Any] | tuple[str, ...]) ->
     return value
 
 
+FMU_CONTROLLER_PREFIX = "fmu:"
+
+
+def controller_choice(value: str) -> tuple[str, Any]:
+    """A registered controller's key, or ``"fmu:FILE.toml"`` -> ("fmu", the loaded
+    controller file, its FMU checked)."""
+    if value.startswith(FMU_CONTROLLER_PREFIX):
+        from trackmj.fmi.controller import load_controller_file
+
+        return "fmu", load_controller_file(value[len(FMU_CONTROLLER_PREFIX):])
+    if value == "fmu":
+        raise ParameterError("controller = 'fmu': name its file, fmu:FILE.toml")
+    return _choice("controller", value, CONTROLLERS), None
+
+
 def scaled_hydraulics(base: HydraulicParams, variant: Variant) -> HydraulicParams:
     """``base`` with the variant's bulk-modulus and cylinder-friction scales applied."""
     fluid = dataclasses.replace(base.fluid, bulk_modulus_Pa=base.fluid.bulk_modulus_Pa
@@ -170,12 +199,15 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
             controller: str | None = None, estimator: str | None = None, seed: int = 0,
             duration: float | None = None, variant: str = "nominal",
             model: str | Path | None = None, hydraulics: str | Path | None = None,
-            control: str | Path | None = None, overrides: Overrides | None = None) -> RunSetup:
+            control: str | Path | None = None, overrides: Overrides | None = None,
+            tensioner: str | Path | None = None) -> RunSetup:
     """Load and validate every input of one run; ParameterError (a ValueError) naming the
     file, key or option and what is allowed, before anything is built.
 
     ``overrides`` (see :data:`Overrides`) change keys of the scenario and parameter files;
-    they pass the same validation as the files.
+    they pass the same validation as the files. ``tensioner``: a tensioner file
+    (:mod:`trackmj.tensioner`) replacing the architecture's hydraulic element, its FMU
+    checked here. ``controller`` may be ``"fmu:FILE.toml"`` (:mod:`trackmj.fmi.controller`).
     """
     sets = overrides_by_kind(overrides)
     if isinstance(scenario, Scenario) and sets["scenario"]:
@@ -183,7 +215,7 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
     sc = (scenario if isinstance(scenario, Scenario)
           else load_scenario(scenario, overrides=sets["scenario"]))
     _choice("architecture", architecture, ARCHITECTURES)
-    controller = _choice("controller", controller or sc.controller, CONTROLLERS)
+    controller, controller_file = controller_choice(controller or sc.controller)
     estimator = _choice("estimator", estimator or sc.estimator, ESTIMATORS)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ParameterError(f"seed = {seed!r}: must be an integer >= 0")
@@ -199,10 +231,25 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
         var = sc.variant(variant)
     except KeyError as exc:
         raise ParameterError(exc.args[0]) from None
+    element = ARCHITECTURES[architecture].element
+    tensioner_file = None
+    if tensioner is not None:
+        if element != REPLACEABLE_ELEMENT:
+            replaceable = [a for a, e in ARCHITECTURES.items()
+                           if e.element == REPLACEABLE_ELEMENT]
+            raise ParameterError(f"--tensioner {tensioner}: architecture {architecture} has "
+                                 f"no hydraulic element to replace ({element}); a tensioner "
+                                 f"file applies to {', '.join(replaceable)}")
+        tensioner_file = load_tensioner(tensioner)
+        element = tensioner_file.element
     files = {"scenario": str(sc.source),
              "model": str(model) if model else "packaged",
              "hydraulics": str(hydraulics) if hydraulics else "packaged",
              "control": str(control) if control else "packaged"}
+    if tensioner is not None:
+        files["tensioner"] = str(tensioner)
+    if controller_file is not None:
+        files["controller"] = str(controller_file.file)
     model_params = (load_model_params(model, overrides=sets["model"])
                     if model or sets["model"] else _packaged_model())
     control_config = load_config(control, overrides=sets["control"])
@@ -214,4 +261,5 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
                                                            overrides=sets["hydraulics"]), var),
         control=control_config, files=files,
         overrides={f"{kind}.{key}": value for kind, keys in sets.items()
-                   for key, value in keys.items()})
+                   for key, value in keys.items()},
+        element=element, tensioner=tensioner_file, controller_file=controller_file)
