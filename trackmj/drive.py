@@ -1,6 +1,6 @@
-"""The ``trackmj drive`` run: the bare track with its passive tensioner driven at a sprocket
-speed, with the mechanical energy ledger (:mod:`trackmj.track_energy`) and a 1 kHz time
-series.
+"""The ``trackmj drive`` run: the bare track with its passive tensioner (or the tensioner of a
+tensioner file: a spring-damper or an FMU) driven at a sprocket speed, with the mechanical
+energy ledger (:mod:`trackmj.track_energy`) and a 1 kHz time series.
 
 Output directory (written whole or not at all: a temporary sibling directory renamed into
 place):
@@ -23,9 +23,11 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from typing import Any
+
 from trackmj.machine import machine
 from trackmj.plant import PassiveTensioner, TrackPlant
-from trackmj.ports import COUPLING_STEP_S
+from trackmj.ports import COUPLING_STEP_S, TensionerElement
 from trackmj.track_energy import TrackEnergyLedger
 
 TIMESERIES_UNITS: dict[str, str] = {
@@ -51,26 +53,52 @@ class DriveResult:
     out_dir: Path | None
 
 
+def _file_tensioner(path: str | Path, stroke_m: float) -> tuple[TensionerElement,
+                                                                 dict[str, Any]]:
+    """The tensioner of a tensioner file on the track at ``stroke_m`` [m], and what
+    metrics.json says about it (an FMU: strongest coupling it offers)."""
+    from trackmj.tensioner import load_tensioner
+
+    tensioner = load_tensioner(path)
+    if tensioner.fmu is not None:
+        from trackmj.fmi.element import FmuElement
+
+        element = FmuElement(tensioner, stroke_m, "strong")
+        return element, element.summary() | {"file": str(path)}
+    t = tensioner.passive
+    return (PassiveTensioner(t.preload_N, t.stiffness_N_m, t.damping_N_s_m, t.stroke_ref_m),
+            {"element": "passive", "file": str(path)})
+
+
 def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = None,
           params: str | Path | None = None, preload_N: float | None = None,
-          out_dir: str | Path | None = None) -> DriveResult:
+          out_dir: str | Path | None = None,
+          tensioner: str | Path | None = None) -> DriveResult:
     """Drive the track at ``speed_m_s`` [m/s] (ramped over min(1 s, duration/4)) for
-    ``duration_s`` [s] with the passive tensioner (its ``preload_N`` [N] if given) and
-    book the energy ledger from rest; write ``out_dir`` if given.
+    ``duration_s`` [s] with the passive tensioner (its ``preload_N`` [N] if given) or the
+    ``tensioner`` file's, and book the energy ledger from rest; write ``out_dir`` if given.
 
-    Raises ValueError for a speed outside [−5, 5] m/s or a duration outside (0, 3600] s.
+    Raises ValueError for a speed outside [−5, 5] m/s or a duration outside (0, 3600] s,
+    ParameterError for a bad tensioner file (before any work), PhysicsError or FmuError if
+    an FMU tensioner leaves physics or fails.
     """
     if not (math.isfinite(speed_m_s) and abs(speed_m_s) <= MAX_SPEED_M_S):
         raise ValueError(f"speed {speed_m_s!r} m/s: allowed [-{MAX_SPEED_M_S}, "
                          f"{MAX_SPEED_M_S}]")
     if not (math.isfinite(duration_s) and 0.0 < duration_s <= MAX_DURATION_S):
         raise ValueError(f"duration {duration_s!r} s: allowed (0, {MAX_DURATION_S}]")
+    if tensioner is not None and preload_N is not None:
+        raise ValueError("give a preload or a tensioner file, not both")
     plant = TrackPlant.load(model, params)
-    element = PassiveTensioner.from_params(plant.params)
-    if preload_N is not None:
-        if not (math.isfinite(preload_N) and preload_N >= 0.0):
-            raise ValueError(f"preload {preload_N!r} N: must be finite and >= 0")
-        element.preload_N = preload_N
+    if tensioner is not None:
+        element, described = _file_tensioner(tensioner, plant.stroke_m)
+    else:
+        element = PassiveTensioner.from_params(plant.params)
+        described = {"element": "passive", "file": "packaged"}
+        if preload_N is not None:
+            if not (math.isfinite(preload_N) and preload_N >= 0.0):
+                raise ValueError(f"preload {preload_N!r} N: must be finite and >= 0")
+            element.preload_N = preload_N
     ramp_s = min(1.0, duration_s / 4.0)
     steps = round(duration_s / COUPLING_STEP_S)
     series = {name: np.empty(steps) for name in TIMESERIES_UNITS}
@@ -101,7 +129,8 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     energy = ledger.finish()
     metrics = {
         "speed_m_s": speed_m_s, "duration_s": duration_s, "ramp_s": ramp_s,
-        "preload_N": element.preload_N,
+        "tensioner": described,
+        **({"preload_N": element.preload_N} if described["element"] == "passive" else {}),
         "real_time_factor": duration_s / wall, "plant_real_time_factor": duration_s / plant_wall,
         "wall_time_s": wall, "machine": machine(),
         "track_energy": energy.to_dict(),
