@@ -19,11 +19,10 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
-
-from typing import Any
 
 from trackmj.machine import machine
 from trackmj.plant import PassiveTensioner, TrackPlant
