@@ -71,10 +71,12 @@ def _cmd_drive(args: argparse.Namespace) -> int:
 
     preload = None if args.preload is None else args.preload * 1e3
     result = drive(args.speed, args.duration, model=args.model, params=args.params,
-                   preload_N=preload, out_dir=args.out)
+                   preload_N=preload, out_dir=args.out, tensioner=args.tensioner)
     m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
     print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s: {m['real_time_factor']:.2f}x "
           f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
+    if m["tensioner"]["element"] == "fmu":
+        print(_tensioner_line(m["tensioner"]))
     print(f"idler force        mean {s['idler_force_mean_N'] / 1e3:7.2f} kN   "
           f"min {s['idler_force_min_N'] / 1e3:7.2f}  max {s['idler_force_max_N'] / 1e3:7.2f}")
     print(f"strand tension     upper {s['upper_strand_tension_mean_N'] / 1e3:5.2f} kN, "
@@ -155,9 +157,18 @@ def _summary_table(results: list, title: str) -> str:
 
 
 def _files(args: argparse.Namespace) -> dict:
-    """The parameter files and ``--set`` overrides given on the command line."""
+    """The parameter files, tensioner file and ``--set`` overrides given on the command
+    line."""
     return dict(model=args.model, hydraulics=args.hydraulics, control=args.control,
-                overrides=args.set)
+                overrides=args.set, tensioner=args.tensioner)
+
+
+def _tensioner_line(described: dict) -> str:
+    """One line on an FMU tensioner's coupling (``Element.run_metrics()["tensioner"]``)."""
+    cost = described.get("step_cost_us")
+    per_step = f"; {cost:.0f} µs of FMU calls per 1 ms step" if cost is not None else ""
+    return (f"tensioner: FMU {described['fmu']}, {described['coupling_description']} "
+            f"(dF/dv: {described['dF_dv']}){per_step}")
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -178,6 +189,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                       extras={"timeseries.png": lambda path: run_figure(result, path)})
     print(f"{setup.scenario.name} ({setup.scenario.title}), {result.architecture}, "
           f"{result.controller}/{result.estimator}, seed {result.seed} -> {out}")
+    if result.metrics.get("tensioner", {}).get("element") == "fmu":
+        print(_tensioner_line(result.metrics["tensioner"]))
     print(_summary_table([result], "{r.architecture}"))
     return 0
 
@@ -189,7 +202,7 @@ def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
     return dict(scenario=scenario, estimator=getattr(args, "estimator", None),
                 duration=args.duration, overrides=overrides_tuple(args.set),
                 model=as_path(args.model), hydraulics=as_path(args.hydraulics),
-                control=as_path(args.control))
+                control=as_path(args.control), tensioner=as_path(args.tensioner))
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
@@ -199,10 +212,12 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     controllers = args.controllers.split(",") if args.controllers else [None]
     setups = [prepare(args.scenario, controller=c, estimator=args.estimator, seed=args.seed,
                       duration=args.duration, **_files(args)) for c in controllers]
+    controllers = [str(c) if c else s.controller for c, s in zip(controllers, setups,
+                                                                 strict=True)]
     scenario = setups[0].scenario
     out = Path(args.out or f"runs/compare-{scenario.name}")
     base = _specs_base(args, str(args.scenario))
-    outcome = compare(base, [s.controller for s in setups], out, seed=args.seed,
+    outcome = compare(base, controllers, out, seed=args.seed,
                       workers=args.workers, scheduler=args.scheduler)
     for spec, error in outcome.failed:
         print(f"trackmj: {spec.architecture} {spec.controller}: {error}", file=sys.stderr)
@@ -229,8 +244,12 @@ def _cmd_report(args: argparse.Namespace) -> int:
         raise ValueError("--archs must include tp: every claim and prediction error is "
                          "against it")
     out = check_report_dir(Path(args.out))
+    if args.tensioner is not None:
+        from trackmj.tensioner import load_tensioner
+
+        load_tensioner(args.tensioner)   # refused here, before any run, if it is bad
     specs = plan(args.scenarios.split(","), list(range(args.seeds)), args.duration, archs,
-                 baselines)
+                 baselines, tensioner=args.tensioner)
     matrix = run_matrix(specs, out, workers=args.workers, scheduler=args.scheduler)
     path = write_report(matrix.results, out, matrix)
     print(f"{len(matrix.results)} runs ({matrix.resumed} resumed, {len(matrix.failed)} failed) "
@@ -319,7 +338,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         raise ValueError("sweep needs a spec file (or --plot DIR); see 'trackmj sweep -h'")
     out = Path(args.out or f"runs/sweep-{Path(args.spec).stem}")
     summary = sweep(args.spec, out, workers=args.workers, scheduler=args.scheduler,
-                    keep_runs=args.keep_runs, retry_failed=args.retry_failed)
+                    keep_runs=args.keep_runs, retry_failed=args.retry_failed,
+                    tensioner=args.tensioner)
     print(summary)
     print(f"{len(summary.figures)} figures -> {out / 'figures'}")
     return 1 if summary.failed else 0
@@ -387,6 +407,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"trackmj {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
+    def tensioner_arg(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--tensioner", metavar="FILE.toml", help="tensioner file: an FMU "
+                       "([fmu]) or a spring-damper ([passive]) replacing the hydraulic "
+                       "element (see README, FMI)")
+
     def model_args(p: argparse.ArgumentParser) -> None:
         p.add_argument("--model", help="MJCF file (default: packaged models/lf1352.xml)")
         p.add_argument("--params", help="parameter TOML (default: packaged lf1352.toml)")
@@ -407,9 +432,11 @@ def build_parser() -> argparse.ArgumentParser:
     drive.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
     drive.add_argument("--preload", type=float, help="tensioner preload [kN]")
     drive.add_argument("--out", help="directory for metrics.json and timeseries.parquet")
+    tensioner_arg(drive)
     drive.set_defaults(func=_cmd_drive)
 
     def file_args(p: argparse.ArgumentParser) -> None:
+        tensioner_arg(p)
         p.add_argument("--model", metavar="FILE",
                        help="model parameter TOML (default: packaged models/lf1352.toml)")
         p.add_argument("--hydraulics", metavar="FILE", help="hydraulic parameter TOML "
@@ -469,6 +496,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="architectures (comma list; default: the study's three)")
     report.add_argument("--baselines", default="lmpc,pid",
                         help="baseline controllers run on tp in W1 ('' for none)")
+    tensioner_arg(report)
     executor_args(report)
     report.add_argument("--out", default="runs/report",
                         help="output directory; runs already complete in it are kept")
@@ -491,6 +519,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="also write each run's result directory under DIR/runs/")
     sweep.add_argument("--retry-failed", action="store_true",
                        help="run again the runs whose rows hold an error")
+    tensioner_arg(sweep)
     executor_args(sweep)
     sweep.set_defaults(func=_cmd_sweep)
 
@@ -510,6 +539,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from trackmj.fmi import FmuError
     from trackmj.params import ParameterError
     from trackmj.results import ResultDirectoryError
     from trackmj.sim.observers import PhysicsError
@@ -525,7 +555,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1
-    except PhysicsError as exc:
+    except (PhysicsError, FmuError) as exc:
         print(f"trackmj: stopped: {exc}", file=sys.stderr)
         return 3
     except (ParameterError, ResultDirectoryError, FileNotFoundError, ValueError,

@@ -45,6 +45,7 @@ class RunSpec:
     model: str | None = None
     hydraulics: str | None = None
     control: str | None = None
+    tensioner: str | None = None
 
     def as_tp(self) -> RunSpec:
         """The same case in the tp architecture (what a dp-a run replays)."""
@@ -55,7 +56,8 @@ class RunSpec:
         return dict(scenario=self.scenario, architecture=self.architecture,
                     controller=self.controller, estimator=self.estimator, seed=self.seed,
                     duration=self.duration, variant=self.variant, set=dict(self.overrides),
-                    model=self.model, hydraulics=self.hydraulics, control=self.control)
+                    model=self.model, hydraulics=self.hydraulics, control=self.control,
+                    tensioner=self.tensioner)
 
 
 @dataclass

@@ -75,20 +75,33 @@ def run_name(scenario: str, architecture: str, controller: str, variant: str, se
 
 def plan(scenarios: Sequence[str], seeds: Sequence[int], duration: float | None,
          archs: Sequence[str] = REPORT_ARCHS,
-         baselines: Sequence[str] = BASELINES) -> list[RunSpec]:
+         baselines: Sequence[str] = BASELINES, tensioner: str | None = None) -> list[RunSpec]:
     """Every run of a report: each scenario's variants × seeds × ``archs`` with its own
-    controller, then ``baselines`` on tp in the nominal :data:`BASELINE_SCENARIOS`."""
+    controller, then ``baselines`` on tp in the nominal :data:`BASELINE_SCENARIOS`;
+    ``tensioner`` (a tensioner file) replaces the hydraulic element where an architecture
+    has one (:func:`tensioner_for`)."""
     specs = []
     for name in scenarios:
         sc = load_scenario(name)
         specs += [RunSpec(scenario=name, architecture=arch, controller=sc.controller,
-                          seed=seed, duration=duration, variant=variant.name)
+                          seed=seed, duration=duration, variant=variant.name,
+                          tensioner=tensioner_for(arch, tensioner))
                   for variant in sc.variants for seed in seeds for arch in archs]
         if sc.name in BASELINE_SCENARIOS:
             specs += [RunSpec(scenario=name, architecture="tp", controller=c, seed=seed,
-                              duration=duration)
+                              duration=duration, tensioner=tensioner)
                       for c in baselines if c != sc.controller for seed in seeds]
     return specs
+
+
+def tensioner_for(architecture: str, tensioner: str | None) -> str | None:
+    """The tensioner file a run of ``architecture`` takes: ``tensioner`` where the
+    architecture's element is the one a file replaces, else None (dp-b keeps its ideal
+    source)."""
+    from trackmj.sim.registry import ARCHITECTURES, REPLACEABLE_ELEMENT
+
+    replaceable = ARCHITECTURES[architecture].element == REPLACEABLE_ELEMENT
+    return tensioner if replaceable else None
 
 
 def _spec_dir(runs_dir: Path, spec: RunSpec) -> Path:
@@ -932,7 +945,9 @@ def compare(base: Mapping[str, Any], controllers: Sequence[str], out_dir: str | 
     from trackmj.sim.registry import ARCHITECTURES
 
     out = check_compare_dir(out_dir)
-    specs = [RunSpec(**base, architecture=a, controller=c, seed=seed)
+    fields = {k: v for k, v in base.items() if k != "tensioner"}
+    specs = [RunSpec(**fields, architecture=a, controller=c, seed=seed,
+                     tensioner=tensioner_for(a, base.get("tensioner")))
              for c in controllers for a in ARCHITECTURES]
     results, failed = [], []
 

@@ -173,6 +173,8 @@ class SweepTable(Parameters):
     hydraulics: str | None = param(max_len=4096, default=None,
                                    doc="hydraulic parameter file")
     control: str | None = param(max_len=4096, default=None, doc="control parameter file")
+    tensioner: str | None = param(max_len=4096, default=None, doc="tensioner file (an FMU "
+                                  "or a spring-damper) replacing the hydraulic element")
     set: tuple[str, ...] | None = param(max_len=4096, default=None,
                                         doc="--set items KIND.TABLE.KEY=VALUE for every run")
     method: Literal["grid", "lhs"] = param(default="grid",
@@ -426,8 +428,18 @@ def _run_key(setup: Any) -> str:
              "variant": repr(setup.variant), "model": repr(setup.model),
              "hydraulics": repr(setup.hydraulics), "control": repr(setup.control),
              "scenario": scenario}
+    if setup.tensioner is not None:
+        ident["tensioner"] = tensioner_identity(setup.tensioner)
     text = json.dumps(ident, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def tensioner_identity(tensioner: Any) -> str:
+    """The tensioner file's validated content and, for an FMU, the hash of the FMU file."""
+    text = repr((tensioner.passive, tensioner.fmu))
+    if tensioner.description is not None:
+        text += hashlib.sha256(tensioner.description.path.read_bytes()).hexdigest()
+    return text
 
 
 def _fixed_overrides(spec: SweepSpec) -> dict[str, Any]:
@@ -463,7 +475,7 @@ def plan(spec: SweepSpec) -> list[PlannedRun]:
         raise ParameterError(f"{spec.where()}: {n_runs} runs; a sweep has at most "
                              f"{MAX_RUNS} (fewer values, or method = 'lhs')")
     files = {"model": spec.path(table.model), "hydraulics": spec.path(table.hydraulics),
-             "control": spec.path(table.control)}
+             "control": spec.path(table.control), "tensioner": spec.path(table.tensioner)}
     inputs = json.dumps({"files": {k: v for k, v in files.items() if v},
                          "set": list(table.set or ())}, sort_keys=True)
     runs = []
@@ -698,7 +710,7 @@ def _run_dir_name(run: PlannedRun) -> str:
 def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
           workers: int | None = None, scheduler: str | None = None, executor: Any = None,
           keep_runs: bool = False, retry_failed: bool = False, plot: bool = True,
-          progress: bool = True) -> SweepSummary:
+          progress: bool = True, tensioner: str | Path | None = None) -> SweepSummary:
     """Run a parameter study (see the module docstring for the spec and the output).
 
     Parameters
@@ -720,6 +732,8 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
         Draw the figures (:func:`plot_sweep`) at the end.
     progress : bool
         Show a progress bar over the simulated seconds of the runs.
+    tensioner : str or Path, optional
+        A tensioner file for every run (the CLI's ``--tensioner``; replaces the spec's).
 
     Returns
     -------
@@ -727,6 +741,9 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
         Raises ParameterError (before any run) if the spec or a run is invalid.
     """
     spec = load_sweep(spec)
+    if tensioner is not None:
+        spec = dataclasses.replace(spec, table=dataclasses.replace(
+            spec.table, tensioner=str(Path(tensioner).resolve())))
     runs = plan(spec)
     out = _output_dir(Path(out))
     results = out / RESULTS
