@@ -85,8 +85,12 @@ class FmuTable(Parameters):
                            "model exchange, else co-simulation (weak)")
     stroke_offset_m: float = param(-1.0, 1.0, default=0.0, doc="trackmj's stroke at the "
                                    "FMU's stroke zero (default 0)")
-    secant_velocity_m_s: float = param(1e-9, 1.0, default=1e-4, doc="velocity increment of "
-                                       "the strong co-simulation secant on dF/dv")
+    difference_velocity_m_s: float = param(1e-9, 1.0, default=1e-6, doc="velocity step δv "
+                                       "of the strong co-simulation's central difference "
+                                       "on dF/dv (and of finite differences in model "
+                                       "exchange); small against the seal-friction "
+                                       "smoothing velocity, large against the FMU's "
+                                       "solver noise / |dF/dv|")
     max_correction_N: float = param(0.0, 1e6, default=200.0, doc="bound on the NEPCE "
                                     "energy-correction force of the strong coupling")
     min_correction_velocity_m_s: float = param(0.0, 1.0, default=1e-4, doc="no energy "
