@@ -382,6 +382,11 @@ class FmuInstance:
                 self._call(f"setting input {quantity}",
                            lambda vr=vr, setter=setter, value=value: setter([vr], [value]))
 
+    def read(self, channel: Channel) -> Any:
+        """The value of one mapped variable."""
+        getter = self._getters[channel.kind]
+        return self._call(f"reading {channel.name}", lambda: getter([channel.vr]))[0]
+
     def real_outputs(self) -> list[float]:
         """The real outputs in :attr:`output_names` order."""
         return self._call("reading the outputs", lambda: self._getters["real"](self._real_out))

@@ -1,0 +1,157 @@
+"""A controller FMU (e.g. a controller exported from Simulink) as the run's controller
+(``ports.Controller``): ``--controller fmu:FILE.toml``.
+
+The controller file's ``[controller]`` table names the FMU (``path``, relative to the file;
+FMI 2.0 or 3.0 co-simulation), its ``period_s`` (an integer multiple of the 1 ms coupling
+step), ``[controller.inputs]`` FMU name = one of :data:`CONTROLLER_INPUTS`,
+``[controller.outputs]`` FMU name = ``"u"`` (opening in [−1, 1]) or ``"valve_mode"``
+(+1/0/−1), and ``[controller.parameters]`` set before initialisation.
+
+Every period at t the FMU's inputs are set (the measurements as the run's estimator gives
+them: its mean over the past period, and the reference F_ref(t)) and it is stepped from t
+to t + period; its output is applied from t, as trackmj's own controllers' solves are. The
+valve logic (dead zone, minimum hold) then turns u into valve modes; a ``valve_mode``
+output passes through it unchanged (|mode| = 1 is outside any dead zone).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from trackmj.params import Location, ParameterError, Parameters, load_file, param, sources_field
+from trackmj.ports import ControllerStatistics, ControlOutput, steps_per_period
+
+CONTROLLER_INPUTS: dict[str, str] = {
+    "p_head_Pa": "head pressure [Pa gauge] (the estimator's period mean)",
+    "p_rod_Pa": "rod pressure [Pa gauge]",
+    "stroke_m": "stroke [m]",
+    "stroke_velocity_m_s": "stroke velocity [m/s]",
+    "F_ref_N": "tension reference F_ref(t) [N]",
+    "supply_pressure_Pa": "supply pressure set value [Pa gauge]",
+}
+"""Port quantities a controller FMU input can be mapped to."""
+CONTROLLER_OUTPUTS = {"u": "valve opening in [−1, 1] [-]",
+                      "valve_mode": "valve mode +1 pressurize, 0 hold, −1 release [-]"}
+"""Port quantities a controller FMU output can be mapped to (exactly one)."""
+
+
+@dataclass(frozen=True)
+class ControllerTable(Parameters):
+    """A controller FMU (see the module docstring)."""
+
+    path: str = param(max_len=4096, doc="the .fmu file, relative to the controller file")
+    period_s: float = param(1e-3, 10.0, doc="the controller's period, an integer multiple "
+                            "of the 1 ms coupling step")
+    inputs: Mapping[str, str] = param(doc="FMU input name = measurement (p_head_Pa, "
+                                      "p_rod_Pa, stroke_m, stroke_velocity_m_s, F_ref_N, "
+                                      "supply_pressure_Pa)")
+    outputs: Mapping[str, str] = param(doc="FMU output name = u or valve_mode (one)")
+    parameters: Mapping[str, Any] = param(default_factory=dict, doc="FMU variable name = "
+                                          "value set before initialisation (default none)")
+
+    def cross_check(self, at: Location) -> None:
+        try:
+            steps_per_period(self.period_s)
+        except ValueError as exc:
+            raise at.error("period_s", self.period_s, str(exc)) from None
+        for table, allowed in (("inputs", CONTROLLER_INPUTS), ("outputs", CONTROLLER_OUTPUTS)):
+            for name, quantity in getattr(self, table).items():
+                if quantity not in allowed:
+                    raise at.error((table, name), quantity,
+                                   f"is not a port quantity; allowed: {', '.join(allowed)}")
+        if len(self.outputs) != 1:
+            raise ParameterError(f"{at.table()}: map exactly one FMU output, to \"u\" or "
+                                 f"\"valve_mode\" (got {len(self.outputs)})")
+
+
+@dataclass(frozen=True)
+class ControllerFile(Parameters):
+    """A controller file: its ``[controller]`` table; ``file`` and ``description`` (the
+    checked FMU) are set by :func:`load_controller_file`."""
+
+    controller: ControllerTable = param(  # noqa: RUF009 (param() returns a dataclasses.Field)
+        doc="the controller FMU")
+    sources: Mapping[str, str] = sources_field()
+    file: Path | None = field(default=None, compare=False, metadata={"loader": "file"})
+    description: Any = field(default=None, compare=False, repr=False,
+                             metadata={"loader": "fmu"})
+
+
+def load_controller_file(path: str | Path) -> ControllerFile:
+    """Read and validate a controller file and check its FMU (co-simulation; the mapped
+    variables' causality and type) before any run."""
+    from trackmj.fmi.model import describe
+
+    path = Path(path)
+    loaded = load_file(ControllerFile, path)
+    table = loaded.controller
+    real, number = ("real",), ("real", "int")
+    description = describe((path.parent / table.path).resolve(), "co-simulation",
+                           Location(file=path.name, path=("controller",)), table.inputs,
+                           table.outputs, table.parameters,
+                           dict.fromkeys(CONTROLLER_INPUTS, real),
+                           {"u": real, "valve_mode": number})
+    object.__setattr__(loaded, "file", path)
+    object.__setattr__(loaded, "description", description)
+    return loaded
+
+
+class FmuController:
+    """The FMU of a controller file on the controller port (see the module docstring).
+
+    Parameters
+    ----------
+    loaded : ControllerFile
+        A loaded controller file (its FMU checked).
+    """
+
+    horizon_steps = 0   # it takes the current reference only
+
+    def __init__(self, loaded: ControllerFile) -> None:
+        from trackmj.fmi.model import FmuInstance
+
+        self.period_s = loaded.controller.period_s
+        self.description = d = loaded.description
+        self.inst = FmuInstance(d, "trackmj-controller")
+        self._supply_Pa = 0.0
+        self.inst.start(0.0, dict.fromkeys(d.inputs, 0.0))
+        self._output, self._channel = next(iter(d.outputs.items()))
+
+    def set_parameters(self, *, supply_pressure_Pa: float | None = None) -> None:
+        """The supply set value [Pa gauge] the FMU's ``supply_pressure_Pa`` input sees."""
+        if supply_pressure_Pa is not None:
+            self._supply_Pa = supply_pressure_Pa
+
+    def __call__(self, estimate: NDArray[np.float64], reference_preview: NDArray[np.float64],
+                 t: float) -> ControlOutput:
+        start = time.perf_counter()
+        p_head, p_rod, stroke, velocity = (float(x) for x in estimate[:4])
+        self.inst.set_inputs({"p_head_Pa": p_head, "p_rod_Pa": p_rod, "stroke_m": stroke,
+                              "stroke_velocity_m_s": velocity,
+                              "F_ref_N": float(reference_preview[0]),
+                              "supply_pressure_Pa": self._supply_Pa})
+        self.inst.do_step(t, self.period_s)
+        u = float(self.inst.read(self._channel))
+        if not np.isfinite(u):
+            from trackmj.fmi import FmuError
+
+            raise FmuError(f"the FMU {self.description.name} output {self._output} = {u!r} "
+                           f"at t = {t:.3f} s (non-finite)")
+        return ControlOutput(min(1.0, max(-1.0, u)), True, time.perf_counter() - start)
+
+    def statistics(self) -> ControllerStatistics:
+        """No plan, no fallback."""
+        return ControllerStatistics()
+
+
+def build_fmu_controller(model: Any, cfg: Any, controller_file: ControllerFile) -> FmuController:
+    """The registry's builder: the FMU of ``controller_file`` (the reduced model and the
+    control configuration are not used: the FMU brings its own)."""
+    return FmuController(controller_file)
