@@ -345,6 +345,16 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 1 if summary.failed else 0
 
 
+def _cmd_fmu_export(args: argparse.Namespace) -> int:
+    from trackmj.fmi.export import export
+
+    exported = export(args.kind, args.out)
+    print(f"wrote {exported.path}")
+    for note in exported.notes:
+        print(f"  {note}")
+    return 0
+
+
 def _nonnegative_int(text: str) -> int:
     value = _integer(text)
     if value < 0:
@@ -531,6 +541,16 @@ def build_parser() -> argparse.ArgumentParser:
     keys.add_argument("kinds", nargs="*", metavar="KIND",
                       help="model, hydraulics, control or scenario (default: all)")
     keys.set_defaults(func=_cmd_keys)
+
+    fmu = sub.add_parser("fmu", help="FMI: export trackmj as an FMU (import: --tensioner, "
+                         "--controller fmu:FILE)")
+    fmu_sub = fmu.add_subparsers(dest="fmu_command", required=True)
+    export = fmu_sub.add_parser("export", help="write an FMI 2.0 co-simulation FMU")
+    export.add_argument("kind", choices=("track", "plant"), help="track: the tensioner port "
+                        "as inputs; plant: track + built-in hydraulics, valve command in, "
+                        "sensor signals out")
+    export.add_argument("-o", "--out", required=True, metavar="FILE.fmu", help="FMU to write")
+    export.set_defaults(func=_cmd_fmu_export)
 
     view = sub.add_parser("view", help="open a run's Rerun recording in the viewer")
     view.add_argument("path", help="run directory or .rrd file")

@@ -10,6 +10,10 @@ import copy
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 
+from trackmj.fmi import hold_module_dict
+
+hold_module_dict(globals())   # pythonfmu's findClass releases this dict once too often
+
 
 class HydraulicTensionerFmu(Fmi2Slave):
     author = "trackmj tests"

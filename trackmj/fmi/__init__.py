@@ -14,3 +14,17 @@
 
 class FmuError(RuntimeError):
     """An FMU failed during a run: the message names the FMU, the FMI call and the time."""
+
+
+_HELD: list[dict] = []
+
+
+def hold_module_dict(namespace: dict) -> None:
+    """Keep one more reference to a pythonfmu slave module's globals, each time the module's
+    code runs. pythonfmu 0.7's binary (``findClass``, PySlaveInstance.cpp) executes the
+    module's file in the module's dict and then DECREFs that dict, which
+    ``PyModule_GetDict`` lent it (a borrowed reference): one reference too few per
+    instantiation, and the dict is freed while in use (measured: segmentation faults in the
+    garbage collector, at random, in fmpy and in a C host). Call it at the top level of
+    every pythonfmu slave script: ``hold_module_dict(globals())``."""
+    _HELD.append(namespace)

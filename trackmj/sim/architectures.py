@@ -117,11 +117,11 @@ def assemble(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
 
 
 SETTLED_KEPT = 4
-"""Settled track states kept per process (see :func:`_settled_track`)."""
+"""Settled track states kept per process (see :func:`settled_track`)."""
 _settled: dict[tuple, tuple[mujoco.MjData, np.ndarray, ForceLaw | None]] = {}
 
 
-def _settled_track(setup: RunSetup, force_N: float) -> TrackPlant:
+def settled_track(setup: RunSetup, force_N: float) -> TrackPlant:
     """The track of the run (terrain of the seed, W5 contact scale), settled standing under
     ``force_N`` [N] on the idler for SETTLE_S, with its clock reset to 0.
 
@@ -173,7 +173,7 @@ def _estimate0(setup: RunSetup, stroke_m: float) -> NDArray[np.float64]:
 def build_track(setup: RunSetup) -> BuiltMechanics:
     """The MuJoCo track of the run, settled under the initial force; its equivalent spring is
     free at the settled stroke less force0 / k."""
-    track = _settled_track(setup, setup.force0_N)
+    track = settled_track(setup, setup.force0_N)
     return BuiltMechanics(track, track,
                           track.stroke_m - setup.force0_N / setup.idler.stiffness_N_m)
 
