@@ -6,7 +6,8 @@ the importing tool through the FMU's embedded Python (see :mod:`trackmj.fmi.expo
   inputs (track speed, hitch load); outputs stroke, velocity, the applied tension, chassis
   vertical acceleration, strand tensions and the derailment indicators.
 * :class:`PlantSlave`: the track with the built-in hydraulics (tp, strong coupling): valve
-  command in, the sensor signals (noisy, the control file's sensor model and the seed) and
+  command (and the supply set value: 0, the default, is the hydraulic file's nominal) in,
+  the sensor signals (noisy, the control file's sensor model and the seed) and
   the true tension and pressures out.
 
 A communication step is any integer multiple of 1 ms (a doStep of another length fails).
@@ -176,7 +177,7 @@ class PlantSlave(_Base):
         self.register_variable(Integer("valve_mode", causality=Fmi2Causality.input,
                                        variability=Fmi2Variability.discrete,
                                        description="+1 pressurize, 0 hold, -1 release"))
-        self._real(("supply_pressure_set_Pa",), Fmi2Causality.input, math.nan)
+        self._real(("supply_pressure_set_Pa",), Fmi2Causality.input, 0.0)
         self._real(PLANT_INPUTS, Fmi2Causality.input)
         self._real(PLANT_OUTPUTS, Fmi2Causality.output, math.nan)
 
@@ -203,7 +204,7 @@ class PlantSlave(_Base):
     def _inputs(self) -> StepInputs:
         supply = self.supply_pressure_set_Pa
         return StepInputs(self.track_speed_m_s, self.hitch_pull_N, self.hitch_down_N,
-                          supply if math.isfinite(supply) else self._nominal_supply_Pa)
+                          supply if supply > 0.0 else self._nominal_supply_Pa)
 
     def _read(self, r) -> None:
         z = self.sensors.measure((r.p_head_Pa, r.p_rod_Pa, r.stroke_m))
