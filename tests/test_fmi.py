@@ -7,6 +7,7 @@ pythonfmu, and the exported track and plant."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import zipfile
@@ -252,7 +253,7 @@ def test_a_bad_fmu_is_refused_before_the_run(fmus, tmp_path, capsys, case) -> No
 
 @pytest.mark.parametrize(("parameter", "expected"), [
     ("fail_time", "the FMU gas2.fmu: "),
-    ("nan_time", "output force_N = nan (non-finite)"),
+    ("nan_time", "output force_N = nan"),
 ])
 def test_an_fmu_that_fails_mid_run_stops_it_and_keeps_earlier_results(
         fmus, tmp_path, capsys, parameter, expected) -> None:
@@ -267,7 +268,7 @@ def test_an_fmu_that_fails_mid_run_stops_it_and_keeps_earlier_results(
     assert main(["drive", "--duration", "1", "--tensioner", str(toml)]) == 3
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and expected in err
-    assert "t = 0.5" in err
+    assert re.search(r"t = 0\.(499|500) s", err)
     code = main(["run", "W1", "--duration", "1.2", "--tensioner", str(toml), "--out", str(out)])
     assert code in (2, 3)   # 2: the directory guard refuses a foreign folder first
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before

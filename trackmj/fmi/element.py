@@ -150,6 +150,10 @@ class FmuElement:
             else:
                 f_star, z = self._me_linearise(t_s, stroke_m, v_star)
             law = ForceLaw(f_star - z * v_star + self._correction(velocity_m_s), z)
+            if not math.isfinite(f_star + z):
+                raise PhysicsError(f"t = {t_s:.3f} s: the FMU {self.name} output force_N = "
+                                   f"{f_star!r}, dF/dv = {z!r} (non-finite) in the predicted "
+                                   "step; the run left physics and was stopped")
         self.v_prev = velocity_m_s
         self._law = law
         self.wall_s += time.perf_counter() - start
