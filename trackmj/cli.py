@@ -290,7 +290,7 @@ VIEWER_START_S = 5.0
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
     from trackmj.scenarios import BUILTIN, load_scenario
-    from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS
+    from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ELEMENTS, ESTIMATORS
 
     loaded = [load_scenario(name) for name in BUILTIN]
     width = max(len(sc.name) for sc in loaded) + 2
@@ -301,7 +301,9 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     print("or any scenario TOML file in the same format (experiments/*.toml)")
     for title, registry in (("architectures (--arch)", ARCHITECTURES),
                             ("controllers (--controller)", CONTROLLERS),
-                            ("estimators (--estimator)", ESTIMATORS)):
+                            ("estimators (--estimator)", ESTIMATORS),
+                            ("tensioner elements (of the architectures; --tensioner FILE)",
+                             ELEMENTS)):
         print(f"\n{title}")
         for name, entry in registry.items():
             print(f"{name:<{width + 5}}{entry.description}")
@@ -408,7 +410,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     from trackmj import __version__
-    from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS, choices
+    from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS, by_name, choices
 
     parser = _Parser(prog="trackmj", description="trackmj: electro-hydraulic track tensioning "
                      "simulator (MuJoCo track, hydraulic plugin, NMPC control)",
@@ -482,7 +484,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--arch", default="tp", choices=choices(ARCHITECTURES),
                      help="coupling architecture")
     run.add_argument("--controller", metavar="NAME",
-                     help=f"{', '.join(c for c in CONTROLLERS if c != 'fmu')}, or "
+                     help=f"{', '.join(by_name(CONTROLLERS))}, or "
                           "fmu:FILE.toml for a controller FMU (default: the scenario's)")
     run.add_argument("--variant", default="nominal", help="W5 variant name")
     run.add_argument("--csv", action="store_true", help="also write timeseries.csv")

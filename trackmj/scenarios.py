@@ -54,7 +54,7 @@ from trackmj.hydraulics.params import PressureProfile, SupplyModel
 from trackmj.metrics import MetricWindows
 from trackmj.params import Location, ParameterError, Parameters, construct, load_file, param
 from trackmj.ports import COUPLING_STEP_S
-from trackmj.sim.registry import CONTROLLERS, ESTIMATORS, choices
+from trackmj.sim.registry import CONTROLLERS, ESTIMATORS, by_name, choices
 from trackmj.terrain import ISO8608_GD_N0_M3, RoadProfile, road_profile, taper_start
 
 BUILTIN = ("W1", "W2", "W3", "W4", "W5", "NL1")
@@ -89,7 +89,7 @@ class Header(Parameters):
                               doc="simulated time; at least one 1 ms step")
     seeds: tuple[int, ...] = param(0, 2**32 - 1, unit="1",
                                    doc="one run per seed (sensor noise and terrain)")
-    controller: str = param(choices=choices(CONTROLLERS), doc="default controller")
+    controller: str = param(choices=by_name(CONTROLLERS), doc="default controller")
     estimator: str = param(choices=choices(ESTIMATORS), doc="default state estimator")
 
     def cross_check(self, at: Location) -> None:

@@ -88,7 +88,7 @@ from trackmj.params import (
     parse_overrides,
     unit_from_name,
 )
-from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS, choices
+from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS, by_name, choices
 
 RESULTS = "results.parquet"
 SPEC_COPY = "sweep.toml"
@@ -164,7 +164,7 @@ class SweepTable(Parameters):
                                    doc="noise and terrain seeds; every point runs each")
     architectures: tuple[str, ...] = param(choices=choices(ARCHITECTURES), default=("tp",),
                                            doc="coupling architectures")
-    controllers: tuple[str, ...] | None = param(choices=choices(CONTROLLERS), default=None,
+    controllers: tuple[str, ...] | None = param(choices=by_name(CONTROLLERS), default=None,
                                                 doc="controllers (default: the scenario's)")
     estimator: str | None = param(choices=choices(ESTIMATORS), default=None,
                                   doc="state estimator (default: the scenario's)")

@@ -142,3 +142,9 @@ ARCHITECTURES: dict[str, Architecture] = {
 def choices(registry: dict[str, Any]) -> tuple[str, ...]:
     """The registered names, in registration order."""
     return tuple(registry)
+
+
+def by_name(registry: dict[str, Entry]) -> tuple[str, ...]:
+    """The names a file or option may give alone: entries whose builder needs nothing
+    besides the run (the FMU controller needs its file: ``fmu:FILE.toml``)."""
+    return tuple(name for name, entry in registry.items() if not entry.needs)

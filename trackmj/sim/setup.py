@@ -33,6 +33,7 @@ from trackmj.sim.registry import (
     CONTROLLERS,
     ESTIMATORS,
     REPLACEABLE_ELEMENT,
+    by_name,
 )
 from trackmj.tensioner import TensionerFile, load_tensioner
 from trackmj.terrain import RoadProfile
@@ -164,9 +165,11 @@ def controller_choice(value: str) -> tuple[str, Any]:
         from trackmj.fmi.controller import load_controller_file
 
         return "fmu", load_controller_file(value[len(FMU_CONTROLLER_PREFIX):])
-    if value == "fmu":
-        raise ParameterError("controller = 'fmu': name its file, fmu:FILE.toml")
-    return _choice("controller", value, CONTROLLERS), None
+    named = by_name(CONTROLLERS)
+    if value not in named:
+        raise ParameterError(f"controller = {value!r}: allowed {', '.join(named)} or "
+                             "fmu:FILE.toml (a controller FMU)")
+    return value, None
 
 
 def scaled_hydraulics(base: HydraulicParams, variant: Variant) -> HydraulicParams:
