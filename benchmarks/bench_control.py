@@ -24,9 +24,8 @@ from trackmj.control.estimators import ExtendedKalmanFilter, UnscentedKalmanFilt
 from trackmj.control.lmpc import LinearMpc
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
-from trackmj.control.params import load_config
 from trackmj.control.pid import PidController
-from trackmj.sim.config import nominal_plant_params
+from trackmj.sim.config import nominal_plant_params, packaged_control
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
 
@@ -81,7 +80,7 @@ def main() -> None:
     ap.add_argument("--no-gc", action="store_true", help="gc.disable() during the loops")
     ap.add_argument("--duration", type=float, default=30.0, help="loop length [s]")
     args = ap.parse_args()
-    cfg = load_config()
+    cfg = packaged_control()
     over = {
         k: v
         for k, v in (

@@ -20,9 +20,28 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Any, ClassVar
 
-from trackmj.params import Location, Parameters, load_file, param, sources_field
+from trackmj.params import Location, ParameterError, Parameters, load_file, param, sources_field
 
 DEFAULT_FILE = "lf1352_control.toml"
+
+BAND_REL = (2.0 / 3.0, 4.0 / 3.0)
+"""Admissible tension band [F_min, F_max] over the machine's nominal tension (LF1352: the
+study's 10-20 kN about its 15 kN working reference)."""
+REFERENCE_MARGIN_REL = 1.0 / 30.0
+"""Reference-governor margin inside the band over the nominal tension (500 N at 15 kN: about
+the low-passed ripple of the driven track)."""
+PID_DEAD_BAND_REL = 0.01
+"""PID error dead band over the nominal tension (150 N at 15 kN: half the ±2 % settling band)."""
+PID_INTEGRATION_BAND_REL = 0.04
+"""PID conditional-integration band over the nominal tension: twice the ±2 % settling band
+(600 N at 15 kN)."""
+DERIVED = {("controller", "force_min_N"): BAND_REL[0],
+           ("controller", "force_max_N"): BAND_REL[1],
+           ("controller", "reference_margin_N"): REFERENCE_MARGIN_REL,
+           ("pid", "error_dead_band_N"): PID_DEAD_BAND_REL,
+           ("pid", "integration_band_N"): PID_INTEGRATION_BAND_REL}
+"""Control-file keys a machine's nominal tension fixes: value = factor x nominal tension [N]
+when the file (or an override) leaves the key out."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,19 +147,23 @@ class ControllerParams(Parameters):
     """Shared controller limits: period, tension band, pressure band, u bounds."""
 
     period_s: float = param(0.0, 1.0, open_low=True, doc="control period")
-    force_min_N: float = param(-1e6, 1e6, doc="lower tension limit F_min")
-    force_max_N: float = param(-1e6, 1e6, doc="upper tension limit F_max")
     pressure_min_Pa: float = param(-1e5, 5e7, doc="lower chamber pressure limit")
     pressure_max_Pa: float = param(-1e5, 5e7, doc="upper chamber pressure limit")
     u_min: float = param(-1.0, 0.0, unit="1", doc="lowest valve opening (-1: full release)")
     u_max: float = param(0.0, 1.0, unit="1", doc="highest valve opening (+1: full pressurize)")
-    reference_margin_N: float = param(0.0, 1e5, doc="the reference governor keeps the tracked "
-                                      "reference this far inside [F_min, F_max]")
     governor_valve_drop_Pa: float = param(0.0, 1e7, doc="smallest pressure drop across the head "
                                           "path the governor leaves below the supply")
+    force_min_N: float | None = param(-1e6, 1e6, default=None, doc="lower tension limit "
+                                      "F_min; optional: BAND_REL[0] x the nominal tension")
+    force_max_N: float | None = param(-1e6, 1e6, default=None, doc="upper tension limit "
+                                      "F_max; optional: BAND_REL[1] x the nominal tension")
+    reference_margin_N: float | None = param(
+        0.0, 1e5, default=None, doc="the reference governor keeps the tracked reference this "
+        "far inside [F_min, F_max]; optional: REFERENCE_MARGIN_REL x the nominal tension")
 
     def cross_check(self, at: Location) -> None:
-        if self.force_max_N < self.force_min_N:
+        if (self.force_min_N is not None and self.force_max_N is not None
+                and self.force_max_N < self.force_min_N):
             raise at.error("force_max_N", self.force_max_N,
                            f"must be >= force_min_N = {self.force_min_N!r}")
         if self.pressure_max_Pa < self.pressure_min_Pa:
@@ -199,11 +222,14 @@ class PidParams(Parameters):
                                        "dimensionless despite the suffix")
     back_calculation_gain: float = param(0.0, 100.0, open_low=True, unit="1",
                                          doc="anti-windup Tt = Ti / gain")
-    error_dead_band_N: float = param(0.0, 1e5, doc="errors inside are zero for the "
-                                     "proportional part")
-    integration_band_N: float = param(0.0, 1e6, doc="integrate only while |error| <= this")
     output_on: float = param(0.0, 1.0, unit="1", doc="leave hold when |u| exceeds this")
     output_off: float = param(0.0, 1.0, unit="1", doc="return to hold below this")
+    error_dead_band_N: float | None = param(0.0, 1e5, default=None, doc="errors inside are "
+                                            "zero for the proportional part; optional: "
+                                            "PID_DEAD_BAND_REL x the nominal tension")
+    integration_band_N: float | None = param(0.0, 1e6, default=None, doc="integrate only "
+                                             "while |error| <= this; optional: "
+                                             "PID_INTEGRATION_BAND_REL x the nominal tension")
 
     def cross_check(self, at: Location) -> None:
         if self.output_off > self.output_on:
@@ -245,8 +271,10 @@ def default_path() -> Path:
 
 
 def load_config(path: str | Path | None = None,
-                overrides: Mapping[str, Any] | None = None) -> ControlConfig:
-    """Read and validate the control TOML.
+                overrides: Mapping[str, Any] | None = None, *,
+                nominal_tension_N: float | None = None) -> ControlConfig:
+    """Read and validate the control TOML; the keys of :data:`DERIVED` the file leaves out
+    are the machine's nominal tension times their factor.
 
     Parameters
     ----------
@@ -255,10 +283,26 @@ def load_config(path: str | Path | None = None,
     overrides : mapping, optional
         ``{dotted key: value}``, the ``control`` entry of
         :func:`trackmj.params.parse_overrides`.
+    nominal_tension_N : float, optional
+        The machine's nominal working tension [N] (its mechanics file's
+        ``[tensioner].nominal_tension_N``); needed when the file leaves a derived key out.
 
     Returns
     -------
     ControlConfig
     """
-    return load_file(ControlConfig, default_path() if path is None else path,
-                     overrides=overrides)
+    path = default_path() if path is None else Path(path)
+    cfg = load_file(ControlConfig, path, overrides=overrides)
+    missing = [(table, key) for table, key in DERIVED
+               if getattr(getattr(cfg, table), key) is None]
+    if not missing:
+        return cfg
+    if nominal_tension_N is None or not nominal_tension_N > 0.0:
+        table, key = missing[0]
+        raise ParameterError(f"{path.name} [{table}].{key}: not given, and no nominal tension "
+                             "to derive it from (load the control file through its machine)")
+    changes: dict[str, dict[str, float]] = {}
+    for table, key in missing:
+        changes.setdefault(table, {})[key] = nominal_tension_N * DERIVED[table, key]
+    return dataclasses.replace(cfg, **{table: dataclasses.replace(getattr(cfg, table), **kv)
+                                       for table, kv in changes.items()})

@@ -8,13 +8,13 @@ from scipy.stats import chi2
 
 from trackmj.control.estimators import ExtendedKalmanFilter, UnscentedKalmanFilter
 from trackmj.control.model import ReducedModel, ReducedPlant
-from trackmj.control.params import EstimatorParams, load_config
+from trackmj.control.params import EstimatorParams
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
-from trackmj.sim.config import nominal_plant_params
+from trackmj.sim.config import nominal_plant_params, packaged_control
 
 RUNS, STEPS, DT = 30, 400, 1e-3
-CFG = load_config()
+CFG = packaged_control()
 PLANT = nominal_plant_params(control_config=CFG)
 
 

@@ -7,12 +7,11 @@ from trackmj.control.lmpc import LinearMpc
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.ocp import X_SCALE
-from trackmj.control.params import load_config
 from trackmj.control.pid import PidController
-from trackmj.sim.config import nominal_plant_params
+from trackmj.sim.config import nominal_plant_params, packaged_control
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
-CFG = load_config()
+CFG = packaged_control()
 PLANT = nominal_plant_params(control_config=CFG)
 
 

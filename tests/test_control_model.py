@@ -5,7 +5,7 @@ import pytest
 
 from trackmj.control.model import ReducedModel, ReducedPlant
 from trackmj.control.params import PlantParams, default_path, load_config
-from trackmj.sim.config import nominal_plant_params
+from trackmj.sim.config import nominal_plant_params, packaged_control
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +105,7 @@ def test_parameter_validation_names_parameter(plant_params: PlantParams) -> None
 def test_default_file_loads_and_rejects_a_plant_table(tmp_path) -> None:
     """The control file holds only the controller's own values: a [plant] table (the old
     place of the reduced model's physics, now derived) is refused by name."""
-    cfg = load_config()
+    cfg = packaged_control()
     assert cfg.controller.period_s == pytest.approx(0.01)
     text = default_path().read_text(encoding="utf-8")
     bad = tmp_path / "bad.toml"

@@ -1,12 +1,11 @@
 """PID baseline on the same closed loop; figures reported beside the NMPC's."""
 
 from trackmj.control.model import ReducedModel
-from trackmj.control.params import load_config
 from trackmj.control.pid import PidController
-from trackmj.sim.config import nominal_plant_params
+from trackmj.sim.config import nominal_plant_params, packaged_control
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
-CFG = load_config()
+CFG = packaged_control()
 PLANT = nominal_plant_params(control_config=CFG)
 
 

@@ -13,11 +13,10 @@ import pytest
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.ocp import X_SCALE, initial_guess
-from trackmj.control.params import load_config
 from trackmj.control.sqp import BETA, C1, MAX_ITER_LS, MIN_STEP, CondensedSqp
-from trackmj.sim.config import nominal_plant_params
+from trackmj.sim.config import nominal_plant_params, packaged_control
 
-CFG = load_config()
+CFG = packaged_control()
 PLANT = nominal_plant_params(control_config=CFG)
 RTOL = 1e-6  # relative to max(1, |u|_inf), u scaled (valve opening)
 

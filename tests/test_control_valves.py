@@ -8,8 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trackmj.control.params import ValveParams, load_config
+from trackmj.control.params import ValveParams
 from trackmj.control.valves import ValveLogic
+from trackmj.sim.config import packaged_control
 
 
 def _run_lengths(modes: list[int]) -> list[int]:
@@ -79,7 +80,7 @@ def test_threshold_mode_and_dead_zone() -> None:
 
 
 def test_invalid_parameters_named() -> None:
-    valves = load_config().valves
+    valves = packaged_control().valves
     with pytest.raises(ValueError, match=r"ValveParams\.min_hold_s = -0\.01 is outside the "
                        r"allowed range \[0, 1\] s"):
         dataclasses.replace(valves, min_hold_s=-0.01)

@@ -176,15 +176,20 @@ MALFORMED = [
     ("W1", "speed_m_s = 1.5", "speed_m_s = inf", r"\[track\]\.speed_m_s = inf: must be finite"),
     ("W1", "[track]", "[trak]",
      r"^bad\.toml: unknown table \[trak\]; did you mean 'track'\?"),
-    ("W1", "initial_N = 12.0e3", "initial_n = 12.0e3",
+    ("W1", "initial_rel = 0.8", "initial_n = 12.0e3",
      r"^bad\.toml \[reference\]: unknown key 'initial_n'; did you mean 'initial_N'\?"),
-    ("W1", "rate_N_s = 50.0", "rate_N_s = 5.0e4",
+    ("W1", "initial_rel = 0.8", "initial_rel = 0.8\ninitial_N = 12.0e3",
+     r"^bad\.toml \[reference\]: give exactly one of 'initial_N' \(absolute\) and "
+     r"'initial_rel'"),
+    ("W1", "rate_rel_s = 0.0033333333333333335", "rate_N_s = 5.0e4",
      r"\[\[reference\.ramps\]\]\[0\]\.rate_N_s = 50000\.0 is outside the allowed range "
      r"\[-5000, 5000\] N/s"),
-    ("W1", "rate_N_s = 50.0", "rate_N_s = 5.0e3",            # 15 kN + 5 kN/s for 15 s
-     r"^bad\.toml \[reference\]: F_ref reaches 90000 N at t = 30 s; it must stay in "
+    ("W1", "rate_rel_s = 0.0033333333333333335", "rate_rel_s = 0.3",
+     # 15 kN + 4.5 kN/s for 15 s
+     r"^bad\.toml \(relative values at a nominal tension of 15000 N\): ScenarioFile "
+     r"\[reference\]: F_ref reaches 82500 N at t = 30 s; it must stay in "
      r"\[0, 50000\] N over the run"),
-    ("W1", "rate_N_s = 50.0", "rate_N_s = 50.0\nend_s = 10.0",
+    ("W1", "rate_rel_s = 0.0033333333333333335", "rate_N_s = 50.0\nend_s = 10.0",
      r"\[\[reference\.ramps\]\]\[0\]\.end_s = 10\.0 must be > start_s = 15\.0"),
     ("W1", "time_s = 3.0", 'time_s = "3"',
      r"\[\[reference\.steps\]\]\[0\]\.time_s = '3': expected a number, got a string"),
@@ -200,10 +205,10 @@ MALFORMED = [
      r"\[supply\]\.model = 'unloading' takes no \[\[supply\.drops\]\]"),
     ("W1", 'kind = "flat"', 'kind = "bumpy"',
      r"\[terrain\]\.kind = 'bumpy' is not one of \['flat', 'iso8608'\]"),
-    ("W1", "force_max_N = 20.0e3", "force_max_N = 5.0e3",
+    ("W1", "[evaluation]", "[limits]\nforce_min_N = 10.0e3\nforce_max_N = 5.0e3\n[evaluation]",
      r"\[limits\]\.force_max_N = 5000\.0 must be > force_min_N = 10000\.0"),
     ("W1", "[evaluation]", "[evaluaton]", r"^bad\.toml: unknown table \[evaluaton\]"),
-    ("W1", "[limits]\nforce_min_N = 10.0e3", "force_min_N = 10.0e3",   # keys land in [terrain]
+    ("W1", "[evaluation]", "force_min_N = 10.0e3\n[evaluation]",   # keys land in [terrain]
      r"^bad\.toml \[terrain\]: unknown key 'force_min_N'"),
     ("W1", "start_s = 1.0                # tracking", "start_s = 30.0  # tracking",
      r"\[evaluation\]\.start_s = 30\.0 is at or after the end of the run"),  # all metrics null
@@ -287,11 +292,36 @@ def test_unreadable_files_are_refused_naming_the_file(tmp_path) -> None:
 
 def test_missing_required_table_is_named(tmp_path) -> None:
     text = scenario_path("W1").read_text()
-    cut = text.index("[limits]")
+    cut = text.index("[terrain]")
     path = tmp_path / "mine.toml"
     path.write_text(text[:cut] + text[text.index("[evaluation]"):])
-    with pytest.raises(ParameterError, match=r"^mine\.toml: missing table \[limits\]$"):
+    with pytest.raises(ParameterError, match=r"^mine\.toml: missing table \[terrain\]$"):
         load_scenario(path)
+
+
+def test_relative_values_scale_with_the_machine_and_limits_default_to_its_band() -> None:
+    """W1 and NL1 state forces over the nominal tension and drop pressures over the supply
+    set-point: on a 20 kN / 16 MPa machine W1 starts at 16 kN, steps +4 kN, ramps 66.7 N/s,
+    is judged in [13.33, 26.67] kN; NL1 drops to 12 MPa. LF1352 (15 kN, 12 MPa) keeps the
+    study's absolute values."""
+    s = load_scenario("W1", nominal_tension_N=20e3, supply_setpoint_Pa=16e6)
+    assert float(s.reference_N(0.0)) == pytest.approx(16e3)
+    assert float(s.reference_N(4.0)) == pytest.approx(20e3)
+    assert float(s.reference_N(16.0)) == pytest.approx(20e3 + 20e3 / 300.0)
+    assert (s.limits.force_min_N, s.limits.force_max_N) == pytest.approx((40e3 / 3, 80e3 / 3))
+    nl1 = load_scenario("NL1", nominal_tension_N=20e3, supply_setpoint_Pa=16e6)
+    assert nl1.supply.drops[0].pressure_Pa == pytest.approx(12e6)
+    lf = load_scenario("W1")
+    assert (float(lf.reference_N(0.0)), float(lf.reference_N(4.0))) == (12e3, 15e3)
+    assert (lf.limits.force_min_N, lf.limits.force_max_N) == (10e3, 20e3)
+
+
+def test_w3_applies_to_lf1352_only_with_the_reason() -> None:
+    s = load_scenario("W3")
+    s.check_machine("lf1352")
+    with pytest.raises(ParameterError, match=r"^W3\.toml: scenario W3 applies to lf1352 only, "
+                       r"not m113: its hitch forces are calibrated on the LF1352 track"):
+        s.check_machine("m113")
 
 
 def test_custom_file_with_every_table_loads(tmp_path) -> None:

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from trackmj.control.model import ReducedModel, ReducedPlant
-from trackmj.control.params import load_config
 from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
 from trackmj.identify import EquivalentIdler
 from trackmj.model import default_xml_path
@@ -21,6 +20,7 @@ from trackmj.sim.config import (
     load_identification,
     load_idler,
     nominal_plant_params,
+    packaged_control,
     reduced_plant_params,
     write_idler_file,
 )
@@ -55,7 +55,7 @@ def test_reduced_plant_lumps_both_cylinders_and_puts_paths_in_series() -> None:
     assert p.dead_volume_head_m3 == pytest.approx(2 * 1.82e-3)
     assert p.dead_volume_rod_m3 == pytest.approx(2 * 1.5e-4 + 5e-5)
     assert p.leakage_m3_s_Pa == pytest.approx(1e-14)
-    idler, own = load_idler(), load_config().reduced_model
+    idler, own = load_idler(), packaged_control().reduced_model
     assert (p.stiffness_N_m, p.mass_kg, p.damping_N_s_m) == (
         idler.stiffness_N_m, idler.mass_kg, idler.damping_N_s_m)
     assert (p.vent_area_rod_m2, p.opening_smoothing) == (own.vent_area_rod_m2,
@@ -141,7 +141,7 @@ def test_derived_plant_follows_the_hydraulic_file() -> None:
     """A changed hydraulic value reaches the reduced model: no copy of it in the control file."""
     hyd = load_hydraulic_params(overrides={"fluid.bulk_modulus_Pa": 1.2e9,
                                            "metering.head_branch_area_m2": 3e-8})
-    p = reduced_plant_params(hyd, load_idler(), load_config(), supply_pressure_Pa=9e6,
+    p = reduced_plant_params(hyd, load_idler(), packaged_control(), supply_pressure_Pa=9e6,
                              free_position_m=0.04)
     assert p.bulk_modulus_Pa == 1.2e9 and p.supply_pressure_Pa == 9e6
     assert p.valve_area_head_m2 == pytest.approx(6e-8, rel=1e-5)

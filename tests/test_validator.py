@@ -3,6 +3,7 @@ refusals with the same messages, overrides, units and docs of every field, shipp
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 import tomllib
@@ -41,7 +42,8 @@ KINDS: dict[str, tuple[Callable[..., Any], Path, str, str, float, str]] = {
               r"\[10, 100000\] kg"),
     "hydraulics": (load_hydraulic_params, hydraulics_path(), "fluid", "bulk_modulus_Pa", -1.0,
                    r"\(0, 1e\+11\] Pa"),
-    "control": (load_config, control_path(), "mpc", "weight_input", -1.0, r"\[0, 1e\+06\]"),
+    "control": (functools.partial(load_config, nominal_tension_N=15e3), control_path(), "mpc",
+                "weight_input", -1.0, r"\[0, 1e\+06\]"),
     "scenario": (load_scenario, scenario_path("W1"), "track", "speed_m_s", 6.0,
                  r"\[0, 5\] m/s"),
 }

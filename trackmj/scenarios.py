@@ -40,6 +40,7 @@ characters). Tables may carry a ``source`` string; unlike parameter files they n
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from collections.abc import Callable, Mapping
@@ -91,6 +92,11 @@ class Header(Parameters):
                                    doc="one run per seed (sensor noise and terrain)")
     controller: str = param(choices=by_name(CONTROLLERS), doc="default controller")
     estimator: str = param(choices=choices(ESTIMATORS), doc="default state estimator")
+    machines: tuple[str, ...] | None = param(default=None, pattern=r"[a-z0-9][a-z0-9_-]*",
+                                      max_len=40, doc="optional: the only machines the "
+                                      "condition applies to (default: any)")
+    machines_reason: str = param(default="", max_len=300, doc="why it applies to those "
+                                 "machines only (the refusal's message)")
 
     def cross_check(self, at: Location) -> None:
         if not self.title.strip() or any(c in self.title for c in "\n\r\t"):
@@ -112,7 +118,12 @@ class Step(Parameters):
     """Reference step of delta_N [N] at time_s [s]."""
 
     time_s: float = param(0.0, None, doc="time of the step")
-    delta_N: float = param(-50e3, 50e3, doc="change of F_ref")
+    delta_N: float | None = param(-50e3, 50e3, default=None, doc="change of F_ref (absolute)")
+    delta_rel: float | None = param(-3.0, 3.0, default=None, unit="1",
+                                    doc="change of F_ref over the nominal tension")
+
+    def cross_check(self, at: Location) -> None:
+        _one_of(self, at, "delta_N", "delta_rel")
 
 
 @dataclass(frozen=True)
@@ -120,12 +131,15 @@ class Ramp(Parameters):
     """Reference ramp of rate_N_s [N/s] from start_s to end_s [s]."""
 
     start_s: float = param(0.0, None, doc="start of the ramp")
-    rate_N_s: float = param(-5e3, 5e3, doc="slope of F_ref")
+    rate_N_s: float | None = param(-5e3, 5e3, default=None, doc="slope of F_ref (absolute)")
+    rate_rel_s: float | None = param(-1.0, 1.0, default=None, unit="1/s",
+                                     doc="slope of F_ref over the nominal tension")
     end_s: float | None = param(0.0, None, default=None,
                                 doc="end of the ramp; optional: without it the ramp runs to "
                                 "the end of the run")
 
     def cross_check(self, at: Location) -> None:
+        _one_of(self, at, "rate_N_s", "rate_rel_s")
         if self.end_s is not None and not self.end_s > self.start_s:
             raise at.error("end_s", self.end_s, f"must be > start_s = {self.start_s!r}")
 
@@ -134,9 +148,15 @@ class Ramp(Parameters):
 class Reference(Parameters):
     """F_ref(t) = initial_N + Σ steps + Σ ramps [N]."""
 
-    initial_N: float = param(0.0, REFERENCE_MAX_N, doc="F_ref at t = 0")
+    initial_N: float | None = param(0.0, REFERENCE_MAX_N, default=None,
+                                    doc="F_ref at t = 0 (absolute)")
+    initial_rel: float | None = param(0.0, 3.0, default=None, unit="1",
+                                      doc="F_ref at t = 0 over the nominal tension")
     steps: tuple[Step, ...] = param(default=(), doc="optional reference steps")
     ramps: tuple[Ramp, ...] = param(default=(), doc="optional reference ramps")
+
+    def cross_check(self, at: Location) -> None:
+        _one_of(self, at, "initial_N", "initial_rel")
 
 
 @dataclass(frozen=True)
@@ -147,10 +167,15 @@ class SupplyDrop(Parameters):
 
     start_s: float = param(0.0, None, doc="start of the first transition")
     end_s: float = param(0.0, None, doc="start of the transition back to nominal")
-    pressure_Pa: float = param(0.0, 30e6, doc="supply set-point during the drop")
     transition_s: float = param(0.0, 5.0, doc="duration of each linear transition")
+    pressure_Pa: float | None = param(0.0, 30e6, default=None,
+                                      doc="supply set-point during the drop (absolute)")
+    pressure_rel: float | None = param(0.0, 2.0, default=None, unit="1",
+                                       doc="supply set-point during the drop over the "
+                                       "hydraulic file's nominal set-point")
 
     def cross_check(self, at: Location) -> None:
+        _one_of(self, at, "pressure_Pa", "pressure_rel")
         _check_window(self, at, self.transition_s, "transition_s")
 
 
@@ -234,13 +259,26 @@ class LoadPulse(Parameters):
 
     start_s: float = param(0.0, None, doc="start of the rising edge")
     end_s: float = param(0.0, None, doc="start of the falling edge")
-    delta_N: float = param(-20e3, 20e3, doc="target change of the hold-mode idler load")
     hitch_N: float = param(-30e3, 30e3, doc="hitch force (> 0 tow, < 0 push)")
     pull_angle_deg: float = param(0.0, 60.0, doc="line of the hitch force below horizontal")
     rise_s: float = param(0.0, 1.0, doc="duration of each linear edge")
+    delta_N: float | None = param(-20e3, 20e3, default=None,
+                                  doc="target change of the hold-mode idler load (absolute)")
+    delta_rel: float | None = param(-1.0, 1.0, default=None, unit="1",
+                                    doc="target change over the nominal tension")
 
     def cross_check(self, at: Location) -> None:
+        _one_of(self, at, "delta_N", "delta_rel")
         _check_window(self, at, self.rise_s, "rise_s")
+
+
+def _one_of(table: Parameters, at: Location, absolute: str, relative: str) -> None:
+    """Exactly one of an absolute key and its relative (over the nominal) twin is given."""
+    given = [k for k in (absolute, relative) if getattr(table, k) is not None]
+    if len(given) != 1:
+        raise ParameterError(f"{at.table()}: give exactly one of {absolute!r} (absolute) and "
+                             f"{relative!r} (relative to the machine's nominal); got "
+                             f"{given or 'neither'}")
 
 
 def _check_window(window: SupplyDrop | LoadPulse, at: Location, edge_s: float,
@@ -272,13 +310,15 @@ NOMINAL = Variant("nominal")
 
 @dataclass(frozen=True)
 class Limits(Parameters):
-    """Admissible tension band [F_min, F_max] [N]."""
+    """Admissible tension band [F_min, F_max] [N]; each optional: the machine's band
+    (``trackmj.control.params.BAND_REL`` x its nominal tension)."""
 
-    force_min_N: float = param(0.0, 100e3, doc="lower tension limit")
-    force_max_N: float = param(0.0, 100e3, doc="upper tension limit")
+    force_min_N: float | None = param(0.0, 100e3, default=None, doc="lower tension limit")
+    force_max_N: float | None = param(0.0, 100e3, default=None, doc="upper tension limit")
 
     def cross_check(self, at: Location) -> None:
-        if self.force_max_N <= self.force_min_N:
+        if (self.force_min_N is not None and self.force_max_N is not None
+                and self.force_max_N <= self.force_min_N):
             raise at.error("force_max_N", self.force_max_N,
                            f"must be > force_min_N = {self.force_min_N!r}")
 
@@ -337,8 +377,9 @@ class ScenarioFile(Parameters):
     track: Track
     reference: Reference
     terrain: Terrain
-    limits: Limits
     evaluation: Evaluation
+    limits: Limits = param(  # noqa: RUF009 (param() returns a dataclasses.Field)
+        default=Limits(), doc="optional: the machine's band")
     supply: Supply = param(  # noqa: RUF009 (param() returns a dataclasses.Field)
         default=Supply(), doc="optional: the hydraulic file's default supply at its nominal "
         "set-point")
@@ -374,7 +415,10 @@ class ScenarioFile(Parameters):
 
 
 def _check_reference_range(ref: Reference, duration_s: float, at: Location) -> None:
-    """F_ref is piecewise linear: its extremes over [0, duration] lie at the breakpoints."""
+    """F_ref is piecewise linear: its extremes over [0, duration] lie at the breakpoints.
+    A reference relative to the nominal tension is checked once resolved (:class:`Scenario`)."""
+    if not _is_absolute(ref):
+        return
     times = {0.0, duration_s, *(s.time_s for s in ref.steps)}
     times |= {r.start_s for r in ref.ramps} | {r.end_s for r in ref.ramps if r.end_s is not None}
     t = np.array(sorted(x for x in times if x <= duration_s))
@@ -386,6 +430,11 @@ def _check_reference_range(ref: Reference, duration_s: float, at: Location) -> N
             raise ParameterError(f"{at.table()}: F_ref reaches {f[k]:.6g} N at t = "
                                  f"{t[k]:.6g} s; it must stay in [0, {REFERENCE_MAX_N:g}] N "
                                  "over the run")
+
+
+def _is_absolute(ref: Reference) -> bool:
+    return (ref.initial_N is not None and all(s.delta_N is not None for s in ref.steps)
+            and all(r.rate_N_s is not None for r in ref.ramps))
 
 
 def _reference(ref: Reference, t: np.ndarray) -> np.ndarray:
@@ -419,16 +468,29 @@ class Scenario:
     variants: tuple[Variant, ...]
     limits: Limits
     evaluation: Evaluation
+    machines: tuple[str, ...] | None = None
+    machines_reason: str = ""
+    nominal_tension_N: float | None = None
+    """The nominal tension the relative values were resolved with [N] (None: all absolute)."""
 
     def __post_init__(self) -> None:
         header = construct(Header, Location(label=f"Scenario {self.name!r}", path=("scenario",)),
                            name=self.name, title=self.title, duration_s=self.duration_s,
                            seeds=self.seeds, controller=self.controller,
-                           estimator=self.estimator)
+                           estimator=self.estimator, machines=self.machines,
+                           machines_reason=self.machines_reason)
         construct(ScenarioFile, Location(label=f"Scenario {self.name!r}"), scenario=header,
                   track=self.track, reference=self.reference, supply=self.supply,
                   terrain=self.terrain, limits=self.limits, evaluation=self.evaluation,
                   load_pulses=self.load_pulses, variants=self.variants)
+
+    def check_machine(self, machine: str) -> None:
+        """ParameterError (one line, the reason) if the condition does not apply to
+        ``machine`` (a shipped machine's name)."""
+        if self.machines and machine not in self.machines:
+            raise ParameterError(f"{self.source.name}: scenario {self.name} applies to "
+                                 f"{', '.join(self.machines)} only, not {machine}: "
+                                 f"{self.machines_reason}")
 
     # ------------------------------------------------------------------ signals
     def reference_N(self, t_s: np.ndarray | float) -> np.ndarray:
@@ -563,8 +625,47 @@ def scenario_path(name_or_path: str | Path) -> Path:
     return path
 
 
+def _packaged_nominal() -> tuple[float, float]:
+    """Nominal tension [N] and supply set-point [Pa] of the packaged machine."""
+    from trackmj.hydraulics import load_hydraulic_params
+    from trackmj.model import load_model_params
+
+    return (load_model_params().nominal_tension_N,
+            load_hydraulic_params().supply.setpoint_Pa)
+
+
+def _resolve(f: ScenarioFile, nominal_N: float, setpoint_Pa: float) -> ScenarioFile:
+    """``f`` with every relative value made absolute: forces x ``nominal_N``, drop pressures
+    x ``setpoint_Pa``, the [limits] the file leaves out the machine's band."""
+    from trackmj.control.params import BAND_REL
+
+    rep = dataclasses.replace
+
+    def absolute(x: float | None, rel: float | None, scale: float) -> float:
+        return x if rel is None else scale * rel
+
+    ref = f.reference
+    reference = rep(
+        ref, initial_N=absolute(ref.initial_N, ref.initial_rel, nominal_N), initial_rel=None,
+        steps=tuple(rep(s, delta_N=absolute(s.delta_N, s.delta_rel, nominal_N), delta_rel=None)
+                    for s in ref.steps),
+        ramps=tuple(rep(r, rate_N_s=absolute(r.rate_N_s, r.rate_rel_s, nominal_N),
+                        rate_rel_s=None) for r in ref.ramps))
+    supply = rep(f.supply, drops=tuple(
+        rep(d, pressure_Pa=absolute(d.pressure_Pa, d.pressure_rel, setpoint_Pa),
+            pressure_rel=None) for d in f.supply.drops))
+    pulses = tuple(rep(p, delta_N=absolute(p.delta_N, p.delta_rel, nominal_N), delta_rel=None)
+                   for p in f.load_pulses)
+    lim = f.limits
+    limits = Limits(nominal_N * BAND_REL[0] if lim.force_min_N is None else lim.force_min_N,
+                    nominal_N * BAND_REL[1] if lim.force_max_N is None else lim.force_max_N)
+    return rep(f, reference=reference, supply=supply, load_pulses=pulses, limits=limits)
+
+
 def load_scenario(name_or_path: str | Path,
-                  overrides: Mapping[str, Any] | None = None) -> Scenario:
+                  overrides: Mapping[str, Any] | None = None, *,
+                  nominal_tension_N: float | None = None,
+                  supply_setpoint_Pa: float | None = None) -> Scenario:
     """Load and validate a scenario.
 
     Parameters
@@ -574,16 +675,31 @@ def load_scenario(name_or_path: str | Path,
     overrides : mapping, optional
         ``{dotted key: value}``, the ``scenario`` entry of
         :func:`trackmj.params.parse_overrides` (e.g. ``{"track.speed_m_s": 2.0}``).
+    nominal_tension_N, supply_setpoint_Pa : float, optional
+        The machine's nominal tension [N] and its hydraulic file's supply set-point [Pa]
+        that the relative values (``*_rel`` keys, the [limits] left out) are taken over;
+        default the packaged machine's (lf1352).
 
     Returns
     -------
     Scenario
+        Every value absolute.
     """
     path = scenario_path(name_or_path)
     f = load_file(ScenarioFile, path, overrides=overrides, require_source=False)
+    if nominal_tension_N is None or supply_setpoint_Pa is None:
+        packaged = _packaged_nominal()
+        nominal_tension_N = packaged[0] if nominal_tension_N is None else nominal_tension_N
+        supply_setpoint_Pa = packaged[1] if supply_setpoint_Pa is None else supply_setpoint_Pa
+    try:
+        f = _resolve(f, nominal_tension_N, supply_setpoint_Pa)
+    except ParameterError as exc:   # a resolved value's check names the file
+        raise ParameterError(f"{path.name} (relative values at a nominal tension of "
+                             f"{nominal_tension_N:g} N): {exc}") from None
     h = f.scenario
     return Scenario(name=h.name, title=h.title, source=path, duration_s=h.duration_s,
                     seeds=h.seeds, controller=h.controller, estimator=h.estimator,
                     track=f.track, reference=f.reference, supply=f.supply, terrain=f.terrain,
                     load_pulses=f.load_pulses, variants=f.variants or (NOMINAL,),
-                    limits=f.limits, evaluation=f.evaluation)
+                    limits=f.limits, evaluation=f.evaluation, machines=h.machines,
+                    machines_reason=h.machines_reason, nominal_tension_N=nominal_tension_N)

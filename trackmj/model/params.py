@@ -148,6 +148,10 @@ class PassiveTensionerParams(Parameters):
     preload_N: float = param(0.0, 1e6, doc="force at the layout stroke [N]")
     stiffness_N_m: float = param(0.0, 1e9)
     damping_N_s_m: float = param(0.0, 1e8)
+    nominal_tension_N: float | None = param(
+        0.0, 1e6, open_low=True, default=None,
+        doc="working tension the tensioning system is designed to hold [N]; optional: "
+            "the preload (the controller's band and the relative scenarios scale with it)")
 
 
 @dataclass(frozen=True)
@@ -196,6 +200,13 @@ class ModelParams(Parameters):
     def pin_joint_table(self) -> str:
         """Name of the TOML table the pin joint comes from."""
         return "bushings" if self.bushings.enabled else "pins"
+
+    @property
+    def nominal_tension_N(self) -> float:
+        """The machine's nominal working tension [N]: ``[tensioner].nominal_tension_N``,
+        else the passive preload."""
+        t = self.tensioner
+        return t.preload_N if t.nominal_tension_N is None else t.nominal_tension_N
 
     @property
     def sprocket_pitch_radius_m(self) -> float:

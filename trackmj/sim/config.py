@@ -19,7 +19,7 @@ from trackmj.control.params import ControlConfig, PlantParams, load_config
 from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
 from trackmj.hydraulics.components import series_area
 from trackmj.identify import EquivalentIdler, ModalTerm
-from trackmj.model import default_xml_path, models_dir
+from trackmj.model import default_xml_path, load_model_params, models_dir
 from trackmj.params import Location, Parameters, load_file, param
 
 IDLER_FILE = "lf1352_idler.toml"
@@ -193,6 +193,13 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
     return path
 
 
+def packaged_control(overrides: dict[str, object] | None = None) -> ControlConfig:
+    """The packaged control file with the values derived from the packaged machine's nominal
+    tension (``models/lf1352.toml`` [tensioner].nominal_tension_N)."""
+    return load_config(overrides=overrides,
+                       nominal_tension_N=load_model_params().nominal_tension_N)
+
+
 def reduced_plant_params(hydraulics: HydraulicParams, idler: EquivalentIdler,
                          control_config: ControlConfig, *, supply_pressure_Pa: float,
                          free_position_m: float) -> PlantParams:
@@ -272,7 +279,7 @@ def nominal_plant_params(hydraulics: HydraulicParams | None = None,
     """
     hydraulics = load_hydraulic_params() if hydraulics is None else hydraulics
     idler = load_idler() if idler is None else idler
-    control_config = load_config() if control_config is None else control_config
+    control_config = packaged_control() if control_config is None else control_config
     y0 = 0.5 * hydraulics.cylinder.stroke_max_m - force_N / idler.stiffness_N_m
     return reduced_plant_params(hydraulics, idler, control_config,
                                 supply_pressure_Pa=supply_pressure_Pa, free_position_m=y0)

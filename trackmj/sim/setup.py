@@ -21,7 +21,13 @@ import mujoco
 from trackmj.control.params import ControlConfig, load_config
 from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
 from trackmj.identify import EquivalentIdler, identify_idler
-from trackmj.model import ModelParams, default_xml_path, generate_mjcf, load_model_params
+from trackmj.model import (
+    MODEL_NAME,
+    ModelParams,
+    default_xml_path,
+    generate_mjcf,
+    load_model_params,
+)
 from trackmj.model.mjcf import with_heightfield
 from trackmj.params import FILE_KINDS, ParameterError, parse_overrides
 from trackmj.plant import TrackPlant
@@ -213,10 +219,17 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
     checked here. ``controller`` may be ``"fmu:FILE.toml"`` (:mod:`trackmj.fmi.controller`).
     """
     sets = overrides_by_kind(overrides)
-    if isinstance(scenario, Scenario) and sets["scenario"]:
-        scenario = scenario.source
+    model_params = (load_model_params(model, overrides=sets["model"])
+                    if model or sets["model"] else _packaged_model())
+    hydraulics_params = load_hydraulic_params(hydraulics, overrides=sets["hydraulics"])
+    nominal = model_params.nominal_tension_N
+    if isinstance(scenario, Scenario) and (sets["scenario"]
+                                           or scenario.nominal_tension_N != nominal):
+        scenario = scenario.source   # resolved for another machine: read it again
     sc = (scenario if isinstance(scenario, Scenario)
-          else load_scenario(scenario, overrides=sets["scenario"]))
+          else load_scenario(scenario, overrides=sets["scenario"], nominal_tension_N=nominal,
+                             supply_setpoint_Pa=hydraulics_params.supply.setpoint_Pa))
+    sc.check_machine(MODEL_NAME)
     _choice("architecture", architecture, ARCHITECTURES)
     controller, controller_file = controller_choice(controller or sc.controller)
     estimator = _choice("estimator", estimator or sc.estimator, ESTIMATORS)
@@ -253,15 +266,13 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
         files["tensioner"] = str(tensioner)
     if controller_file is not None:
         files["controller"] = str(controller_file.file)
-    model_params = (load_model_params(model, overrides=sets["model"])
-                    if model or sets["model"] else _packaged_model())
-    control_config = load_config(control, overrides=sets["control"])
+    control_config = load_config(control, overrides=sets["control"],
+                                 nominal_tension_N=model_params.nominal_tension_N)
     _check_bands_agree(sc, control_config, files["control"])
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,
         estimator=estimator, seed=seed, duration_s=duration_s, model=model_params,
-        hydraulics=scaled_hydraulics(load_hydraulic_params(hydraulics,
-                                                           overrides=sets["hydraulics"]), var),
+        hydraulics=scaled_hydraulics(hydraulics_params, var),
         control=control_config, files=files,
         overrides={f"{kind}.{key}": value for kind, keys in sets.items()
                    for key, value in keys.items()},
