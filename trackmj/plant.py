@@ -15,16 +15,16 @@ Sign conventions (see also :mod:`trackmj.ports`):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
 
 from trackmj.model import (
     ModelParams,
-    default_xml_path,
     load_model_params,
     with_heightfield,
 )
@@ -163,24 +163,39 @@ class TrackPlant:
     @classmethod
     def load(cls, xml_path: str | Path | None = None,
              param_path: str | Path | None = None,
-             terrain: RoadProfile | None = None) -> TrackPlant:
-        """Load the committed model (default ``models/lf1352.xml``) and its parameters.
+             terrain: RoadProfile | None = None, *, machine: str | Path | None = None,
+             overrides: Mapping[str, Any] | None = None) -> TrackPlant:
+        """Load a machine's track (default the packaged LF1352).
 
-        terrain: optional road profile replacing the flat ground by a heightfield (see
+        machine: a shipped machine's name or a machine file (:mod:`trackmj.machines`);
+        param_path: a model parameter file replacing the machine's mechanics; overrides:
+        ``{dotted key: value}`` of the model file (``--set model.KEY=VALUE``); xml_path: an
+        MJCF file to load instead of the model of those parameters (the machine's committed
+        reference for its own parameters, else generated and cached). terrain: optional
+        road profile replacing the flat ground by a heightfield (see
         :func:`trackmj.model.with_heightfield`).
         """
-        path = Path(xml_path) if xml_path is not None else default_xml_path()
-        if not path.is_file():
-            raise FileNotFoundError(f"model file not found: {path}")
+        from trackmj.machines import is_own, mechanics, model_mjcf, resolve
+
+        mach = resolve(machine)
+        params = (load_model_params(param_path or mach.mechanics, overrides=overrides)
+                  if param_path is not None or overrides else mechanics(mach))
+        if xml_path is not None:
+            path: Path | None = Path(xml_path)
+            if not path.is_file():
+                raise FileNotFoundError(f"model file not found: {path}")
+            text = path.read_text()
+        else:
+            path = mach.reference_mjcf if is_own(params, mach) else None
+            text = model_mjcf(params, mach)
         try:
-            if terrain is None:
-                model = mujoco.MjModel.from_xml_path(str(path))
-            else:
-                mjcf = with_heightfield(path.read_text(), terrain)
-                model = mujoco.MjModel.from_xml_string(mjcf)
+            if terrain is not None:
+                text = with_heightfield(text, terrain)
+            model = mujoco.MjModel.from_xml_string(text)
         except ValueError as exc:
-            raise ValueError(f"{path}: MuJoCo could not load the model: {exc}") from None
-        plant = cls(model, load_model_params(param_path))
+            raise ValueError(f"{path or 'generated model'}: MuJoCo could not load the model: "
+                             f"{exc}") from None
+        plant = cls(model, params)
         plant.model_path = path
         return plant
 
