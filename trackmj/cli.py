@@ -53,10 +53,54 @@ def _cmd_model_info(args: argparse.Namespace) -> int:
                         f"upper strand {tension[plant.upper_strand_pins()].mean() / 1e3:.2f} "
                         "kN)"),
     ]
+    rows += _geometry_rows(plant)
     width = max(len(label) for label, _ in rows) + 2
     for label, text in rows:
         print(f"{label:<{width}}{text}")
     return 0
+
+
+def _geometry_rows(plant: object) -> list[tuple[str, str]]:
+    """The derived geometry of the plant's layout and what its home keyframe measures."""
+    import math
+
+    from trackmj.model import compute_layout
+    from trackmj.model.geometry import catenary_sag_m, derive_geometry, measured_sag_m
+
+    p = plant.params
+    layout = compute_layout(p)
+    g = derive_geometry(p, layout)
+    weight = float(plant.model.body_subtreemass[0]) * p.simulation.gravity_m_s2
+    ground = plant.contact_forces_N()["ground"]
+    end = "front" if p.sprocket.x_m > p.idler.x_m else "rear"
+    rows = [
+        ("layout", f"sprocket at the {end}, idler slide "
+                   f"{math.degrees(p.idler.slide_angle_rad):.1f}° above horizontal, idler "
+                   f"centre x {layout.idler_x_m:.4f} m (guess {p.idler.x_m:g} m)"),
+        ("perimeter", f"loop {g.loop_m:.4f} m ({p.track.link_count} × "
+                      f"{p.track.pitch_m * 1e3:.1f} mm), path round the pin circles "
+                      f"{g.path_m:.4f} m, layout closure {g.closure_m * 1e3:.2g} mm"),
+        ("wraps", ", ".join(f"{name} {math.degrees(a):.1f}°"
+                            for name, a in g.wraps_rad.items() if a > 1e-6)),
+    ]
+    pins = plant.pins_layout_frame()
+    upper_N = float(plant.pin_tensions_N()[plant.upper_strand_pins()].mean())
+    for s in g.spans:
+        text = f"{s.start} -> {s.end}: {s.length_m * 1e3:.0f} mm"
+        sag, chord = measured_sag_m(s, pins, p.track.pitch_m) if s.upper else (0.0, 0.0)
+        if chord > 0.0:
+            text += (f", sag at home {sag * 1e3:.1f} mm over {chord * 1e3:.0f} mm (shallow "
+                     f"catenary at the home tension "
+                     f"{catenary_sag_m(p, s, upper_N, chord) * 1e3:.1f} mm)")
+        rows.append(("upper span" if s.upper else "lower span", text))
+    rows += [
+        ("weight this side", f"{weight / 1e3:.2f} kN (Σ ground normal force at home "
+                             f"{ground / 1e3:.2f} kN)"),
+        ("static strand tension", f"{g.strand_tension_N / 1e3:.2f} kN at the preload "
+                                  f"{p.tensioner.preload_N / 1e3:.1f} kN (idler geometry "
+                                  f"factor {g.idler_factor:.4f}; frictionless idler)"),
+    ]
+    return rows
 
 
 def _cmd_model_generate(args: argparse.Namespace) -> int:
@@ -116,7 +160,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     print(f"idler force        mean {s['idler_force_mean_N'] / 1e3:7.2f} kN   "
           f"min {s['idler_force_min_N'] / 1e3:7.2f}  max {s['idler_force_max_N'] / 1e3:7.2f}")
     print(f"strand tension     upper {s['upper_strand_tension_mean_N'] / 1e3:5.2f} kN, "
-          f"rear lower run {s['lower_strand_tension_mean_N'] / 1e3:5.2f} kN")
+          f"sprocket lower run {s['lower_strand_tension_mean_N'] / 1e3:5.2f} kN")
     print(f"vehicle speed      {s['vehicle_speed_mean_m_s']:.3f} m/s "
           f"(sprocket pitch speed {s['track_speed_mean_m_s']:.3f} m/s)")
     contacts = sum(e["contact_work_J"].values())

@@ -404,6 +404,12 @@ class TrackPlant:
         # undo the rotation about +y by `pitch`: x' = c x - s z, z' = s x + c z
         return np.column_stack([c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]])
 
+    def pins_layout_frame(self) -> np.ndarray:
+        """(x, z) of every pin [m] in the chassis frame, placed as the chassis was at the
+        layout (origin at ride height): comparable with the layout's coordinates,
+        (link_count, 2)."""
+        return self._chassis_frame_pins() + np.array([0.0, self.params.chassis.ride_height_m])
+
     def _home_envelope(self) -> np.ndarray:
         from scipy.spatial import ConvexHull
 
