@@ -75,21 +75,23 @@ def run_name(scenario: str, architecture: str, controller: str, variant: str, se
 
 def plan(scenarios: Sequence[str], seeds: Sequence[int], duration: float | None,
          archs: Sequence[str] = REPORT_ARCHS,
-         baselines: Sequence[str] = BASELINES, tensioner: str | None = None) -> list[RunSpec]:
+         baselines: Sequence[str] = BASELINES, tensioner: str | None = None,
+         machine: str | None = None) -> list[RunSpec]:
     """Every run of a report: each scenario's variants × seeds × ``archs`` with its own
     controller, then ``baselines`` on tp in the nominal :data:`BASELINE_SCENARIOS`;
     ``tensioner`` (a tensioner file) replaces the hydraulic element where an architecture
-    has one (:func:`tensioner_for`)."""
+    has one (:func:`tensioner_for`); ``machine`` (a shipped name or a machine file) for
+    every run."""
     specs = []
     for name in scenarios:
         sc = load_scenario(name)
         specs += [RunSpec(scenario=name, architecture=arch, controller=sc.controller,
                           seed=seed, duration=duration, variant=variant.name,
-                          tensioner=tensioner_for(arch, tensioner))
+                          tensioner=tensioner_for(arch, tensioner), machine=machine)
                   for variant in sc.variants for seed in seeds for arch in archs]
         if sc.name in BASELINE_SCENARIOS:
             specs += [RunSpec(scenario=name, architecture="tp", controller=c, seed=seed,
-                              duration=duration, tensioner=tensioner)
+                              duration=duration, tensioner=tensioner, machine=machine)
                       for c in baselines if c != sc.controller for seed in seeds]
     return specs
 

@@ -76,6 +76,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from trackmj.machines import DEFAULT_MACHINE, names
 from trackmj.params import (
     FILE_KINDS,
     Location,
@@ -169,6 +170,9 @@ class SweepTable(Parameters):
     estimator: str | None = param(choices=choices(ESTIMATORS), default=None,
                                   doc="state estimator (default: the scenario's)")
     variant: str = param(max_len=64, default="nominal", doc="scenario variant (W5)")
+    machine: str | None = param(max_len=4096, default=None,
+                                doc="a shipped machine's name or a machine file (default "
+                                    "lf1352)")
     model: str | None = param(max_len=4096, default=None, doc="model parameter file")
     hydraulics: str | None = param(max_len=4096, default=None,
                                    doc="hydraulic parameter file")
@@ -430,6 +434,8 @@ def _run_key(setup: Any) -> str:
              "scenario": scenario}
     if setup.tensioner is not None:
         ident["tensioner"] = tensioner_identity(setup.tensioner)
+    if setup.machine.name != DEFAULT_MACHINE:
+        ident["machine"] = str(setup.machine.file)
     text = json.dumps(ident, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
@@ -475,7 +481,9 @@ def plan(spec: SweepSpec) -> list[PlannedRun]:
         raise ParameterError(f"{spec.where()}: {n_runs} runs; a sweep has at most "
                              f"{MAX_RUNS} (fewer values, or method = 'lhs')")
     files = {"model": spec.path(table.model), "hydraulics": spec.path(table.hydraulics),
-             "control": spec.path(table.control), "tensioner": spec.path(table.tensioner)}
+             "control": spec.path(table.control), "tensioner": spec.path(table.tensioner),
+             "machine": (table.machine if table.machine is None or table.machine in names()
+                         else spec.path(table.machine))}
     inputs = json.dumps({"files": {k: v for k, v in files.items() if v},
                          "set": list(table.set or ())}, sort_keys=True)
     runs = []
@@ -710,7 +718,8 @@ def _run_dir_name(run: PlannedRun) -> str:
 def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
           workers: int | None = None, scheduler: str | None = None, executor: Any = None,
           keep_runs: bool = False, retry_failed: bool = False, plot: bool = True,
-          progress: bool = True, tensioner: str | Path | None = None) -> SweepSummary:
+          progress: bool = True, tensioner: str | Path | None = None,
+          machine: str | None = None) -> SweepSummary:
     """Run a parameter study (see the module docstring for the spec and the output).
 
     Parameters
@@ -734,6 +743,9 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
         Show a progress bar over the simulated seconds of the runs.
     tensioner : str or Path, optional
         A tensioner file for every run (the CLI's ``--tensioner``; replaces the spec's).
+    machine : str, optional
+        A shipped machine's name or a machine file for every run (the CLI's
+        ``--machine``; replaces the spec's).
 
     Returns
     -------
@@ -744,6 +756,9 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
     if tensioner is not None:
         spec = dataclasses.replace(spec, table=dataclasses.replace(
             spec.table, tensioner=str(Path(tensioner).resolve())))
+    if machine is not None:
+        spec = dataclasses.replace(spec, table=dataclasses.replace(spec.table,
+                                                                   machine=machine))
     runs = plan(spec)
     out = _output_dir(Path(out))
     results = out / RESULTS

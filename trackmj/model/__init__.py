@@ -9,7 +9,7 @@ Nothing here imports the plant.
 
 from trackmj.model.generate import generate_mjcf, write_model
 from trackmj.model.layout import Layout, compute_layout
-from trackmj.model.mjcf import build_mjcf, soft_constraints, with_heightfield
+from trackmj.model.mjcf import build_mjcf, link_name, pin_name, soft_constraints, with_heightfield
 from trackmj.model.params import (
     MODEL_NAME,
     ModelParams,
@@ -19,7 +19,20 @@ from trackmj.model.params import (
     models_dir,
 )
 
-__all__ = ["MODEL_NAME", "Layout", "ModelParams", "build_mjcf",
-           "compute_layout", "default_param_path", "default_xml_path", "generate_mjcf",
-           "load_model_params", "models_dir", "soft_constraints", "with_heightfield",
-           "write_model"]
+__all__ = [
+    "MODEL_NAME",
+    "Layout",
+    "ModelParams",
+    "build_mjcf",
+    "compute_layout",
+    "default_param_path",
+    "default_xml_path",
+    "generate_mjcf",
+    "link_name",
+    "load_model_params",
+    "models_dir",
+    "pin_name",
+    "soft_constraints",
+    "with_heightfield",
+    "write_model",
+]

@@ -3,15 +3,20 @@
 The model is planar (x forward, z up, all hinges about +y):
 
 * ``chassis``: slide x, slide z, hinge y (``chassis_x``, ``chassis_z``, ``chassis_pitch``).
-* ``sprocket`` (rear, hinge ``sprocket_hinge``, velocity servo ``sprocket_drive``) with
+* ``sprocket`` (rear or front, hinge ``sprocket_hinge``, velocity servo ``sprocket_drive``;
+  a positive speed turns it so the vehicle travels forward, wherever it sits) with
   ``tooth_count`` capsule teeth around a hub on which the link rails seat.
-* ``idler_carrier`` on prismatic joint ``idler_slide`` (+x = outward = tensioning) carrying
-  ``idler``; actuator ``tensioner`` is affine: force = ctrl + biasprm[2]·v so that
+* ``idler_carrier`` on prismatic joint ``idler_slide`` carrying ``idler``, at the end
+  opposite the sprocket; the slide axis points outward (away from the sprocket, +x for a
+  front idler, −x for a rear one), inclined by ``[idler].slide_angle_rad`` above the
+  horizontal, so a positive slide position and a positive tensioner force always tension
+  the track. Actuator ``tensioner`` is affine: force = ctrl + biasprm[2]·v so that
   ``implicitfast`` integrates a cylinder's dF/dv implicitly.
-* ``road_wheel_1..6`` on vertical spring-damper slides ``road_wheel_k_suspension``;
-  ``return_roller_1..2`` fixed to the chassis.
-* ``link_00..link_81``: rigid links, numbered in the running direction for forward travel
-  (bottom strand rearward, over the sprocket, top strand forward, round the idler).
+* ``road_wheel_1..N`` on vertical spring-damper slides ``road_wheel_k_suspension``;
+  ``return_roller_1..M`` (M may be 0) fixed to the chassis.
+* ``link_00..link_{n-1}`` (:func:`link_name`): rigid links, numbered in the running
+  direction for forward travel (bottom strand rearward, up round the rear wheel, top strand
+  forward, down round the front wheel).
   Pin k joins link_{k-1} and link_k. Every link is a free planar body (world slides
   ``link_kk_x``, ``link_kk_z``, hinge ``link_kk_pitch`` through its centre of mass) and
   every pin is a ``connect`` equality ``pin_kk`` with the stated pin stiffness and damping
@@ -43,7 +48,7 @@ import xml.etree.ElementTree as ET
 import mujoco
 import numpy as np
 
-from trackmj.model.layout import Layout, hub_radius
+from trackmj.model.layout import Layout, hub_radius, outward_sign, slide_axis
 from trackmj.model.params import MODEL_NAME, ModelParams
 from trackmj.model.soft import SoftConstraint, body_inv_weight, row_diag, soft_constraint
 from trackmj.params import ParameterError
@@ -52,6 +57,17 @@ from trackmj.terrain import RoadProfile, heightfield
 _RAIL, _PIN = 8, 16  # contype bits of link rails and pin spheres
 TERRAIN_WIDTH_M = 2.0
 TERRAIN_BASE_M = 0.5
+
+
+def link_name(k: int) -> str:
+    """Name of link k (body; its joints add ``_x``, ``_z``, ``_pitch``, geoms ``_rail``,
+    ``_pin``, ``_shoe``): ``link_00`` .. ``link_99``, ``link_100`` .. for any count."""
+    return f"link_{k:02d}"
+
+
+def pin_name(k: int) -> str:
+    """Name of pin k, the connect joining link k−1 and link k (``pin_00`` ..)."""
+    return f"pin_{k:02d}"
 
 
 def _fmt(*values: float) -> str:
@@ -194,13 +210,15 @@ def _idler(chassis: ET.Element, p: ModelParams, layout: Layout) -> None:
     """Idler wheel on the tensioning carrier (prismatic ``idler_slide``)."""
     ride, half_w = p.chassis.ride_height_m, p.track.link_width_m / 2.0
     ix, iz = layout.idler_center
+    ux, uz = slide_axis(p)
     carrier = _sub(chassis, "body", name="idler_carrier", pos=_fmt(ix, 0, iz - ride))
-    _sub(carrier, "joint", name="idler_slide", type="slide", axis="1 0 0",
+    _sub(carrier, "joint", name="idler_slide", type="slide", axis=_fmt(ux, 0, uz),
          range=_fmt(*p.idler.slide_range_m))
     _sub(carrier, "inertial", pos="0 0 0", mass=_fmt(p.idler.carrier_mass_kg),
          diaginertia="0.5 0.5 0.5")
     _sub(carrier, "geom", name="idler_carrier_visual", class_="visual", type="box",
-         pos=_fmt(-0.25, -0.3, 0), size="0.25 0.04 0.04", rgba="0.3 0.3 0.8 1")
+         pos=_fmt(-0.25 * outward_sign(p), -0.3, 0), size="0.25 0.04 0.04",
+         rgba="0.3 0.3 0.8 1")
     _sub(carrier, "site", name="idler_force_site", pos="0 0 0", size="0.02")
     idler = _sub(carrier, "body", name="idler", pos="0 0 0")
     _sub(idler, "inertial", pos="0 0 0", mass=_fmt(p.idler.mass_kg),
@@ -264,24 +282,24 @@ def _links(root: ET.Element, world: ET.Element, p: ModelParams, layout: Layout) 
     direction = _link_directions(layout)
     for k in range(n):
         quat = _quat_y(direction[k])
-        body = _sub(world, "body", name=f"link_{k:02d}", pos=_fmt(pins[k, 0], 0, pins[k, 1]),
+        body = _sub(world, "body", name=link_name(k), pos=_fmt(pins[k, 0], 0, pins[k, 1]),
                     quat=quat)
         rot = np.empty(9)
         mujoco.mju_quat2Mat(rot, np.array([float(v) for v in quat.split()]))
         rot = rot.reshape(3, 3)
         # slide axes are given in the body frame: world x and z seen from the link
-        _sub(body, "joint", name=f"link_{k:02d}_x", type="slide",
+        _sub(body, "joint", name=link_name(k) + "_x", type="slide",
              axis=_fmt(*(rot.T @ (1.0, 0.0, 0.0))))
-        _sub(body, "joint", name=f"link_{k:02d}_z", type="slide",
+        _sub(body, "joint", name=link_name(k) + "_z", type="slide",
              axis=_fmt(*(rot.T @ (0.0, 0.0, 1.0))))
-        _sub(body, "joint", name=f"link_{k:02d}_pitch", class_="link_pitch",
+        _sub(body, "joint", name=link_name(k) + "_pitch", class_="link_pitch",
              pos=_fmt(pitch / 2, 0, 0))
         _sub(body, "inertial", pos=_fmt(pitch / 2, 0, 0), mass=_fmt(t.link_mass_kg),
              diaginertia=_fmt(*_link_inertia(p)))
-        _sub(body, "geom", name=f"link_{k:02d}_rail", class_="rail",
+        _sub(body, "geom", name=link_name(k) + "_rail", class_="rail",
              fromto=_fmt(0, 0, 0, pitch, 0, 0))
-        _sub(body, "geom", name=f"link_{k:02d}_pin", class_="pin", pos="0 0 0")
-        _sub(body, "geom", name=f"link_{k:02d}_shoe", class_="visual", type="box",
+        _sub(body, "geom", name=link_name(k) + "_pin", class_="pin", pos="0 0 0")
+        _sub(body, "geom", name=link_name(k) + "_shoe", class_="visual", type="box",
              pos=_fmt(pitch / 2, 0, 0), size=_fmt(pitch * 0.48, half_w, t.rail_radius_m),
              rgba="0.25 0.25 0.28 1")
     if joint.torsional_stiffness_N_m_rad > 0.0 or joint.torsional_damping_N_m_s_rad > 0.0:
@@ -291,16 +309,16 @@ def _links(root: ET.Element, world: ET.Element, p: ModelParams, layout: Layout) 
             # twist from in-line is (dir_k − q_k) − (dir_{k-1} − q_{k-1}): zero when the
             # tendon length q_k − q_{k-1} equals dir_k − dir_{k-1} (wrapped to ±π)
             neutral = math.remainder(direction[k] - direction[k - 1], 2.0 * math.pi)
-            fixed = _sub(tendon, "fixed", name=f"pin_{k:02d}_torsion",
+            fixed = _sub(tendon, "fixed", name=pin_name(k) + "_torsion",
                          stiffness=_fmt(joint.torsional_stiffness_N_m_rad),
                          damping=_fmt(joint.torsional_damping_N_m_s_rad),
                          springlength=_fmt(neutral))
-            _sub(fixed, "joint", joint=f"link_{k:02d}_pitch", coef="1")
-            _sub(fixed, "joint", joint=f"link_{(k - 1) % n:02d}_pitch", coef="-1")
+            _sub(fixed, "joint", joint=link_name(k) + "_pitch", coef="1")
+            _sub(fixed, "joint", joint=link_name((k - 1) % n) + "_pitch", coef="-1")
     equality = _sub(root, "equality")
     for k in range(n):
-        _sub(equality, "connect", name=f"pin_{k:02d}", class_="pin_joint",
-             body1=f"link_{(k - 1) % n:02d}", body2=f"link_{k:02d}",
+        _sub(equality, "connect", name=pin_name(k), class_="pin_joint",
+             body1=link_name((k - 1) % n), body2=link_name(k),
              anchor=_fmt(pitch, 0, 0))
 
 
