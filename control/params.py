@@ -160,6 +160,9 @@ class ControllerParams(Parameters):
     reference_margin_N: float | None = param(
         0.0, 1e5, default=None, doc="the reference governor keeps the tracked reference this "
         "far inside [F_min, F_max]; optional: REFERENCE_MARGIN_REL x the nominal tension")
+    nominal_tension_N: float | None = param(
+        0.0, 1e6, open_low=True, default=None, doc="the machine's nominal working tension "
+        "the derived values scale with; optional: the machine's (load_config)")
 
     def cross_check(self, at: Location) -> None:
         if (self.force_min_N is not None and self.force_max_N is not None
@@ -189,6 +192,9 @@ class MpcParams(Parameters):
     weight_input_rate: float = param(0.0, 1e6, unit="1", doc="weight on the u increments")
     weight_force_slack_per_kN2: float = param(0.0, 1e9, open_low=True, unit="1/kN^2",
                                               doc="weight on the soft F_min/F_max slack")
+    tuned_on_machine: str = param(pattern=r"[a-z0-9][a-z0-9_-]*", max_len=40,
+                                  doc="the machine on whose plant the weights were tuned; on "
+                                  "another the u and u-rate weights are scaled by (g/g_tuned)²")
     max_iter: int = param(1, 1000, doc="NMPC SQP iterations per period, at most")
     accept_iter: int = param(1, 1000, doc="NMPC SQP iterations after which a plan feasible "
                              "within the feasibility tolerance is used without more")
@@ -293,11 +299,15 @@ def load_config(path: str | Path | None = None,
     """
     path = default_path() if path is None else Path(path)
     cfg = load_file(ControlConfig, path, overrides=overrides)
+    if cfg.controller.nominal_tension_N is None and nominal_tension_N is not None:
+        cfg = dataclasses.replace(cfg, controller=dataclasses.replace(
+            cfg.controller, nominal_tension_N=nominal_tension_N))
+    nominal_tension_N = cfg.controller.nominal_tension_N
     missing = [(table, key) for table, key in DERIVED
                if getattr(getattr(cfg, table), key) is None]
     if not missing:
         return cfg
-    if nominal_tension_N is None or not nominal_tension_N > 0.0:
+    if nominal_tension_N is None:
         table, key = missing[0]
         raise ParameterError(f"{path.name} [{table}].{key}: not given, and no nominal tension "
                              "to derive it from (load the control file through its machine)")

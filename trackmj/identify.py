@@ -129,9 +129,11 @@ def r2(model: np.ndarray, measured: np.ndarray) -> float:
 
 
 def fit_single_dof(freq_Hz: np.ndarray, compliance: np.ndarray,
-                   stiffness_N_m: float) -> tuple[float, float]:
+                   stiffness_N_m: float, min_mass_kg: float = 1e-3) -> tuple[float, float]:
     """(M [kg], c [N·s/m]) of 1/(k − Mω² + icω) fitted to ``compliance`` with k given
-    (relative complex error; several starting frequencies, best kept)."""
+    (relative complex error; several starting frequencies, best kept). A fit below
+    ``min_mass_kg`` (the idler and carrier's own mass: the equivalent mass cannot be less)
+    is fitted again with M bounded there."""
     omega = 2.0 * math.pi * freq_Hz
 
     def residual(x: np.ndarray) -> np.ndarray:
@@ -139,14 +141,20 @@ def fit_single_dof(freq_Hz: np.ndarray, compliance: np.ndarray,
         err = (model - compliance) / np.abs(compliance)
         return np.concatenate([err.real, err.imag])
 
-    best = None
-    for f0 in (10.0, 20.0, 30.0, 45.0):
-        mass = stiffness_N_m / (2.0 * math.pi * f0) ** 2
-        fit = least_squares(residual, x0=[mass, 0.4 * math.sqrt(stiffness_N_m * mass)],
-                            bounds=([1e-3, 0.0], [1e5, 1e8]))
-        if best is None or fit.cost < best.cost:
-            best = fit
-    return float(best.x[0]), float(best.x[1])
+    def fit(low_kg: float) -> np.ndarray:
+        best = None
+        for f0 in (10.0, 20.0, 30.0, 45.0):
+            mass = max(stiffness_N_m / (2.0 * math.pi * f0) ** 2, low_kg)
+            trial = least_squares(residual, x0=[mass, 0.4 * math.sqrt(stiffness_N_m * mass)],
+                                  bounds=([low_kg, 0.0], [1e5, 1e8]))
+            if best is None or trial.cost < best.cost:
+                best = trial
+        return best.x
+
+    x = fit(1e-3)
+    if x[0] < min_mass_kg:
+        x = fit(min_mass_kg)
+    return float(x[0]), float(x[1])
 
 
 def fit_modal(freq_Hz: np.ndarray, compliance: np.ndarray) -> tuple[ModalTerm, ...]:
@@ -191,11 +199,13 @@ def _settled_stroke(plant, force_N: float, settle_s: float) -> float:
 def identify_idler(make_plant: Callable[[], object], force_low_N: float = 12_000.0,
                    force_high_N: float = 15_000.0, settle_s: float = 1.5,
                    excitation_s: float = 8.0, band_Hz: tuple[float, float] = (1.0, 50.0),
-                   amplitude_N: float = 1_500.0, seed: int = 0) -> EquivalentIdler:
+                   amplitude_N: float = 1_500.0, seed: int = 0,
+                   min_mass_kg: float = 1e-3) -> EquivalentIdler:
     """Identify the equivalent idler on a standing track (sprocket held at 0 rad/s).
 
     make_plant: returns a fresh ``TrackPlant`` at its home keyframe. The multisine of
-    ``amplitude_N`` [N] (rms amplitude/√2) runs about the mean of the two force levels.
+    ``amplitude_N`` [N] (rms amplitude/√2) runs about the mean of the two force levels;
+    ``min_mass_kg`` [kg]: the idler and carrier's mass, the floor of the fitted M.
     """
     plant = make_plant()
     stroke_low = _settled_stroke(plant, force_low_N, settle_s)
@@ -207,7 +217,7 @@ def identify_idler(make_plant: Callable[[], object], force_low_N: float = 12_000
     strokes: list[float] = []
     plant.run(ForceHistory(force), excitation_s, 0.0, lambda pl: strokes.append(pl.stroke_m))
     freq, compliance, coherence = frequency_response(force, np.array(strokes), band_Hz)
-    mass, damping = fit_single_dof(freq, compliance, stiffness)
+    mass, damping = fit_single_dof(freq, compliance, stiffness, min_mass_kg)
     omega = 2.0 * math.pi * freq
     single = 1.0 / (stiffness - mass * omega ** 2 + 1j * damping * omega)
     modes = fit_modal(freq, compliance)

@@ -253,8 +253,9 @@ def compute_layout(p: ModelParams) -> Layout:
     pins = _pins_for(p, idler_x, count)
     sx, sz = p.sprocket.x_m, p.sprocket.z_m
     rp = p.sprocket_pitch_radius_m
+    # 1 µm: the hull polyline lies up to r·(1 − cos(π/2880)) = 1.5e-7 m inside a 0.25 m circle
     on_arc = [k for k in range(count)
-              if abs(math.hypot(pins[k, 0] - sx, pins[k, 1] - sz) - rp) < 1e-7]
+              if abs(math.hypot(pins[k, 0] - sx, pins[k, 1] - sz) - rp) < 1e-6]
     if len(on_arc) < MIN_SEATED_PINS:
         raise at.error(("sprocket", "z_m"), sz, f"lets the track wrap the sprocket over "
                        f"{len(on_arc)} seated pins (at least {MIN_SEATED_PINS}): raise the "

@@ -85,9 +85,15 @@ class IdlerFile(Parameters):
     identification: IdentificationTable
 
 
-IDENTIFICATION = {"force_low_N": 12_000.0, "force_high_N": 15_000.0, "settle_s": 1.5,
-                  "excitation_s": 8.0, "band_Hz": (1.0, 50.0), "amplitude_N": 1_500.0,
-                  "seed": 0}
+def identification_for(nominal_tension_N: float) -> dict[str, object]:
+    """Arguments of ``identify_idler`` for a machine of nominal tension [N]: settled levels
+    at 0.8 and 1.0 x nominal, a multisine of 0.1 x nominal (LF1352: 12, 15, 1.5 kN)."""
+    return {"force_low_N": 0.8 * nominal_tension_N, "force_high_N": nominal_tension_N,
+            "settle_s": 1.5, "excitation_s": 8.0, "band_Hz": (1.0, 50.0),
+            "amplitude_N": 0.1 * nominal_tension_N, "seed": 0}
+
+
+IDENTIFICATION = identification_for(15e3)
 """The identification of :func:`identify_packaged_idler` (``identify_idler``'s defaults)."""
 
 SCALARS = ("stiffness_N_m", "mass_kg", "damping_N_s_m", "natural_frequency_Hz",
@@ -138,7 +144,9 @@ def identify_packaged_idler() -> EquivalentIdler:
 
 
 def write_idler_file(idler: EquivalentIdler, path: str | Path,
-                     model_path: str | Path | None = None) -> Path:
+                     model_path: str | Path | None = None, *,
+                     identification: dict[str, object] | None = None,
+                     machine: str = "LF1352", model_text: str | None = None) -> Path:
     """Write ``idler`` as an idler file (with its generated-file header) to ``path``.
 
     Parameters
@@ -150,22 +158,35 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
     model_path : str or Path, optional
         The model it was identified on (default the packaged ``lf1352.xml``); its name and
         SHA-256 are recorded.
+    identification : dict, optional
+        The arguments used (default :data:`IDENTIFICATION`).
+    machine : str
+        The machine's name in the header.
+    model_text : str, optional
+        The generated MJCF identified on when no file is committed (its SHA-256 is
+        recorded, ``model_path`` names the mechanics file it was generated from).
 
     Returns
     -------
     Path
     """
     model = Path(model_path) if model_path is not None else default_xml_path()
+    digest = (file_sha256(model) if model_text is None
+              else hashlib.sha256(model_text.encode()).hexdigest())
     values = {name: float(getattr(idler, name)) for name in SCALARS}
     identification = {name: list(v) if isinstance(v, tuple) else v
-                      for name, v in IDENTIFICATION.items()}
+                      for name, v in (identification or IDENTIFICATION).items()}
     lines = [
-        "# GENERATED FILE - do not edit. The equivalent idler of the LF1352 track, identified",
-        "# on the committed MuJoCo model by trackmj.identify.identify_idler(TrackPlant.load):",
+        f"# GENERATED FILE - do not edit. The equivalent idler of the {machine} track, "
+        "identified",
+        f"# on the {'committed' if model_text is None else 'generated'} MuJoCo model by "
+        "trackmj.identify.identify_idler(TrackPlant.load):",
         "# static stiffness between two settled force levels, then the frequency response of",
         "# the stroke to a multisine force, fitted by a single-DOF model (k fixed) and by a",
         "# modal model. Written by trackmj.sim.config.write_idler_file; regenerate after any",
-        "# change of models/lf1352.xml with:  python -m trackmj.sim.config",
+        ("# change of models/lf1352.xml with:  python -m trackmj.sim.config"
+         if model_text is None else
+         f"# change of its mechanics with:  python -m trackmj.sim.config {machine.lower()}"),
         "# tests/test_sim_config.py checks this file equals a fresh identification.",
         "# Read by trackmj.sim.config.load_idler; the reduced plant of the controller takes",
         "# k, M and c from it (trackmj.sim.config.reduced_plant_params). Units SI.",
@@ -183,7 +204,7 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
         "[identification]",
         'source = "the arguments of trackmj.identify.identify_idler used for [idler]"',
         f'model_file = "{model.name}"',
-        f'model_sha256 = "{file_sha256(model)}"',
+        f'model_sha256 = "{digest}"',
         *(f"{name} = {value!r}" for name, value in identification.items()),
         "",
     ]
@@ -285,12 +306,46 @@ def nominal_plant_params(hydraulics: HydraulicParams | None = None,
                                 supply_pressure_Pa=supply_pressure_Pa, free_position_m=y0)
 
 
-def main() -> None:
-    """Identify the idler on the packaged track and rewrite ``models/lf1352_idler.toml``."""
-    idler = identify_packaged_idler()
-    path = write_idler_file(idler, default_idler_path())
-    print(f"wrote {path}: k {idler.stiffness_N_m:.4g} N/m, M {idler.mass_kg:.4g} kg, "
-          f"c {idler.damping_N_s_m:.4g} N s/m, fit R^2 {idler.fit_r2:.3f}")
+def identify_machine_idler(name: str) -> tuple[EquivalentIdler, str, dict[str, object]]:
+    """Identify the equivalent idler of shipped machine ``name`` on its generated model at
+    force levels relative to its nominal tension (:func:`identification_for`); returns the
+    idler, the MJCF text and the identification arguments."""
+    import mujoco
+
+    from trackmj.identify import identify_idler
+    from trackmj.machines import mechanics, model_mjcf, resolve
+    from trackmj.plant import TrackPlant
+
+    machine = resolve(name)
+    params = mechanics(machine)
+    text = model_mjcf(params, machine)
+    arguments = identification_for(params.nominal_tension_N)
+    idler = identify_idler(lambda: TrackPlant(mujoco.MjModel.from_xml_string(text), params),
+                           **arguments, min_mass_kg=params.idler.mass_kg
+                           + params.idler.carrier_mass_kg)
+    return idler, text, arguments
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Identify the idler on the packaged track and rewrite ``models/lf1352_idler.toml``;
+    with machine names (``python -m trackmj.sim.config m113``), each shipped machine's
+    ``models/<name>_idler.toml`` from its generated model."""
+    import sys
+
+    from trackmj.machines import resolve
+
+    for name in (sys.argv[1:] if argv is None else argv) or ["lf1352"]:
+        if name == "lf1352":
+            idler = identify_packaged_idler()
+            path = write_idler_file(idler, default_idler_path())
+        else:
+            idler, text, arguments = identify_machine_idler(name)
+            machine = resolve(name)
+            path = write_idler_file(idler, models_dir() / f"{name}_idler.toml",
+                                    machine.mechanics, identification=arguments,
+                                    machine=name.upper(), model_text=text)
+        print(f"wrote {path}: k {idler.stiffness_N_m:.4g} N/m, M {idler.mass_kg:.4g} kg, "
+              f"c {idler.damping_N_s_m:.4g} N s/m, fit R^2 {idler.fit_r2:.3f}")
 
 
 if __name__ == "__main__":

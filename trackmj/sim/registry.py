@@ -68,7 +68,11 @@ def _lmpc(model: Any, cfg: Any) -> Any:
 def _pid(model: Any, cfg: Any) -> Any:
     from trackmj.control.pid import PidController
 
-    return PidController(model, cfg.controller, cfg.pid)
+    nominal = cfg.controller.nominal_tension_N
+    if nominal is None:
+        return PidController(model, cfg.controller, cfg.pid)
+    # tuned between the W1 levels 0.8 and 1.0 x nominal (13.5 kN on LF1352)
+    return PidController(model, cfg.controller, cfg.pid, operating_force_N=0.9 * nominal)
 
 
 def _ekf(model: Any, cfg: Any, dt_s: float, x0: Any) -> Any:

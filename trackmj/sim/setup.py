@@ -18,6 +18,7 @@ from typing import Any
 
 import mujoco
 
+from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig, load_config
 from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
 from trackmj.identify import EquivalentIdler, identify_idler
@@ -28,7 +29,7 @@ from trackmj.params import FILE_KINDS, ParameterError, parse_overrides
 from trackmj.plant import TrackPlant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.scenarios import Scenario, Variant, load_scenario
-from trackmj.sim.config import load_idler
+from trackmj.sim.config import identification_for, load_idler, nominal_plant_params
 from trackmj.sim.registry import (
     ARCHITECTURES,
     CONTROLLERS,
@@ -36,6 +37,7 @@ from trackmj.sim.registry import (
     REPLACEABLE_ELEMENT,
     by_name,
 )
+from trackmj.sizing import input_weight_scale
 from trackmj.tensioner import TensionerFile, load_tensioner
 from trackmj.terrain import RoadProfile
 
@@ -49,7 +51,34 @@ def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
     if machine.idler is not None and is_own(params, machine):
         return load_idler(machine.idler)
     return identify_idler(lambda: TrackPlant(
-        mujoco.MjModel.from_xml_string(model_mjcf(params, machine)), params))
+        mujoco.MjModel.from_xml_string(model_mjcf(params, machine)), params),
+        **identification_for(params.nominal_tension_N),
+        min_mass_kg=params.idler.mass_kg + params.idler.carrier_mass_kg)
+
+
+@functools.cache
+def _rate_gain(machine: Machine) -> float:
+    """Tension-rate gain g [N/s per unit u] of the machine's reduced plant at its nominal
+    tension (mid stroke) and supply set-point, from its own files."""
+    params = mechanics(machine)
+    hyd = load_hydraulic_params(machine.hydraulics)
+    cfg = load_config(machine.control, nominal_tension_N=params.nominal_tension_N)
+    plant = nominal_plant_params(hyd, _idler(params, machine), cfg,
+                                 force_N=params.nominal_tension_N,
+                                 supply_pressure_Pa=hyd.supply.setpoint_Pa)
+    return ReducedModel(plant).tension_rate_gain(params.nominal_tension_N)
+
+
+def machine_weights(cfg: ControlConfig, machine: Machine) -> ControlConfig:
+    """``cfg`` with the MPC's u and u-rate weights scaled by (g/g_tuned)² from the machine
+    they were tuned on ([mpc].tuned_on_machine) to ``machine`` (unchanged on that one)."""
+    tuned = cfg.mpc.tuned_on_machine
+    if tuned == machine.name:
+        return cfg
+    scale = input_weight_scale(_rate_gain(machine), _rate_gain(resolve(tuned)))
+    mpc = dataclasses.replace(cfg.mpc, weight_input=cfg.mpc.weight_input * scale,
+                              weight_input_rate=cfg.mpc.weight_input_rate * scale)
+    return dataclasses.replace(cfg, mpc=mpc)
 
 
 @dataclass(frozen=True)
@@ -256,8 +285,9 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
         files["tensioner"] = str(tensioner)
     if controller_file is not None:
         files["controller"] = str(controller_file.file)
-    control_config = load_config(control or mach.control, overrides=sets["control"],
-                                 nominal_tension_N=model_params.nominal_tension_N)
+    control_config = machine_weights(
+        load_config(control or mach.control, overrides=sets["control"],
+                    nominal_tension_N=model_params.nominal_tension_N), mach)
     _check_bands_agree(sc, control_config, files["control"])
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,

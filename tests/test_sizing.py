@@ -1,0 +1,123 @@
+"""Sizing rules (trackmj/sizing.py, docs/sizing.md): hand checks on LF1352, the shipped
+machines' hydraulic files come from them, and the controller values follow each machine."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from trackmj import machines, sizing
+from trackmj.control.model import ReducedModel
+from trackmj.control.params import BAND_REL, load_config
+from trackmj.hydraulics import load_hydraulic_params
+from trackmj.hydraulics.components import series_area
+from trackmj.sim.config import load_idler, nominal_plant_params
+from trackmj.sim.setup import machine_weights
+
+SUPPLY_PA, TANK_PA, VALVE_DROP_PA, HOLD_S = 12e6, 0.2e6, 1e6, 0.030
+
+
+def test_lf1352_cylinders_by_hand() -> None:
+    """F_max 20 kN on two cylinders at 12 MPa less 1 MPa, rods at 0.2 MPa over phi = 1.6:
+    A_h >= 20e3 / (2 (11e6 - 0.2e6 / 1.6)) = 9.195e-4 m^2. ISO 3320: 32 mm gives 8.04e-4
+    (too small), 40 mm 1.2566e-3; rod 40 sqrt(1 - 1/1.6) = 24.5 -> 25 mm."""
+    cyl = sizing.size_cylinders(20e3, SUPPLY_PA, TANK_PA, VALVE_DROP_PA)
+    assert (cyl.bore_m, cyl.rod_m) == (0.040, 0.025)
+    assert cyl.area_head_m2 == pytest.approx(1.2566e-3, rel=1e-4)
+    assert cyl.area_rod_m2 == pytest.approx(7.658e-4, rel=1e-4)
+    assert 20e3 / (2 * (11e6 - 0.2e6 / 1.6)) == pytest.approx(9.195e-4, rel=1e-3)
+    assert math.pi * 0.032 ** 2 / 4 < 9.195e-4 < cyl.area_head_m2
+
+
+def test_head_path_area_inverts_the_reduced_models_tension_rate() -> None:
+    """The area asked for a rate gives that rate in control/model.py's independent
+    quasi-static gain (LF1352 plant at 15 kN, 12 MPa), and by hand: with 8e-8 m^2 the head
+    flow Cq A sqrt(2 dp / rho) at dp = 12 - 6.09 MPa is 6.10e-6 m^3/s."""
+    plant = nominal_plant_params()
+    head = (15e3 + plant.area_rod_m2 * TANK_PA) / plant.area_head_m2
+    assert head == pytest.approx(6.09e6, rel=1e-3)
+    volume = plant.dead_volume_head_m3 + plant.area_head_m2 * 0.5 * plant.stroke_m
+    area = sizing.head_path_area_m2(
+        3000.0, force_N=15e3, area_head_m2=plant.area_head_m2, area_rod_m2=plant.area_rod_m2,
+        volume_head_m3=volume, idler_stiffness_N_m=plant.stiffness_N_m, supply_Pa=SUPPLY_PA,
+        tank_Pa=TANK_PA, bulk_modulus_Pa=plant.bulk_modulus_Pa,
+        density_kg_m3=plant.density_kg_m3, discharge_coefficient=plant.discharge_coefficient,
+        critical_pressure_Pa=plant.critical_pressure_Pa)
+    rate = ReducedModel(plant.replace(valve_area_head_m2=area)).tension_rate_gain(15e3)
+    assert rate == pytest.approx(3000.0, rel=1e-9)
+    flow = 0.65 * 8e-8 * math.sqrt(2 * (12e6 - head) / 860.0)
+    assert flow == pytest.approx(6.10e-6, rel=2e-3)
+    restrictor = sizing.restrictor_for(area / 2, 2e-5)
+    assert series_area(2e-5, restrictor) == pytest.approx(area / 2, rel=1e-12)
+
+
+@pytest.mark.parametrize("name", machines.names())
+def test_shipped_hydraulics_are_the_sizing_rules(name: str) -> None:
+    """Each machine's cylinders are size_cylinders(4/3 F_nom) and its head restrictors give
+    PULSE_REL of F_nom per 30 ms pulse on its identified idler (2-digit rounding: 2 %;
+    LF1352's hand-sized 4.0e-8 m^2 is within 1 % of the rule's 4.04e-8)."""
+    machine = machines.resolve(name)
+    params = machines.mechanics(machine)
+    hyd = load_hydraulic_params(machine.hydraulics)
+    nominal = params.nominal_tension_N
+    cyl = sizing.size_cylinders(nominal * BAND_REL[1], hyd.supply.setpoint_Pa,
+                                hyd.tank_pressure_Pa, VALVE_DROP_PA)
+    assert hyd.cylinder.area_head_m2 == pytest.approx(cyl.area_head_m2, rel=1e-4)
+    assert hyd.cylinder.area_rod_m2 == pytest.approx(cyl.area_rod_m2, rel=1e-3)
+    idler = load_idler(machine.idler)
+    volume = 2.0 * (hyd.cylinder.dead_volume_head_m3
+                    + cyl.area_head_m2 * params.idler.stroke_at_layout_m)
+    area = sizing.head_path_area_m2(
+        sizing.PULSE_REL * nominal / HOLD_S, force_N=nominal,
+        area_head_m2=2 * cyl.area_head_m2, area_rod_m2=2 * cyl.area_rod_m2,
+        volume_head_m3=volume, idler_stiffness_N_m=idler.stiffness_N_m,
+        supply_Pa=hyd.supply.setpoint_Pa, tank_Pa=hyd.tank_pressure_Pa,
+        bulk_modulus_Pa=hyd.fluid.bulk_modulus_Pa, density_kg_m3=hyd.fluid.density_kg_m3,
+        discharge_coefficient=hyd.orifice.discharge_coefficient,
+        critical_pressure_Pa=hyd.orifice.critical_pressure_Pa)
+    branch = sizing.restrictor_for(area / 2, hyd.switching_valves.open_area_m2)
+    assert hyd.metering.head_branch_area_m2 == pytest.approx(branch, rel=0.02)
+    assert hyd.metering.rod_feed_area_m2 / hyd.metering.head_branch_area_m2 == \
+        pytest.approx(5.5 / 4.0, rel=1e-2)
+
+
+@pytest.mark.parametrize("name", machines.names())
+def test_controller_values_follow_the_machines_nominal_tension(name: str) -> None:
+    """Band [2/3, 4/3], governor margin 1/30, PID dead band 1 % and integration band 4 % of
+    the nominal tension: on LF1352 (15 kN) exactly the study's 10, 20, 0.5, 0.15, 0.6 kN."""
+    machine = machines.resolve(name)
+    nominal = machines.mechanics(machine).nominal_tension_N
+    cfg = load_config(machine.control, nominal_tension_N=nominal)
+    c, pid = cfg.controller, cfg.pid
+    assert (c.force_min_N, c.force_max_N) == pytest.approx((2 * nominal / 3, 4 * nominal / 3))
+    assert (c.reference_margin_N, pid.error_dead_band_N, pid.integration_band_N) == \
+        pytest.approx((nominal / 30, 0.01 * nominal, 0.04 * nominal))
+    if name == "lf1352":
+        assert (c.force_min_N, c.force_max_N, c.reference_margin_N, pid.error_dead_band_N,
+                pid.integration_band_N) == (10e3, 20e3, 500.0, 150.0, 600.0)
+
+
+def test_mpc_input_weights_keep_the_cost_per_tension_rate() -> None:
+    """w_u / g^2 is the tuned machine's on every machine (g: the tension-rate gain at the
+    nominal tension and set-point); on LF1352 itself the weights are the file's."""
+    def gain_and_weights(name: str) -> tuple[float, float, float]:
+        machine = machines.resolve(name)
+        params = machines.mechanics(machine)
+        hyd = load_hydraulic_params(machine.hydraulics)
+        cfg = load_config(machine.control, nominal_tension_N=params.nominal_tension_N)
+        plant = nominal_plant_params(hyd, load_idler(machine.idler), cfg,
+                                     force_N=params.nominal_tension_N,
+                                     supply_pressure_Pa=hyd.supply.setpoint_Pa)
+        g = ReducedModel(plant).tension_rate_gain(params.nominal_tension_N)
+        mpc = machine_weights(cfg, machine).mpc
+        return g, mpc.weight_input, mpc.weight_input_rate
+
+    g0, wu0, wr0 = gain_and_weights("lf1352")
+    assert (wu0, wr0) == (0.6, 2.0)
+    for name in machines.names():
+        g, wu, wr = gain_and_weights(name)
+        assert wu / g ** 2 == pytest.approx(wu0 / g0 ** 2, rel=1e-12)
+        assert wr / g ** 2 == pytest.approx(wr0 / g0 ** 2, rel=1e-12)
+    cfg = load_config(nominal_tension_N=15e3)
+    assert machine_weights(cfg, machines.resolve("lf1352")) is cfg
