@@ -114,7 +114,7 @@ def _cmd_model_generate(args: argparse.Namespace) -> int:
                          f"{machine.file.name}: give --out FILE.xml")
     params = load_model_params(args.params or machine.mechanics,
                                overrides=_model_overrides(args.set))
-    path = write_model(out, params)
+    path = write_model(out, params, machine.name)
     print(f"wrote {path}")
     return 0
 

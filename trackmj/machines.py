@@ -32,7 +32,7 @@ from trackmj.params import ParameterError, Parameters, load_file, param
 DEFAULT_MACHINE = "lf1352"
 MACHINE_SUFFIX = "_machine.toml"
 _NAME = r"[a-z0-9][a-z0-9_-]*"
-_FILE = r"[^/\\][^\\]*"
+_FILE = r".*\S.*"
 
 
 @dataclass(frozen=True)
@@ -44,10 +44,10 @@ class MachineTable(Parameters):
     mechanics: str = param(pattern=_FILE, max_len=400, doc="model parameter file (.toml)")
     hydraulics: str = param(pattern=_FILE, max_len=400, doc="hydraulic parameter file (.toml)")
     control: str = param(pattern=_FILE, max_len=400, doc="control parameter file (.toml)")
-    idler: str = param(pattern=_FILE, max_len=400, default="",
+    idler: str = param(max_len=400, default="",
                        doc="identified equivalent idler file (optional: identified on "
                            "demand when absent)")
-    reference_mjcf: str = param(pattern=_FILE, max_len=400, default="",
+    reference_mjcf: str = param(max_len=400, default="",
                                 doc="the generator's committed output for the mechanics "
                                     "file (optional: generated and cached when absent)")
 
@@ -151,4 +151,4 @@ def model_mjcf(params: ModelParams, machine: Machine | None = None) -> str:
     machine = resolve(machine)
     if machine.reference_mjcf is not None and is_own(params, machine):
         return machine.reference_mjcf.read_text()
-    return cached_mjcf(params)
+    return cached_mjcf(params, machine.name)

@@ -18,7 +18,7 @@ import os
 from pathlib import Path
 
 from trackmj.io import write_text_atomic
-from trackmj.model.params import ModelParams
+from trackmj.model.params import MODEL_NAME, ModelParams
 
 CACHE_ENV = "TRACKMJ_CACHE"
 
@@ -52,17 +52,17 @@ def model_key(params: ModelParams) -> str:
 
 
 @functools.cache
-def cached_mjcf(params: ModelParams) -> str:
-    """MJCF text (with the settled ``home`` keyframe) of ``params``: from the cache
-    directory if generated before, else generated and stored there."""
+def cached_mjcf(params: ModelParams, name: str = MODEL_NAME) -> str:
+    """MJCF text (with the settled ``home`` keyframe) of ``params`` for machine ``name``:
+    from the cache directory if generated before, else generated and stored there."""
     from trackmj.model.generate import generate_mjcf
 
-    path = cache_dir() / f"model-{model_key(params)[:32]}.xml"
+    path = cache_dir() / f"{name}-{model_key(params)[:32]}.xml"
     try:
         return path.read_text()
     except (FileNotFoundError, UnicodeDecodeError):
         pass
-    text = generate_mjcf(params)
+    text = generate_mjcf(params, name)
     try:
         write_text_atomic(path, text)
     except OSError:          # a read-only home: generate each time rather than fail

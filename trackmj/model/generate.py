@@ -1,5 +1,6 @@
-"""Generation of ``models/lf1352.xml``: layout, a check of the initial state, and the
-``home`` keyframe found by settling under gravity with the passive tensioner preload.
+"""Generation of a machine's MJCF (``models/lf1352.xml`` for the study's): layout, a check
+of the initial state, and the ``home`` keyframe found by settling under gravity with the
+passive tensioner preload.
 
 Settling uses MuJoCo alone (no plant): the passive spring-damper
 F = preload − k·(s − s_layout) − c·v is the tensioner actuator's affine bias
@@ -17,7 +18,7 @@ import numpy as np
 from trackmj.io import write_text_atomic
 from trackmj.model.layout import compute_layout
 from trackmj.model.mjcf import build_mjcf
-from trackmj.model.params import ModelParams, default_xml_path, load_model_params
+from trackmj.model.params import MODEL_NAME, ModelParams, default_xml_path, load_model_params
 from trackmj.params import ParameterError
 
 SETTLE_DURATION_S = 3.0
@@ -37,7 +38,7 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
     if worst < -MAX_INITIAL_PENETRATION_M:
         raise ParameterError(f"initial layout penetrates by {-worst * 1e3:.2f} mm "
                              f"(limit {MAX_INITIAL_PENETRATION_M * 1e3:.1f} mm): check radii "
-                             "and positions in lf1352.toml")
+                             "and positions in the model file")
     steps = round(duration_s / model.opt.timestep)
     for _ in range(steps):
         mujoco.mj_step(model, data)
@@ -46,8 +47,8 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
     return data
 
 
-def generate_mjcf(params: ModelParams | None = None) -> str:
-    """Full MJCF of the model with the settled ``home`` keyframe.
+def generate_mjcf(params: ModelParams | None = None, name: str = MODEL_NAME) -> str:
+    """Full MJCF of the model with the settled ``home`` keyframe (``name``: the machine's).
 
     Keyframe values are rounded to 1e-6 so the committed file does not depend on the
     last bits of floating-point arithmetic.
@@ -56,11 +57,12 @@ def generate_mjcf(params: ModelParams | None = None) -> str:
     layout = compute_layout(params)
     model = mujoco.MjModel.from_xml_string(build_mjcf(params, layout))
     data = settle(model, params, SETTLE_DURATION_S)
-    return build_mjcf(params, layout, home_qpos=np.round(data.qpos, 6))
+    return build_mjcf(params, layout, home_qpos=np.round(data.qpos, 6), name=name)
 
 
-def write_model(path: str | Path | None = None, params: ModelParams | None = None) -> Path:
+def write_model(path: str | Path | None = None, params: ModelParams | None = None,
+                name: str = MODEL_NAME) -> Path:
     """Generate the model and write it atomically (default: packaged lf1352.xml)."""
     path = Path(path) if path is not None else default_xml_path()
-    write_text_atomic(path, generate_mjcf(params))
+    write_text_atomic(path, generate_mjcf(params, name))
     return path

@@ -170,7 +170,7 @@ def chords_fitting(p: ModelParams, idler_x: float) -> float:
     perimeter = float(np.linalg.norm(np.roll(path, -1, axis=0) - path, axis=1).sum())
     pins = _pins_for(p, idler_x, math.ceil(perimeter / p.track.pitch_m) + 3)
     start_x, r_pin = _start_x(p), p.track.pin_radius_m
-    flat = np.abs(pins[:, 1] - r_pin) < 1e-6
+    flat = np.abs(pins[:, 1] - r_pin) < 0.25 * p.track.pitch_m   # on or near the bottom
     for k in range(len(pins) // 2, len(pins)):
         if flat[k - 1] and flat[k] and pins[k - 1, 0] > start_x >= pins[k, 0]:
             return k - 1 + (pins[k - 1, 0] - start_x) / (pins[k - 1, 0] - pins[k, 0])
@@ -220,13 +220,13 @@ def idler_window(p: ModelParams, at: Location) -> tuple[float, float]:
 
 def check_closure(p: ModelParams, at: Location) -> tuple[float, float]:
     """Refuse a link count that cannot close the loop with the idler in its window
-    (:func:`idler_window`); returns the window. The message names what would fit."""
+    (:func:`idler_window`): it must lie between the chords that fit round the loop with the
+    idler at the window's two ends. Returns the window; the message names what would fit."""
     lo, hi = idler_window(p, at)
-    g_lo, g_hi = closure_gap(p, lo), closure_gap(p, hi)
-    if g_lo * g_hi <= 0.0:
-        return lo, hi
     n, pitch = p.track.link_count, p.track.pitch_m
     f_lo, f_hi = sorted((chords_fitting(p, lo), chords_fitting(p, hi)))
+    if f_lo <= n <= f_hi:
+        return lo, hi
     n_lo, n_hi = math.ceil(f_lo), math.floor(f_hi)
     fits = (f"use {n_lo}–{n_hi} links" if n_lo < n_hi else f"use {n_lo} links"
             if n_lo == n_hi else "no whole link count fits: change pitch_m")
@@ -245,7 +245,7 @@ def compute_layout(p: ModelParams) -> Layout:
     lo, hi = p.idler.x_m - CLOSURE_WINDOW_M, p.idler.x_m + CLOSURE_WINDOW_M
     try:
         idler_x = brentq(lambda x: closure_gap(p, x), lo, hi, xtol=1e-12)
-    except ValueError:
+    except (ValueError, RuntimeError):    # no sign change, or a walk round the loop twice
         idler_x = None
     free = check_closure(p, at)
     if idler_x is None or not free[0] <= idler_x <= free[1]:

@@ -276,6 +276,10 @@ def _check_layout(p: ModelParams, at: Location) -> None:
                                f"{xs[k] - xs[k - 1]:g} m apart: must increase by at least "
                                f"2·radius_m + {CLEARANCE_M * 1e3:g} mm = "
                                f"{2.0 * radius + CLEARANCE_M:g} m")
+    if max(rw.x_m) - min(rw.x_m) < 2.0 * p.track.pitch_m:
+        raise at.error(("road_wheels", "x_m"), rw.x_m, f"span {max(rw.x_m) - min(rw.x_m):g} m "
+                       f"from first to last: at least two links (2·pitch_m = "
+                       f"{2.0 * p.track.pitch_m:g} m) must lie flat between them")
     if not min(rw.x_m) < 0.0 < max(rw.x_m):
         raise at.error(("road_wheels", "x_m"), rw.x_m, "must straddle the chassis centre "
                        "of mass at x = 0 (else the machine tips over its end wheel)")
@@ -285,6 +289,14 @@ def _check_layout(p: ModelParams, at: Location) -> None:
             raise at.error(("road_wheels", "x_m"), rw.x_m, f"entry {k} ({x:g} m) touches the "
                            f"sprocket teeth: keep its centre {spr_reach:.3f} m from the "
                            "sprocket's")
+    # a tooth sits between two seated pins, half a tooth pitch round from each
+    rp, rt = p.sprocket_pitch_radius_m, p.sprocket_pitch_radius_m + s.tooth_radial_offset_m
+    pocket = math.sqrt(rp * rp + rt * rt - 2.0 * rp * rt * math.cos(math.pi / s.tooth_count))
+    if s.tooth_radius_m + r_pin > pocket:
+        raise at.error(("sprocket", "tooth_radius_m"), s.tooth_radius_m,
+                       f"does not fit between two seated pins: at most {pocket - r_pin:.4f} m "
+                       f"with {s.tooth_count} teeth, pitch {p.track.pitch_m:g} m and pin radius "
+                       f"{r_pin:g} m")
     floor = r_pin
     if s.z_m - p.sprocket_pitch_radius_m < floor:
         raise at.error(("sprocket", "z_m"), s.z_m, f"puts the sprocket's lowest pin below "
