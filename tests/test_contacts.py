@@ -38,16 +38,16 @@ def _kind(model: mujoco.MjModel, g1: int, g2: int) -> str | None:
     return None
 
 
-def _static_stiffness(plant: TrackPlant) -> dict[str, list[float]]:
+def _static_stiffness(plant: TrackPlant, force_N: float = 13_000.0) -> dict[str, list[float]]:
     """Time-averaged normal force / penetration of each contact loaded throughout 0.3 s of
-    a standing, settled track, grouped by kind [N/m]."""
-    plant.run(ConstantForce(13_000.0, 2e4), 1.5)
+    a standing track settled under ``force_N`` [N], grouped by kind [N/m]."""
+    plant.run(ConstantForce(force_N, 2e4), 1.5)
     m, d = plant.model, plant.data
     sums: dict[tuple[int, int], list[float]] = {}
     wrench = np.zeros(6)
     steps = 300
     for _ in range(steps):
-        plant.step(ConstantForce(13_000.0, 2e4))
+        plant.step(ConstantForce(force_N, 2e4))
         for i in range(d.ncon):
             c = d.contact[i]
             mujoco.mj_contactForce(m, d, i, wrench)

@@ -1,0 +1,175 @@
+"""Checks every shipped machine passes (models/*_machine.toml): at rest the idler's force
+balance, the weight and the stated contact stiffnesses; driving 10 s at 1.5 m/s with the
+passive tensioner the track stays engaged, its chordal frequency is v/pitch, no
+once-per-revolution component, the ledger closes; W1 closed loop stays in the machine's band
+and its energy table closes. One standing settle, one 10 s drive and one W1 run per machine
+(module-scoped)."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+from test_contacts import _static_stiffness
+
+from trackmj import machines
+from trackmj.drive import drive
+from trackmj.elements import ConstantForce
+from trackmj.energy import accounted_J
+from trackmj.model.layout import slide_axis
+from trackmj.plant import TrackPlant
+from trackmj.sim.run import simulate
+
+NAMES = machines.names()
+SPEED_M_S, DRIVE_S, STEADY_FROM_S = 1.5, 10.0, 2.0
+W1_S = 6.0
+"""W1 up to 3 s past its step (the start-up, the step and a settled second)."""
+
+
+@pytest.fixture(scope="module", params=NAMES)
+def machine(request) -> str:
+    return request.param
+
+
+@pytest.fixture(scope="module")
+def standing(machine: str) -> dict:
+    """The machine standing, settled 1.5 s under its preload, then 0.3 s averaged: the
+    idler's wrap and strand directions, the exit pins' tension, Σ ground normal force and
+    the static stiffness of every loaded contact."""
+    plant = TrackPlant.load(machine=machine)
+    p = plant.params
+    preload = p.tensioner.preload_N
+    stiffness = _static_stiffness(plant, preload)   # settles 1.5 s, then 0.3 s of contacts
+    m, d = plant.model, plant.data
+    ground = m.geom("ground").id
+    wrench, normal, exits, forces = np.zeros(6), [], [], []
+    pins = plant.pin_positions()
+    centre = d.xpos[m.body("idler").id][[0, 2]]
+    vertex_r = math.hypot(p.idler.radius_m + p.track.rail_radius_m, p.track.pitch_m / 2)
+    on = np.linalg.norm(pins - centre, axis=1) < vertex_r + 1.5e-3
+    n = len(pins)
+    # the wrap is contiguous in the running order (possibly across index 0)
+    first = next(k for k in range(n) if on[k] and not on[k - 1])
+    last = next(k for k in range(n) if on[k] and not on[(k + 1) % n])
+    for _ in range(300):
+        plant.step(ConstantForce(preload, 2e4))
+        total = 0.0
+        for i in range(d.ncon):
+            c = d.contact[i]
+            if ground in (c.geom1, c.geom2):
+                mujoco.mj_contactForce(m, d, i, wrench)
+                total += wrench[0]
+        normal.append(total)
+        tension = plant.pin_tensions_N()
+        # the pins one link off the wrap: both their links are in the free span
+        exits.append(0.5 * (tension[(first - 1) % n] + tension[(last + 1) % n]))
+        forces.append(plant.idler_force_N)
+    pins = plant.pin_positions()
+    e_in = pins[(first - 1) % n] - pins[first]       # link arriving at the wrap, outward
+    e_out = pins[(last + 1) % n] - pins[last]        # link leaving it
+    axis = np.array(slide_axis(p))
+    pitch = plant.chassis_pose[2]
+    rot = np.array([[math.cos(pitch), math.sin(pitch)], [-math.sin(pitch), math.cos(pitch)]])
+    weight = sum(m.body_mass) * p.simulation.gravity_m_s2
+    return {"plant": plant, "stiffness": stiffness, "normal_N": float(np.mean(normal)),
+            "weight_N": float(weight), "exit_tension_N": float(np.mean(exits)),
+            "idler_force_N": float(np.mean(forces)), "wrap": int(on.sum()),
+            "units": (e_in / np.linalg.norm(e_in), e_out / np.linalg.norm(e_out)),
+            "slide_axis": rot @ axis}
+
+
+def test_strand_tension_is_the_idler_force_through_the_measured_wrap(standing) -> None:
+    """Frictionless idler on a horizontal carrier: both strands carry T and the tensioner
+    holds F = −T (e_in + e_out)·x_slide, e the directions of the two links leaving the
+    wrap; T measured at the pins one link off the wrap (their links in line: the pin
+    tension is the link force, not its projection on a wrapped pin's bisector)."""
+    e_in, e_out = standing["units"]
+    factor = -(e_in + e_out) @ standing["slide_axis"]
+    assert standing["wrap"] >= 3 and 1.5 < factor <= 2.0
+    t_hand = standing["idler_force_N"] / factor
+    assert standing["exit_tension_N"] == pytest.approx(t_hand, rel=0.01)
+
+
+def test_ground_carries_the_weight(standing) -> None:
+    assert standing["normal_N"] == pytest.approx(standing["weight_N"], rel=0.005)
+
+
+def test_every_contact_has_its_stated_stiffness(standing) -> None:
+    p = standing["plant"].params
+    stated = {"ground": p.ground.stiffness_N_m, "tooth": p.contacts.tooth_stiffness_N_m}
+    stiffness = standing["stiffness"]
+    assert {"ground", "rail:road_wheel", "rail:idler_wheel"} <= set(stiffness)
+    assert len(stiffness["rail:road_wheel"]) >= p.road_wheels.count - 1
+    for kind, values in stiffness.items():
+        target = stated.get(kind, p.contacts.rail_stiffness_N_m)
+        np.testing.assert_allclose(values, target, rtol=0.10, err_msg=kind)
+
+
+@pytest.fixture(scope="module")
+def driven(machine: str) -> dict:
+    """10 s at 1.5 m/s from rest (1 s ramp), passive tensioner, with the ledger."""
+    result = drive(SPEED_M_S, DRIVE_S, machine=machine)
+    return {"metrics": result.metrics, "series": result.timeseries,
+            "params": machines.mechanics(machines.resolve(machine))}
+
+
+def _amplitude(t: np.ndarray, y: np.ndarray, f_Hz: float) -> float:
+    """Amplitude [unit of y] of the component at f_Hz (least squares with mean and trend)."""
+    w = 2.0 * math.pi * f_Hz * t
+    basis = np.column_stack([np.cos(w), np.sin(w), np.ones_like(t), t - t.mean()])
+    coef = np.linalg.lstsq(basis, y, rcond=None)[0]
+    return float(math.hypot(coef[0], coef[1]))
+
+
+def test_driving_keeps_the_track_engaged_near_the_preload(driven) -> None:
+    m, s, p = driven["metrics"], driven["series"], driven["params"]
+    steady = s["t_s"] >= STEADY_FROM_S
+    force = s["idler_force_N"][steady]
+    assert force.min() > 0.0
+    assert force.mean() == pytest.approx(p.tensioner.preload_N, rel=0.25)
+    assert m["derailment_checks_failed"] == 0 and m["mujoco_warnings"] == 0
+    assert m["max_pin_gap_m"] < 0.5e-3
+    e = m["track_energy"]
+    assert abs(e["residual_J"]) <= 0.01 * e["drive_work_J"]
+
+
+def test_chordal_frequency_is_v_over_pitch_without_a_revolution_component(driven) -> None:
+    """The idler force's strongest line near v/pitch sits at v/pitch (1 %), v the chain's
+    speed: the sprocket turns at ω = v_p/r_p (v_p its pitch-circle speed, the command) and
+    passes N_t links per turn, so the links move at ω·N_t·pitch/(2π) = v_p·sin(π/N_t)/(π/N_t)
+    (the polygon effect: 1.6 % slower for M113's 10 teeth). The once-per-revolution line
+    v/(N·pitch) is at most 10 % of it."""
+    s, p = driven["series"], driven["params"]
+    steady = s["t_s"] >= STEADY_FROM_S
+    t, y = s["t_s"][steady], s["idler_force_N"][steady]
+    teeth = p.sprocket.tooth_count
+    chain = float(s["track_speed_m_s"][steady].mean()) * math.sin(math.pi / teeth) / (
+        math.pi / teeth)
+    assert chain == pytest.approx(SPEED_M_S * math.sin(math.pi / teeth) * teeth / math.pi,
+                                  rel=1e-3)
+    chordal = chain / p.track.pitch_m
+    grid = np.arange(0.8, 1.2, 0.0005) * chordal
+    amplitudes = np.array([_amplitude(t, y, f) for f in grid])
+    assert grid[np.argmax(amplitudes)] == pytest.approx(chordal, rel=0.01)
+    revolution = chordal / p.track.link_count
+    assert _amplitude(t, y, revolution) <= 0.10 * amplitudes.max()
+
+
+@pytest.fixture(scope="module")
+def w1(machine: str) -> tuple[float, dict]:
+    nominal = machines.mechanics(machines.resolve(machine)).nominal_tension_N
+    return nominal, simulate("W1", duration=W1_S, machine=machine).metrics
+
+
+def test_w1_closed_loop_stays_in_the_machines_band_and_its_energy_closes(w1) -> None:
+    """The band is [2/3, 4/3] x the machine's nominal tension (10-20 kN on LF1352)."""
+    nominal, metrics = w1
+    acc = metrics["acceptance"]
+    low, high = 2.0 * nominal / 3.0, 4.0 * nominal / 3.0
+    assert low <= acc["mean_min_N"] and acc["mean_max_N"] <= high, acc
+    e = metrics["energy_J"]
+    assert e["pump"] > 0.0
+    assert abs(e["residual"]) <= 5e-3 * e["pump"]
+    assert abs(e["pump"] - accounted_J(e) - e["residual"]) <= 1e-9 * e["pump"]
