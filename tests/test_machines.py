@@ -256,3 +256,32 @@ def test_random_infeasible_layouts_are_refused_with_a_message(o, how) -> None:
            "overlap": "road_wheels.x_m", "low": "sprocket.z_m"}[how]
     with pytest.raises(ParameterError, match=re.escape(key)):
         load_model_params(overrides=o | bad)
+
+
+def test_run_w1_on_a_machine_file_of_another_layout(tmp_path) -> None:
+    """A user's machine (the mirrored, front-sprocket LF1352 as mechanics, the LF1352's
+    hydraulics and control files as stand-ins) runs W1 closed loop from its machine file:
+    the model generated and cached, the idler identified on it."""
+    import json
+
+    lf = resolve("lf1352")
+    text = lf.mechanics.read_text()
+    for old, new in (("x_m = -1.10 ", "x_m = 1.10 "), ("x_m = 1.35 ", "x_m = -1.35 "),
+                     ("hitch_x_m = -1.30", "hitch_x_m = 1.30")):
+        assert old in text
+        text = text.replace(old, new, 1)
+    (tmp_path / "front.toml").write_text(text)
+    (tmp_path / "front_machine.toml").write_text(
+        f'[machine]\nname = "front"\ndescription = "LF1352 mirrored"\nmechanics = '
+        f'"front.toml"\nhydraulics = "{lf.hydraulics}"\ncontrol = "{lf.control}"\n')
+    out = tmp_path / "run"
+    assert main(["run", "W1", "--duration", "2", "--machine",
+                 str(tmp_path / "front_machine.toml"), "--out", str(out)]) == 0
+    doc = json.loads((out / "metrics.json").read_text())
+    m = doc["metrics"]
+    assert doc["run"]["files"]["machine"] == "front"
+    assert m["mujoco_warnings"] == 0
+    # W1 holds 12 kN from 1 s on: the tensioner pushes the rear idler out as commanded
+    means = m["acceptance"]      # lowest and highest 0.5 s mean from 1 s on
+    assert 0.9 * 12e3 < means["mean_min_N"] <= means["mean_max_N"] < 1.1 * 12e3
+    assert list(cache_dir().glob("front-*-idler.json"))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -20,15 +21,17 @@ import mujoco
 
 from trackmj.control.params import ControlConfig, load_config
 from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
-from trackmj.identify import EquivalentIdler, identify_idler
+from trackmj.identify import EquivalentIdler, ModalTerm, identify_idler
+from trackmj.io import write_text_atomic
 from trackmj.machines import DEFAULT_MACHINE, Machine, is_own, mechanics, model_mjcf, resolve
 from trackmj.model import ModelParams, load_model_params
+from trackmj.model.cache import cache_dir, model_key
 from trackmj.model.mjcf import with_heightfield
 from trackmj.params import FILE_KINDS, ParameterError, parse_overrides
 from trackmj.plant import TrackPlant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.scenarios import Scenario, Variant, load_scenario
-from trackmj.sim.config import load_idler
+from trackmj.sim.config import IDENTIFICATION, SCALARS, load_idler
 from trackmj.sim.registry import (
     ARCHITECTURES,
     CONTROLLERS,
@@ -44,12 +47,32 @@ MAX_DURATION_S = 3600.0
 
 @functools.cache
 def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
-    """The machine's identified idler for its own mechanics, or a fresh identification on
-    another model (once per process)."""
+    """The machine's identified idler for its own mechanics, or an identification on another
+    model (cached by content hash beside its generated MJCF): the packaged idler file's
+    force levels and amplitude (:data:`trackmj.sim.config.IDENTIFICATION`, chosen for the
+    LF1352's preload) scaled by this model's preload over the LF1352's."""
     if machine.idler is not None and is_own(params, machine):
         return load_idler(machine.idler)
-    return identify_idler(lambda: TrackPlant(
-        mujoco.MjModel.from_xml_string(model_mjcf(params, machine)), params))
+    path = cache_dir() / f"{machine.name}-{model_key(params)[:32]}-idler.json"
+    try:
+        data = json.loads(path.read_text())
+        return EquivalentIdler(**data["idler"], modes=tuple(ModalTerm(**m)
+                                                            for m in data["modes"]))
+    except (FileNotFoundError, ValueError, KeyError, TypeError):
+        pass
+    reference = mechanics(resolve(DEFAULT_MACHINE)).tensioner.preload_N
+    scale = params.tensioner.preload_N / reference
+    args = {k: v * scale if k in ("force_low_N", "force_high_N", "amplitude_N") else v
+            for k, v in IDENTIFICATION.items()}
+    idler = identify_idler(lambda: TrackPlant(
+        mujoco.MjModel.from_xml_string(model_mjcf(params, machine)), params), **args)
+    record = {"idler": {name: float(getattr(idler, name)) for name in SCALARS},
+              "modes": [dataclasses.asdict(m) for m in idler.modes]}
+    try:
+        write_text_atomic(path, json.dumps(record))
+    except OSError:
+        pass
+    return idler
 
 
 @dataclass(frozen=True)
