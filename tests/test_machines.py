@@ -59,7 +59,11 @@ def test_machine_file_resolves_relative_paths_and_names_a_missing_file(tmp_path)
 def test_reference_mjcf_for_own_parameters_generated_and_cached_otherwise() -> None:
     lf = resolve("lf1352")
     own = load_model_params(lf.mechanics)
-    assert model_mjcf(own, lf) == lf.reference_mjcf.read_text()
+    # the committed scene joined with its machine part: the model MuJoCo compiles from the
+    # scene file itself (its include resolved by MuJoCo)
+    joined = mujoco.MjModel.from_xml_string(model_mjcf(own, lf))
+    from_file = mujoco.MjModel.from_xml_path(str(lf.reference_mjcf))
+    assert _model_bytes(joined) == _model_bytes(from_file)
     other = load_model_params(overrides={"track.link_count": 80})
     text = model_mjcf(other, lf)
     cached = list(cache_dir().glob("lf1352-*.xml"))
@@ -67,6 +71,12 @@ def test_reference_mjcf_for_own_parameters_generated_and_cached_otherwise() -> N
     cached_mjcf.cache_clear()        # a new process: read back from the directory
     assert cached_mjcf(other, "lf1352") == text
     assert text.count("<body name=\"link_") == 80
+
+
+def _model_bytes(model: mujoco.MjModel) -> bytes:
+    buffer = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)
+    mujoco.mj_saveModel(model, None, buffer)
+    return buffer.tobytes()
 
 
 # ----------------------------------------------------------------------------- refusals
