@@ -295,3 +295,28 @@ def test_run_w1_on_a_machine_file_of_another_layout(tmp_path) -> None:
     means = m["acceptance"]      # lowest and highest 0.5 s mean from 1 s on
     assert 0.9 * 12e3 < means["mean_min_N"] <= means["mean_max_N"] < 1.1 * 12e3
     assert list(cache_dir().glob("front-*-idler.json"))
+
+
+def test_link_and_pin_names_past_100_links() -> None:
+    """123 links of 50 mm (pins and teeth scaled with the pitch): the plant finds every
+    link, pin and connect by name on the generated layout (no settling needed)."""
+    from trackmj.model import build_mjcf
+
+    p = load_model_params(overrides={"track.pitch_m": 0.05, "track.link_count": 123,
+                                     "track.link_mass_kg": 2.3, "track.pin_radius_m": 0.009,
+                                     "sprocket.tooth_radius_m": 0.013,
+                                     "sprocket.tooth_count": 21})
+    plant = TrackPlant(mujoco.MjModel.from_xml_string(build_mjcf(p, compute_layout(p))), p)
+    assert plant.link_count == 123 and plant.model.neq == 123
+    assert plant.model.body("link_122").id > plant.model.body("link_99").id
+    assert plant.closure_error_m < 1e-6
+
+
+@pytest.mark.parametrize("command", [["run", "W1"], ["compare", "W1"], ["report"],
+                                     ["sweep", "spec.toml"], ["drive"], ["model", "info"],
+                                     ["model", "generate"]])
+def test_every_command_takes_a_machine(command) -> None:
+    from trackmj.cli import build_parser
+
+    args = build_parser().parse_args([*command, "--machine", "my_machine.toml"])
+    assert args.machine == "my_machine.toml"
