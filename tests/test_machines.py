@@ -59,7 +59,11 @@ def test_machine_file_resolves_relative_paths_and_names_a_missing_file(tmp_path)
 def test_reference_mjcf_for_own_parameters_generated_and_cached_otherwise() -> None:
     lf = resolve("lf1352")
     own = load_model_params(lf.mechanics)
-    assert model_mjcf(own, lf) == lf.reference_mjcf.read_text()
+    # the committed scene joined with its machine part: the model MuJoCo compiles from the
+    # scene file itself (its include resolved by MuJoCo)
+    joined = mujoco.MjModel.from_xml_string(model_mjcf(own, lf))
+    from_file = mujoco.MjModel.from_xml_path(str(lf.reference_mjcf))
+    assert _model_bytes(joined) == _model_bytes(from_file)
     other = load_model_params(overrides={"track.link_count": 80})
     text = model_mjcf(other, lf)
     cached = list(cache_dir().glob("lf1352-*.xml"))
@@ -67,6 +71,12 @@ def test_reference_mjcf_for_own_parameters_generated_and_cached_otherwise() -> N
     cached_mjcf.cache_clear()        # a new process: read back from the directory
     assert cached_mjcf(other, "lf1352") == text
     assert text.count("<body name=\"link_") == 80
+
+
+def _model_bytes(model: mujoco.MjModel) -> bytes:
+    buffer = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)
+    mujoco.mj_saveModel(model, None, buffer)
+    return buffer.tobytes()
 
 
 # ----------------------------------------------------------------------------- refusals
@@ -256,3 +266,57 @@ def test_random_infeasible_layouts_are_refused_with_a_message(o, how) -> None:
            "overlap": "road_wheels.x_m", "low": "sprocket.z_m"}[how]
     with pytest.raises(ParameterError, match=re.escape(key)):
         load_model_params(overrides=o | bad)
+
+
+def test_run_w1_on_a_machine_file_of_another_layout(tmp_path) -> None:
+    """A user's machine (the mirrored, front-sprocket LF1352 as mechanics, the LF1352's
+    hydraulics and control files as stand-ins) runs W1 closed loop from its machine file:
+    the model generated and cached, the idler identified on it."""
+    import json
+
+    lf = resolve("lf1352")
+    text = lf.mechanics.read_text()
+    for old, new in (("x_m = -1.10 ", "x_m = 1.10 "), ("x_m = 1.35 ", "x_m = -1.35 "),
+                     ("hitch_x_m = -1.30", "hitch_x_m = 1.30")):
+        assert old in text
+        text = text.replace(old, new, 1)
+    (tmp_path / "front.toml").write_text(text)
+    (tmp_path / "front_machine.toml").write_text(
+        f'[machine]\nname = "front"\ndescription = "LF1352 mirrored"\nmechanics = '
+        f'"front.toml"\nhydraulics = "{lf.hydraulics}"\ncontrol = "{lf.control}"\n')
+    out = tmp_path / "run"
+    assert main(["run", "W1", "--duration", "2", "--machine",
+                 str(tmp_path / "front_machine.toml"), "--out", str(out)]) == 0
+    doc = json.loads((out / "metrics.json").read_text())
+    m = doc["metrics"]
+    assert doc["run"]["files"]["machine"] == "front"
+    assert m["mujoco_warnings"] == 0
+    # W1 holds 12 kN from 1 s on: the tensioner pushes the rear idler out as commanded
+    means = m["acceptance"]      # lowest and highest 0.5 s mean from 1 s on
+    assert 0.9 * 12e3 < means["mean_min_N"] <= means["mean_max_N"] < 1.1 * 12e3
+    assert list(cache_dir().glob("front-*-idler.json"))
+
+
+def test_link_and_pin_names_past_100_links() -> None:
+    """123 links of 50 mm (pins and teeth scaled with the pitch): the plant finds every
+    link, pin and connect by name on the generated layout (no settling needed)."""
+    from trackmj.model import build_mjcf
+
+    p = load_model_params(overrides={"track.pitch_m": 0.05, "track.link_count": 123,
+                                     "track.link_mass_kg": 2.3, "track.pin_radius_m": 0.009,
+                                     "sprocket.tooth_radius_m": 0.013,
+                                     "sprocket.tooth_count": 21})
+    plant = TrackPlant(mujoco.MjModel.from_xml_string(build_mjcf(p, compute_layout(p))), p)
+    assert plant.link_count == 123 and plant.model.neq == 123
+    assert plant.model.body("link_122").id > plant.model.body("link_99").id
+    assert plant.closure_error_m < 1e-6
+
+
+@pytest.mark.parametrize("command", [["run", "W1"], ["compare", "W1"], ["report"],
+                                     ["sweep", "spec.toml"], ["drive"], ["model", "info"],
+                                     ["model", "generate"]])
+def test_every_command_takes_a_machine(command) -> None:
+    from trackmj.cli import build_parser
+
+    args = build_parser().parse_args([*command, "--machine", "my_machine.toml"])
+    assert args.machine == "my_machine.toml"

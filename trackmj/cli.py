@@ -108,7 +108,8 @@ def _cmd_model_generate(args: argparse.Namespace) -> int:
     from trackmj.model import load_model_params, write_model
 
     machine = resolve(args.machine)
-    out = args.out or machine.reference_mjcf
+    out = args.out or (machine.reference_mjcf and machine.reference_mjcf.with_name(
+        machine.reference_mjcf.name.removesuffix("_scene.xml") + ".xml"))
     if out is None:
         raise ValueError(f"machine {machine.name} has no reference_mjcf in "
                          f"{machine.file.name}: give --out FILE.xml")
@@ -543,7 +544,9 @@ def build_parser() -> argparse.ArgumentParser:
     gen.add_argument("--params", help="model parameter TOML (default: the machine's)")
     gen.add_argument("--set", metavar="model.TABLE.KEY=VALUE", action="append", default=[],
                      help="override one key of the model file (repeatable)")
-    gen.add_argument("--out", help="output MJCF path (default: the machine's reference_mjcf)")
+    gen.add_argument("--out", help="output MJCF path NAME.xml, the machine part; the scene "
+                     "NAME_scene.xml beside it includes it (default: the machine's "
+                     "reference_mjcf)")
     gen.set_defaults(func=_cmd_model_generate)
 
     drive = sub.add_parser("drive", help="drive the track with the passive tensioner")

@@ -12,7 +12,8 @@ no value entered twice)::
     control = "lf1352_control.toml"         # controllers, estimators, sensors
     idler = "lf1352_idler.toml"             # optional: the equivalent idler identified on
                                             # the reference model (else identified on demand)
-    reference_mjcf = "lf1352.xml"           # optional: the generator's committed output
+    reference_mjcf = "lf1352_scene.xml"     # optional: the generator's committed output, a
+                                            # scene (ground, light) including lf1352.xml
 
 :data:`MACHINES` is the registry of the shipped machines (every ``*_machine.toml`` in the
 packaged ``models/``); :func:`resolve` takes a registered name or a machine file path.
@@ -26,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trackmj.model.cache import cached_mjcf
+from trackmj.model.mjcf import read_mjcf
 from trackmj.model.params import ModelParams, load_model_params, models_dir
 from trackmj.params import ParameterError, Parameters, load_file, param
 
@@ -49,7 +51,8 @@ class MachineTable(Parameters):
                            "demand when absent)")
     reference_mjcf: str = param(max_len=400, default="",
                                 doc="the generator's committed output for the mechanics "
-                                    "file (optional: generated and cached when absent)")
+                                    "file: the scene MJCF, which includes the machine's "
+                                    "(optional: generated and cached when absent)")
 
 
 @dataclass(frozen=True)
@@ -150,5 +153,5 @@ def model_mjcf(params: ModelParams, machine: Machine | None = None) -> str:
     (:func:`trackmj.model.cache.cached_mjcf`)."""
     machine = resolve(machine)
     if machine.reference_mjcf is not None and is_own(params, machine):
-        return machine.reference_mjcf.read_text()
+        return read_mjcf(machine.reference_mjcf)
     return cached_mjcf(params, machine.name)

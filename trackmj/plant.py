@@ -30,6 +30,7 @@ from trackmj.model import (
     pin_name,
     with_heightfield,
 )
+from trackmj.model.mjcf import read_mjcf
 from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElement
 from trackmj.terrain import RoadProfile
 
@@ -175,7 +176,8 @@ class TrackPlant:
         param_path: a model parameter file replacing the machine's mechanics; overrides:
         ``{dotted key: value}`` of the model file (``--set model.KEY=VALUE``); xml_path: an
         MJCF file to load instead of the model of those parameters (the machine's committed
-        reference for its own parameters, else generated and cached). terrain: optional
+        reference for its own parameters, else generated and cached; a scene that includes
+        its machine part is joined with it). terrain: optional
         road profile replacing the flat ground by a heightfield (see
         :func:`trackmj.model.with_heightfield`).
         """
@@ -188,7 +190,7 @@ class TrackPlant:
             path: Path | None = Path(xml_path)
             if not path.is_file():
                 raise FileNotFoundError(f"model file not found: {path}")
-            text = path.read_text()
+            text = read_mjcf(path)
         else:
             path = mach.reference_mjcf if is_own(params, mach) else None
             text = model_mjcf(params, mach)

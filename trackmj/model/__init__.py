@@ -1,9 +1,12 @@
-"""Generator of the LF1352 track-side MuJoCo model (``models/lf1352.xml``).
+"""Generator of a machine's track-side MuJoCo model (``models/lf1352.xml`` and its scene
+``models/lf1352_scene.xml`` for the study's LF1352; any single-side layout).
 
-Subpackages, each a stage of the model: :mod:`.params` (the validated parameter file),
-:mod:`.layout` (pin positions that close the loop), :mod:`.soft` (stated stiffness and
+Subpackages, each a stage of the model: :mod:`.params` (the validated parameter file and
+its layout checks), :mod:`.layout` (pin positions that close the loop), :mod:`.geometry`
+(derived geometry: wraps, spans, static strand tension), :mod:`.soft` (stated stiffness and
 damping -> MuJoCo soft-constraint parameters), :mod:`.mjcf` (one builder per subtree, the
-heightfield terrain), :mod:`.generate` (settled ``home`` keyframe, the committed file).
+machine/scene split, the heightfield terrain), :mod:`.generate` (settled ``home``
+keyframe, the committed files), :mod:`.cache` (generated models by content hash).
 Nothing here imports the plant.
 """
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from trackmj.io import write_text_atomic
 from trackmj.model.layout import compute_layout
-from trackmj.model.mjcf import build_mjcf
+from trackmj.model.mjcf import build_mjcf, split_mjcf
 from trackmj.model.params import MODEL_NAME, ModelParams, default_xml_path, load_model_params
 from trackmj.params import ParameterError
 
@@ -60,9 +60,19 @@ def generate_mjcf(params: ModelParams | None = None, name: str = MODEL_NAME) -> 
     return build_mjcf(params, layout, home_qpos=np.round(data.qpos, 6), name=name)
 
 
+def scene_path(path: str | Path) -> Path:
+    """The scene file beside a machine's MJCF ``NAME.xml``: ``NAME_scene.xml``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}_scene.xml")
+
+
 def write_model(path: str | Path | None = None, params: ModelParams | None = None,
                 name: str = MODEL_NAME) -> Path:
-    """Generate the model and write it atomically (default: packaged lf1352.xml)."""
+    """Generate the model and write its two parts atomically (Menagerie habit): the machine
+    to ``path`` (default: packaged lf1352.xml) and the scene that includes it (ground,
+    light) to :func:`scene_path`. Returns the scene's path, the file to load."""
     path = Path(path) if path is not None else default_xml_path()
-    write_text_atomic(path, generate_mjcf(params, name))
-    return path
+    machine, scene = split_mjcf(generate_mjcf(params, name), path.name)
+    write_text_atomic(path, machine)
+    write_text_atomic(scene_path(path), scene)
+    return scene_path(path)

@@ -1,4 +1,5 @@
-"""Mechanical parameters of the LF1352 track side (``models/lf1352.toml``) as frozen dataclasses.
+"""Mechanical parameters of one track side (``models/lf1352.toml`` for the study's machine)
+as frozen dataclasses, with the checks that refuse a layout the generator cannot build.
 
 Units are SI (m, kg, N, s, rad); each field declares its allowed range with
 :func:`trackmj.params.param`, and :func:`load_model_params` refuses unknown keys, wrong types
@@ -173,7 +174,7 @@ class SolverParams(Parameters):
 
 @dataclass(frozen=True)
 class ModelParams(Parameters):
-    """All mechanical parameters of one track side (SI units, see lf1352.toml)."""
+    """All mechanical parameters of one track side (SI units, e.g. lf1352.toml)."""
 
     simulation: SimulationParams
     track: TrackParams

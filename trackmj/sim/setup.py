@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -21,15 +22,17 @@ import mujoco
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig, load_config
 from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
-from trackmj.identify import EquivalentIdler, identify_idler
+from trackmj.identify import EquivalentIdler, ModalTerm, identify_idler
+from trackmj.io import write_text_atomic
 from trackmj.machines import DEFAULT_MACHINE, Machine, is_own, mechanics, model_mjcf, resolve
 from trackmj.model import ModelParams, load_model_params
+from trackmj.model.cache import cache_dir, model_key
 from trackmj.model.mjcf import with_heightfield
 from trackmj.params import FILE_KINDS, ParameterError, parse_overrides
 from trackmj.plant import TrackPlant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.scenarios import Scenario, Variant, load_scenario
-from trackmj.sim.config import identification_for, load_idler, nominal_plant_params
+from trackmj.sim.config import SCALARS, identification_for, load_idler, nominal_plant_params
 from trackmj.sim.registry import (
     ARCHITECTURES,
     CONTROLLERS,
@@ -46,14 +49,30 @@ MAX_DURATION_S = 3600.0
 
 @functools.cache
 def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
-    """The machine's identified idler for its own mechanics, or a fresh identification on
-    another model (once per process)."""
+    """The machine's identified idler for its own mechanics, or an identification on another
+    model (cached by content hash beside its generated MJCF) at force levels relative to its
+    nominal tension (:func:`trackmj.sim.config.identification_for`: 0.8 and 1.0 x nominal,
+    the LF1352's 12 and 15 kN), the fitted mass floored at the idler and carrier's."""
     if machine.idler is not None and is_own(params, machine):
         return load_idler(machine.idler)
-    return identify_idler(lambda: TrackPlant(
+    path = cache_dir() / f"{machine.name}-{model_key(params)[:32]}-idler.json"
+    try:
+        data = json.loads(path.read_text())
+        return EquivalentIdler(**data["idler"], modes=tuple(ModalTerm(**m)
+                                                            for m in data["modes"]))
+    except (FileNotFoundError, ValueError, KeyError, TypeError):
+        pass
+    idler = identify_idler(lambda: TrackPlant(
         mujoco.MjModel.from_xml_string(model_mjcf(params, machine)), params),
         **identification_for(params.nominal_tension_N),
         min_mass_kg=params.idler.mass_kg + params.idler.carrier_mass_kg)
+    record = {"idler": {name: float(getattr(idler, name)) for name in SCALARS},
+              "modes": [dataclasses.asdict(m) for m in idler.modes]}
+    try:
+        write_text_atomic(path, json.dumps(record))
+    except OSError:
+        pass
+    return idler
 
 
 @functools.cache
