@@ -51,8 +51,8 @@ def test_machine_file_resolves_relative_paths_and_names_a_missing_file(tmp_path)
     with pytest.raises(ParameterError, match=r"mine_machine\.toml \[machine\]\.control = "
                                              r"'nowhere\.toml': no such file"):
         load_machine(path)
-    with pytest.raises(ParameterError, match=r"machine 'm1' : not a shipped machine|"
-                                             r"machine 'm1': not a shipped machine \(lf1352"):
+    with pytest.raises(ParameterError, match=r"machine 'm1': not a shipped machine "
+                                             r"\([a-z0-9, ]*lf1352"):
         resolve("m1")
 
 

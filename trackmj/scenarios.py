@@ -12,22 +12,31 @@ prescribes set-point changes (docs/sizing.md says what a drop means for each mod
 Units are SI: s, N, Pa, m/s; forces are F_ten (the cylinder force on the idler carrier, see
 README "Tension convention").
 
-File layout; every table is required except [supply], the arrays of tables are optional
-(a condition has no steps, ramps, drops, pulses or variants unless it lists them)::
+File layout; every table is required except [supply] and [limits], the arrays of tables
+are optional (a condition has no steps, ramps, drops, pulses or variants unless it lists
+them)::
 
-    [scenario]    name, title, duration_s, seeds, controller, estimator
+    [scenario]    name, title, duration_s, seeds, controller, estimator,
+                  machines, machines_reason (optional: the only machines it applies to)
     [track]       speed_m_s, ramp_s
-    [reference]   initial_N; [[reference.steps]] time_s, delta_N;
-                  [[reference.ramps]] start_s, rate_N_s, end_s (optional: to the end)
-    [supply]      model (optional); [[supply.drops]] start_s, end_s, pressure_Pa, transition_s
+    [reference]   initial_N | initial_rel; [[reference.steps]] time_s, delta_N | delta_rel;
+                  [[reference.ramps]] start_s, rate_N_s | rate_rel_s, end_s (optional)
+    [supply]      model (optional); [[supply.drops]] start_s, end_s,
+                  pressure_Pa | pressure_rel, transition_s
     [terrain]     kind; for kind = "iso8608" also road_class, n_min_cycles_m, n_max_cycles_m,
                   dx_m, x_start_m, flat_until_m, taper_m, margin_m (for "flat" they are
                   optional and unused, so ``--set scenario.terrain.kind=flat`` works on W2)
-    [[load_pulses]] start_s, end_s, delta_N, hitch_N, pull_angle_deg, rise_s
+    [[load_pulses]] start_s, end_s, delta_N | delta_rel, hitch_N, pull_angle_deg, rise_s
     [[variants]]  name, bulk_modulus_scale, friction_scale, contact_stiffness_scale,
                   pretension_scale (each scale optional, default 1: a variant names only
                   what it changes; if variants are listed one must be "nominal")
-    [limits]      force_min_N, force_max_N
+    [limits]      force_min_N, force_max_N (each optional: the machine's band)
+
+A force is absolute (``*_N``) or relative to the machine's nominal tension (``*_rel``, the
+mechanics file's ``[tensioner].nominal_tension_N``, else its preload); a drop pressure
+absolute or relative to the hydraulic file's set-point; exactly one of each pair.
+:func:`load_scenario` resolves them for the machine it is given (default the packaged one),
+so a :class:`Scenario` holds absolute values only.
     [evaluation]  start_s, steady_start_s, settle_band_rel, min_hold_s, lowpass_cutoff_Hz,
                   tooth_band_rel, body_mode_band_Hz, psd_resolution_Hz, psd_max_Hz
 
@@ -53,7 +62,15 @@ import numpy as np
 
 from trackmj.hydraulics.params import PressureProfile, SupplyModel
 from trackmj.metrics import MetricWindows
-from trackmj.params import Location, ParameterError, Parameters, construct, load_file, param
+from trackmj.params import (
+    Location,
+    ParameterError,
+    Parameters,
+    build,
+    construct,
+    param,
+    read_toml,
+)
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.sim.registry import CONTROLLERS, ESTIMATORS, by_name, choices
 from trackmj.terrain import ISO8608_GD_N0_M3, RoadProfile, road_profile, taper_start
@@ -625,6 +642,25 @@ def scenario_path(name_or_path: str | Path) -> Path:
     return path
 
 
+TWINS = {"initial_N": "initial_rel", "delta_N": "delta_rel", "rate_N_s": "rate_rel_s",
+         "pressure_Pa": "pressure_rel"}
+"""Absolute keys and their relative twins (exactly one of a pair is given)."""
+
+
+def _drop_twin(data: dict[str, Any], dotted: str) -> None:
+    """An override of one key of a twin pair replaces the other one of the file."""
+    *parents, key = dotted.split(".")
+    twin = TWINS.get(key) or next((a for a, r in TWINS.items() if r == key), None)
+    node: Any = data
+    for part in parents:
+        try:
+            node = node[int(part)] if isinstance(node, list) else node[part]
+        except (KeyError, IndexError, ValueError, TypeError):
+            return
+    if twin is not None and isinstance(node, dict):
+        node.pop(twin, None)
+
+
 def _packaged_nominal() -> tuple[float, float]:
     """Nominal tension [N] and supply set-point [Pa] of the packaged machine."""
     from trackmj.hydraulics import load_hydraulic_params
@@ -686,7 +722,10 @@ def load_scenario(name_or_path: str | Path,
         Every value absolute.
     """
     path = scenario_path(name_or_path)
-    f = load_file(ScenarioFile, path, overrides=overrides, require_source=False)
+    data = read_toml(path)
+    for key in overrides or {}:
+        _drop_twin(data, str(key))
+    f = build(ScenarioFile, data, file=path.name, overrides=overrides, require_source=False)
     if nominal_tension_N is None or supply_setpoint_Pa is None:
         packaged = _packaged_nominal()
         nominal_tension_N = packaged[0] if nominal_tension_N is None else nominal_tension_N
