@@ -77,8 +77,8 @@ def calibration_pulse(hitch_N: float, pull_angle_deg: float, rise_s: float,
                       plateau_s: float) -> LoadPulse:
     """A pulse from START_S with the given hitch force [N], angle [deg], edges [s] and
     plateau [s] (target change left at 0)."""
-    return LoadPulse(START_S, START_S + rise_s + plateau_s, 0.0, hitch_N, pull_angle_deg,
-                     rise_s)
+    return LoadPulse(start_s=START_S, end_s=START_S + rise_s + plateau_s, delta_N=0.0,
+                     hitch_N=hitch_N, pull_angle_deg=pull_angle_deg, rise_s=rise_s)
 
 
 def load_change_N(scenario: Scenario, hitch_N: float, pull_angle_deg: float, *,
