@@ -823,7 +823,10 @@ def describe_schema(cls: type, prefix: str = "") -> list[KeySpec]:
             default = None if fld.required else repr(f.default if f.default is not
                                                       dataclasses.MISSING else f.default_factory())
             choices = f"one of {list(fld.spec.choices)}" if fld.spec.choices else ""
-            rows.append(KeySpec(key, _expected(fld.hint), fld.spec.unit or "",
+            expected = _expected(fld.hint)
+            if fld.spec.allow_empty:
+                expected = expected.replace("a non-empty array", "an array (may be empty)")
+            rows.append(KeySpec(key, expected, fld.spec.unit or "",
                                 fld.spec.range_text() or choices, default, fld.spec.doc))
     return rows
 
