@@ -311,8 +311,8 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def _cmd_keys(args: argparse.Namespace) -> int:
+    from trackmj.campaign import file_schema
     from trackmj.params import FILE_KINDS, describe_schema
-    from trackmj.sweeps import file_schema
 
     unknown = [k for k in args.kinds if k not in FILE_KINDS]
     if unknown:

@@ -52,26 +52,7 @@ import pyarrow.parquet as pq
 
 from trackmj import __version__
 from trackmj.io import current_umask
-
-COLUMN_UNITS: dict[str, str] = {
-    "t_s": "s",
-    "tension_N": "N",
-    "tension_ref_N": "N",
-    "p_head_Pa": "Pa",
-    "p_rod_Pa": "Pa",
-    "p_supply_Pa": "Pa",
-    "stroke_m": "m",
-    "stroke_velocity_m_s": "m/s",
-    "q_supply_m3_s": "m^3/s",
-    "valve_mode": "1",
-    "u": "1",
-    "e_supply_J": "J",
-    "p_work_J": "J",
-    "mech_work_J": "J",
-    "chassis_acc_z_m_s2": "m/s^2",
-    "closure_error_m": "m",
-}
-"""Contract columns of a closed-loop run in order, with their units ("1": dimensionless)."""
+from trackmj.ports import COLUMN_UNITS
 
 INT_COLUMNS = {"valve_mode": pa.int8()}
 NUMPY_TYPES = {pa.float64(): np.float64, pa.int8(): np.int8}
