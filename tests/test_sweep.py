@@ -205,10 +205,13 @@ def executor():
 
 @pytest.fixture(scope="module")
 def grid(executor, tmp_path_factory):
-    """2 x 2 grid of 1.5 s W1 runs: standing / driven track x soft / stiff oil."""
+    """2 x 2 grid of 1.5 s W1 runs: standing / driven track x soft / stiff oil; the step
+    and ramp, moved inside the short runs, are of zero size (a constant reference)."""
     out = tmp_path_factory.mktemp("grid")
     spec = _spec(parameters=[{"key": SPEED, "values": [0.0, 1.5]},
-                             {"key": BULK, "values": [0.8e9, 1.6e9]}])
+                             {"key": BULK, "values": [0.8e9, 1.6e9]}],
+                 set=["scenario.reference.steps.0.delta_N=0",
+                      "scenario.reference.ramps.0.rate_N_s=0"])
     summary = sweep(spec, out, executor=executor, progress=False)
     return out, spec, summary
 

@@ -226,7 +226,8 @@ def is_key_column(name: str) -> bool:
 
 def column_unit(name: str) -> str:
     """Unit of a results (or timeseries) column: a key's declared unit, a timeseries
-    column's unit (:data:`trackmj.ports.COLUMN_UNITS`), else its name's SI suffix."""
+    column's unit (:data:`trackmj.ports.COLUMN_UNITS`), else its name's SI suffix (for a
+    flattened table entry ``table.key`` the key's, else the table's)."""
     from trackmj.ports import COLUMN_UNITS
 
     if is_key_column(name):
@@ -235,7 +236,11 @@ def column_unit(name: str) -> str:
         return COLUMN_UNITS[name]
     if name in ("point", "seed"):
         return "1"
-    return unit_from_name(name.rsplit(".", 1)[-1]) or ""
+    for part in reversed(name.split(".")):   # a table entry: the table's unit (energy_J.pump)
+        unit = unit_from_name(part)
+        if unit:
+            return unit
+    return ""
 
 
 # ----------------------------------------------------------------------------- the store

@@ -171,20 +171,61 @@ def _tensioner_line(described: dict) -> str:
             f"(dF/dv: {described['dF_dv']}){per_step}")
 
 
+def run_folder(setup: object, key: str, *, defaults: bool) -> Path:
+    """Default folder of ``trackmj run``: ``runs/SCENARIO-ARCH-CONTROLLER-sSEED`` for the
+    scenario's own inputs (``defaults``), with ``-VARIANT`` for a W5 variant and the first
+    8 digits of the inputs' hash (:func:`trackmj.campaign.inputs_key`) for any other input
+    (estimator, --duration, --set, parameter or tensioner files), so that runs of other
+    inputs never share a folder."""
+    name = (f"{setup.scenario.name}-{setup.architecture}-{setup.controller}-"
+            f"s{setup.seed}")
+    if setup.variant.name != "nominal":
+        name += f"-{setup.variant.name}"
+    if not defaults:
+        name += f"-{key[:8]}"
+    return Path("runs") / name
+
+
+def _stored_inputs_key(out: Path) -> str | None:
+    """The inputs key of the run in folder ``out`` ('' for a run without one, None if
+    ``out`` holds no run)."""
+    import json
+
+    from trackmj.results import METRICS
+
+    try:
+        doc = json.loads((out / METRICS).read_text())
+    except (OSError, ValueError):
+        return None
+    return str(doc.get("run", {}).get("inputs_key", ""))
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
+    from trackmj.campaign import inputs_key, run_key, stamped
     from trackmj.figures import run_figure
     from trackmj.playback import RUN_RRD
-    from trackmj.results import ResultWriter
+    from trackmj.results import ResultDirectoryError, ResultWriter
+    from trackmj.scenarios import check_duration
     from trackmj.sim.run import run
     from trackmj.sim.setup import prepare
 
     setup = prepare(args.scenario, architecture=args.arch, controller=args.controller,
                     estimator=args.estimator, seed=args.seed, duration=args.duration,
                     variant=args.variant, **_files(args))
-    out = Path(args.out or f"runs/{setup.scenario.name}-{setup.architecture}-"
-                           f"{setup.controller}-s{setup.seed}")
+    check_duration(setup.scenario, setup.duration_s)
+    key = inputs_key(setup)
+    defaults = not (args.estimator or args.duration is not None or args.set or args.model
+                    or args.hydraulics or args.control or args.tensioner)
+    out = Path(args.out) if args.out else run_folder(setup, key, defaults=defaults)
+    held = _stored_inputs_key(out)
+    if held is not None and held != key and not args.overwrite:
+        what = f"inputs {held[:8]}" if held else "no inputs key: an older trackmj"
+        raise ResultDirectoryError(
+            f"--out {out}: holds a run of other inputs ({what}; this run's are {key[:8]}); "
+            "give --overwrite to replace it, or another --out")
     with ResultWriter(out) as writer:
         result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True)
+        result = stamped(result, inputs_key=key, run_key=run_key(setup))
         writer.commit(result, csv=args.csv,
                       extras={"timeseries.png": lambda path: run_figure(result, path)})
     print(f"{setup.scenario.name} ({setup.scenario.title}), {result.architecture}, "
@@ -489,6 +530,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--variant", default="nominal", help="W5 variant name")
     run.add_argument("--csv", action="store_true", help="also write timeseries.csv")
     run.add_argument("--rrd", action="store_true", help="also write a Rerun recording")
+    run.add_argument("--overwrite", action="store_true", help="replace a result of other "
+                     "inputs in the output folder (the same inputs replace it anyway)")
     run.set_defaults(func=_cmd_run)
 
     compare = sub.add_parser("compare", help="all architectures on one scenario, with each "

@@ -263,10 +263,27 @@ def _json_read(value: Any) -> Any:
         else value
 
 
+NUMERIC_METADATA = {"seed": int, "duration_s": float}
+"""Run metadata written as numbers in metrics.json (the Arrow metadata holds strings)."""
+
+
+def _metadata_value(key: str, text: str) -> Any:
+    if text.startswith("{"):
+        return json.loads(text)
+    kind = NUMERIC_METADATA.get(key)
+    if kind is not None:
+        try:
+            return kind(text)
+        except ValueError:
+            return text
+    return text
+
+
 def metrics_json(result: Result) -> str:
     """The text of ``metrics.json`` for ``result``; metadata stored as JSON objects (e.g. the
-    files and overrides of the run) are written as objects."""
-    run = {k: json.loads(v) if v.startswith("{") else v for k, v in result.metadata.items()}
+    files and overrides of the run) are written as objects, the seed and the duration
+    (:data:`NUMERIC_METADATA`) as numbers."""
+    run = {k: _metadata_value(k, v) for k, v in result.metadata.items()}
     return json.dumps({"run": run, "metrics": _json_ready(result.metrics)},
                       indent=2, sort_keys=True, allow_nan=False) + "\n"
 
