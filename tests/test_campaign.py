@@ -148,3 +148,54 @@ def test_moved_events_keep_their_order_inside_the_run():
     windows = moved.metric_windows(8.0).disturbances
     assert len(windows) == 2 and all(0.0 < on < off < 8.0 for on, off in windows)
     assert moved_events(sc, 30.0) == {} and moved_events(load_scenario("W2"), 2.0) == {}
+
+
+# ----------------------------------------------------------------------------- real runs
+
+def test_report_and_sweep_give_identical_numbers_for_the_same_runs(tmp_path):
+    """The same W1 tp run (1.5 s, its step and ramp moved inside) planned by the report and
+    by a sweep: one identity, and the same numbers in both results.parquet files."""
+    from trackmj import report
+    from trackmj.executor import Executor
+    from trackmj.sweeps import sweep
+
+    runs = report.plan(["W1"], [0], 1.5, archs=["tp"], baselines=())
+    spec = {"sweep": {"scenario": "W1", "duration_s": 1.5}}
+    with Executor(workers=1) as ex:
+        report.run_matrix(runs, tmp_path / "report", progress=False, executor=ex)
+        summary = sweep(spec, tmp_path / "sweep", executor=ex, progress=False, plot=False)
+    assert summary.ran == 1
+    (a,) = campaign.read_rows(tmp_path / "report" / campaign.RESULTS)
+    (b,) = campaign.read_rows(tmp_path / "sweep" / campaign.RESULTS)
+    assert a["run_key"] == b["run_key"] == runs[0].key
+    timing = ("wall_time_s", "real_time_factor", "solve_time")   # this machine's clock
+    numbers = [k for k, v in a.items() if isinstance(v, float) and not k.startswith(timing)
+               and "time_factor" not in k]
+    assert len(numbers) > 50 and a["rmse_N"] > 0
+    differ = [k for k in numbers if not (a[k] == b[k] or math.isnan(a[k]) and math.isnan(b[k]))]
+    assert differ == []
+
+
+def test_two_runs_with_different_set_keep_both_results(tmp_path, monkeypatch, capsys):
+    """trackmj run never replaces a result of other inputs: a run with --set gets its own
+    default folder; the same inputs again replace theirs; --out onto another run's folder
+    needs --overwrite."""
+    monkeypatch.chdir(tmp_path)
+    base = ["run", "W2", "--duration", "1.2"]
+    soft = [*base, "--set", "hydraulics.fluid.bulk_modulus_Pa=1.2e9"]
+    assert main(base) == 0 and main(soft) == 0
+    folders = sorted(p for p in (tmp_path / "runs").iterdir() if not p.name.startswith("."))
+    assert len(folders) == 2 and all(f.name.startswith("W2-tp-nmpc-s0-") for f in folders)
+    docs = [json.loads((f / "metrics.json").read_text()) for f in folders]
+    assert {d["run"]["overrides"].get("hydraulics.fluid.bulk_modulus_Pa") for d in docs} \
+        == {None, 1.2e9}
+    assert docs[0]["run"]["seed"] == 0 and docs[0]["run"]["duration_s"] == 1.2   # numbers
+    assert docs[0]["metrics"]["rmse_N"] != docs[1]["metrics"]["rmse_N"]
+    capsys.readouterr()
+    target = next(f for f, d in zip(folders, docs, strict=True) if d["run"]["overrides"])
+    assert main([*base, "--out", str(target)]) == 2
+    assert "holds a run of other inputs" in capsys.readouterr().err
+    assert main(soft) == 0                          # the same inputs: replaced in place
+    assert len([p for p in (tmp_path / "runs").iterdir() if not p.name.startswith(".")]) == 2
+    assert main([*base, "--out", str(target), "--overwrite"]) == 0
+    assert not json.loads((target / "metrics.json").read_text())["run"]["overrides"]
