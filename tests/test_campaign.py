@@ -172,7 +172,8 @@ def test_report_and_sweep_give_identical_numbers_for_the_same_runs(tmp_path):
     numbers = [k for k, v in a.items() if isinstance(v, float) and not k.startswith(timing)
                and "time_factor" not in k]
     assert len(numbers) > 50 and a["rmse_N"] > 0
-    differ = [k for k in numbers if not (a[k] == b[k] or math.isnan(a[k]) and math.isnan(b[k]))]
+    differ = [k for k in numbers
+              if not (a[k] == b[k] or (math.isnan(a[k]) and math.isnan(b[k])))]
     assert differ == []
 
 

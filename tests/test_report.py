@@ -10,7 +10,7 @@ from synthetic import energy_table, synthetic_result
 
 from trackmj import report as R
 from trackmj.cli import _summary_table, main
-from trackmj.results import read_result, write_result
+from trackmj.results import read_result
 
 
 def test_verdict_on_reductions_follows_its_rules() -> None:

@@ -69,9 +69,8 @@ def _cmd_model_generate(args: argparse.Namespace) -> int:
 def _cmd_drive(args: argparse.Namespace) -> int:
     from trackmj.drive import drive
 
-    preload = None if args.preload is None else args.preload * 1e3
     result = drive(args.speed, args.duration, model=args.model, params=args.params,
-                   preload_N=preload, out_dir=args.out, tensioner=args.tensioner)
+                   preload_N=args.preload, out_dir=args.out, tensioner=args.tensioner)
     m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
     print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s: {m['real_time_factor']:.2f}x "
           f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
@@ -248,6 +247,7 @@ def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     from trackmj.report import compare, write_compare
+    from trackmj.scenarios import check_duration
     from trackmj.sim.setup import prepare
 
     controllers = args.controllers.split(",") if args.controllers else [None]
@@ -256,6 +256,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     controllers = [str(c) if c else s.controller for c, s in zip(controllers, setups,
                                                                  strict=True)]
     scenario = setups[0].scenario
+    check_duration(scenario, setups[0].duration_s)
     out = Path(args.out or f"runs/compare-{scenario.name}")
     base = _specs_base(args, str(args.scenario))
     outcome = compare(base, controllers, out, seed=args.seed,
@@ -336,9 +337,10 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     loaded = [load_scenario(name) for name in BUILTIN]
     width = max(len(sc.name) for sc in loaded) + 2
     for sc in loaded:
-        variants = f", {len(sc.variants)} variants" if len(sc.variants) > 1 else ""
         print(f"{sc.name:<{width}}{sc.title} ({sc.duration_s:g} s, {sc.controller}/"
-              f"{sc.estimator}{variants})")
+              f"{sc.estimator})")
+        if len(sc.variants) > 1:
+            print(f"{'':<{width}}--variant " + ", ".join(v.name for v in sc.variants))
     print("or any scenario TOML file in the same format (experiments/*.toml)")
     for title, registry in (("architectures (--arch)", ARCHITECTURES),
                             ("controllers (--controller)", CONTROLLERS),
@@ -483,7 +485,8 @@ def build_parser() -> argparse.ArgumentParser:
     model_args(drive)
     drive.add_argument("--speed", type=float, default=1.5, help="sprocket pitch speed [m/s]")
     drive.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
-    drive.add_argument("--preload", type=float, help="tensioner preload [kN]")
+    drive.add_argument("--preload", type=float, metavar="N",
+                       help="tensioner preload [N], e.g. 12e3")
     drive.add_argument("--out", help="directory for metrics.json and timeseries.parquet")
     tensioner_arg(drive)
     drive.set_defaults(func=_cmd_drive)
@@ -569,7 +572,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="output directory, resumed if it holds a sweep "
                             "(default: runs/sweep-SPEC_NAME)")
     sweep.add_argument("--plot", metavar="DIR",
-                       help="only redraw DIR/figures from DIR/results.parquet")
+                       help="only redraw DIR/figures from DIR/results.parquet (a resumed "
+                            "sweep that makes no run keeps the figures that exist)")
     sweep.add_argument("--keep-runs", action="store_true",
                        help="also write each run's result directory under DIR/runs/")
     sweep.add_argument("--retry-failed", action="store_true",

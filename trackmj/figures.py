@@ -103,7 +103,7 @@ def _legend_above(ax: Axes, ncol: int | None = None, **kwargs: Any) -> None:
     handles, labels = ax.get_legend_handles_labels()
     if handles:
         ax.legend(handles, labels, loc="lower left", bbox_to_anchor=(0.0, 1.01),
-                  ncol=ncol or len(handles), frameon=False, fontsize=8,
+                  ncol=ncol or len(handles), frameon=False, fontsize=9,
                   handlelength=3.0, borderaxespad=0.0, columnspacing=1.2, **kwargs)
 
 
@@ -203,57 +203,107 @@ def _tension_panel(ax: Axes, runs: Sequence[tuple[str, Result]], w: MetricWindow
     ax.grid(alpha=0.3)
 
 
-def _energy_bars(ax: Axes, labels: Sequence[str], results: Sequence[Result]) -> None:
-    """Stacked bars of each run's energy terms [kJ] (positive terms up, negative down) with
-    the totals (pump, circuit) as black ticks; a note where a run has no energy_J table."""
-    terms = [energy_terms(r.metrics) for r in results]
-    names: list[str] = []
-    for e in terms:
-        names += [k for k in e.terms if k not in ENERGY_TOTALS and k not in names]
-    # the circuit's sinks first, so the circuit tick meets their top; the relief last, so the
-    # pump tick meets the top of the stack (when nothing is released from storage)
-    names.sort(key=lambda k: ENERGY_ORDER.index(k) if k in ENERGY_ORDER else len(ENERGY_ORDER))
+SUPPLY_SIDE = ("pump_losses", "relief", "stored_change.supply_oil",
+               "stored_change.accumulator", "numerical.supply")
+"""Terms of the energy table between the pump and the main valve's P port (the rest of the
+terms, but the residual, lie between the P port and the track: the circuit's)."""
+ENERGY_LABELS = {
+    "numerical": "numerical (backward-Euler dissipation of the pressure nodes, the chamber "
+                 "volume term and the 1 ms coupling's interface residual)",
+    "stored_change": "stored_change (oil and gas energy, end − start)",
+    "residual": "residual (pump − every term: the bookkeeping check)",
+    "mechanical": "mechanical (work into the track, ∫F·v dt)",
+}
+"""Legend text of the energy terms that need a word of explanation."""
+
+
+def energy_waterfall(metrics: Mapping[str, Any]) -> tuple[list[tuple[str, float]],
+                                                           list[tuple[str, float]]]:
+    """A run's energy terms [J] in the order of the waterfall: (circuit terms, then the
+    supply-side terms and the residual), each a list of (term, value); sub-terms summed per
+    term and side (``stored_change`` and ``numerical`` have a share on each side). Running
+    sums: after the circuit terms the circuit total, after all the pump total."""
+    table = metrics.get("energy_J")
+    if not isinstance(table, Mapping):
+        return [], []
+    sides: tuple[dict[str, float], dict[str, float]] = ({}, {})
+    for key, value in table.items():
+        if key in ENERGY_TOTALS or isinstance(value, str | bool):
+            continue
+        items = value.items() if isinstance(value, Mapping) else [(None, value)]
+        for sub, v in items:
+            if isinstance(v, str | bool) or not math.isfinite(float(v)):
+                continue
+            full = key if sub is None else f"{key}.{sub}"
+            supply = key in SUPPLY_SIDE or full in SUPPLY_SIDE or key == "residual"
+            side = sides[1 if supply else 0]
+            side[key] = side.get(key, 0.0) + float(v)
+
+    def order(item: tuple[str, float]) -> int:
+        return ENERGY_ORDER.index(item[0]) if item[0] in ENERGY_ORDER else len(ENERGY_ORDER)
+
+    return (sorted(sides[0].items(), key=order), sorted(sides[1].items(), key=order))
+
+
+def _energy_bars(ax: Axes, labels: Sequence[str], results: Sequence[Result], *,
+                 below: bool = False) -> None:
+    """Each run's energy as a waterfall [kJ]: the circuit's terms from zero, each bar from the
+    running sum (a negative term, e.g. energy released from storage, goes down), so the
+    circuit total (dashed tick) stands where its terms end; then the supply-side terms
+    (relief, pump losses, supply storage) up to the pump total (solid tick). A note where a
+    run has no energy_J table. ``below``: the legend under the panel (else beside it)."""
     spare = iter(["#777777", "#444444", "#AAAAAA"])
     drawn: set[str] = set()
-    for x, e in enumerate(terms):
-        up = down = 0.0
-        for name in names:
-            value = e.terms.get(name, math.nan) / 1e3
-            if not math.isfinite(value) or value == 0.0:
-                continue
+    for x, r in enumerate(results):
+        circuit_terms, supply_terms = energy_waterfall(r.metrics)
+        circuit_terms = [t for t in circuit_terms if t[1] != 0.0]
+        steps = circuit_terms + [t for t in supply_terms if t[1] != 0.0]
+        if not steps:
+            continue
+        width = 0.8 / len(steps)
+        left = x - 0.4
+        end_circuit = left + width * len(circuit_terms)
+        running = 0.0
+        totals = energy_terms(r.metrics).terms
+        for k, (name, value) in enumerate(steps):
             colour, hatch = ENERGY_STYLES.get(name) or ENERGY_STYLES.setdefault(
                 name, (next(spare, "#777777"), "||"))
-            bottom = up if value > 0 else down
-            ax.bar(x, value, bottom=bottom, width=0.6, color=colour, hatch=hatch,
-                   edgecolor="black", lw=0.5, label=None if name in drawn else name)
+            ax.bar(left + width * (k + 0.5), value / 1e3, bottom=running / 1e3, width=width,
+                   color=colour, hatch=hatch, edgecolor="black", lw=0.5,
+                   label=None if name in drawn else ENERGY_LABELS.get(name, name))
             drawn.add(name)
-            if value > 0:
-                up += value
-            else:
-                down += value
-        for total, ls in zip(ENERGY_TOTALS, ("-", "--"), strict=True):
-            value = e.terms.get(total, math.nan) / 1e3
-            if math.isfinite(value):
-                ax.hlines(value, x - 0.42, x + 0.42, color="black", lw=2.0, ls=ls,
-                          label=None if total in drawn else f"{total} (total in)")
+            running += value
+        for total, ls, x0, x1 in (("circuit", "--", left, end_circuit),
+                                  ("pump", "-", left, x + 0.4)):
+            value = totals.get(total, math.nan) / 1e3
+            if math.isfinite(value) and x1 > x0:
+                ax.hlines(value, x0, x1, color="black", lw=2.0, ls=ls,
+                          label=None if total in drawn else f"{total} total (energy in)")
                 drawn.add(total)
     by_note: dict[str, list[str]] = {}
-    for lab, e in zip(labels, terms, strict=True):
-        for n in e.notes:
+    for lab, r in zip(labels, results, strict=True):
+        for n in energy_terms(r.metrics).notes:
             by_note.setdefault(n, []).append(lab)
-    lines = [textwrap.fill(f"{', '.join(labs)}: {n}", 70) for n, labs in by_note.items()]
+    lines = [textwrap.fill(f"{', '.join(labs)}: {n}", 60) for n, labs in by_note.items()]
     if lines:     # in head room above the bars, not over them
         low, high = ax.get_ylim()
         rows = sum(line.count("\n") + 1 for line in lines)
-        ax.set_ylim(low, high + (0.1 * rows + 0.1) * (high - low))
-        ax.text(0.02, 0.98, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=7)
+        ax.set_ylim(low, high + (0.12 * rows + 0.1) * (high - low))
+        ax.text(0.02, 0.98, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=9)
     ax.axhline(0.0, color="black", lw=0.6)
     ax.set_xticks(range(len(labels)), labels, rotation=20)
     ax.set_xlim(-0.6, len(labels) - 0.4)
     ax.set_ylabel("energy [kJ]")
+    ax.set_title("energy, waterfall: circuit terms, then supply side", fontsize=10, loc="left")
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, fontsize=7,
-              borderaxespad=0.0)   # beside the bars: the breakdown has a dozen terms
+    handles, names = ax.get_legend_handles_labels()
+    if below:      # a narrow panel: the dozen terms under it, in two columns
+        ax.legend(handles, [textwrap.fill(n, 38) for n in names], loc="upper center",
+                  bbox_to_anchor=(0.5, -0.12), ncol=2, frameon=False, fontsize=9,
+                  borderaxespad=0.0)
+    else:
+        ax.legend(handles, [textwrap.fill(n, 42) for n in names], loc="upper left",
+                  bbox_to_anchor=(1.01, 1.0), frameon=False, fontsize=9, borderaxespad=0.0)
 
 
 def run_figure(result: Result, path: str | Path) -> Path:
@@ -265,10 +315,11 @@ def run_figure(result: Result, path: str | Path) -> Path:
     t = c["t_s"]
     t_end = float(t[-1])
     zooms = _zoom_windows(w, t_end)
-    fig = plt.figure(figsize=(16, 11), layout="constrained")
-    outer = fig.add_gridspec(1, 2, width_ratios=(2.2, 1.0))
+    fig = plt.figure(figsize=(16, 12), layout="constrained")
+    outer = fig.add_gridspec(1, 2, width_ratios=(2.0, 1.0))
     left = outer[0].subgridspec(4, 1, height_ratios=(3.0, 2.0, 1.1, 1.1))
-    right = outer[1].subgridspec(len(zooms) + 1, 1, height_ratios=(*[1.0] * len(zooms), 1.4))
+    right = outer[1].subgridspec(len(zooms) + 1, 1,
+                                 height_ratios=(*[1.0] * len(zooms), 1.2 + 0.6 * len(zooms)))
     ax_f = fig.add_subplot(left[0])
     ax_p = fig.add_subplot(left[1], sharex=ax_f)
     ax_v = fig.add_subplot(left[2], sharex=ax_f)
@@ -298,8 +349,11 @@ def run_figure(result: Result, path: str | Path) -> Path:
     ax_v.set_ylabel("mode [-]")
     _shade_events(ax_v, w, t_end, label=False)
     ax_v.grid(alpha=0.3)
-    ax_u.plot(t, c["u"], color="#0072B2", lw=0.6, label="valve opening u")
+    ax_u.plot(t, c["u"], color="#0072B2", lw=0.6,
+              label="u: the controller's command in [−1, 1] (> 0 pressurize, < 0 release), "
+                    "which the valve logic turns into the modes above")
     ax_u.set_ylabel("u [-]")
+    _legend_above(ax_u)
     ax_u.set_xlabel("time [s]")
     _shade_events(ax_u, w, t_end, label=False)
     ax_u.grid(alpha=0.3)
@@ -311,7 +365,8 @@ def run_figure(result: Result, path: str | Path) -> Path:
                        raw_as_line=True)
         ax.set_title(f"zoom: {title}", fontsize=9, loc="left")
         ax.set_xlabel("time [s]")
-    _energy_bars(fig.add_subplot(right[len(zooms)]), [result.architecture], [result])
+    _energy_bars(fig.add_subplot(right[len(zooms)]), [result.architecture], [result],
+                 below=True)
     fig.suptitle(f"{result.scenario} {result.architecture} {result.controller}/"
                  f"{result.estimator} seed {result.seed}, variant "
                  f"{result.metadata.get('variant', 'nominal')}")
@@ -337,7 +392,7 @@ def _bars(ax: Axes, labels: Sequence[str], series: Mapping[str, Sequence[float]]
         colour = STYLES[name]["color"] if name in STYLES else shades[j % 4]
         bars = ax.bar(x, values, width=width, color=colour, hatch=hatches[j % 4],
                       edgecolor="0.6" if name == "tp" else "black", lw=0.5, label=name)
-        ax.bar_label(bars, labels=[_number(v, values) for v in values], fontsize=7,
+        ax.bar_label(bars, labels=[_number(v, values) for v in values], fontsize=9,
                      padding=1)
     ax.axhline(0.0, color="black", lw=0.6)
     ax.set_xticks(range(len(labels)), labels, rotation=20)
