@@ -270,13 +270,15 @@ class Store:
     """A campaign directory of kind ``kind`` (``with Store(out, "sweep") as store:``): the
     ``--out`` guard, the lock, ``campaign.json``, the rows of ``results.parquet`` and the run
     directories. ``markers``: other names that show a directory is one of this kind (e.g. a
-    report written before campaign.json existed)."""
+    report written before campaign.json existed); ``what``: its name in messages; ``runs``:
+    the subdirectory of the run directories ("." for the campaign directory itself)."""
 
-    def __init__(self, out: str | Path, kind: str, markers: Sequence[str] = ()) -> None:
+    def __init__(self, out: str | Path, kind: str, markers: Sequence[str] = (),
+                 what: str | None = None, runs: str = RUNS) -> None:
         self.kind = kind
-        self.out = check_campaign_dir(out, (CAMPAIGN, RESULTS, *markers), kind)
+        self.out = check_campaign_dir(out, (CAMPAIGN, RESULTS, *markers), what or kind)
         self.results = self.out / RESULTS
-        self.runs = self.out / RUNS
+        self.runs = self.out / runs
         self._fh: Any = None
         self.rows: dict[str, dict[str, Any]] = {}
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from trackmj.campaign import PlannedRun, Store, check_campaign_dir, finite, plan_run, run_campaign
 from trackmj.campaign import mean_std as statistics
-from trackmj.executor import Executor, RunOutcome, RunSpec, overrides_tuple
+from trackmj.executor import RunOutcome, RunSpec, overrides_tuple
 from trackmj.figures import (
     overlay_figure,
     psd_figure,
@@ -51,7 +51,7 @@ from trackmj.metrics import (
     lookup,
     prediction_vs_tp,
 )
-from trackmj.results import Result, write_result
+from trackmj.results import Result
 from trackmj.results import _json_ready as jsonable  # the one JSON form of metrics
 from trackmj.scenarios import describe_moves, load_scenario
 from trackmj.sim.setup import prepare
@@ -905,36 +905,28 @@ class CompareRun:
 
 def check_compare_dir(out: str | Path) -> Path:
     """``out`` if it can hold a comparison: absent, empty or a previous comparison."""
-    return check_campaign_dir(out, (COMPARE,), "comparison")
+    return check_campaign_dir(out, ("campaign.json", COMPARE), "comparison")
 
 
 def compare(base: Mapping[str, Any], controllers: Sequence[str], out_dir: str | Path, *,
             seed: int, workers: int | None = None, scheduler: str | None = None) -> CompareRun:
     """Every architecture with each controller on one case (``base``: the RunSpec fields but
-    architecture, controller and seed); each run is written to ``OUT/<arch>-<controller>/``
-    (the run contract plus its figure) as it finishes."""
+    architecture, controller and seed), a campaign of kind ``compare``
+    (:mod:`trackmj.campaign`): each run is written to ``OUT/<arch>-<controller>/`` (the run
+    contract plus its figure) as it finishes; a run already done there is read back."""
     from trackmj.sim.registry import ARCHITECTURES
 
-    out = check_compare_dir(out_dir)
     fields = {k: v for k, v in base.items() if k != "tensioner"}
     specs = [RunSpec(**fields, architecture=a, controller=c, seed=seed,
                      tensioner=tensioner_for(a, base.get("tensioner")))
              for c in controllers for a in ARCHITECTURES]
-    results, failed = [], []
-
-    def on_done(outcome: RunOutcome) -> None:
-        if not outcome.ok:
-            failed.append((outcome.spec, outcome.error or "failed"))
-            return
-        r = outcome.result
-        write_result(r, out / f"{r.architecture}-{r.controller}",
-                     extras={"timeseries.png": lambda path: run_figure(r, path)})
-        results.append(r)
-
-    with Executor(workers=workers, scheduler=scheduler) as executor:
-        executor.map(specs, on_done=on_done, progress=f"compare {base['scenario']}")
-    order = {(s.architecture, s.controller): k for k, s in enumerate(specs)}
-    results.sort(key=lambda r: order.get((r.architecture, r.controller), len(order)))
+    runs = [plan_run(s, name=f"{s.architecture}-{s.controller}") for s in specs]
+    with Store(out_dir, "compare", markers=(COMPARE,), what="comparison", runs=".") as store:
+        made = run_campaign(store, runs, workers=workers, scheduler=scheduler,
+                            progress=f"compare {base['scenario']}", need_results=True,
+                            extras=lambda r: {"timeseries.png": lambda path: run_figure(r, path)})
+    results = [made.results[r.key] for r in runs if r.key in made.results]
+    failed = [(o.spec, o.error or "failed") for o in made.failed]
     predictions: dict[str, dict[str, dict[str, Any]]] = {}
     for c in controllers:
         tp = next((r for r in results if r.controller == c and r.architecture == "tp"), None)
