@@ -141,8 +141,8 @@ def test_moved_events_keep_their_order_inside_the_run():
     sc = load_scenario("W3")
     moves = moved_events(sc, 8.0)
     k = 7.0 / 29.0
-    assert moves["load_pulses.0.start_s"] == pytest.approx(1.0 + 5.0 * k, abs=1e-6)
-    assert moves["load_pulses.1.end_s"] == pytest.approx(1.0 + 19.0 * k, abs=1e-6)
+    assert moves["load_pulses.0.start_s"] == pytest.approx(1.0 + 5.0 * k, abs=5e-4)
+    assert moves["load_pulses.1.end_s"] == pytest.approx(1.0 + 19.0 * k, abs=5e-4)
     moved = load_scenario("W3", overrides=moves)
     assert not cut_events(moved, 8.0)
     windows = moved.metric_windows(8.0).disturbances

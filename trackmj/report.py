@@ -10,11 +10,14 @@ tuned toward them.
 Runs: every scenario's variants × seeds × architectures (``tp``, ``dp-a``, ``dp-b`` by
 default, the study's three) with the scenario's controller, plus the baseline controllers
 (``lmpc``, ``pid``) on ``tp`` in W1 for the controller claims. They run on the shared
-executor; each run is written to ``OUT/runs/<scenario>-<arch>-<controller>-<variant>-s<seed>/``
-as it finishes, and a run already complete there (same scenario, architecture, controller,
-variant, seed and duration) is read back instead of run again, so an interrupted report
-resumes. A dp-a run needs its tp run's track load: when only the dp-a run is missing, the
-executor runs the tp case again for it (deterministic per seed, so the same load).
+executor as a campaign (:mod:`trackmj.campaign`); each run is written to
+``OUT/runs/<scenario>-<arch>-<controller>-<variant>-s<seed>/`` and its row to
+``OUT/results.parquet`` as it finishes, and a run already done there (the same identity:
+inputs and code) is read back instead of run again, so an interrupted report resumes. A
+``--duration`` shorter than a scenario's events moves them inside the run
+(:func:`event_moves`); the report says where to. A dp-a run needs its tp run's track
+load: when only the dp-a run is missing, the executor runs the tp case again for it
+(deterministic per seed, so the same load).
 """
 
 from __future__ import annotations
@@ -730,7 +733,7 @@ def _condition_section(m: Matrix, scenario: str, out: Path) -> list[str]:
             lines += [f"The {duration:g} s runs would cut off events of the {sc.duration_s:g} s "
                       f"scenario, so its schedule after the evaluation start "
                       f"({sc.evaluation.start_s:g} s) is compressed linearly into the run "
-                      f"(README, Reports): {describe_moves(sc, moves)}.", ""]
+                      f"(README, Usage, Durations): {describe_moves(sc, moves)}.", ""]
     lines += ["| metric | " + " | ".join(archs) + " |", "|---|" + "---|" * len(archs)]
     for key in TABLE_METRICS:
         label, scale, unit = METRIC_DISPLAY[key]

@@ -660,7 +660,7 @@ def moved_events(sc: Scenario, duration_s: float) -> dict[str, float]:
     becomes s + (t − s)·(duration_s − s)/(D − s), D the scenario's duration, so the events
     keep their order and their share of the run; earlier times stay. Edges (a pulse's rise,
     a drop's transition) keep their length where the window holds it, else shrink by the
-    same factor."""
+    same factor. Moved times are rounded to the 1 ms coupling step."""
     if not cut_events(sc, duration_s):
         return {}
     s = sc.evaluation.start_s
@@ -672,11 +672,11 @@ def moved_events(sc: Scenario, duration_s: float) -> dict[str, float]:
     out: dict[str, float] = {}
     for e in events(sc):
         moved = [(key, move(t)) for key, t in e.times]
-        out |= {key: round(t, 6) for key, t in moved}
+        out |= {key: round(t, 3) for key, t in moved}   # on the 1 ms coupling grid
         if e.edge_s and len(moved) == 2:
             if e.edge_s > moved[1][1] - moved[0][1]:   # the window's own check
                 kind = "transition_s" if "drops" in moved[0][0] else "rise_s"
-                out[moved[0][0].rsplit(".", 1)[0] + "." + kind] = round(e.edge_s * factor, 6)
+                out[moved[0][0].rsplit(".", 1)[0] + "." + kind] = round(e.edge_s * factor, 3)
     return out
 
 
@@ -684,7 +684,7 @@ def describe_moves(sc: Scenario, moves: Mapping[str, float]) -> str:
     """One line saying where ``moves`` (from :func:`moved_events`) put the events of ``sc``."""
     parts = []
     for e in events(sc):
-        new = [f"{moves[k]:g}" for k, _ in e.times if k in moves]
+        new = [f"{moves[k]:.3g}" for k, _ in e.times if k in moves]
         if new:
             parts.append(f"{e.what.split('(', 1)[1].rstrip(')')} -> {'-'.join(new)} s")
     return "; ".join(parts)

@@ -47,17 +47,22 @@ Output directory ``DIR``:
   column per swept key (named by the key), every scalar metric (nested metric tables
   flattened as ``table.key``, e.g. ``energy_J.pump``), ``wall_time_s`` (the run's wall time
   in its worker) and ``error`` (null, or ``"Type: message"`` for a run that failed).
-  Each column's unit is in its Arrow field metadata (``unit``) where the name states one.
+  Each column's unit is in its Arrow field metadata (``unit``) where the name states one,
+  and all of them in the schema metadata ``units`` (JSON); see :mod:`trackmj.campaign`.
 - ``sweep.toml``: the spec as given; ``figures/<metric>.png``: each metric against each
   swept parameter, mean ± std over seeds (without swept parameters: bars per scenario and
   case); ``runs/<case>/``: every run's result directory
   with ``keep_runs``.
 
 Resume: a run whose ``run_key`` already has a row is skipped (a failed one too, unless
-``retry_failed``). The key hashes everything that determines the run: the validated model,
-hydraulic, control and scenario parameters (after overrides), the variant, architecture,
-controller, estimator, seed, duration and the trackmj version; a changed file changes it.
-Rows of runs the current spec does not ask for are kept.
+``retry_failed``). The key is the run's identity (:func:`trackmj.campaign.run_key`: the
+validated model, hydraulic, control and scenario parameters after overrides, the variant,
+architecture, controller, estimator, seed, duration, tensioner and FMU file hashes and the
+hash of trackmj's source); a changed file or a changed code changes it. Rows of runs the
+current spec does not ask for are kept. A ``duration_s`` that would cut off a scenario's
+step, ramp, pulse or drop moves the events the spec does not set itself inside the run
+(:func:`trackmj.scenarios.moved_events`). Figures are drawn for the metrics that vary
+across the runs, once: a resumed sweep that makes no run keeps the figures there are.
 """
 
 from __future__ import annotations
