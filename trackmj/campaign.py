@@ -4,12 +4,13 @@ directory, each known by its identity, resumable, one row per run.
 A run's **identity** (:func:`identity`) is everything that determines its result: the
 scenario (validated, after overrides, events as they will run), the machine files' content
 (the validated model, hydraulic and control parameters after overrides and the variant's
-scaling; a tensioner file's content and its FMU file's SHA-256; a controller FMU's file
-hash), the architecture, controller, estimator, seed, variant, duration and the SHA-256 of
-the *source* of the trackmj, trackmj.hydraulics and trackmj.control packages
-(:func:`source_hash`). :func:`run_key` hashes all of it; :func:`inputs_key` the same without
-the source (what ``trackmj run`` compares before replacing a folder: the same inputs run by
-other code may replace their old result, other inputs may not).
+scaling; the packaged machine's files, :func:`machine_files_hash`; a tensioner file's
+content and its FMU file's SHA-256; a controller FMU's file hash), the architecture,
+controller, estimator, seed, variant, duration and the SHA-256 of the *source* of the
+trackmj, trackmj.hydraulics and trackmj.control packages (:func:`source_hash`).
+:func:`run_key` hashes all of it; :func:`inputs_key` the same without the source (what
+``trackmj run`` compares before replacing a folder: the same inputs run by other code may
+replace their old result, other inputs may not).
 
 One rule for "already done", for every campaign: a run is done when the campaign's
 ``results.parquet`` holds a row with its ``run_key`` (and no error, unless failed runs are
@@ -84,6 +85,20 @@ def source_hash() -> str:
     return digest.hexdigest()
 
 
+@functools.cache
+def machine_files_hash() -> str:
+    """SHA-256 (hex) of the packaged machine's files (``trackmj.models``: the committed MJCF,
+    the parameter files and the identified idler), by name and content: the packaged runs
+    read the MJCF and the idler from them, not from the validated parameters."""
+    import importlib
+
+    root = Path(importlib.import_module("trackmj.models").__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(p for p in root.iterdir() if p.suffix in (".xml", ".toml")):
+        digest.update(f"{path.name}\0".encode() + path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
 def _file_hash(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
@@ -106,7 +121,7 @@ def identity(setup: Any) -> dict[str, Any]:
         "estimator": setup.estimator, "seed": setup.seed, "duration_s": repr(setup.duration_s),
         "variant": repr(setup.variant), "model": repr(setup.model),
         "hydraulics": repr(setup.hydraulics), "control": repr(setup.control),
-        "scenario": scenario, "source": source_hash()}
+        "scenario": scenario, "machine_files": machine_files_hash(), "source": source_hash()}
     if setup.tensioner is not None:
         ident["tensioner"] = tensioner_identity(setup.tensioner)
     if setup.controller_file is not None:
