@@ -246,7 +246,7 @@ def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from trackmj.report import compare, write_compare
+    from trackmj.compare import compare, write_compare
     from trackmj.scenarios import check_duration
     from trackmj.sim.setup import prepare
 
