@@ -258,17 +258,22 @@ def test_resume_skips_the_rows_already_written(grid, executor) -> None:
     assert (out / "results.parquet").read_bytes() == before
 
 
-def test_figures_per_metric_and_redraw(grid, tmp_path) -> None:
-    out, _, summary = grid
+def test_figures_per_metric_and_redraw(grid, executor) -> None:
+    out, spec, summary = grid
     names = {p.name for p in summary.figures}
     assert {"rmse_N.png", "energy_J.pump.png", "wall_time_s.png"} <= names
     assert "fluctuation_N.png" not in names   # NaN in a 1.5 s run (steady window from 5 s)
+    assert not names & {"mujoco_warnings.png", "evaluation.psd_max_Hz.png"}   # constants
     for path in summary.figures:
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     (out / "figures" / "rmse_N.png").unlink()
     assert main(["sweep", "--plot", str(out)]) == 0
     assert (out / "figures" / "rmse_N.png").is_file()
     assert len(list((out / "figures").glob("*.png"))) == len(summary.figures)
+    stamps = {p.name: p.stat().st_mtime_ns for p in (out / "figures").glob("*.png")}
+    again = sweep(spec, out, executor=executor, progress=False)   # resumes: nothing to run
+    assert again.ran == 0 and len(again.figures) == len(summary.figures)
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "figures").glob("*.png")} == stamps
 
 
 def test_a_failing_run_becomes_an_error_row(executor, tmp_path) -> None:
