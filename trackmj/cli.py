@@ -340,7 +340,10 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
         print(f"{sc.name:<{width}}{sc.title} ({sc.duration_s:g} s, {sc.controller}/"
               f"{sc.estimator})")
         if len(sc.variants) > 1:
-            print(f"{'':<{width}}--variant " + ", ".join(v.name for v in sc.variants))
+            import textwrap
+
+            print(textwrap.fill("--variant " + ", ".join(v.name for v in sc.variants), 90,
+                                initial_indent=" " * width, subsequent_indent=" " * (width + 10)))
     print("or any scenario TOML file in the same format (experiments/*.toml)")
     for title, registry in (("architectures (--arch)", ARCHITECTURES),
                             ("controllers (--controller)", CONTROLLERS),
