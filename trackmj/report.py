@@ -35,7 +35,15 @@ from typing import Any
 
 import numpy as np
 
-from trackmj.campaign import PlannedRun, Store, check_campaign_dir, finite, plan_run, run_campaign
+from trackmj.campaign import (
+    RUNS,
+    PlannedRun,
+    Store,
+    check_campaign_dir,
+    finite,
+    plan_run,
+    run_campaign,
+)
 from trackmj.campaign import mean_std as statistics
 from trackmj.executor import RunOutcome, RunSpec, overrides_tuple
 from trackmj.figures import (
@@ -66,7 +74,6 @@ BASELINES = ("lmpc", "pid")
 BASELINE_SCENARIOS = ("W1",)
 """Conditions the baselines run in: tracking (W1); more would push the full report past its
 15 min budget on two cores (10 runs of ~12 s CPU each per condition at 5 seeds)."""
-RUNS = "runs"
 REPORT = "report.md"
 STUDY = ("Ding et al., \"Simulation Method for Hydraulic Tensioning Systems in Tracked "
          "Vehicles Using Simulink-AMESim-RecurDyn\", Actuators 2025, 14(12), 615")
