@@ -51,6 +51,9 @@ def test_machine_file_resolves_relative_paths_and_names_a_missing_file(tmp_path)
     with pytest.raises(ParameterError, match=r"mine_machine\.toml \[machine\]\.control = "
                                              r"'nowhere\.toml': no such file"):
         load_machine(path)
+    with pytest.raises(ParameterError, match=r"lf1352\.toml is a model parameter file, not a "
+                                             r"machine file: give it as --model"):
+        resolve(str(lf.mechanics))
     with pytest.raises(ParameterError, match=r"machine 'm1': not a shipped machine "
                                              r"\([a-z0-9, ]*lf1352"):
         resolve("m1")

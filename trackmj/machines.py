@@ -29,7 +29,7 @@ from pathlib import Path
 from trackmj.model.cache import cached_mjcf
 from trackmj.model.mjcf import read_mjcf
 from trackmj.model.params import ModelParams, load_model_params, models_dir
-from trackmj.params import ParameterError, Parameters, load_file, param
+from trackmj.params import ParameterError, Parameters, build, param, read_toml
 
 DEFAULT_MACHINE = "lf1352"
 MACHINE_SUFFIX = "_machine.toml"
@@ -84,7 +84,12 @@ def load_machine(path: str | Path) -> Machine:
     path = Path(path).resolve()
     if not path.is_file():
         raise ParameterError(f"machine file not found: {path}")
-    table = load_file(MachineFile, path, require_source=False).machine
+    data = read_toml(path)
+    if "machine" not in data and "track" in data:
+        raise ParameterError(f"{path.name} is a model parameter file, not a machine file: "
+                             "give it as --model (run, compare) or --params (drive, model), "
+                             f"or write a machine file (*{MACHINE_SUFFIX}) naming it")
+    table = build(MachineFile, data, file=path.name, require_source=False).machine
     paths: dict[str, Path | None] = {}
     for key in ("mechanics", "hydraulics", "control", "idler", "reference_mjcf"):
         rel = getattr(table, key)

@@ -72,6 +72,7 @@ MAX_FILE_BYTES = 1 << 20
 
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (
     ("_m3_s_Pa", "m^3/(s·Pa)"),
+    ("_N2s", "N^2·s"),
     ("_Pa_abs", "Pa (absolute)"),
     ("_cycles_m", "1/m"),
     ("_N_s_m", "N·s/m"),
@@ -823,7 +824,10 @@ def describe_schema(cls: type, prefix: str = "") -> list[KeySpec]:
             default = None if fld.required else repr(f.default if f.default is not
                                                       dataclasses.MISSING else f.default_factory())
             choices = f"one of {list(fld.spec.choices)}" if fld.spec.choices else ""
-            rows.append(KeySpec(key, _expected(fld.hint), fld.spec.unit or "",
+            expected = _expected(fld.hint)
+            if fld.spec.allow_empty:
+                expected = expected.replace("a non-empty array", "an array (may be empty)")
+            rows.append(KeySpec(key, expected, fld.spec.unit or "",
                                 fld.spec.range_text() or choices, default, fld.spec.doc))
     return rows
 

@@ -99,10 +99,15 @@ def _circles(p: ModelParams, idler_x: float) -> list[tuple[float, float, float]]
     return circles
 
 
-def _hull_path(circles: list[tuple[float, float, float]], samples: int = 2880) -> np.ndarray:
+HULL_SAMPLES = 2880
+"""Points per circle of the sampled convex path the pins are walked on."""
+
+
+def _hull_path(circles: list[tuple[float, float, float]],
+               samples: int = HULL_SAMPLES) -> np.ndarray:
     """Closed convex path around the circles, clockwise in the (x, z) view, starting at the
-    bottom. Returns (n, 2) points; the path is sampled finely enough (< 1e-7 m chord error
-    at these radii) to walk chords on it."""
+    bottom. Returns (n, 2) points; sampled finely enough to walk chords on it (sagitta
+    r·(1 − cos(π/samples)): 1.0e-7 m on a 0.17 m circle, 3e-7 m on 0.5 m)."""
     ang = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)
     pts = np.concatenate([np.column_stack([cx + r * np.cos(ang), cz + r * np.sin(ang)])
                           for cx, cz, r in circles])
@@ -253,9 +258,10 @@ def compute_layout(p: ModelParams) -> Layout:
     pins = _pins_for(p, idler_x, count)
     sx, sz = p.sprocket.x_m, p.sprocket.z_m
     rp = p.sprocket_pitch_radius_m
-    # 1 µm: the hull polyline lies up to r·(1 − cos(π/2880)) = 1.5e-7 m inside a 0.25 m circle
+    # a pin on the sprocket arc lies on the sampled hull: within its sagitta of the circle
+    tolerance = rp * (1.0 - math.cos(math.pi / HULL_SAMPLES)) + 1e-7
     on_arc = [k for k in range(count)
-              if abs(math.hypot(pins[k, 0] - sx, pins[k, 1] - sz) - rp) < 1e-6]
+              if abs(math.hypot(pins[k, 0] - sx, pins[k, 1] - sz) - rp) < tolerance]
     if len(on_arc) < MIN_SEATED_PINS:
         raise at.error(("sprocket", "z_m"), sz, f"lets the track wrap the sprocket over "
                        f"{len(on_arc)} seated pins (at least {MIN_SEATED_PINS}): raise the "

@@ -261,14 +261,14 @@ def _link_inertia(p: ModelParams) -> tuple[float, float, float]:
 
 
 def _link_directions(layout: Layout) -> np.ndarray:
-    """Angle of every link's axis (pin k -> pin k+1) from +x towards +z [rad], (82,)."""
+    """Angle of every link's axis (pin k -> pin k+1) from +x towards +z [rad], (link_count,)."""
     pins = layout.pins
     step = np.roll(pins, -1, axis=0) - pins
     return np.arctan2(step[:, 1], step[:, 0])
 
 
 def _links(root: ET.Element, world: ET.Element, p: ModelParams, layout: Layout) -> None:
-    """The 82 links as free planar bodies joined by one ``connect`` per pin.
+    """The links as free planar bodies joined by one ``connect`` per pin.
 
     Link k has its origin at pin k and its x axis towards pin k+1; its joints are world
     slides ``link_kk_x``, ``link_kk_z`` and the hinge ``link_kk_pitch`` about +y through
