@@ -38,6 +38,8 @@ import numpy as np
 
 from trackmj.machine import machine
 from trackmj.model import default_xml_path, load_model_params
+from trackmj.model.mjcf import contact_kind, soft_constraints
+from trackmj.model.soft import row_diag, soft_constraint
 
 PARAMS = load_model_params()
 SETTLE_S, RAMP_S = 1.0, 1.0
@@ -83,7 +85,32 @@ def pairs_xml(text: str) -> str:
     key = root.find("keyframe")
     if key is not None:
         root.remove(key)
+    _remap_soft(root)
     return ET.tostring(root, encoding="unicode")
+
+
+def _remap_soft(root: ET.Element) -> None:
+    """Contacts and pin connects re-mapped to their stated K, B on the pairs' row diagonals
+    (what the generator's ``_map_soft_constraints`` does on its own tree): every link of a
+    pair has the same ``body_invweight0`` (0.130 1/kg against 0.190 for a free link). Each
+    remaining connect carries the compliance of two pins in series (K/2, B/2), so a span
+    stretches as before; the hinged pins are rigid."""
+    model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+    mapping = soft_constraints(PARAMS, model)
+    for geom in root.iter("geom"):
+        soft = mapping.get(geom.get("name", ""))
+        if soft is not None and contact_kind(geom.get("name")) is not None:
+            geom.set("solref", " ".join(f"{v:.9g}" for v in soft.solref))
+            geom.set("solimp", " ".join(f"{v:.9g}" for v in soft.solimp))
+    pin = PARAMS.pin_joint
+    link = float(model.body_invweight0[model.body("link_00").id, 0])
+    rows, diag = row_diag(2.0 * link, condim=1)
+    soft = soft_constraint(pin.radial_stiffness_N_m / 2, pin.radial_damping_N_s_m / 2, rows,
+                           diag, PARAMS.simulation.timestep_s, PARAMS.solver.soft_margin,
+                           "pairs pin")
+    cls = root.find("default/default[@class='pin_joint']/equality")
+    cls.set("solref", " ".join(f"{v:.9g}" for v in soft.solref))
+    cls.set("solimp", " ".join(f"{v:.9g}" for v in soft.solimp))
 
 
 def novisual_xml(text: str) -> str:
@@ -231,6 +258,37 @@ def check(candidate: str, speed: float) -> dict[str, float]:
             "finite": float(np.isfinite(drv.d.qpos).all())}
 
 
+def static_stiffness(candidate: str) -> dict[str, tuple[float, float, int]]:
+    """Time-averaged normal force / penetration of each contact loaded throughout 0.3 s of
+    the standing track under 13 kN (as tests/test_contacts.py), per partner kind:
+    (min, max, count) [N/m]."""
+    m, home = build(candidate)
+    drv = Drive(m, home)
+    d = drv.d
+    drv.preload, drv.k, drv.c = 13_000.0, 0.0, 2e4
+    for _ in range(1500):
+        drv.step(0.0)
+    sums: dict[tuple[int, int], list[float]] = {}
+    wrench = np.zeros(6)
+    for _ in range(300):
+        drv.step(0.0)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            mujoco.mj_contactForce(m, d, i, wrench)
+            entry = sums.setdefault((int(c.geom1), int(c.geom2)), [0.0, 0.0, 0])
+            entry[0] += wrench[0]
+            entry[1] += -c.dist
+            entry[2] += 1
+    out: dict[str, list[float]] = {}
+    for (g1, g2), (force, pen, count) in sums.items():
+        names = [m.geom(g1).name, m.geom(g2).name]
+        kind = contact_kind(names[0] if not names[0].startswith("link_") else names[1])
+        if kind is None or count < 300 or pen / count < 5e-6:
+            continue
+        out.setdefault(kind, []).append(force / pen)
+    return {k: (min(v), max(v), len(v)) for k, v in out.items()}
+
+
 def snapshot_path(candidate: str) -> str:
     return os.path.join(tempfile.gettempdir(), f"bench_structure_{candidate}.npz")
 
@@ -278,6 +336,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--check", nargs="*", default=[], metavar="CANDIDATE")
     parser.add_argument("--callgrind", nargs="*", default=[], metavar="CANDIDATE")
+    parser.add_argument("--stiffness", nargs="*", default=[], metavar="CANDIDATE")
     parser.add_argument("--replay", help=argparse.SUPPRESS)
     parser.add_argument("--speeds", type=float, nargs="+", default=[1.5])
     parser.add_argument("--steps", type=int, default=300)
@@ -288,6 +347,9 @@ def main() -> None:
     print(f"machine: {machine()}")
     for cand in args.callgrind:
         callgrind(cand, args.steps)
+    for cand in args.stiffness:
+        for kind, (lo, hi, n) in static_stiffness(cand).items():
+            print(f"{cand}: {kind} contacts ({n}) static stiffness {lo:.4g}..{hi:.4g} N/m")
     for cand in args.check:
         for v in args.speeds:
             r = check(cand, v)
