@@ -7,8 +7,9 @@ Sign conventions (see also :mod:`trackmj.ports`):
 * tensioner force [N] > 0 pushes the idler carrier outward.
 * pin tension [N] > 0 pulls the two links of a pin apart along the track (tension);
   pin k joins link_{k-1} and link_k; array index k, shape (82,). Each pin is a compliant
-  ``connect`` with a stated stiffness (``[pins]`` of the model file); its tension is the
-  force that connect transmits, along the bisector of the two links.
+  ``connect`` with a stated stiffness (``[pins]`` of the model file), or with ``[track]
+  structure = "pairs"`` every odd pin a hinge and every even connect two pins' compliance;
+  its tension is the force the pin transmits, along the bisector of the two links.
 * chassis pose (x [m] forward, z [m] up, pitch [rad] about +y, nose-down positive).
 """
 
@@ -104,8 +105,9 @@ class TrackPlant:
     """One LF1352 track side in MuJoCo with named accessors.
 
     State layout: ``data.qpos`` holds chassis (x, z, pitch), sprocket angle, idler slide,
-    six suspension slides, then (x, z, pitch) of each free link link_00..link_81; use the
-    accessors rather than raw indices. The coupling step is 1 ms; the MuJoCo timestep
+    six suspension slides, then (x, z, pitch) of each free link link_00..link_81 (pairs:
+    of each even link, followed by its odd child's pin hinge); use the accessors rather
+    than raw indices. The coupling step is 1 ms; the MuJoCo timestep
     must divide it (``substeps`` MuJoCo steps per coupling step). Sign conventions: see the
     module docstring (stroke outward positive, tensioner force > 0 pushes the idler out).
 
@@ -159,12 +161,18 @@ class TrackPlant:
         self.link_count = n
         self._link_body = np.array([m.body(f"link_{k:02d}").id for k in range(n)])
         self._pin_geom = np.array([m.geom(f"link_{k:02d}_pin").id for k in range(n)])
-        # the pin connects are the model's only equalities, in pin order: 3 rows each
-        pin_eq = [m.equality(f"pin_{k:02d}").id for k in range(n)]
-        if m.neq != n or pin_eq != list(range(n)):
-            raise ValueError(f"{m.neq} equalities: expected the {n} pin connects pin_00.. "
-                             "only, in order (regenerate the model)")
-        self._pin_rows = 3 * n
+        # the pin connects are the model's only equalities, in pin order: 3 rows each; the
+        # other pins are hinges (structure "pairs": link k hinged to link k-1 at pin k)
+        hinged = [k for k in range(n) if m.body(f"link_{k:02d}").parentid != 0]
+        connected = [k for k in range(n) if k not in hinged]
+        pin_eq = [m.equality(f"pin_{k:02d}").id for k in connected]
+        if m.neq != len(connected) or pin_eq != list(range(m.neq)) or any(
+                m.body(f"link_{k:02d}").parentid != self._link_body[k - 1] for k in hinged):
+            raise ValueError(f"{m.neq} equalities: expected one pin connect per pin that "
+                             "is not a hinge, in pin order, only (regenerate the model)")
+        self._pin_rows = 3 * m.neq
+        self._connected_pins = np.array(connected, dtype=int)
+        self._hinged_pins = np.array(hinged, dtype=int)
         self._chassis_body = m.body("chassis").id
         self._hitch_site = m.site("rear_hitch").id
         self._sprocket_body = m.body("sprocket").id
@@ -333,6 +341,11 @@ class TrackPlant:
         return _largest_gap_m(self.data.efc_pos, self._pin_rows)
 
     @property
+    def pin_rows(self) -> int:
+        """Constraint rows of the pin connects, the first rows of every step (3 per connect)."""
+        return self._pin_rows
+
+    @property
     def warning_count(self) -> int:
         """Total MuJoCo warnings raised since the last reset."""
         return int(sum(w.number for w in self.data.warning))
@@ -353,7 +366,14 @@ class TrackPlant:
         d = self.data
         # connect residual = anchor(link_{k-1}) − anchor(link_k); its force acts on
         # link_{k-1}, forwards (towards link_k) under tension
-        force = d.efc_force[: self._pin_rows].reshape(-1, 3)
+        force = np.empty((self.link_count, 3))
+        force[self._connected_pins] = d.efc_force[: self._pin_rows].reshape(-1, 3)
+        if len(self._hinged_pins):
+            # a hinged pin transmits the force of link_{k-1} on its child link_k (the
+            # translational part of cfrc_int after the constraint forces); link_{k-1}
+            # feels the opposite, forwards under tension like a connect
+            mujoco.mj_rnePostConstraint(self.model, d)
+            force[self._hinged_pins] = -d.cfrc_int[self._link_body[self._hinged_pins], 3:]
         axes = d.xmat[self._link_body, 0::3]   # each link's x axis (towards the next pin)
         bisector = axes + np.roll(axes, 1, axis=0)   # links k-1 and k at pin k
         bisector /= np.linalg.norm(bisector, axis=1, keepdims=True)
