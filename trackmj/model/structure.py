@@ -8,8 +8,11 @@ nv 257 -> 175 and 123 instead of 246 pin-connect rows; callgrind 2.92M -> 2.16M
 instructions per bare step at 1.5 m/s (``benchmarks/README.md``, track structure candidates).
 
 Physics kept (measured there): both links of a pair have the same ``body_invweight0``
-(0.130 1/kg, a free link 0.190), so the contact mapping of :mod:`trackmj.model.soft`, done
-on the compiled pairs, stays exact with one solref per partner geom; each remaining connect
+(0.130 1/kg on straight runs, a free link 0.190), so the contact mapping of
+:mod:`trackmj.model.soft`, done on the compiled pairs with link_00's value, stays exact with
+one solref per partner geom there; pairs laid on a wrap at qpos0 weigh up to 3.9 % more, so
+their contacts are up to ~4 % softer than stated (static rails 0.963–1.00e7 N/m against
+1e7, ground 1.98–2.00e6 against 2e6); each remaining connect
 carries the compliance of the two pins of its stretch in series (K/2, B/2,
 :func:`pin_series_count`), so a span stretches as before while the hinged pins are rigid.
 The revolution component stays ≤ 3 % of the link-passing one at 1.0/1.5/2.0 m/s, the
