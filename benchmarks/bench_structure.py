@@ -6,6 +6,8 @@ never the generator:
 * ``free``: the committed model (82 free planar links, 82 pin connects).
 * ``pairs``: two-link sub-chains: every odd link hinged to the even link before it at their
   shared pin (41 free parents, 41 hinged children, 41 connects: 123 rows, nv 175).
+* ``chainN``: sub-chains of N links (cost and revolution probe; their contacts are not
+  re-mapped per link).
 * ``novisual``: the links' visual shoe geoms removed (fewer geoms in the broadphase).
 * solver variants (``+cg``, ``+iter10``, ``+tol1e-6``, ``+ls10``) on either structure.
 
@@ -50,9 +52,11 @@ def _pitch(xmat: np.ndarray) -> float:
     return math.atan2(-xmat[6], xmat[0])
 
 
-def pairs_xml(text: str) -> str:
-    """Odd links hinged to the preceding even link at their shared pin (its origin); their
-    pin connects removed; keyframes dropped (the state is mapped in :func:`home_state`)."""
+def pairs_xml(text: str, group: int = 2) -> str:
+    """Sub-chains of ``group`` links (the last one shorter when it does not divide 82):
+    every link but a chain's first hinged to the preceding link at their shared pin (its
+    origin); their pin connects removed; keyframes dropped (the state is mapped in
+    :func:`home_state`)."""
     root = ET.fromstring(text)
     world = root.find("worldbody")
     n = PARAMS.track.link_count
@@ -60,7 +64,7 @@ def pairs_xml(text: str) -> str:
     base = mujoco.MjModel.from_xml_string(text)
     d = mujoco.MjData(base)
     mujoco.mj_forward(base, d)   # layout pose (qpos0)
-    for k in range(1, n, 2):
+    for k in (k for k in range(n) if k % group):
         child, parent = bodies[f"link_{k:02d}"], bodies[f"link_{k - 1:02d}"]
         bp, bc = base.body(parent.get("name")).id, base.body(child.get("name")).id
         rp = d.xmat[bp].reshape(3, 3)
@@ -80,21 +84,23 @@ def pairs_xml(text: str) -> str:
     eq = root.find("equality")
     for c in list(eq):
         k = int(c.get("name").split("_")[1])
-        if k % 2 == 1:
+        if k % group:
             eq.remove(c)
     key = root.find("keyframe")
     if key is not None:
         root.remove(key)
-    _remap_soft(root)
+    _remap_soft(root, group)
     return ET.tostring(root, encoding="unicode")
 
 
-def _remap_soft(root: ET.Element) -> None:
-    """Contacts and pin connects re-mapped to their stated K, B on the pairs' row diagonals
-    (what the generator's ``_map_soft_constraints`` does on its own tree): every link of a
-    pair has the same ``body_invweight0`` (0.130 1/kg against 0.190 for a free link). Each
-    remaining connect carries the compliance of two pins in series (K/2, B/2), so a span
-    stretches as before; the hinged pins are rigid."""
+def _remap_soft(root: ET.Element, group: int) -> None:
+    """Contacts and pin connects re-mapped to their stated K, B on the sub-chains' row
+    diagonals with link_00's weight (what the generator's ``_map_soft_constraints`` does):
+    both links of a straight pair have the same ``body_invweight0`` (0.130 1/kg against
+    0.190 for a free link); longer chains' links differ (their contacts are then off the
+    stated K: a cost probe only). Each remaining connect carries the compliance of the
+    ``group`` pins of its chain in series (K/group, B/group), so a span stretches as
+    before; the hinged pins are rigid."""
     model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
     mapping = soft_constraints(PARAMS, model)
     for geom in root.iter("geom"):
@@ -105,7 +111,8 @@ def _remap_soft(root: ET.Element) -> None:
     pin = PARAMS.pin_joint
     link = float(model.body_invweight0[model.body("link_00").id, 0])
     rows, diag = row_diag(2.0 * link, condim=1)
-    soft = soft_constraint(pin.radial_stiffness_N_m / 2, pin.radial_damping_N_s_m / 2, rows,
+    soft = soft_constraint(pin.radial_stiffness_N_m / group, pin.radial_damping_N_s_m / group,
+                           rows,
                            diag, PARAMS.simulation.timestep_s, PARAMS.solver.soft_margin,
                            "pairs pin")
     cls = root.find("default/default[@class='pin_joint']/equality")
@@ -148,7 +155,10 @@ def build(candidate: str) -> tuple[mujoco.MjModel, np.ndarray]:
     text = default_xml_path().read_text()
     parts = candidate.split("+")
     structure = parts[0]
-    xml = {"free": lambda t: t, "pairs": pairs_xml}[structure](text)
+    if structure.startswith("chain"):   # chainN: sub-chains of N links
+        xml = pairs_xml(text, int(structure[5:]))
+    else:
+        xml = {"free": lambda t: t, "pairs": pairs_xml}[structure](text)
     if "novisual" in parts:
         xml = novisual_xml(xml)
     m = mujoco.MjModel.from_xml_string(xml)
@@ -258,37 +268,6 @@ def check(candidate: str, speed: float) -> dict[str, float]:
             "finite": float(np.isfinite(drv.d.qpos).all())}
 
 
-def static_stiffness(candidate: str) -> dict[str, tuple[float, float, int]]:
-    """Time-averaged normal force / penetration of each contact loaded throughout 0.3 s of
-    the standing track under 13 kN (as tests/test_contacts.py), per partner kind:
-    (min, max, count) [N/m]."""
-    m, home = build(candidate)
-    drv = Drive(m, home)
-    d = drv.d
-    drv.preload, drv.k, drv.c = 13_000.0, 0.0, 2e4
-    for _ in range(1500):
-        drv.step(0.0)
-    sums: dict[tuple[int, int], list[float]] = {}
-    wrench = np.zeros(6)
-    for _ in range(300):
-        drv.step(0.0)
-        for i in range(d.ncon):
-            c = d.contact[i]
-            mujoco.mj_contactForce(m, d, i, wrench)
-            entry = sums.setdefault((int(c.geom1), int(c.geom2)), [0.0, 0.0, 0])
-            entry[0] += wrench[0]
-            entry[1] += -c.dist
-            entry[2] += 1
-    out: dict[str, list[float]] = {}
-    for (g1, g2), (force, pen, count) in sums.items():
-        names = [m.geom(g1).name, m.geom(g2).name]
-        kind = contact_kind(names[0] if not names[0].startswith("link_") else names[1])
-        if kind is None or count < 300 or pen / count < 5e-6:
-            continue
-        out.setdefault(kind, []).append(force / pen)
-    return {k: (min(v), max(v), len(v)) for k, v in out.items()}
-
-
 def snapshot_path(candidate: str) -> str:
     return os.path.join(tempfile.gettempdir(), f"bench_structure_{candidate}.npz")
 
@@ -336,7 +315,6 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--check", nargs="*", default=[], metavar="CANDIDATE")
     parser.add_argument("--callgrind", nargs="*", default=[], metavar="CANDIDATE")
-    parser.add_argument("--stiffness", nargs="*", default=[], metavar="CANDIDATE")
     parser.add_argument("--replay", help=argparse.SUPPRESS)
     parser.add_argument("--speeds", type=float, nargs="+", default=[1.5])
     parser.add_argument("--steps", type=int, default=300)
@@ -347,9 +325,6 @@ def main() -> None:
     print(f"machine: {machine()}")
     for cand in args.callgrind:
         callgrind(cand, args.steps)
-    for cand in args.stiffness:
-        for kind, (lo, hi, n) in static_stiffness(cand).items():
-            print(f"{cand}: {kind} contacts ({n}) static stiffness {lo:.4g}..{hi:.4g} N/m")
     for cand in args.check:
         for v in args.speeds:
             r = check(cand, v)

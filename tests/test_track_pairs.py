@@ -13,9 +13,9 @@ import dataclasses
 import mujoco
 import numpy as np
 import pytest
-from test_contacts import STATIC_TOLERANCE, _static_stiffness
+from test_contacts import STATIC_TOLERANCE, _static_stiffness, span_under_tension
+from test_model import assert_sparse_matches_dense
 
-from trackmj.elements import ConstantForce
 from trackmj.model import ModelParams, generate_mjcf
 from trackmj.plant import PassiveTensioner, TrackPlant
 from trackmj.track_energy import TrackEnergyLedger
@@ -63,39 +63,23 @@ def test_pairs_static_contact_stiffness_is_the_stated_one(pairs) -> None:
 
 def test_pairs_span_stretches_as_its_connects_in_series(pairs) -> None:
     """The free upper span stretches by c·ΔT·2/K when its tension rises by ΔT, c the
-    connects in it (each carries two pins' compliance; the hinged pins are rigid); the
-    hinged pins there carry the tension of their neighbours (cfrc_int readout)."""
+    connects in it (each carries two pins' compliance; the hinged pins are rigid); its
+    hinged pins carry the tension of their neighbours (the cfrc_int readout)."""
     plant = _plant(pairs)
-    p = plant.params
-    ride = p.chassis.ride_height_m
-    x_lo, x_hi = max(p.return_rollers.x_m) + 0.12, p.idler.x_m - 0.3
-    lengths, tensions = [], []
-    for force in (11_000.0, 15_000.0):
-        plant.reset()
-        plant.run(ConstantForce(force, 2e4), 1.5)
-        pins = plant._chassis_frame_pins()
-        span = np.nonzero((pins[:, 0] > x_lo) & (pins[:, 0] < x_hi) & (pins[:, 1] > 0.3 - ride))[0]
-        assert len(span) >= 5 and np.all(np.diff(span) == 1)
-        a, b = span[0], span[-1]
-        samples = []
-        for _ in range(200):
-            plant.step(ConstantForce(force, 2e4))
-            pos = plant.pin_positions()[a:b + 1]
-            tension = plant.pin_tensions_N()
-            samples.append((np.linalg.norm(np.diff(pos, axis=0), axis=1).sum(),
-                            tension[a + 1:b + 1].mean()))
+    spans = [span_under_tension(plant, f) for f in (11_000.0, 15_000.0)]
+    for a, b, _, _, tension in spans:
         inner = np.arange(a + 1, b)
         hinged = inner[inner % 2 == 1]
+        assert len(hinged) >= 2
         np.testing.assert_allclose(tension[hinged],
                                    0.5 * (tension[hinged - 1] + tension[hinged + 1]),
                                    rtol=0.01)
-        length, mean_tension = np.mean(samples, axis=0)
-        lengths.append(length)
-        tensions.append(mean_tension)
+    (a, b, l0, t0, _), (a1, b1, l1, t1, _) = spans
+    assert (a, b) == (a1, b1)
     connects = int(np.count_nonzero(np.arange(a + 1, b + 1) % 2 == 0))
-    measured = 2.0 * connects * (tensions[1] - tensions[0]) / (lengths[1] - lengths[0])
-    assert tensions[1] - tensions[0] > 1_000.0
-    assert measured == pytest.approx(p.pin_joint.radial_stiffness_N_m, rel=0.05)
+    measured = 2.0 * connects * (t1 - t0) / (l1 - l0)
+    assert t1 - t0 > 1_000.0
+    assert measured == pytest.approx(plant.params.pin_joint.radial_stiffness_N_m, rel=0.05)
 
 
 def test_pairs_drive_closes_the_ledger(pairs) -> None:
@@ -115,33 +99,9 @@ def test_pairs_drive_closes_the_ledger(pairs) -> None:
 
 
 def test_pairs_sparse_and_dense_constraint_solutions_agree(pairs) -> None:
-    """The sparse path (the model's) gives the dense path's accelerations, constraint forces
-    and Newton iteration count on driven pairs states (upstream issue 3767)."""
-    plant = _plant(pairs)
-    m, d = plant.model, plant.data
-    states: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-
-    def keep(pl: TrackPlant) -> None:
-        if round(pl.time_s * 1000) % 200 == 0:
-            states.append((d.qpos.copy(), d.qvel.copy(), d.ctrl.copy()))
-
-    plant.run(PassiveTensioner.from_params(plant.params), 1.0,
-              lambda t: 1.5 * min(1.0, t / 0.5), keep)
-    for qpos, qvel, ctrl in states:
-        results = []
-        for jacobian in (mujoco.mjtJacobian.mjJAC_DENSE, mujoco.mjtJacobian.mjJAC_SPARSE):
-            m.opt.jacobian = jacobian
-            probe = mujoco.MjData(m)
-            probe.qpos[:], probe.qvel[:], probe.ctrl[:] = qpos, qvel, ctrl
-            mujoco.mj_forward(m, probe)
-            results.append((probe.qacc.copy(), probe.efc_force[: probe.nefc].copy(),
-                            int(probe.solver_niter[0])))
-        (acc_d, force_d, iter_d), (acc_s, force_s, iter_s) = results
-        assert len(force_d) == len(force_s) > 200
-        np.testing.assert_allclose(acc_s, acc_d, rtol=0, atol=1e-9 * np.abs(acc_d).max())
-        np.testing.assert_allclose(force_s, force_d, rtol=0, atol=1e-9 * np.abs(force_d).max())
-        assert iter_s == iter_d
-    assert len(states) == 5
+    """The sparse path (the model's) gives the dense path's solution on driven pairs states
+    (upstream issue 3767)."""
+    assert_sparse_matches_dense(_plant(pairs), every_ms=200, min_rows=200)
 
 
 def test_pairs_refuse_the_torsional_bushings(model_params: ModelParams) -> None:

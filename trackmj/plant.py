@@ -182,6 +182,7 @@ class TrackPlant:
         self.last_law: ForceLaw | None = None
         self.reset("home" if model.nkey else None)
         self._envelope = self._home_envelope()
+        _ = self.closure_error_m   # load (or compile) the kernel here, not in the first step
 
     # ------------------------------------------------------------------ construction
     @classmethod
