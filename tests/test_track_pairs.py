@@ -42,12 +42,12 @@ def test_pairs_halve_the_pin_connects(pairs, model_params: ModelParams) -> None:
     for k in range(1, n, 2):
         assert m.body(f"link_{k:02d}").parentid == m.body(f"link_{k - 1:02d}").id
         assert m.joint(f"link_{k:02d}_pin").type == mujoco.mjtJoint.mjJNT_HINGE
-    # both links of a pair weigh alike in MuJoCo's row diagonals (one solref per partner
-    # stays exact) on straight runs; pairs laid on a wrap at qpos0 weigh up to 3.9 % more
-    weights = m.body_invweight0[[m.body(f"link_{k:02d}").id for k in range(n)], 0]
-    np.testing.assert_allclose(weights[0::2], weights[1::2], rtol=1e-12)
-    assert np.count_nonzero(np.isclose(weights, weights[0], rtol=1e-6)) >= n // 2
-    np.testing.assert_allclose(weights, weights[0], rtol=0.04)
+    # MuJoCo weighs a pair laid on a wrap at qpos0 up to 3.9 % more than a straight one;
+    # the plant gives every link the straight pair's weight, which the contact mapping used
+    links = [m.body(f"link_{k:02d}").id for k in range(n)]
+    compiled = mujoco.MjModel.from_xml_string(pairs[0]).body_invweight0[links, 0]
+    assert 0.01 < compiled.max() / compiled.min() - 1.0 < 0.04
+    assert np.all(m.body_invweight0[links] == m.body_invweight0[links[0]])
 
 
 def test_pairs_static_contact_stiffness_is_the_stated_one(pairs) -> None:

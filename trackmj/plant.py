@@ -30,6 +30,7 @@ from trackmj.model import (
     load_model_params,
     with_heightfield,
 )
+from trackmj.model.structure import equalise_pair_weights
 from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElement
 from trackmj.terrain import RoadProfile
 
@@ -173,6 +174,7 @@ class TrackPlant:
         self._pin_rows = 3 * m.neq
         self._connected_pins = np.array(connected, dtype=int)
         self._hinged_pins = np.array(hinged, dtype=int)
+        equalise_pair_weights(m)   # pairs: every link the straight pair's row weight
         self._chassis_body = m.body("chassis").id
         self._hitch_site = m.site("rear_hitch").id
         self._sprocket_body = m.body("sprocket").id

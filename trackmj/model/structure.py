@@ -7,12 +7,13 @@ child of link k−1, hinged about +y at their shared pin k (the child's origin),
 nv 257 -> 175 and 123 instead of 246 pin-connect rows; callgrind 2.92M -> 2.16M
 instructions per bare step at 1.5 m/s (``benchmarks/README.md``, track structure candidates).
 
-Physics kept (measured there): both links of a pair have the same ``body_invweight0``
-(0.130 1/kg on straight runs, a free link 0.190), so the contact mapping of
-:mod:`trackmj.model.soft`, done on the compiled pairs with link_00's value, stays exact with
-one solref per partner geom there; pairs laid on a wrap at qpos0 weigh up to 3.9 % more, so
-their contacts are up to ~4 % softer than stated (static rails 0.963–1.00e7 N/m against
-1e7, ground 1.98–2.00e6 against 2e6); each remaining connect
+Physics kept (measured there): both links of a straight pair have the same
+``body_invweight0`` (0.130 1/kg, a free link 0.190), which the contact mapping of
+:mod:`trackmj.model.soft` uses (link_00's, one solref per partner geom). MuJoCo computes it at
+qpos0, the layout, where a pair laid on a wrap weighs up to 3.9 % more (its contacts would be
+up to ~4 % softer than stated); :func:`equalise_pair_weights` gives every link the straight
+pair's value after compiling (the plant and the generator's settle call it), so the static
+stiffness is the stated one within 0.1 % (ground) and 0.07 % (rails); each remaining connect
 carries the compliance of the two pins of its stretch in series (K/2, B/2,
 :func:`pin_series_count`), so a span stretches as before while the hinged pins are rigid.
 The revolution component stays ≤ 3 % of the link-passing one at 1.0/1.5/2.0 m/s, the
@@ -78,3 +79,11 @@ def pair_links(root: ET.Element, p: ModelParams) -> None:
     equality = root.find("equality")
     for k in hinged_pins(p):
         equality.remove(equality.find(f"connect[@name='pin_{k:02d}']"))
+
+
+def equalise_pair_weights(model: mujoco.MjModel) -> None:
+    """Give every link of a pairs model link_00's ``body_invweight0`` (the straight pair's;
+    see the module docstring); a free-link model is left as it is (all its links alike)."""
+    links = [b for b in range(model.nbody) if model.body(b).name.startswith("link_")]
+    if any(model.body_parentid[b] != 0 for b in links):
+        model.body_invweight0[links] = model.body_invweight0[model.body("link_00").id]
