@@ -17,6 +17,7 @@ from test_contacts import STATIC_TOLERANCE, _static_stiffness, span_under_tensio
 from test_model import assert_sparse_matches_dense
 
 from trackmj.model import ModelParams, generate_mjcf
+from trackmj.model.mjcf import link_name
 from trackmj.plant import PassiveTensioner, TrackPlant
 from trackmj.track_energy import TrackEnergyLedger
 
@@ -40,11 +41,11 @@ def test_pairs_halve_the_pin_connects(pairs, model_params: ModelParams) -> None:
     free = TrackPlant.load().model
     assert m.nv == free.nv - n and m.neq == n // 2
     for k in range(1, n, 2):
-        assert m.body(f"link_{k:02d}").parentid == m.body(f"link_{k - 1:02d}").id
-        assert m.joint(f"link_{k:02d}_pin").type == mujoco.mjtJoint.mjJNT_HINGE
+        assert m.body(link_name(k)).parentid == m.body(link_name(k - 1)).id
+        assert m.joint(link_name(k) + "_pin").type == mujoco.mjtJoint.mjJNT_HINGE
     # MuJoCo weighs a pair laid on a wrap at qpos0 up to 3.9 % more than a straight one;
     # the plant gives every link the straight pair's weight, which the contact mapping used
-    links = [m.body(f"link_{k:02d}").id for k in range(n)]
+    links = [m.body(link_name(k)).id for k in range(n)]
     compiled = mujoco.MjModel.from_xml_string(pairs[0]).body_invweight0[links, 0]
     assert 0.01 < compiled.max() / compiled.min() - 1.0 < 0.04
     assert np.all(m.body_invweight0[links] == m.body_invweight0[links[0]])

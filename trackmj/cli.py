@@ -16,10 +16,10 @@ from pathlib import Path
 def _cmd_model_info(args: argparse.Namespace) -> int:
     import mujoco
 
-    from trackmj.model import MODEL_NAME
     from trackmj.plant import TrackPlant
 
-    plant = TrackPlant.load(args.model, args.params)
+    plant = TrackPlant.load(args.model, args.params, machine=args.machine,
+                            overrides=_model_overrides(args.set))
     m, d = plant.model, plant.data
     p = plant.params
     link_mass = p.track.link_mass_kg * plant.link_count
@@ -29,7 +29,8 @@ def _cmd_model_info(args: argparse.Namespace) -> int:
                         or (m.geom_contype[j] & m.geom_conaffinity[i]))
     tension = plant.pin_tensions_N()
     rows = [
-        ("model", f"{MODEL_NAME} ({plant.model_path})"),
+        ("model", f"{m.names[:m.names.index(0)].decode()} "
+                  f"({plant.model_path or 'generated, cached'})"),
         ("bodies", f"{m.nbody - 1} (+ world)"),
         ("degrees of freedom", f"{m.nv} (generalised coordinates {m.nq})"),
         ("links", f"{plant.link_count}, pitch {p.track.pitch_m * 1e3:.1f} mm, "
@@ -52,26 +53,105 @@ def _cmd_model_info(args: argparse.Namespace) -> int:
                         f"upper strand {tension[plant.upper_strand_pins()].mean() / 1e3:.2f} "
                         "kN)"),
     ]
+    rows += _geometry_rows(plant)
     width = max(len(label) for label, _ in rows) + 2
     for label, text in rows:
         print(f"{label:<{width}}{text}")
     return 0
 
 
+def _geometry_rows(plant: object) -> list[tuple[str, str]]:
+    """The derived geometry of the plant's layout and what its home keyframe measures."""
+    import math
+
+    from trackmj.model import compute_layout
+    from trackmj.model.geometry import catenary_sag_m, derive_geometry, measured_sag_m
+
+    p = plant.params
+    layout = compute_layout(p)
+    g = derive_geometry(p, layout)
+    weight = float(plant.model.body_subtreemass[0]) * p.simulation.gravity_m_s2
+    ground = plant.contact_forces_N()["ground"]
+    end = "front" if p.sprocket.x_m > p.idler.x_m else "rear"
+    rows = [
+        ("layout", f"sprocket at the {end}, idler slide "
+                   f"{math.degrees(p.idler.slide_angle_rad):.1f}° above horizontal, idler "
+                   f"centre x {layout.idler_x_m:.4f} m (guess {p.idler.x_m:g} m)"),
+        ("perimeter", f"loop {g.loop_m:.4f} m ({p.track.link_count} × "
+                      f"{p.track.pitch_m * 1e3:.1f} mm), path round the pin circles "
+                      f"{g.path_m:.4f} m, layout closure {g.closure_m * 1e3:.2g} mm"),
+        ("wraps", ", ".join(f"{name} {math.degrees(a):.1f}°"
+                            for name, a in g.wraps_rad.items() if a > 1e-6)),
+    ]
+    pins = plant.pins_layout_frame()
+    upper_N = float(plant.pin_tensions_N()[plant.upper_strand_pins()].mean())
+    for s in g.spans:
+        text = f"{s.start} -> {s.end}: {s.length_m * 1e3:.0f} mm"
+        sag, chord = measured_sag_m(s, pins, p.track.pitch_m) if s.upper else (0.0, 0.0)
+        if chord > 0.0:
+            text += (f", sag at home {sag * 1e3:.1f} mm over {chord * 1e3:.0f} mm (shallow "
+                     f"catenary at the home tension "
+                     f"{catenary_sag_m(p, s, upper_N, chord) * 1e3:.1f} mm)")
+        rows.append(("upper span" if s.upper else "lower span", text))
+    rows += [
+        ("weight this side", f"{weight / 1e3:.2f} kN (Σ ground normal force at home "
+                             f"{ground / 1e3:.2f} kN)"),
+        ("static strand tension", f"{g.strand_tension_N / 1e3:.2f} kN at the preload "
+                                  f"{p.tensioner.preload_N / 1e3:.1f} kN (idler geometry "
+                                  f"factor {g.idler_factor:.4f}; frictionless idler)"),
+    ]
+    return rows
+
+
 def _cmd_model_generate(args: argparse.Namespace) -> int:
+    from trackmj.machines import resolve
     from trackmj.model import load_model_params, write_model
 
-    path = write_model(args.out, load_model_params(args.params))
+    machine = resolve(args.machine)
+    out = args.out or (machine.reference_mjcf and machine.reference_mjcf.with_name(
+        machine.reference_mjcf.name.removesuffix("_scene.xml") + ".xml"))
+    if out is None:
+        raise ValueError(f"machine {machine.name} has no reference_mjcf in "
+                         f"{machine.file.name}: give --out FILE.xml")
+    params = load_model_params(args.params or machine.mechanics,
+                               overrides=_model_overrides(args.set))
+    path = write_model(out, params, machine.name)
     print(f"wrote {path}")
+    return 0
+
+
+def _model_overrides(items: list[str]) -> dict:
+    """The ``model`` entries of ``--set`` items (commands on the bare track take no
+    others)."""
+    from trackmj.params import ParameterError, parse_overrides
+
+    sets = parse_overrides(items)
+    other = [kind for kind, keys in sets.items() if keys and kind != "model"]
+    if other:
+        raise ParameterError(f"--set {other[0]}.*: this command takes only model.* keys "
+                             "(the bare track has no hydraulics, control or scenario)")
+    return sets["model"]
+
+
+def _cmd_machines(args: argparse.Namespace) -> int:
+    from trackmj.machines import DEFAULT_MACHINE, shipped
+
+    machines = shipped()
+    width = max(len(name) for name in machines) + 2
+    for name, m in machines.items():
+        default = " (default)" if name == DEFAULT_MACHINE else ""
+        print(f"{name:<{width}}{m.description}{default}")
+    print("or any machine file (*_machine.toml naming its mechanics, hydraulics and control "
+          "files; see README, Your machine)")
     return 0
 
 
 def _cmd_drive(args: argparse.Namespace) -> int:
     from trackmj.drive import drive
 
-    preload = None if args.preload is None else args.preload * 1e3
     result = drive(args.speed, args.duration, model=args.model, params=args.params,
-                   preload_N=preload, out_dir=args.out, tensioner=args.tensioner)
+                   preload_N=args.preload, out_dir=args.out, tensioner=args.tensioner,
+                   machine=args.machine, overrides=_model_overrides(args.set))
     m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
     print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s: {m['real_time_factor']:.2f}x "
           f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
@@ -80,7 +160,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     print(f"idler force        mean {s['idler_force_mean_N'] / 1e3:7.2f} kN   "
           f"min {s['idler_force_min_N'] / 1e3:7.2f}  max {s['idler_force_max_N'] / 1e3:7.2f}")
     print(f"strand tension     upper {s['upper_strand_tension_mean_N'] / 1e3:5.2f} kN, "
-          f"rear lower run {s['lower_strand_tension_mean_N'] / 1e3:5.2f} kN")
+          f"sprocket lower run {s['lower_strand_tension_mean_N'] / 1e3:5.2f} kN")
     print(f"vehicle speed      {s['vehicle_speed_mean_m_s']:.3f} m/s "
           f"(sprocket pitch speed {s['track_speed_mean_m_s']:.3f} m/s)")
     contacts = sum(e["contact_work_J"].values())
@@ -160,7 +240,7 @@ def _files(args: argparse.Namespace) -> dict:
     """The parameter files, tensioner file and ``--set`` overrides given on the command
     line."""
     return dict(model=args.model, hydraulics=args.hydraulics, control=args.control,
-                overrides=args.set, tensioner=args.tensioner)
+                overrides=args.set, tensioner=args.tensioner, machine=args.machine)
 
 
 def _tensioner_line(described: dict) -> str:
@@ -171,20 +251,61 @@ def _tensioner_line(described: dict) -> str:
             f"(dF/dv: {described['dF_dv']}){per_step}")
 
 
+def run_folder(setup: object, key: str, *, defaults: bool) -> Path:
+    """Default folder of ``trackmj run``: ``runs/SCENARIO-ARCH-CONTROLLER-sSEED`` for the
+    scenario's own inputs (``defaults``), with ``-VARIANT`` for a W5 variant and the first
+    8 digits of the inputs' hash (:func:`trackmj.campaign.inputs_key`) for any other input
+    (estimator, --duration, --set, parameter or tensioner files), so that runs of other
+    inputs never share a folder."""
+    name = (f"{setup.scenario.name}-{setup.architecture}-{setup.controller}-"
+            f"s{setup.seed}")
+    if setup.variant.name != "nominal":
+        name += f"-{setup.variant.name}"
+    if not defaults:
+        name += f"-{key[:8]}"
+    return Path("runs") / name
+
+
+def _stored_inputs_key(out: Path) -> str | None:
+    """The inputs key of the run in folder ``out`` ('' for a run without one, None if
+    ``out`` holds no run)."""
+    import json
+
+    from trackmj.results import METRICS
+
+    try:
+        doc = json.loads((out / METRICS).read_text())
+    except (OSError, ValueError):
+        return None
+    return str(doc.get("run", {}).get("inputs_key", ""))
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
+    from trackmj.campaign import inputs_key, run_key, stamped
     from trackmj.figures import run_figure
     from trackmj.playback import RUN_RRD
-    from trackmj.results import ResultWriter
+    from trackmj.results import ResultDirectoryError, ResultWriter
+    from trackmj.scenarios import check_duration
     from trackmj.sim.run import run
     from trackmj.sim.setup import prepare
 
     setup = prepare(args.scenario, architecture=args.arch, controller=args.controller,
                     estimator=args.estimator, seed=args.seed, duration=args.duration,
                     variant=args.variant, **_files(args))
-    out = Path(args.out or f"runs/{setup.scenario.name}-{setup.architecture}-"
-                           f"{setup.controller}-s{setup.seed}")
+    check_duration(setup.scenario, setup.duration_s)
+    key = inputs_key(setup)
+    defaults = not (args.estimator or args.duration is not None or args.set or args.model
+                    or args.hydraulics or args.control or args.tensioner)
+    out = Path(args.out) if args.out else run_folder(setup, key, defaults=defaults)
+    held = _stored_inputs_key(out)
+    if held is not None and held != key and not args.overwrite:
+        what = f"inputs {held[:8]}" if held else "no inputs key: an older trackmj"
+        raise ResultDirectoryError(
+            f"--out {out}: holds a run of other inputs ({what}; this run's are {key[:8]}); "
+            "give --overwrite to replace it, or another --out")
     with ResultWriter(out) as writer:
         result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True)
+        result = stamped(result, inputs_key=key, run_key=run_key(setup))
         writer.commit(result, csv=args.csv,
                       extras={"timeseries.png": lambda path: run_figure(result, path)})
     print(f"{setup.scenario.name} ({setup.scenario.title}), {result.architecture}, "
@@ -202,11 +323,23 @@ def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
     return dict(scenario=scenario, estimator=getattr(args, "estimator", None),
                 duration=args.duration, overrides=overrides_tuple(args.set),
                 model=as_path(args.model), hydraulics=as_path(args.hydraulics),
-                control=as_path(args.control), tensioner=as_path(args.tensioner))
+                control=as_path(args.control), tensioner=as_path(args.tensioner),
+                machine=_machine_spec(args.machine))
+
+
+def _machine_spec(machine: str | None) -> str | None:
+    """A machine for a RunSpec: a shipped name as given, a machine file as an absolute
+    path (workers may run elsewhere)."""
+    from trackmj.machines import names
+
+    if machine is None or machine.strip().lower() in names():
+        return machine
+    return str(Path(machine).resolve())
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from trackmj.report import compare, write_compare
+    from trackmj.compare import compare, write_compare
+    from trackmj.scenarios import check_duration
     from trackmj.sim.setup import prepare
 
     controllers = args.controllers.split(",") if args.controllers else [None]
@@ -215,6 +348,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     controllers = [str(c) if c else s.controller for c, s in zip(controllers, setups,
                                                                  strict=True)]
     scenario = setups[0].scenario
+    check_duration(scenario, setups[0].duration_s)
     out = Path(args.out or f"runs/compare-{scenario.name}")
     base = _specs_base(args, str(args.scenario))
     outcome = compare(base, controllers, out, seed=args.seed,
@@ -248,8 +382,12 @@ def _cmd_report(args: argparse.Namespace) -> int:
         from trackmj.tensioner import load_tensioner
 
         load_tensioner(args.tensioner)   # refused here, before any run, if it is bad
+    if args.machine is not None:
+        from trackmj.machines import resolve
+
+        resolve(args.machine)   # refused here, before any run, if it is bad
     specs = plan(args.scenarios.split(","), list(range(args.seeds)), args.duration, archs,
-                 baselines, tensioner=args.tensioner)
+                 baselines, tensioner=args.tensioner, machine=_machine_spec(args.machine))
     matrix = run_matrix(specs, out, workers=args.workers, scheduler=args.scheduler)
     path = write_report(matrix.results, out, matrix)
     print(f"{len(matrix.results)} runs ({matrix.resumed} resumed, {len(matrix.failed)} failed) "
@@ -295,9 +433,13 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     loaded = [load_scenario(name) for name in BUILTIN]
     width = max(len(sc.name) for sc in loaded) + 2
     for sc in loaded:
-        variants = f", {len(sc.variants)} variants" if len(sc.variants) > 1 else ""
         print(f"{sc.name:<{width}}{sc.title} ({sc.duration_s:g} s, {sc.controller}/"
-              f"{sc.estimator}{variants})")
+              f"{sc.estimator})")
+        if len(sc.variants) > 1:
+            import textwrap
+
+            print(textwrap.fill("--variant " + ", ".join(v.name for v in sc.variants), 90,
+                                initial_indent=" " * width, subsequent_indent=" " * (width + 10)))
     print("or any scenario TOML file in the same format (experiments/*.toml)")
     for title, registry in (("architectures (--arch)", ARCHITECTURES),
                             ("controllers (--controller)", CONTROLLERS),
@@ -311,8 +453,8 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def _cmd_keys(args: argparse.Namespace) -> int:
+    from trackmj.campaign import file_schema
     from trackmj.params import FILE_KINDS, describe_schema
-    from trackmj.sweeps import file_schema
 
     unknown = [k for k in args.kinds if k not in FILE_KINDS]
     if unknown:
@@ -341,7 +483,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     out = Path(args.out or f"runs/sweep-{Path(args.spec).stem}")
     summary = sweep(args.spec, out, workers=args.workers, scheduler=args.scheduler,
                     keep_runs=args.keep_runs, retry_failed=args.retry_failed,
-                    tensioner=args.tensioner)
+                    tensioner=args.tensioner, machine=_machine_spec(args.machine))
     print(summary)
     print(f"{len(summary.figures)} figures -> {out / 'figures'}")
     return 1 if summary.failed else 0
@@ -424,37 +566,54 @@ def build_parser() -> argparse.ArgumentParser:
                        "([fmu]) or a spring-damper ([passive]) replacing the hydraulic "
                        "element (see README, FMI)")
 
+    def machine_arg(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--machine", metavar="NAME|FILE", help="a shipped machine ('trackmj "
+                       "machines') or a machine file *_machine.toml (default: lf1352)")
+
     def model_args(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--model", help="MJCF file (default: packaged models/lf1352.xml)")
-        p.add_argument("--params", help="parameter TOML (default: packaged lf1352.toml)")
+        machine_arg(p)
+        p.add_argument("--model", help="MJCF file (default: the machine's model, generated "
+                       "and cached unless it is the committed reference)")
+        p.add_argument("--params", help="model parameter TOML (default: the machine's)")
+        p.add_argument("--set", metavar="model.TABLE.KEY=VALUE", action="append", default=[],
+                       help="override one key of the model file (repeatable), e.g. "
+                            "--set model.track.link_count=80")
 
     model = sub.add_parser("model", help="inspect or regenerate the track model")
     model_sub = model.add_subparsers(dest="model_command", required=True)
     info = model_sub.add_parser("info", help="summary: bodies, DOF, links, masses, contacts")
     model_args(info)
     info.set_defaults(func=_cmd_model_info)
-    gen = model_sub.add_parser("generate", help="regenerate lf1352.xml from the TOML")
-    gen.add_argument("--params", help="parameter TOML (default: packaged lf1352.toml)")
-    gen.add_argument("--out", help="output MJCF path (default: packaged lf1352.xml)")
+    gen = model_sub.add_parser("generate", help="regenerate a machine's reference MJCF "
+                               "(models/lf1352.xml) from its files")
+    machine_arg(gen)
+    gen.add_argument("--params", help="model parameter TOML (default: the machine's)")
+    gen.add_argument("--set", metavar="model.TABLE.KEY=VALUE", action="append", default=[],
+                     help="override one key of the model file (repeatable)")
+    gen.add_argument("--out", help="output MJCF path NAME.xml, the machine part; the scene "
+                     "NAME_scene.xml beside it includes it (default: the machine's "
+                     "reference_mjcf)")
     gen.set_defaults(func=_cmd_model_generate)
 
     drive = sub.add_parser("drive", help="drive the track with the passive tensioner")
     model_args(drive)
     drive.add_argument("--speed", type=float, default=1.5, help="sprocket pitch speed [m/s]")
     drive.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
-    drive.add_argument("--preload", type=float, help="tensioner preload [kN]")
+    drive.add_argument("--preload", type=float, metavar="N",
+                       help="tensioner preload [N], e.g. 12e3")
     drive.add_argument("--out", help="directory for metrics.json and timeseries.parquet")
     tensioner_arg(drive)
     drive.set_defaults(func=_cmd_drive)
 
     def file_args(p: argparse.ArgumentParser) -> None:
         tensioner_arg(p)
+        machine_arg(p)
         p.add_argument("--model", metavar="FILE",
-                       help="model parameter TOML (default: packaged models/lf1352.toml)")
+                       help="model parameter TOML (default: the machine's mechanics)")
         p.add_argument("--hydraulics", metavar="FILE", help="hydraulic parameter TOML "
-                       "(default: packaged models/lf1352_hydraulics.toml)")
+                       "(default: the machine's)")
         p.add_argument("--control", metavar="FILE", help="control parameter TOML "
-                       "(default: packaged models/lf1352_control.toml)")
+                       "(default: the machine's)")
         p.add_argument("--set", metavar="KIND.TABLE.KEY=VALUE", action="append", default=[],
                        help="override one key of a file (repeatable), KIND one of model, "
                             "hydraulics, control, scenario; e.g. "
@@ -467,7 +626,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler, "
                        "e.g. tcp://HOST:8786, instead of a local cluster")
 
-    def run_args(p: argparse.ArgumentParser) -> None:
+    def run_args(p: argparse.ArgumentParser, out_help: str) -> None:
         p.add_argument("scenario", help="a built-in scenario (W1-W5, NL1; trackmj "
                        "scenarios) or a scenario TOML file")
         p.add_argument("--estimator", choices=choices(ESTIMATORS),
@@ -476,11 +635,13 @@ def build_parser() -> argparse.ArgumentParser:
                        help="noise and terrain seed")
         p.add_argument("--duration", type=_duration,
                        help="simulated time [s] (default: the scenario's)")
-        p.add_argument("--out", metavar="DIR", help="output directory")
+        p.add_argument("--out", metavar="DIR", help=out_help)
         file_args(p)
 
     run = sub.add_parser("run", help="one closed-loop run of a scenario")
-    run_args(run)
+    run_args(run, "output directory (default: runs/SCENARIO-ARCH-CONTROLLER-sSEED, with "
+                  "-VARIANT and a short hash of the inputs when they are not the scenario's "
+                  "own; a folder holding a run of other inputs is refused unless --overwrite)")
     run.add_argument("--arch", default="tp", choices=choices(ARCHITECTURES),
                      help="coupling architecture")
     run.add_argument("--controller", metavar="NAME",
@@ -489,11 +650,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--variant", default="nominal", help="W5 variant name")
     run.add_argument("--csv", action="store_true", help="also write timeseries.csv")
     run.add_argument("--rrd", action="store_true", help="also write a Rerun recording")
+    run.add_argument("--overwrite", action="store_true", help="replace a result of other "
+                     "inputs in the output folder (the same inputs replace it anyway)")
     run.set_defaults(func=_cmd_run)
 
     compare = sub.add_parser("compare", help="all architectures on one scenario, with each "
                              "reduced one's prediction error against tp")
-    run_args(compare)
+    run_args(compare, "output directory (default: runs/compare-SCENARIO); runs already done "
+                      "in it are kept")
     compare.add_argument("--controllers", help="comma list, e.g. nmpc,lmpc,pid (each on every "
                          "architecture; one more figure overlays the controllers)")
     executor_args(compare)
@@ -509,6 +673,7 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--baselines", default="lmpc,pid",
                         help="baseline controllers run on tp in W1 ('' for none)")
     tensioner_arg(report)
+    machine_arg(report)
     executor_args(report)
     report.add_argument("--out", default="runs/report",
                         help="output directory; runs already complete in it are kept")
@@ -526,14 +691,19 @@ def build_parser() -> argparse.ArgumentParser:
                        help="output directory, resumed if it holds a sweep "
                             "(default: runs/sweep-SPEC_NAME)")
     sweep.add_argument("--plot", metavar="DIR",
-                       help="only redraw DIR/figures from DIR/results.parquet")
+                       help="only redraw DIR/figures from DIR/results.parquet (a resumed "
+                            "sweep that makes no run keeps the figures that exist)")
     sweep.add_argument("--keep-runs", action="store_true",
                        help="also write each run's result directory under DIR/runs/")
     sweep.add_argument("--retry-failed", action="store_true",
                        help="run again the runs whose rows hold an error")
     tensioner_arg(sweep)
+    machine_arg(sweep)
     executor_args(sweep)
     sweep.set_defaults(func=_cmd_sweep)
+
+    machines = sub.add_parser("machines", help="list the shipped machines")
+    machines.set_defaults(func=_cmd_machines)
 
     scenarios = sub.add_parser("scenarios", help="list the built-in operating conditions")
     scenarios.set_defaults(func=_cmd_scenarios)

@@ -46,10 +46,17 @@ class RunSpec:
     hydraulics: str | None = None
     control: str | None = None
     tensioner: str | None = None
+    machine: str | None = None
 
     def as_tp(self) -> RunSpec:
         """The same case in the tp architecture (what a dp-a run replays)."""
         return replace(self, architecture="tp")
+
+    def prepare_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`trackmj.sim.setup.prepare` for this run."""
+        kwargs = self.simulate_kwargs()
+        kwargs["overrides"] = kwargs.pop("set")
+        return kwargs
 
     def simulate_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of ``simulate`` for this run."""
@@ -57,7 +64,7 @@ class RunSpec:
                     controller=self.controller, estimator=self.estimator, seed=self.seed,
                     duration=self.duration, variant=self.variant, set=dict(self.overrides),
                     model=self.model, hydraulics=self.hydraulics, control=self.control,
-                    tensioner=self.tensioner)
+                    tensioner=self.tensioner, machine=self.machine)
 
 
 @dataclass

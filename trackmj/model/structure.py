@@ -57,10 +57,12 @@ def pair_links(root: ET.Element, p: ModelParams) -> None:
         raise ParameterError(f"[track] structure = \"pairs\" does not take the "
                              f"[{p.pin_joint_table}] torsional spring-damper; use "
                              "structure = \"free\" with it")
+    from trackmj.model.mjcf import link_name, pin_name  # mjcf imports this module
+
     world = root.find("worldbody")
     bodies = {b.get("name"): b for b in world.findall("body")}
     for k in hinged_pins(p):
-        child, parent = bodies[f"link_{k:02d}"], bodies[f"link_{k - 1:02d}"]
+        child, parent = bodies[link_name(k)], bodies[link_name(k - 1)]
         qp, qc = _floats(parent.get("quat")), _floats(child.get("quat"))
         rot = np.empty(9)
         mujoco.mju_quat2Mat(rot, qp)
@@ -72,18 +74,19 @@ def pair_links(root: ET.Element, p: ModelParams) -> None:
         child.set("quat", " ".join(f"{v:.9g}" for v in rel_quat))
         for j in child.findall("joint"):
             child.remove(j)
-        child.insert(0, ET.Element("joint", name=f"link_{k:02d}_pin", type="hinge",
+        child.insert(0, ET.Element("joint", name=link_name(k) + "_pin", type="hinge",
                                    axis="0 1 0", pos="0 0 0"))
         world.remove(child)
         parent.append(child)
     equality = root.find("equality")
     for k in hinged_pins(p):
-        equality.remove(equality.find(f"connect[@name='pin_{k:02d}']"))
+        equality.remove(equality.find(f"connect[@name='{pin_name(k)}']"))
 
 
 def equalise_pair_weights(model: mujoco.MjModel) -> None:
     """Give every link of a pairs model link_00's ``body_invweight0`` (the straight pair's;
     see the module docstring); a free-link model is left as it is (all its links alike)."""
     links = [b for b in range(model.nbody) if model.body(b).name.startswith("link_")]
+    links.sort(key=lambda b: int(model.body(b).name.split("_")[1]))   # link_00 first
     if any(model.body_parentid[b] != 0 for b in links):
-        model.body_invweight0[links] = model.body_invweight0[model.body("link_00").id]
+        model.body_invweight0[links] = model.body_invweight0[links[0]]

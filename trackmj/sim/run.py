@@ -21,7 +21,7 @@ import numpy as np
 
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
-from trackmj.machine import machine
+from trackmj.machine import machine as host_machine
 from trackmj.metrics import compute_metrics
 from trackmj.ports import COUPLING_STEP_S, StepInputs, steps_per_period
 from trackmj.results import Result, run_metadata
@@ -73,7 +73,8 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
              model: str | Path | None = None, hydraulics: str | Path | None = None,
              control: str | Path | None = None, set: Overrides | None = None,
              rrd: str | Path | None = None, progress: bool = False,
-             tp_result: Result | None = None, tensioner: str | Path | None = None) -> Result:
+             tp_result: Result | None = None, tensioner: str | Path | None = None,
+             machine: str | Path | None = None) -> Result:
     """Run one operating condition in closed loop.
 
     Parameters
@@ -93,7 +94,7 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     variant : str
         Name of a scenario variant (W5 perturbations); ``"nominal"`` by default.
     model, hydraulics, control : str or Path, optional
-        Parameter files replacing the packaged ``models/lf1352*.toml``.
+        Parameter files replacing the machine's (``models/lf1352*.toml`` by default).
     set : mapping or sequence of str, optional
         Overrides of file keys, ``{"hydraulics.fluid.bulk_modulus_Pa": 1.2e9}`` or
         ``["hydraulics.fluid.bulk_modulus_Pa=1.2e9"]`` (the CLI's ``--set``); KIND is
@@ -107,6 +108,9 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     tensioner : str or Path, optional
         A tensioner file (:mod:`trackmj.tensioner`: an FMU or a passive spring-damper)
         replacing the hydraulic plugin of tp, tp-weak and dp-a.
+    machine : str or Path, optional
+        A shipped machine's name (``trackmj machines``) or a machine file
+        (``*_machine.toml``, see :mod:`trackmj.machines`); default ``"lf1352"``.
 
     Returns
     -------
@@ -126,7 +130,7 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     setup = prepare(scenario, architecture=architecture, controller=controller,
                     estimator=estimator, seed=seed, duration=duration, variant=variant,
                     model=model, hydraulics=hydraulics, control=control, overrides=set,
-                    tensioner=tensioner)
+                    tensioner=tensioner, machine=machine)
     return run(setup, rrd=rrd, progress=progress, tp_result=tp_result)
 
 
@@ -176,7 +180,7 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
                 bar.close()
         wall = time.perf_counter() - wall_start
     meta = run_metadata(setup.scenario.name, setup.architecture, setup.controller,
-                        setup.estimator, setup.seed, machine(), variant=setup.variant.name,
+                        setup.estimator, setup.seed, host_machine(), variant=setup.variant.name,
                         duration_s=setup.duration_s, files=setup.files,
                         overrides=setup.overrides)
     result = Result(recorder.table(meta), {})
