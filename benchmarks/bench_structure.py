@@ -1,7 +1,7 @@
 """Track-structure candidates of issue 21 on the default model: cost and physics checks.
 
-Each candidate edits the committed MJCF (``models/lf1352.xml``) or its compiled options here,
-never the generator:
+Each candidate edits the default machine's MJCF (machine and scene joined) or its compiled
+options here, never the generator:
 
 * ``free``: the committed model (82 free planar links, 82 pin connects).
 * ``pairs``: two-link sub-chains: every odd link hinged to the even link before it at their
@@ -39,11 +39,12 @@ import mujoco
 import numpy as np
 
 from trackmj.machine import machine
-from trackmj.model import default_xml_path, load_model_params
+from trackmj.machines import mechanics, model_mjcf, resolve
 from trackmj.model.mjcf import contact_kind, soft_constraints
 from trackmj.model.soft import row_diag, soft_constraint
 
-PARAMS = load_model_params()
+MACHINE = resolve(None)   # the default machine (LF1352)
+PARAMS = mechanics(MACHINE)
 SETTLE_S, RAMP_S = 1.0, 1.0
 
 
@@ -152,7 +153,7 @@ def home_state(m: mujoco.MjModel, base_text: str) -> np.ndarray:
 def build(candidate: str) -> tuple[mujoco.MjModel, np.ndarray]:
     """The compiled candidate ("free" or "pairs", "+novisual", solver suffixes) and its
     starting qpos."""
-    text = default_xml_path().read_text()
+    text = model_mjcf(PARAMS, MACHINE)
     parts = candidate.split("+")
     structure = parts[0]
     if structure.startswith("chain"):   # chainN: sub-chains of N links
