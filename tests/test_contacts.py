@@ -140,35 +140,42 @@ def _bushed_plant(params: ModelParams) -> TrackPlant:
     return TrackPlant(mujoco.MjModel.from_xml_string(generate_mjcf(bushed)), bushed)
 
 
+def span_under_tension(plant: TrackPlant, force_N: float) -> tuple[int, int, float, float,
+                                                                   np.ndarray]:
+    """Settle standing under ``force_N`` on the idler, then over 200 steps the upper span
+    between return roller 2 and the idler (pins a..b): its mean length along the links (sum
+    of pin-to-pin distances, blind to sag and kinks) [m], the mean tension of its pins
+    a+1..b [N], and the last step's pin tensions [N]."""
+    p = plant.params
+    ride = p.chassis.ride_height_m
+    x_lo, x_hi = max(p.return_rollers.x_m) + 0.12, p.idler.x_m - 0.3
+    plant.reset()
+    plant.run(ConstantForce(force_N, 2e4), 1.5)
+    pins = plant._chassis_frame_pins()
+    span = np.nonzero((pins[:, 0] > x_lo) & (pins[:, 0] < x_hi) & (pins[:, 1] > 0.3 - ride))[0]
+    assert len(span) >= 5 and np.all(np.diff(span) == 1)
+    a, b = int(span[0]), int(span[-1])
+    samples = []
+    for _ in range(200):
+        plant.step(ConstantForce(force_N, 2e4))
+        pos = plant.pin_positions()[a:b + 1]
+        tension = plant.pin_tensions_N()
+        samples.append((np.linalg.norm(np.diff(pos, axis=0), axis=1).sum(),
+                        tension[a + 1:b + 1].mean()))
+    length, mean_tension = np.mean(samples, axis=0)
+    return a, b, float(length), float(mean_tension), tension
+
+
 @pytest.mark.parametrize("pins", ["steel", "bushings"])
 def test_free_span_stretches_as_pins_in_series(model_params: ModelParams, pins: str) -> None:
     """The upper span between return roller 2 and the idler holds n pins in series: its
-    length along the links (sum of pin-to-pin distances, blind to sag and kinks) grows by
-    n·ΔT/K when the tension rises by ΔT (the links are rigid), for the steel pins and for
-    the rubber bushings."""
+    length along the links grows by n·ΔT/K when the tension rises by ΔT (the links are
+    rigid), for the steel pins and for the rubber bushings."""
     plant = TrackPlant.load() if pins == "steel" else _bushed_plant(model_params)
     p = plant.params
     assert p.pin_joint_table == ("pins" if pins == "steel" else "bushings")
-    ride = p.chassis.ride_height_m
-    x_lo, x_hi = max(p.return_rollers.x_m) + 0.12, p.idler.x_m - 0.3
-    lengths, tensions = [], []
-    for force in (11_000.0, 15_000.0):
-        plant.reset()
-        plant.run(ConstantForce(force, 2e4), 1.5)
-        pins = plant._chassis_frame_pins()
-        span = np.nonzero((pins[:, 0] > x_lo) & (pins[:, 0] < x_hi) & (pins[:, 1] > 0.3 - ride))[0]
-        assert len(span) >= 5 and np.all(np.diff(span) == 1)
-        a, b = span[0], span[-1]
-        samples = []
-        for _ in range(200):
-            plant.step(ConstantForce(force, 2e4))
-            pos = plant.pin_positions()[a:b + 1]
-            samples.append((np.linalg.norm(np.diff(pos, axis=0), axis=1).sum(),
-                            plant.pin_tensions_N()[a + 1:b + 1].mean()))
-        length, tension = np.mean(samples, axis=0)
-        lengths.append(length)
-        tensions.append(tension)
-    pins_in_series = b - a
-    measured = pins_in_series * (tensions[1] - tensions[0]) / (lengths[1] - lengths[0])
-    assert tensions[1] - tensions[0] > 1_000.0
+    (_, _, l0, t0, _), (a, b, l1, t1, _) = (span_under_tension(plant, f)
+                                            for f in (11_000.0, 15_000.0))
+    measured = (b - a) * (t1 - t0) / (l1 - l0)
+    assert t1 - t0 > 1_000.0
     assert measured == pytest.approx(p.pin_joint.radial_stiffness_N_m, rel=0.05)

@@ -42,7 +42,7 @@ def _cmd_model_info(args: argparse.Namespace) -> int:
         ("", f"chassis share {p.chassis.mass_kg:.0f} kg, track {link_mass:.0f} kg, wheels "
              f"and carrier {total_mass - p.chassis.mass_kg - link_mass:.0f} kg"),
         ("geoms", f"{m.ngeom} ({contact_pairs} geom pairs can collide)"),
-        ("equalities", f"{m.neq} (one connect per pin)"),
+        ("equalities", f"{m.neq} pin connects ({p.track.structure} links)"),
         ("actuators", f"{m.nu}: {', '.join(m.actuator(i).name for i in range(m.nu))}"),
         ("timestep", f"{m.opt.timestep * 1e3:.3f} ms, integrator "
                      f"{mujoco.mjtIntegrator(m.opt.integrator).name}"),

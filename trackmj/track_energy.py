@@ -37,7 +37,6 @@ from dataclasses import asdict, dataclass, field
 import mujoco
 import numpy as np
 
-from trackmj.model import link_name
 from trackmj.plant import TrackPlant
 
 PARTNERS = ("ground", "ground_friction", "sprocket", "road_wheels", "idler",
@@ -111,8 +110,9 @@ class TrackEnergyLedger:
         self._drive_dof = int(m.jnt_dofadr[m.actuator_trnid[self._drive, 0]])
         self._tensioner_dof = int(m.jnt_dofadr[m.joint("idler_slide").id])
         self._damped_dofs = np.nonzero(m.dof_damping > 0.0)[0]   # the suspension slides
-        if np.any(m.dof_damping[m.jnt_dofadr[[m.joint(link_name(k) + "_pitch").id
-                                              for k in range(plant.link_count)]]] > 0.0):
+        hinges = [j for j in range(m.njnt) if m.joint(j).name.startswith("link_")
+                  and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]   # pitch and pin hinges
+        if np.any(m.dof_damping[m.jnt_dofadr[hinges]] > 0.0):
             raise ValueError("energy ledger: link hinges must not carry joint damping")
         # the implicit part of the step, qDeriv·Δv, in MuJoCo's sparse layout
         self._deriv_row = np.repeat(np.arange(m.nv), m.D_rownnz)
@@ -145,7 +145,7 @@ class TrackEnergyLedger:
         self._creation = np.zeros(len(PARTNERS))   # Σ ½·K·Δr² of the constraint springs
         self._curvature = 0.0                      # Σ f·(J·Δq − Δr) of the constraints
         self._pending: dict[str, np.ndarray] | None = None
-        self._pin_rows = 3 * plant.link_count
+        self._pin_rows = plant.pin_rows
         self._steps = 0
 
     def after_step(self) -> None:

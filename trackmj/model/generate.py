@@ -19,6 +19,7 @@ from trackmj.io import write_text_atomic
 from trackmj.model.layout import compute_layout
 from trackmj.model.mjcf import build_mjcf, split_mjcf
 from trackmj.model.params import MODEL_NAME, ModelParams, default_xml_path, load_model_params
+from trackmj.model.structure import equalise_pair_weights
 from trackmj.params import ParameterError
 
 SETTLE_DURATION_S = 3.0
@@ -28,6 +29,7 @@ MAX_INITIAL_PENETRATION_M = 1e-3
 def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> mujoco.MjData:
     """State after ``duration_s`` [s] from the layout, standing (sprocket servo at 0 rad/s),
     under the passive tensioner of ``params``; RuntimeError on MuJoCo warnings."""
+    equalise_pair_weights(model)
     data = mujoco.MjData(model)
     tensioner = model.actuator("tensioner").id
     t = params.tensioner

@@ -52,6 +52,7 @@ import numpy as np
 from trackmj.model.layout import Layout, hub_radius, outward_sign, slide_axis
 from trackmj.model.params import MODEL_NAME, ModelParams
 from trackmj.model.soft import SoftConstraint, body_inv_weight, row_diag, soft_constraint
+from trackmj.model.structure import pair_links, pin_series_count
 from trackmj.params import ParameterError
 from trackmj.terrain import RoadProfile, heightfield
 
@@ -385,10 +386,11 @@ def soft_constraints(p: ModelParams, model: mujoco.MjModel) -> dict[str, SoftCon
         stiffness, damping, key = stated[kind]
         out[name] = soft_constraint(stiffness, damping, rows, diag, h, margin,
                                     f"model file {key}")
-    joint = p.pin_joint
+    joint, series = p.pin_joint, pin_series_count(p)   # pins in series on one connect
     rows, diag = row_diag(2.0 * link, condim=1)
-    out["pin"] = soft_constraint(joint.radial_stiffness_N_m, joint.radial_damping_N_s_m, rows,
-                                 diag, h, margin, f"model file [{p.pin_joint_table}]")
+    out["pin"] = soft_constraint(joint.radial_stiffness_N_m / series,
+                                 joint.radial_damping_N_s_m / series, rows, diag, h, margin,
+                                 f"model file [{p.pin_joint_table}]")
     return out
 
 
@@ -437,6 +439,8 @@ def build_mjcf(p: ModelParams, layout: Layout, home_qpos: np.ndarray | None = No
     _running_gear(chassis, p, layout)
     _check_torsion(p)
     _links(root, world, p, layout)
+    if p.track.structure == "pairs":
+        pair_links(root, p)
     _actuators(root, p)
     _map_soft_constraints(root, p)
     if home_qpos is not None:
