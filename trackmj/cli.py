@@ -347,6 +347,25 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 1 if summary.failed else 0
 
 
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from trackmj.fitting import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
+
+    out = Path(args.out)
+    done = calibrate(args.spec, args.measured, out, workers=args.workers)
+    doc = done.document
+    runs = len(doc["runs"])
+    print(f"calibrated {len(doc['estimates'])} keys on {len(args.measured)} log(s), {runs} "
+          f"runs in {doc['wall_time_s']:.0f} s ({doc['optimizer']['message']})")
+    for key, value in doc["estimates"].items():
+        low, high = doc["intervals"][key]
+        bound = "  (at a bound)" if doc["at_bound"][key] else ""
+        print(f"  {key} = {value:.5g}   95 % [{low:.5g}, {high:.5g}]{bound}")
+    rms = ", ".join(f"{name} {value:.4g}" for name, value in doc["residual_rms"].items())
+    print(f"  residual RMS (SI): {rms}")
+    print(f"-> {out / CALIBRATION_JSON}, {out / CALIBRATION_PNG}")
+    return 0
+
+
 def _cmd_fmu_export(args: argparse.Namespace) -> int:
     from trackmj.fmi.export import export
 
@@ -534,6 +553,22 @@ def build_parser() -> argparse.ArgumentParser:
     tensioner_arg(sweep)
     executor_args(sweep)
     sweep.set_defaults(func=_cmd_sweep)
+
+    calib = sub.add_parser(
+        "calibrate", help="fit --set keys to measured logs -> DIR/calibration.json",
+        description="Fit the keys of a calibration spec within their bounds to measured logs "
+                    "(least squares; the logs' valve command replayed in the spec's "
+                    "conditions), with 95 %% intervals; see the README ('Calibrate').")
+    calib.add_argument("spec", help="calibration spec TOML ([calibrate], "
+                       "[[calibrate.parameters]])")
+    calib.add_argument("--measured", nargs="+", required=True, metavar="LOG",
+                       help="CSV or Parquet logs: t_s, valve_mode and any of tension_N, "
+                            "p_head_Pa, p_rod_Pa, stroke_m (or with units: p_head [MPa])")
+    calib.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    calib.add_argument("--workers", type=_positive_int, help="Dask workers for a "
+                       "Latin-hypercube start (start_points in the spec; default one per "
+                       "core)")
+    calib.set_defaults(func=_cmd_calibrate)
 
     scenarios = sub.add_parser("scenarios", help="list the built-in operating conditions")
     scenarios.set_defaults(func=_cmd_scenarios)

@@ -480,3 +480,38 @@ def variants_figure(variants: Sequence[str], series: Mapping[str, Mapping[str, S
         _bars(ax, list(variants), values, unit.rstrip("]"), name)
     fig.suptitle(title)
     return _save(fig, Path(path))
+
+
+CHANNEL_DISPLAY: dict[str, tuple[str, float]] = {
+    "tension_N": ("F_ten [kN]", 1e-3), "p_head_Pa": ("p_head [MPa]", 1e-6),
+    "p_rod_Pa": ("p_rod [MPa]", 1e-6), "stroke_m": ("stroke [mm]", 1e3)}
+"""Label and display scale of the channels a log is compared on."""
+
+
+def calibration_figure(t: np.ndarray, panels: Sequence[tuple[str, Mapping[str, np.ndarray],
+                                                             Mapping[str, np.ndarray],
+                                                             Mapping[str, np.ndarray]]],
+                       title: str, path: str | Path) -> Path:
+    """Measured (grey) against fitted (black) and the fit's start (dashed), one row per
+    channel, one column per log; ``panels``: (log name, measured, start, fitted), each a
+    channel -> values on ``t`` [s] (SI)."""
+    names = [c for c in CHANNEL_DISPLAY if any(c in p[1] for p in panels)]
+    fig, axes = plt.subplots(len(names), len(panels), squeeze=False, sharex=True,
+                             figsize=(8.0 * len(panels), 2.3 * len(names) + 1.4),
+                             layout="constrained")
+    for j, (name, measured, start, fitted) in enumerate(panels):
+        for i, channel in enumerate(names):
+            ax = axes[i][j]
+            label, scale = CHANNEL_DISPLAY[channel]
+            if channel in measured:
+                ax.plot(t, measured[channel] * scale, color="0.6", lw=0.5, label="measured")
+                ax.plot(t, start[channel] * scale, color="#0072B2", ls="--", lw=1.0,
+                        label="start of the fit")
+                ax.plot(t, fitted[channel] * scale, color="black", lw=1.1, label="fitted")
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+        axes[0][j].set_title(f"log {name}", fontsize=10, loc="right")
+        axes[-1][j].set_xlabel("time [s]")
+    _legend_above(axes[0][0], ncol=3)
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, Path(path))

@@ -1,0 +1,207 @@
+"""Measured time series: rig logs and input traces read from CSV or Parquet files.
+
+A file holds a time column ``t_s`` and signal columns. A column is named either in SI with
+its unit as the name's suffix (``tension_N``, ``p_head_Pa``, ``stroke_m``), or with another
+unit, as a suffix (``tension_kN``, ``stroke_mm``, ``p_head_MPa``) or in brackets
+(``p_head [MPa]``, ``t [ms]``); every such column is converted to SI on reading and
+renamed to its SI name (``p_head [MPa]`` -> ``p_head_Pa``). Pressures are gauge, as in the
+run's own columns. :data:`UNIT_SCALES` lists the units understood.
+
+Checks, each refused with one line naming the file and the column (a
+:class:`~trackmj.params.ParameterError`, exit 2 on the command line): a time column, time
+strictly increasing, every value finite, and, for a run, the time covering the run
+[1 ms, duration]. Signals are resampled to the run's 1 ms grid by linear interpolation
+(:func:`resample`; a log sampled faster than 1 kHz is interpolated, not averaged).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from trackmj.params import ParameterError
+from trackmj.ports import COUPLING_STEP_S
+
+UNIT_SCALES: dict[str, tuple[str, float]] = {
+    "s": ("s", 1.0), "ms": ("s", 1e-3),
+    "N": ("N", 1.0), "kN": ("N", 1e3),
+    "Pa": ("Pa", 1.0), "kPa": ("Pa", 1e3), "MPa": ("Pa", 1e6), "bar": ("Pa", 1e5),
+    "m": ("m", 1.0), "mm": ("m", 1e-3),
+    "m_s": ("m_s", 1.0), "m/s": ("m_s", 1.0), "mm_s": ("m_s", 1e-3), "mm/s": ("m_s", 1e-3),
+    "m3_s": ("m3_s", 1.0), "m^3/s": ("m3_s", 1.0), "L_min": ("m3_s", 1e-3 / 60.0),
+    "L/min": ("m3_s", 1e-3 / 60.0),
+    "m_s2": ("m_s2", 1.0), "m/s^2": ("m_s2", 1.0),
+    "J": ("J", 1.0), "kJ": ("J", 1e3),
+    "1": ("", 1.0), "-": ("", 1.0),
+}
+"""Unit written in a column header -> (SI suffix of the column's name, factor to SI)."""
+DIMENSIONLESS = ("valve_mode", "u")
+"""Columns without a unit suffix (the run's valve mode −1/0/+1 and opening u [-])."""
+TIME = "t_s"
+COVER_TOLERANCE_S = 0.5 * COUPLING_STEP_S
+"""A trace covers the run if it starts by the end of the first step (a run's own ``t_s``
+starts there) and ends by the duration, within half a step [s]; before its first sample
+it holds its first value."""
+
+_BRACKET = re.compile(r"^\s*(?P<name>[^\[\]]+?)\s*\[(?P<unit>[^\[\]]+)\]\s*$")
+
+
+def si_name(header: str) -> tuple[str, float] | None:
+    """(SI column name, factor to SI) of a header, or None if it states no known unit.
+
+    ``tension_kN`` -> ("tension_N", 1e3); ``p_head [MPa]`` -> ("p_head_Pa", 1e6);
+    ``stroke_m`` -> ("stroke_m", 1.0); ``valve_mode`` -> ("valve_mode", 1.0).
+    """
+    if header in DIMENSIONLESS:
+        return header, 1.0
+    match = _BRACKET.match(header)
+    if match:
+        base, unit = match["name"].strip().replace(" ", "_"), match["unit"].strip()
+        if unit not in UNIT_SCALES:
+            return None
+        suffix, scale = UNIT_SCALES[unit]
+        return (f"{base}_{suffix}" if suffix else base), scale
+    for unit in sorted(UNIT_SCALES, key=len, reverse=True):
+        if "/" in unit or "^" in unit or unit in ("1", "-"):
+            continue
+        if header.endswith("_" + unit) and len(header) > len(unit) + 1:
+            suffix, scale = UNIT_SCALES[unit]
+            return f"{header[: -len(unit) - 1]}_{suffix}", scale
+    return None
+
+
+@dataclass(frozen=True)
+class Trace:
+    """A file's time series in SI: ``t_s`` [s], shape (n,), strictly increasing;
+    ``columns``: SI name -> values, shape (n,); ``headers``: SI name -> the header as
+    written (for messages); ``file``: the file's name."""
+
+    file: str
+    t_s: np.ndarray
+    columns: Mapping[str, np.ndarray]
+    headers: Mapping[str, str]
+
+    def where(self, name: str) -> str:
+        """``file column 'header'`` for a message."""
+        return f"{self.file} column {self.headers.get(name, name)!r}"
+
+    def require(self, names: Sequence[str]) -> None:
+        """ParameterError naming the file if a column is missing."""
+        missing = [n for n in names if n not in self.columns]
+        if missing:
+            raise ParameterError(f"{self.file}: no column {missing[0]!r} (has: "
+                                 f"{', '.join(self.headers.values())}); name it in SI "
+                                 "(tension_N) or with its unit (tension_kN, p_head [MPa])")
+
+    def check_covers(self, duration_s: float, what: str = "the run") -> None:
+        """ParameterError naming the file and time column unless t spans [0, duration_s]."""
+        t0, t1 = float(self.t_s[0]), float(self.t_s[-1])
+        if t0 > COUPLING_STEP_S + COVER_TOLERANCE_S or t1 < duration_s - COVER_TOLERANCE_S:
+            raise ParameterError(f"{self.where(TIME)}: spans {t0:g} .. {t1:g} s, too short "
+                                 f"to cover {what} ({COUPLING_STEP_S:g} .. {duration_s:g} s)")
+
+    def resample(self, name: str, t_s: np.ndarray) -> np.ndarray:
+        """Column ``name`` at times ``t_s`` [s] by linear interpolation (held beyond the
+        ends), shape of ``t_s``."""
+        return np.interp(np.asarray(t_s, dtype=float), self.t_s, self.columns[name])
+
+
+def _read_table(path: Path) -> dict[str, np.ndarray]:
+    """Column name -> float values of a CSV or Parquet file (pyarrow)."""
+    import pyarrow as pa
+
+    try:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            table = pq.read_table(path)
+        else:
+            import pyarrow.csv as pacsv
+
+            table = pacsv.read_csv(path)
+    except (OSError, pa.ArrowInvalid) as exc:
+        raise ParameterError(f"{path.name}: cannot read as "
+                             f"{'Parquet' if path.suffix.lower() in ('.parquet', '.pq') else 'CSV'}"
+                             f": {str(exc).splitlines()[0]}") from None
+    out = {}
+    for name in table.column_names:
+        column = table.column(name)
+        if not (pa.types.is_floating(column.type) or pa.types.is_integer(column.type)):
+            raise ParameterError(f"{path.name} column {name!r}: holds {column.type}, not "
+                                 "numbers")
+        out[name] = column.to_numpy(zero_copy_only=False).astype(float)   # nulls -> NaN
+    return out
+
+
+def read_trace(path: str | Path, columns: Sequence[str] | None = None) -> Trace:
+    """Read a measured or input time series (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV (one header row) or Parquet (``.parquet``) file.
+    columns : sequence of str, optional
+        SI names of the columns wanted (each must be there); default every column whose
+        header names a unit.
+
+    Returns
+    -------
+    Trace
+        Time and the columns in SI. ParameterError naming the file and column for a
+        missing file or column, time not strictly increasing, or a non-finite value.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ParameterError(f"measured data file not found: {path}")
+    raw = _read_table(path)
+    headers: dict[str, str] = {}
+    values: dict[str, np.ndarray] = {}
+    for header, data in raw.items():
+        named = si_name(header)
+        if named is None:
+            continue
+        name, scale = named
+        if name in values:
+            raise ParameterError(f"{path.name}: columns {headers[name]!r} and {header!r} are "
+                                 f"both {name}")
+        headers[name], values[name] = header, data * scale
+    if TIME not in values:
+        raise ParameterError(f"{path.name}: no time column 't_s' (or 't [s]', 't [ms]'); "
+                             f"columns: {', '.join(raw)}")
+    trace = Trace(path.name, values.pop(TIME), values, headers)
+    wanted = list(values) if columns is None else list(columns)
+    trace.require(wanted)
+    t = trace.t_s
+    if len(t) < 2:
+        raise ParameterError(f"{trace.where(TIME)}: {len(t)} row(s); a time series needs two "
+                             "or more")
+    for name, data in ((TIME, t), *((n, values[n]) for n in wanted)):
+        bad = ~np.isfinite(data)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ParameterError(f"{trace.where(name)}: row {i + 1} is {data[i]!r} (values "
+                                 "must be finite numbers)")
+    steps = np.diff(t)
+    if (steps <= 0.0).any():
+        i = int(np.argmax(steps <= 0.0))
+        raise ParameterError(f"{trace.where(TIME)}: time is not strictly increasing at row "
+                             f"{i + 2} (t = {t[i + 1]:g} s after {t[i]:g} s)")
+    return Trace(trace.file, t, {n: values[n] for n in wanted}, headers)
+
+
+def run_grid(duration_s: float) -> np.ndarray:
+    """End of every 1 ms coupling step of a run of ``duration_s`` [s], shape (steps,): the
+    run's ``t_s`` column."""
+    return COUPLING_STEP_S * np.arange(1, round(duration_s / COUPLING_STEP_S) + 1)
+
+
+def resample(trace: Trace, duration_s: float) -> dict[str, np.ndarray]:
+    """The trace's columns on the run's 1 ms grid (:func:`run_grid`) after checking it
+    covers the run; ``t_s`` included."""
+    trace.check_covers(duration_s)
+    t = run_grid(duration_s)
+    return {TIME: t} | {name: trace.resample(name, t) for name in trace.columns}
