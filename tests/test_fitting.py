@@ -162,3 +162,59 @@ def test_cli_refuses_a_bad_spec_before_any_run(tmp_path, capsys):
     assert code == 2
     assert "spec.toml [[calibrate.parameters]][1].bounds" in err and "high > low" in err
     assert not (tmp_path / "out").exists()
+
+
+# ---------------------------------------------------------------------- run --measured
+
+def test_lag_by_cross_correlation_finds_a_known_delay():
+    from trackmj.metrics import lag_s
+
+    t = 1e-3 * np.arange(1, 4001)
+    ref = np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 1.9 * t)
+    late = np.sin(2 * np.pi * 0.7 * (t - 0.037)) + 0.3 * np.sin(2 * np.pi * 1.9 * (t - 0.037))
+    assert lag_s(t, late, ref, (0.5, 4.0)) == pytest.approx(0.037, abs=1e-9)
+    assert lag_s(t, ref, late, (0.5, 4.0)) == pytest.approx(-0.037, abs=1e-9)
+
+
+def test_trace_errors_of_a_constant_offset():
+    from trackmj.metrics import trace_errors
+
+    t = 1e-3 * np.arange(1, 3001)
+    y_ref = 12e3 + 3e3 * (t >= 1.0)
+    e = trace_errors(t, y_ref + 250.0, y_ref, (0.5, 3.0), 2.0)
+    assert e["rmse"] == pytest.approx(250.0) and e["peak_error"] == pytest.approx(250.0)
+    # the low-pass is linear: the offset passes whole (DC gain 1)
+    assert e["rmse_lp"] == pytest.approx(250.0, rel=1e-6)
+    assert e["peak_abs_error_lp"] == pytest.approx(250.0, rel=1e-6)
+
+
+def test_a_run_compared_with_its_own_log_has_no_error(truth_run, tmp_path):
+    from trackmj.sim.run import simulate
+
+    c = truth_run
+    log = write_csv(tmp_path / "own.csv", {"t [ms]": c["t_s"] * 1e3,
+                                           "tension_kN": c["tension_N"] / 1e3,
+                                           "p_head_Pa": c["p_head_Pa"]})
+    result = simulate(SCENARIO, set=TRUTH, seed=0, measured=log)
+    table = result.metrics["prediction_vs_measured"]
+    assert set(table) == {"tension_N", "p_head_Pa"}
+    assert table["tension_N"]["rmse_N"] == pytest.approx(0.0, abs=1e-9)
+    assert table["tension_N"]["rmse_lp_N"] == pytest.approx(0.0, abs=1e-9)
+    assert table["p_head_Pa"]["peak_error_Pa"] == pytest.approx(0.0, abs=1e-6)
+    assert table["p_head_Pa"]["lag_s"] == 0.0
+
+
+@pytest.mark.parametrize(("columns", "words"), [
+    ({"t_s": 1e-3 * np.arange(1, 2501), "hitch_kN": np.zeros(2500)},
+     ["bad.csv column 'hitch_kN'", "not a column of the run"]),
+    ({"t_s": 1e-3 * np.arange(1, 1001), "tension_N": np.zeros(1000)},
+     ["bad.csv column 't_s'", "too short"]),
+])
+def test_run_refuses_a_bad_measured_log_before_running(tmp_path, capsys, columns, words):
+    from trackmj.cli import main
+
+    log = write_csv(tmp_path / "bad.csv", columns)
+    code = main(["run", str(SCENARIO), "--measured", str(log), "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert code == 2 and all(w in err for w in words), err
+    assert not (tmp_path / "r").exists()

@@ -175,24 +175,49 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from trackmj.figures import run_figure
     from trackmj.playback import RUN_RRD
     from trackmj.results import ResultWriter
-    from trackmj.sim.run import run
+    from trackmj.sim.run import measured_log, run
     from trackmj.sim.setup import prepare
 
     setup = prepare(args.scenario, architecture=args.arch, controller=args.controller,
                     estimator=args.estimator, seed=args.seed, duration=args.duration,
                     variant=args.variant, **_files(args))
+    measured = None if args.measured is None else measured_log(setup, args.measured)
     out = Path(args.out or f"runs/{setup.scenario.name}-{setup.architecture}-"
                            f"{setup.controller}-s{setup.seed}")
     with ResultWriter(out) as writer:
-        result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True)
+        result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True,
+                     measured=measured)
         writer.commit(result, csv=args.csv,
-                      extras={"timeseries.png": lambda path: run_figure(result, path)})
+                      extras={"timeseries.png": lambda path: run_figure(result, path,
+                                                                        measured)})
     print(f"{setup.scenario.name} ({setup.scenario.title}), {result.architecture}, "
           f"{result.controller}/{result.estimator}, seed {result.seed} -> {out}")
     if result.metrics.get("tensioner", {}).get("element") == "fmu":
         print(_tensioner_line(result.metrics["tensioner"]))
     print(_summary_table([result], "{r.architecture}"))
+    if measured is not None:
+        print(_measured_table(result.metrics["prediction_vs_measured"], args.measured))
     return 0
+
+
+MEASURED_DISPLAY = {"N": (1e-3, "kN"), "Pa": (1e-6, "MPa"), "m": (1e3, "mm"), "": (1.0, "-")}
+"""Display scale and unit of a compared channel, by its SI unit."""
+
+
+def _measured_table(table: dict, log: str) -> str:
+    """Markdown table of ``prediction_vs_measured``: one row per channel."""
+    lines = [f"prediction vs measured ({Path(log).name}; tracking window; > 0 lag: the "
+             "simulation lags)", "",
+             "| channel | RMSE raw | RMSE low-pass | peak (sim − meas) | lag [ms] |",
+             "|---|---|---|---|---|"]
+    for name, row in table.items():
+        unit = name.rpartition("_")[2] if "_" in name else ""
+        scale, shown = MEASURED_DISPLAY.get(unit, (1.0, unit))
+        cells = [row.get(f"{k}_{unit}", float("nan")) * scale
+                 for k in ("rmse", "rmse_lp", "peak_error")]
+        lines.append(f"| {name} [{shown}] | " + " | ".join(f"{v:.3g}" for v in cells)
+                     + f" | {row['lag_s'] * 1e3:.0f} |")
+    return "\n".join(lines)
 
 
 def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
@@ -508,6 +533,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--variant", default="nominal", help="W5 variant name")
     run.add_argument("--csv", action="store_true", help="also write timeseries.csv")
     run.add_argument("--rrd", action="store_true", help="also write a Rerun recording")
+    run.add_argument("--measured", metavar="LOG", help="a measured log (CSV or Parquet: t_s "
+                     "and any of the run's columns, e.g. tension_N, p_head [MPa], stroke_mm) "
+                     "overlaid in the figure and compared in metrics.json "
+                     "(prediction_vs_measured)")
     run.set_defaults(func=_cmd_run)
 
     compare = sub.add_parser("compare", help="all architectures on one scenario, with each "

@@ -205,3 +205,20 @@ def resample(trace: Trace, duration_s: float) -> dict[str, np.ndarray]:
     trace.check_covers(duration_s)
     t = run_grid(duration_s)
     return {TIME: t} | {name: trace.resample(name, t) for name in trace.columns}
+
+
+def load_measured(path: str | Path, duration_s: float,
+                  run_columns: Sequence[str]) -> dict[str, np.ndarray]:
+    """A measured log to compare a run of ``duration_s`` [s] with: its columns that name a
+    unit, each one of ``run_columns`` (the run's own names), on the run's 1 ms grid
+    (``t_s`` included). ParameterError naming the file and column for a column the run
+    does not record, or a log that does not cover the run."""
+    trace = read_trace(path)
+    for name in trace.columns:
+        if name not in run_columns:
+            raise ParameterError(f"{trace.where(name)}: {name} is not a column of the run "
+                                 f"(compared by the run's own names: "
+                                 f"{', '.join(c for c in run_columns if c != TIME)})")
+    if not trace.columns:
+        raise ParameterError(f"{trace.file}: no column to compare besides t_s")
+    return resample(trace, duration_s)

@@ -22,7 +22,7 @@ import numpy as np
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.machine import machine
-from trackmj.metrics import compute_metrics
+from trackmj.metrics import compute_metrics, prediction_vs_measured
 from trackmj.ports import COUPLING_STEP_S, StepInputs, steps_per_period
 from trackmj.results import Result, run_metadata
 from trackmj.scenarios import Scenario
@@ -73,7 +73,8 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
              model: str | Path | None = None, hydraulics: str | Path | None = None,
              control: str | Path | None = None, set: Overrides | None = None,
              rrd: str | Path | None = None, progress: bool = False,
-             tp_result: Result | None = None, tensioner: str | Path | None = None) -> Result:
+             tp_result: Result | None = None, tensioner: str | Path | None = None,
+             measured: str | Path | None = None) -> Result:
     """Run one operating condition in closed loop.
 
     Parameters
@@ -107,6 +108,10 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     tensioner : str or Path, optional
         A tensioner file (:mod:`trackmj.tensioner`: an FMU or a passive spring-damper)
         replacing the hydraulic plugin of tp, tp-weak and dp-a.
+    measured : str or Path, optional
+        A measured log (:mod:`trackmj.measured`: CSV or Parquet, ``t_s`` and any of the
+        run's columns, e.g. ``tension_N``, ``p_head [MPa]``); the metrics get
+        ``prediction_vs_measured`` (:func:`trackmj.metrics.prediction_vs_measured`).
 
     Returns
     -------
@@ -127,12 +132,24 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
                     estimator=estimator, seed=seed, duration=duration, variant=variant,
                     model=model, hydraulics=hydraulics, control=control, overrides=set,
                     tensioner=tensioner)
-    return run(setup, rrd=rrd, progress=progress, tp_result=tp_result)
+    log = None if measured is None else measured_log(setup, measured)
+    return run(setup, rrd=rrd, progress=progress, tp_result=tp_result, measured=log)
+
+
+def measured_log(setup: RunSetup, path: str | Path) -> dict[str, np.ndarray]:
+    """The measured log at ``path`` on the run's grid, checked against the run's columns
+    and duration before the run (ParameterError naming the file and column)."""
+    from trackmj.measured import load_measured
+    from trackmj.results import COLUMN_UNITS
+
+    return load_measured(path, setup.duration_s, list(COLUMN_UNITS))
 
 
 def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = False,
-        tp_result: Result | None = None) -> Result:
-    """Run a prepared setup (see :func:`simulate` for the arguments and the result)."""
+        tp_result: Result | None = None,
+        measured: dict[str, np.ndarray] | None = None) -> Result:
+    """Run a prepared setup (see :func:`simulate` for the arguments and the result;
+    ``measured``: a log from :func:`measured_log`)."""
     if ARCHITECTURES[setup.architecture].replays_tp and tp_result is None:
         tp_result = run(dataclasses.replace(setup, architecture="tp"))
     with capture_mujoco_warnings() as warnings:
@@ -191,6 +208,9 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
                                             > controller.period_s))
     if asm.track is not None:
         m["mujoco_warnings"] = float(asm.track.warning_count)
+    if measured is not None:
+        m["prediction_vs_measured"] = prediction_vs_measured(result.columns(), measured,
+                                                             windows)
     result.metrics = m
     if playback is not None:
         playback.log_timeseries(result)
