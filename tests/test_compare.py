@@ -17,7 +17,7 @@ from trackmj.sim.registry import ARCHITECTURES
 
 def test_quick_compare_writes_runs_prediction_errors_and_figures(tmp_path, capsys) -> None:
     out = tmp_path / "cmp"
-    args = ["compare", "W1", "--duration", "1.5", "--workers", "2", "--out", str(out)]
+    args = ["compare", "W2", "--duration", "1.5", "--workers", "2", "--out", str(out)]
     assert main(args) == 0
     assert f"-> {out / 'compare.json'}" in capsys.readouterr().out
     doc = json.loads((out / "compare.json").read_text())

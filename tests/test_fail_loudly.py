@@ -83,7 +83,7 @@ def test_w3_push_beyond_what_the_tensioner_holds_stops_with_the_reason(tmp_path,
         "start_s = 6.0\nend_s = 8.0", "start_s = 2.0\nend_s = 4.0").replace(
         "hitch_N = -3755.0", "hitch_N = -30000.0"))
     out = tmp_path / "out"
-    assert main(["run", path, "--duration", "4", "--out", str(out)]) == 3
+    assert main(["run", path, "--duration", "20.5", "--out", str(out)]) == 3
     err = capsys.readouterr().err
     assert re.search(r"stopped: t = [23]\.\d+ s: rod node pressure -[\d.]+ MPa gauge below "
                      r"vacuum .*the run left physics", err), err
@@ -103,7 +103,7 @@ def test_rough_road_that_pulls_the_rods_below_vacuum_stops(tmp_path, capsys) -> 
 def test_ctrl_c_ends_with_one_line_and_keeps_the_previous_result(tmp_path, monkeypatch,
                                                                 capsys) -> None:
     out = tmp_path / "w1"
-    assert main(["run", "W1", "--duration", "1.2", "--out", str(out)]) == 0
+    assert main(["run", "W2", "--duration", "1.2", "--out", str(out)]) == 0
     before = json.loads((out / "metrics.json").read_text())
     capsys.readouterr()
 
@@ -111,7 +111,7 @@ def test_ctrl_c_ends_with_one_line_and_keeps_the_previous_result(tmp_path, monke
         raise KeyboardInterrupt
 
     monkeypatch.setattr("trackmj.sim.run.run", interrupted)
-    assert main(["run", "W1", "--duration", "1.5", "--out", str(out)]) == 130
+    assert main(["run", "W2", "--duration", "1.2", "--out", str(out)]) == 130
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "interrupted" in err and "Traceback" not in err
     assert json.loads((out / "metrics.json").read_text()) == before
@@ -126,7 +126,7 @@ def test_out_that_is_a_file_is_refused_before_the_run(tmp_path, capsys, monkeypa
         raise AssertionError("the simulation started")
 
     monkeypatch.setattr("trackmj.sim.run.run", must_not_run)
-    assert main(["run", "W1", "--duration", "1.5", "--out", str(target)]) == 2
+    assert main(["run", "W2", "--duration", "1.5", "--out", str(target)]) == 2
     assert "is a file" in capsys.readouterr().err
     assert target.read_text() == "keep me"
 

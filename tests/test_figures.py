@@ -3,6 +3,8 @@ the energy breakdown stacking the ledger's terms, zooms on each condition's even
 
 from __future__ import annotations
 
+import itertools
+
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
@@ -35,7 +37,8 @@ def _runs(scenario: str = "W1", duration_s: float = 6.0) -> list:
 
 def _check_axes(fig: plt.Figure) -> None:
     """Every axis with data names its unit in brackets; every legend lies outside its axes
-    (above them, or beside them on the right)."""
+    (above, beside them on the right, or below); every text is at least 9 pt at the saved
+    size (the figure's own inches)."""
     renderer = fig.canvas.get_renderer()
     fig.canvas.draw()
     for ax in fig.axes:
@@ -47,19 +50,31 @@ def _check_axes(fig: plt.Figure) -> None:
         legend = ax.get_legend()
         if legend is not None:
             box = legend.get_window_extent(renderer).transformed(ax.transAxes.inverted())
-            assert box.y0 >= 0.99 or box.x0 >= 1.0, (
+            assert box.y0 >= 0.99 or box.x0 >= 1.0 or box.y1 <= 0.0, (
                 f"legend of '{ax.get_ylabel()}' overlaps its data")
+    import matplotlib.text
+
+    small = {(t.get_text()[:40], t.get_fontsize()) for t in fig.findobj(matplotlib.text.Text)
+             if t.get_text().strip() and t.get_visible() and t.get_fontsize() < 9}
+    assert not small, small
 
 
 def test_run_figure_units_legends_and_zooms(captured) -> None:
     tp = _runs("W3", duration_s=22.0)[0]
+    tp.metrics["energy_J"]["numerical"] = {"circuit": 20.0, "interface": 5.0}
     figures.run_figure(tp, "unused.png")
     fig = captured[0]
     _check_axes(fig)
     titles = [ax.get_title(loc="left") for ax in fig.axes if ax.get_title(loc="left")]
-    assert titles == ["zoom: load pulse +2 kN, onset at 6 s", "zoom: load pulse +2 kN, end at 8 s",
-                      "zoom: load pulse -1.5 kN, onset at 18 s",
-                      "zoom: load pulse -1.5 kN, end at 20 s"]
+    assert titles[:-1] == ["zoom: load pulse +2 kN, onset at 6 s",
+                           "zoom: load pulse +2 kN, end at 8 s",
+                           "zoom: load pulse -1.5 kN, onset at 18 s",
+                           "zoom: load pulse -1.5 kN, end at 20 s"]
+    u_axis = next(ax for ax in fig.axes if ax.get_ylabel() == "u [-]")
+    assert "controller's command" in u_axis.get_legend().get_texts()[0].get_text()
+    energy = next(ax for ax in fig.axes if ax.get_ylabel() == "energy [kJ]")
+    assert any(t.get_text().startswith("numerical (backward-Euler")
+               for t in energy.get_legend().get_texts())
     mode_axis = next(ax for ax in fig.axes if ax.get_ylabel() == "mode [-]")
     assert [t.get_text() for t in mode_axis.get_yticklabels()] == ["−1 release", "0 hold",
                                                                    "+1 pressurize"]
@@ -94,22 +109,31 @@ def test_styles_differ_in_more_than_colour() -> None:
     assert len(set(hatches)) == len(hatches)
 
 
-def test_energy_bars_stack_the_ledger_terms_and_mark_the_totals() -> None:
+def test_energy_bars_are_a_waterfall_ending_at_the_totals() -> None:
+    """Each term's bar starts where the previous one ended (a negative term goes down); the
+    circuit's terms end at the circuit total, all of them at the pump total, where the
+    dashed and the solid tick stand."""
     table = energy_table()
     with_table = synthetic_result(energy=table)
     without = synthetic_result()
     fig, ax = plt.subplots()
     figures._energy_bars(ax, ["tp", "old"], [with_table, without])
-    at_tp = [p for p in ax.patches if abs(p.get_x() + p.get_width() / 2) < 1e-9]
-    up = sum(p.get_height() for p in at_tp if p.get_height() > 0)
-    down = sum(p.get_height() for p in at_tp if p.get_height() < 0)
-    positive = [v for k, v in table.items() if k not in ("pump", "circuit")
-                for v in ([sum(v.values())] if isinstance(v, dict) else [v]) if v > 0]
-    assert up == pytest.approx(sum(positive) / 1e3)
-    assert down == pytest.approx(table["stored_change"] / 1e3)
-    ticks = sorted(float(seg[0][1]) for c in ax.collections for seg in c.get_segments())
-    assert ticks == pytest.approx(sorted([table["pump"] / 1e3, table["circuit"] / 1e3]))
-    at_old = [p for p in ax.patches if abs(p.get_x() + p.get_width() / 2 - 1) < 1e-9]
+    bars = sorted((p for p in ax.patches if abs(p.get_x() + p.get_width() / 2) < 0.45),
+                  key=lambda p: p.get_x())
+    for a, b in itertools.pairwise(bars):
+        assert b.get_y() == pytest.approx(a.get_y() + a.get_height())
+    circuit_terms, supply_terms = figures.energy_waterfall(with_table.metrics)
+    assert [n for n, _ in supply_terms] == ["residual", "relief"]
+    n_circuit = len([v for _, v in circuit_terms if v != 0.0])
+    end_circuit = bars[n_circuit - 1].get_y() + bars[n_circuit - 1].get_height()
+    assert end_circuit == pytest.approx(table["circuit"] / 1e3, abs=2e-3)   # residual 1 J
+    end = bars[-1].get_y() + bars[-1].get_height()
+    assert end == pytest.approx(table["pump"] / 1e3)
+    ticks = {float(seg[0][1]): c.get_linestyle() for c in ax.collections
+             for seg in c.get_segments()}
+    assert sorted(ticks) == pytest.approx(sorted([table["pump"] / 1e3, table["circuit"] / 1e3]))
+    assert any("numerical" not in t.get_text() for t in ax.get_legend().get_texts())
+    at_old = [p for p in ax.patches if abs(p.get_x() + p.get_width() / 2 - 1) < 0.45]
     assert at_old == []      # a run without an energy table gets no bar, but a note
     assert "old: no energy table in this run" in ax.texts[0].get_text()
     plt.close(fig)

@@ -244,7 +244,7 @@ def test_a_bad_fmu_is_refused_before_the_run(fmus, tmp_path, capsys, case) -> No
     toml = _tensioner(tmp_path / f"{case}.toml", str(fmus / fmu), inputs=inputs,
                       outputs=outputs)
     out = tmp_path / "run"
-    assert main(["run", "W1", "--duration", "1.2", "--tensioner", str(toml),
+    assert main(["run", "W2", "--duration", "1.2", "--tensioner", str(toml),
                  "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and expected in err and toml.name in err
@@ -269,7 +269,7 @@ def test_an_fmu_that_fails_mid_run_stops_it_and_keeps_earlier_results(
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and expected in err
     assert re.search(r"t = 0\.(499|500) s", err)
-    code = main(["run", "W1", "--duration", "1.2", "--tensioner", str(toml), "--out", str(out)])
+    code = main(["run", "W2", "--duration", "1.2", "--tensioner", str(toml), "--out", str(out)])
     assert code in (2, 3)   # 2: the directory guard refuses a foreign folder first
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 

@@ -10,7 +10,7 @@ from synthetic import energy_table, synthetic_result
 
 from trackmj import report as R
 from trackmj.cli import _summary_table, main
-from trackmj.results import read_result, write_result
+from trackmj.results import read_result
 
 
 def test_verdict_on_reductions_follows_its_rules() -> None:
@@ -78,21 +78,38 @@ def test_claims_on_synthetic_runs_state_what_they_measure(tmp_path) -> None:
         assert (tmp_path / figure).stat().st_size > 20_000
 
 
-def test_report_resumes_complete_runs_and_reruns_others(tmp_path) -> None:
-    """Runs already complete under OUT/runs are read back (no executor starts); a run of
-    another duration does not count as complete."""
-    specs = R.plan(["W1"], [0], 6.0, baselines=())
-    assert [(s.architecture, s.controller) for s in specs] == [("tp", "nmpc"), ("dp-a", "nmpc"),
-                                                               ("dp-b", "nmpc")]
-    for spec in specs:
-        run = synthetic_result("W1", spec.architecture, seed=0, energy=energy_table())
-        write_result(run, tmp_path / R.RUNS / R.run_name("W1", spec.architecture, "nmpc",
-                                                         "nominal", 0))
-    done = R.run_matrix(specs, tmp_path, progress=False)
-    assert done.resumed == 3 and len(done.results) == 3 and not done.failed
-    longer = R.plan(["W1"], [0], 8.0, baselines=())
-    assert R.completed(tmp_path / R.RUNS, longer[0]) is None
-    assert R.completed(tmp_path / R.RUNS, specs[0]) is not None
+class _SyntheticExecutor:
+    """Stands in for the Dask executor: synthetic runs of the asked-for specs."""
+
+    def __init__(self) -> None:
+        self.ran = []
+
+    def as_completed(self, specs, progress=None):
+        from trackmj.executor import RunOutcome
+
+        for spec in specs:
+            self.ran.append(spec)
+            yield RunOutcome(spec, result=synthetic_result(
+                "W1", spec.architecture, seed=spec.seed, duration_s=spec.duration,
+                energy=energy_table()), wall_time_s=0.01)
+
+
+def test_report_resumes_done_runs_and_reruns_others(tmp_path) -> None:
+    """Runs done in OUT (their identity in results.parquet and under runs/) are read back
+    without running; a run of another duration is not the same run."""
+    runs = R.plan(["W1"], [0], 6.0, baselines=())
+    assert [(r.spec.architecture, r.spec.controller) for r in runs] == [
+        ("tp", "nmpc"), ("dp-a", "nmpc"), ("dp-b", "nmpc")]
+    ex = _SyntheticExecutor()
+    first = R.run_matrix(runs, tmp_path, progress=False, executor=ex)
+    assert (first.resumed, len(first.results), len(ex.ran)) == (0, 3, 3)
+    assert sorted(p.name for p in (tmp_path / R.RUNS).iterdir() if not p.name.startswith(".")) \
+        == ["W1-dp-a-nmpc-nominal-s0", "W1-dp-b-nmpc-nominal-s0", "W1-tp-nmpc-nominal-s0"]
+    done = R.run_matrix(runs, tmp_path, progress=False, executor=ex)
+    assert (done.resumed, len(done.results), len(ex.ran)) == (3, 3, 3)
+    longer = R.run_matrix(R.plan(["W1"], [0], 8.0, baselines=())[:1], tmp_path,
+                          progress=False, executor=ex)
+    assert (longer.resumed, len(ex.ran)) == (0, 4)
 
 
 def test_summary_table_names_views_and_says_when_nothing_settled() -> None:

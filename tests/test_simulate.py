@@ -102,7 +102,7 @@ def test_bad_scenario_file_gives_clear_error_and_writes_nothing(tmp_path, capsys
 
 def test_cli_run_writes_outputs(tmp_path) -> None:
     out = tmp_path / "w1"
-    assert main(["run", "W1", "--duration", "1.5", "--out", str(out)]) == 0
+    assert main(["run", "W2", "--duration", "1.5", "--out", str(out)]) == 0
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["metrics"]["rmse_N"] is not None
     assert (out / "timeseries.parquet").stat().st_size > 0
@@ -111,10 +111,10 @@ def test_cli_run_writes_outputs(tmp_path) -> None:
 
 def test_cli_overrides_change_the_run_and_are_recorded(tmp_path, capsys) -> None:
     standing, driven = tmp_path / "standing", tmp_path / "driven"
-    assert main(["run", "W1", "--duration", "1.5", "--out", str(standing),
+    assert main(["run", "W2", "--duration", "1.5", "--out", str(standing),
                  "--set", "scenario.track.speed_m_s=0.0",
                  "--set", "hydraulics.fluid.bulk_modulus_Pa=1.2e9"]) == 0
-    assert main(["run", "W1", "--duration", "1.5", "--out", str(driven)]) == 0
+    assert main(["run", "W2", "--duration", "1.5", "--out", str(driven)]) == 0
     doc = json.loads((standing / "metrics.json").read_text())
     assert doc["run"]["overrides"] == {"scenario.track.speed_m_s": 0.0,
                                        "hydraulics.fluid.bulk_modulus_Pa": 1.2e9}
@@ -124,7 +124,7 @@ def test_cli_overrides_change_the_run_and_are_recorded(tmp_path, capsys) -> None
               for name, out in (("standing", standing), ("driven", driven))}
     assert ripple["standing"] < 0.2 * ripple["driven"], ripple
     capsys.readouterr()
-    assert main(["run", "W1", "--duration", "1.5", "--out", str(tmp_path / "bad"),
+    assert main(["run", "W2", "--duration", "1.5", "--out", str(tmp_path / "bad"),
                  "--set", "hydraulics.fluid.bulk_modulus_Paa=1.2e9"]) == 2
     err = capsys.readouterr().err
     assert "did you mean 'bulk_modulus_Pa'" in err and not (tmp_path / "bad").exists()

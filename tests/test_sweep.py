@@ -10,11 +10,11 @@ import os
 import numpy as np
 import pytest
 
+from trackmj.campaign import flatten_metrics, write_table
 from trackmj.cli import main
 from trackmj.executor import Executor
 from trackmj.params import ParameterError
 from trackmj.sweeps import (
-    flatten_metrics,
     load_sweep,
     parameter_points,
     plan,
@@ -68,7 +68,7 @@ def test_the_readme_spec_is_valid_and_plans_every_combination(tmp_path) -> None:
     runs = plan(load_sweep(spec))
     # 3 areas x 3 bulk moduli x 2 controllers x 2 seeds, each a distinct run
     assert len(runs) == len({r.key for r in runs}) == 36
-    assert {r.identity["controller"] for r in runs} == {"nmpc", "pid"}
+    assert {r.row["controller"] for r in runs} == {"nmpc", "pid"}
 
 
 def test_integer_keys_take_integers() -> None:
@@ -123,10 +123,11 @@ def test_nested_metric_tables_become_dotted_columns() -> None:
                     "energy_J.losses.orifices": 3.0, "ok": 1.0}
 
 
-def test_scattered_samples_are_plotted_per_metric(tmp_path) -> None:
+def test_scattered_samples_are_plotted_per_metric(tmp_path, monkeypatch) -> None:
     """Rows of an LHS sweep (no two points share the other key's value), one failed: a
-    figure per metric with a finite value, the failed row left out."""
-    from trackmj.sweeps import _write_table, plot_sweep
+    figure per metric that varies across the runs that ran (not the constant wall time, not
+    the metric that is NaN everywhere), the failed row left out; labels in plain words."""
+    from trackmj.sweeps import plot_sweep
 
     rows = [{"run_key": f"k{i}", "point": i, "scenario": "W1", "architecture": "tp",
              "controller": "nmpc", "estimator": "ekf", "variant": "nominal", "seed": 0,
@@ -134,28 +135,39 @@ def test_scattered_samples_are_plotted_per_metric(tmp_path) -> None:
              "rmse_N": 100.0 * i, "only_nan_N": math.nan, "wall_time_s": 1.0, "error": None}
             for i in range(5)]
     rows[4] |= {"rmse_N": None, "error": "PhysicsError: ..."}
-    _write_table(rows, tmp_path / "results.parquet")
+    write_table(rows, tmp_path / "results.parquet")
+    import trackmj.figures as figures_module
+
+    drawn = []
+    original = figures_module._metric_figure
+    monkeypatch.setattr(figures_module, "_metric_figure",
+                        lambda *args: drawn.append(original(*args)) or drawn[-1])
     figures = plot_sweep(tmp_path)
-    assert sorted(p.name for p in figures) == ["rmse_N.png", "wall_time_s.png"]
+    assert sorted(p.name for p in figures) == ["rmse_N.png"]
     assert all(p.read_bytes()[:4] == b"\x89PNG" for p in figures)
+    ax = drawn[0].axes[0]
+    assert ax.get_ylabel() == "tension RMSE, raw [kN]"
+    assert ax.get_xlabel() == "fluid bulk modulus [MPa]"
+    plot_sweep(tmp_path, redraw=False)      # what exists is not drawn again
+    assert len(drawn) == 1
 
 
 def test_a_sweep_without_swept_keys_gets_bars_per_scenario_and_case(tmp_path,
                                                                     monkeypatch) -> None:
     """A controller comparison (no swept key): a figure per metric with a group of bars per
     scenario and a bar per controller at the mean over seeds."""
-    from trackmj.sweeps import _write_table, plot_sweep
+    from trackmj.sweeps import plot_sweep
 
     rows = [{"run_key": f"{sc}{c}{seed}", "point": 0, "scenario": sc, "architecture": "tp",
              "controller": c, "estimator": "ekf", "variant": "nominal", "seed": seed,
              "duration_s": 1.5, "inputs": "{}", "rmse_N": 100.0 * k + seed,
-             "wall_time_s": 1.0, "error": None}
+             "wall_time_s": 1.0 + seed, "error": None}
             for sc in ("NL1", "W1") for k, c in enumerate(("nmpc", "pid")) for seed in (0, 2)]
-    _write_table(rows, tmp_path / "results.parquet")
-    import trackmj.sweeps as sweeps
+    write_table(rows, tmp_path / "results.parquet")
+    import trackmj.figures as figures
 
-    captured, original = [], sweeps._case_figure
-    monkeypatch.setattr(sweeps, "_case_figure",
+    captured, original = [], figures._case_figure
+    monkeypatch.setattr(figures, "_case_figure",
                         lambda *args: captured.append(original(*args)) or captured[-1])
     figures = plot_sweep(tmp_path)
     assert sorted(p.name for p in figures) == ["rmse_N.png", "wall_time_s.png"]
@@ -168,11 +180,11 @@ def test_a_sweep_without_swept_keys_gets_bars_per_scenario_and_case(tmp_path,
 
 def test_results_are_rewritten_at_most_every_period_and_flushed(tmp_path, monkeypatch) -> None:
     """Rewriting grows with the rows, so it is throttled; what arrived is always flushed."""
-    import trackmj.sweeps as sweeps
+    import trackmj.campaign as campaign
 
     writes = []
-    monkeypatch.setattr(sweeps, "_write_table", lambda rows, path: writes.append(len(rows)))
-    writer = sweeps._TableWriter(tmp_path / "results.parquet")
+    monkeypatch.setattr(campaign, "write_table", lambda rows, path: writes.append(len(rows)))
+    writer = campaign.TableWriter(tmp_path / "results.parquet")
     rows = {}
     for i in range(5):
         rows[f"k{i}"] = {"run_key": f"k{i}"}
@@ -193,10 +205,13 @@ def executor():
 
 @pytest.fixture(scope="module")
 def grid(executor, tmp_path_factory):
-    """2 x 2 grid of 1.5 s W1 runs: standing / driven track x soft / stiff oil."""
+    """2 x 2 grid of 1.5 s W1 runs: standing / driven track x soft / stiff oil; the step
+    and ramp, moved inside the short runs, are of zero size (a constant reference)."""
     out = tmp_path_factory.mktemp("grid")
     spec = _spec(parameters=[{"key": SPEED, "values": [0.0, 1.5]},
-                             {"key": BULK, "values": [0.8e9, 1.6e9]}])
+                             {"key": BULK, "values": [0.8e9, 1.6e9]}],
+                 set=["scenario.reference.steps.0.delta_N=0",
+                      "scenario.reference.ramps.0.rate_N_s=0"])
     summary = sweep(spec, out, executor=executor, progress=False)
     return out, spec, summary
 

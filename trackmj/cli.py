@@ -69,9 +69,8 @@ def _cmd_model_generate(args: argparse.Namespace) -> int:
 def _cmd_drive(args: argparse.Namespace) -> int:
     from trackmj.drive import drive
 
-    preload = None if args.preload is None else args.preload * 1e3
     result = drive(args.speed, args.duration, model=args.model, params=args.params,
-                   preload_N=preload, out_dir=args.out, tensioner=args.tensioner)
+                   preload_N=args.preload, out_dir=args.out, tensioner=args.tensioner)
     m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
     print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s: {m['real_time_factor']:.2f}x "
           f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
@@ -171,22 +170,63 @@ def _tensioner_line(described: dict) -> str:
             f"(dF/dv: {described['dF_dv']}){per_step}")
 
 
+def run_folder(setup: object, key: str, *, defaults: bool) -> Path:
+    """Default folder of ``trackmj run``: ``runs/SCENARIO-ARCH-CONTROLLER-sSEED`` for the
+    scenario's own inputs (``defaults``), with ``-VARIANT`` for a W5 variant and the first
+    8 digits of the inputs' hash (:func:`trackmj.campaign.inputs_key`) for any other input
+    (estimator, --duration, --set, parameter or tensioner files), so that runs of other
+    inputs never share a folder."""
+    name = (f"{setup.scenario.name}-{setup.architecture}-{setup.controller}-"
+            f"s{setup.seed}")
+    if setup.variant.name != "nominal":
+        name += f"-{setup.variant.name}"
+    if not defaults:
+        name += f"-{key[:8]}"
+    return Path("runs") / name
+
+
+def _stored_inputs_key(out: Path) -> str | None:
+    """The inputs key of the run in folder ``out`` ('' for a run without one, None if
+    ``out`` holds no run)."""
+    import json
+
+    from trackmj.results import METRICS
+
+    try:
+        doc = json.loads((out / METRICS).read_text())
+    except (OSError, ValueError):
+        return None
+    return str(doc.get("run", {}).get("inputs_key", ""))
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
+    from trackmj.campaign import inputs_key, run_key, stamped
     from trackmj.figures import run_figure
     from trackmj.playback import RUN_RRD
-    from trackmj.results import ResultWriter
+    from trackmj.results import ResultDirectoryError, ResultWriter
+    from trackmj.scenarios import check_duration
     from trackmj.sim.run import measured_log, run
     from trackmj.sim.setup import prepare
 
     setup = prepare(args.scenario, architecture=args.arch, controller=args.controller,
                     estimator=args.estimator, seed=args.seed, duration=args.duration,
                     variant=args.variant, **_files(args))
+    check_duration(setup.scenario, setup.duration_s)
     measured = None if args.measured is None else measured_log(setup, args.measured)
-    out = Path(args.out or f"runs/{setup.scenario.name}-{setup.architecture}-"
-                           f"{setup.controller}-s{setup.seed}")
+    key = inputs_key(setup)
+    defaults = not (args.estimator or args.duration is not None or args.set or args.model
+                    or args.hydraulics or args.control or args.tensioner)
+    out = Path(args.out) if args.out else run_folder(setup, key, defaults=defaults)
+    held = _stored_inputs_key(out)
+    if held is not None and held != key and not args.overwrite:
+        what = f"inputs {held[:8]}" if held else "no inputs key: an older trackmj"
+        raise ResultDirectoryError(
+            f"--out {out}: holds a run of other inputs ({what}; this run's are {key[:8]}); "
+            "give --overwrite to replace it, or another --out")
     with ResultWriter(out) as writer:
         result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True,
                      measured=measured)
+        result = stamped(result, inputs_key=key, run_key=run_key(setup))
         writer.commit(result, csv=args.csv,
                       extras={"timeseries.png": lambda path: run_figure(result, path,
                                                                         measured)})
@@ -232,6 +272,7 @@ def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     from trackmj.report import compare, write_compare
+    from trackmj.scenarios import check_duration
     from trackmj.sim.setup import prepare
 
     controllers = args.controllers.split(",") if args.controllers else [None]
@@ -240,6 +281,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     controllers = [str(c) if c else s.controller for c, s in zip(controllers, setups,
                                                                  strict=True)]
     scenario = setups[0].scenario
+    check_duration(scenario, setups[0].duration_s)
     out = Path(args.out or f"runs/compare-{scenario.name}")
     base = _specs_base(args, str(args.scenario))
     outcome = compare(base, controllers, out, seed=args.seed,
@@ -320,9 +362,10 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     loaded = [load_scenario(name) for name in BUILTIN]
     width = max(len(sc.name) for sc in loaded) + 2
     for sc in loaded:
-        variants = f", {len(sc.variants)} variants" if len(sc.variants) > 1 else ""
         print(f"{sc.name:<{width}}{sc.title} ({sc.duration_s:g} s, {sc.controller}/"
-              f"{sc.estimator}{variants})")
+              f"{sc.estimator})")
+        if len(sc.variants) > 1:
+            print(f"{'':<{width}}--variant " + ", ".join(v.name for v in sc.variants))
     print("or any scenario TOML file in the same format (experiments/*.toml)")
     for title, registry in (("architectures (--arch)", ARCHITECTURES),
                             ("controllers (--controller)", CONTROLLERS),
@@ -336,8 +379,8 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def _cmd_keys(args: argparse.Namespace) -> int:
+    from trackmj.campaign import file_schema
     from trackmj.params import FILE_KINDS, describe_schema
-    from trackmj.sweeps import file_schema
 
     unknown = [k for k in args.kinds if k not in FILE_KINDS]
     if unknown:
@@ -486,7 +529,8 @@ def build_parser() -> argparse.ArgumentParser:
     model_args(drive)
     drive.add_argument("--speed", type=float, default=1.5, help="sprocket pitch speed [m/s]")
     drive.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
-    drive.add_argument("--preload", type=float, help="tensioner preload [kN]")
+    drive.add_argument("--preload", type=float, metavar="N",
+                       help="tensioner preload [N], e.g. 12e3")
     drive.add_argument("--out", help="directory for metrics.json and timeseries.parquet")
     tensioner_arg(drive)
     drive.set_defaults(func=_cmd_drive)
@@ -537,6 +581,8 @@ def build_parser() -> argparse.ArgumentParser:
                      "and any of the run's columns, e.g. tension_N, p_head [MPa], stroke_mm) "
                      "overlaid in the figure and compared in metrics.json "
                      "(prediction_vs_measured)")
+    run.add_argument("--overwrite", action="store_true", help="replace a result of other "
+                     "inputs in the output folder (the same inputs replace it anyway)")
     run.set_defaults(func=_cmd_run)
 
     compare = sub.add_parser("compare", help="all architectures on one scenario, with each "
@@ -574,7 +620,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="output directory, resumed if it holds a sweep "
                             "(default: runs/sweep-SPEC_NAME)")
     sweep.add_argument("--plot", metavar="DIR",
-                       help="only redraw DIR/figures from DIR/results.parquet")
+                       help="only redraw DIR/figures from DIR/results.parquet (a resumed "
+                            "sweep that makes no run keeps the figures that exist)")
     sweep.add_argument("--keep-runs", action="store_true",
                        help="also write each run's result directory under DIR/runs/")
     sweep.add_argument("--retry-failed", action="store_true",

@@ -51,6 +51,12 @@ class RunSpec:
         """The same case in the tp architecture (what a dp-a run replays)."""
         return replace(self, architecture="tp")
 
+    def prepare_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`trackmj.sim.setup.prepare` for this run."""
+        kwargs = self.simulate_kwargs()
+        kwargs["overrides"] = kwargs.pop("set")
+        return kwargs
+
     def simulate_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of ``simulate`` for this run."""
         return dict(scenario=self.scenario, architecture=self.architecture,

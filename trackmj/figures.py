@@ -31,8 +31,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
 
+from trackmj.campaign import column_unit, mean_std
 from trackmj.io import write_bytes_atomic
-from trackmj.metrics import ENERGY_TOTALS, MetricWindows, energy_terms, lowpass
+from trackmj.metrics import ENERGY_TOTALS, METRIC_DISPLAY, MetricWindows, energy_terms, lowpass
 from trackmj.results import Result
 
 STYLES: dict[str, dict[str, Any]] = {
@@ -102,7 +103,7 @@ def _legend_above(ax: Axes, ncol: int | None = None, **kwargs: Any) -> None:
     handles, labels = ax.get_legend_handles_labels()
     if handles:
         ax.legend(handles, labels, loc="lower left", bbox_to_anchor=(0.0, 1.01),
-                  ncol=ncol or len(handles), frameon=False, fontsize=8,
+                  ncol=ncol or len(handles), frameon=False, fontsize=9,
                   handlelength=3.0, borderaxespad=0.0, columnspacing=1.2, **kwargs)
 
 
@@ -202,57 +203,107 @@ def _tension_panel(ax: Axes, runs: Sequence[tuple[str, Result]], w: MetricWindow
     ax.grid(alpha=0.3)
 
 
-def _energy_bars(ax: Axes, labels: Sequence[str], results: Sequence[Result]) -> None:
-    """Stacked bars of each run's energy terms [kJ] (positive terms up, negative down) with
-    the totals (pump, circuit) as black ticks; a note where a run has no energy_J table."""
-    terms = [energy_terms(r.metrics) for r in results]
-    names: list[str] = []
-    for e in terms:
-        names += [k for k in e.terms if k not in ENERGY_TOTALS and k not in names]
-    # the circuit's sinks first, so the circuit tick meets their top; the relief last, so the
-    # pump tick meets the top of the stack (when nothing is released from storage)
-    names.sort(key=lambda k: ENERGY_ORDER.index(k) if k in ENERGY_ORDER else len(ENERGY_ORDER))
+SUPPLY_SIDE = ("pump_losses", "relief", "stored_change.supply_oil",
+               "stored_change.accumulator", "numerical.supply")
+"""Terms of the energy table between the pump and the main valve's P port (the rest of the
+terms, but the residual, lie between the P port and the track: the circuit's)."""
+ENERGY_LABELS = {
+    "numerical": "numerical (backward-Euler dissipation of the pressure nodes, the chamber "
+                 "volume term and the 1 ms coupling's interface residual)",
+    "stored_change": "stored_change (oil and gas energy, end − start)",
+    "residual": "residual (pump − every term: the bookkeeping check)",
+    "mechanical": "mechanical (work into the track, ∫F·v dt)",
+}
+"""Legend text of the energy terms that need a word of explanation."""
+
+
+def energy_waterfall(metrics: Mapping[str, Any]) -> tuple[list[tuple[str, float]],
+                                                           list[tuple[str, float]]]:
+    """A run's energy terms [J] in the order of the waterfall: (circuit terms, then the
+    supply-side terms and the residual), each a list of (term, value); sub-terms summed per
+    term and side (``stored_change`` and ``numerical`` have a share on each side). Running
+    sums: after the circuit terms the circuit total, after all the pump total."""
+    table = metrics.get("energy_J")
+    if not isinstance(table, Mapping):
+        return [], []
+    sides: tuple[dict[str, float], dict[str, float]] = ({}, {})
+    for key, value in table.items():
+        if key in ENERGY_TOTALS or isinstance(value, str | bool):
+            continue
+        items = value.items() if isinstance(value, Mapping) else [(None, value)]
+        for sub, v in items:
+            if isinstance(v, str | bool) or not math.isfinite(float(v)):
+                continue
+            full = key if sub is None else f"{key}.{sub}"
+            supply = key in SUPPLY_SIDE or full in SUPPLY_SIDE or key == "residual"
+            side = sides[1 if supply else 0]
+            side[key] = side.get(key, 0.0) + float(v)
+
+    def order(item: tuple[str, float]) -> int:
+        return ENERGY_ORDER.index(item[0]) if item[0] in ENERGY_ORDER else len(ENERGY_ORDER)
+
+    return (sorted(sides[0].items(), key=order), sorted(sides[1].items(), key=order))
+
+
+def _energy_bars(ax: Axes, labels: Sequence[str], results: Sequence[Result], *,
+                 below: bool = False) -> None:
+    """Each run's energy as a waterfall [kJ]: the circuit's terms from zero, each bar from the
+    running sum (a negative term, e.g. energy released from storage, goes down), so the
+    circuit total (dashed tick) stands where its terms end; then the supply-side terms
+    (relief, pump losses, supply storage) up to the pump total (solid tick). A note where a
+    run has no energy_J table. ``below``: the legend under the panel (else beside it)."""
     spare = iter(["#777777", "#444444", "#AAAAAA"])
     drawn: set[str] = set()
-    for x, e in enumerate(terms):
-        up = down = 0.0
-        for name in names:
-            value = e.terms.get(name, math.nan) / 1e3
-            if not math.isfinite(value) or value == 0.0:
-                continue
+    for x, r in enumerate(results):
+        circuit_terms, supply_terms = energy_waterfall(r.metrics)
+        circuit_terms = [t for t in circuit_terms if t[1] != 0.0]
+        steps = circuit_terms + [t for t in supply_terms if t[1] != 0.0]
+        if not steps:
+            continue
+        width = 0.8 / len(steps)
+        left = x - 0.4
+        end_circuit = left + width * len(circuit_terms)
+        running = 0.0
+        totals = energy_terms(r.metrics).terms
+        for k, (name, value) in enumerate(steps):
             colour, hatch = ENERGY_STYLES.get(name) or ENERGY_STYLES.setdefault(
                 name, (next(spare, "#777777"), "||"))
-            bottom = up if value > 0 else down
-            ax.bar(x, value, bottom=bottom, width=0.6, color=colour, hatch=hatch,
-                   edgecolor="black", lw=0.5, label=None if name in drawn else name)
+            ax.bar(left + width * (k + 0.5), value / 1e3, bottom=running / 1e3, width=width,
+                   color=colour, hatch=hatch, edgecolor="black", lw=0.5,
+                   label=None if name in drawn else ENERGY_LABELS.get(name, name))
             drawn.add(name)
-            if value > 0:
-                up += value
-            else:
-                down += value
-        for total, ls in zip(ENERGY_TOTALS, ("-", "--"), strict=True):
-            value = e.terms.get(total, math.nan) / 1e3
-            if math.isfinite(value):
-                ax.hlines(value, x - 0.42, x + 0.42, color="black", lw=2.0, ls=ls,
-                          label=None if total in drawn else f"{total} (total in)")
+            running += value
+        for total, ls, x0, x1 in (("circuit", "--", left, end_circuit),
+                                  ("pump", "-", left, x + 0.4)):
+            value = totals.get(total, math.nan) / 1e3
+            if math.isfinite(value) and x1 > x0:
+                ax.hlines(value, x0, x1, color="black", lw=2.0, ls=ls,
+                          label=None if total in drawn else f"{total} total (energy in)")
                 drawn.add(total)
     by_note: dict[str, list[str]] = {}
-    for lab, e in zip(labels, terms, strict=True):
-        for n in e.notes:
+    for lab, r in zip(labels, results, strict=True):
+        for n in energy_terms(r.metrics).notes:
             by_note.setdefault(n, []).append(lab)
-    lines = [textwrap.fill(f"{', '.join(labs)}: {n}", 70) for n, labs in by_note.items()]
+    lines = [textwrap.fill(f"{', '.join(labs)}: {n}", 60) for n, labs in by_note.items()]
     if lines:     # in head room above the bars, not over them
         low, high = ax.get_ylim()
         rows = sum(line.count("\n") + 1 for line in lines)
-        ax.set_ylim(low, high + (0.1 * rows + 0.1) * (high - low))
-        ax.text(0.02, 0.98, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=7)
+        ax.set_ylim(low, high + (0.12 * rows + 0.1) * (high - low))
+        ax.text(0.02, 0.98, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=9)
     ax.axhline(0.0, color="black", lw=0.6)
     ax.set_xticks(range(len(labels)), labels, rotation=20)
     ax.set_xlim(-0.6, len(labels) - 0.4)
     ax.set_ylabel("energy [kJ]")
+    ax.set_title("energy, waterfall: circuit terms, then supply side", fontsize=10, loc="left")
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, fontsize=7,
-              borderaxespad=0.0)   # beside the bars: the breakdown has a dozen terms
+    handles, names = ax.get_legend_handles_labels()
+    if below:      # a narrow panel: the dozen terms under it, in two columns
+        ax.legend(handles, [textwrap.fill(n, 38) for n in names], loc="upper center",
+                  bbox_to_anchor=(0.5, -0.12), ncol=2, frameon=False, fontsize=9,
+                  borderaxespad=0.0)
+    else:
+        ax.legend(handles, [textwrap.fill(n, 42) for n in names], loc="upper left",
+                  bbox_to_anchor=(1.01, 1.0), frameon=False, fontsize=9, borderaxespad=0.0)
 
 
 MEASURED_COLOUR = "#D55E00"
@@ -274,11 +325,12 @@ def run_figure(result: Result, path: str | Path,
     zooms = _zoom_windows(w, t_end)
     measured = dict(measured or {})
     stroke = "stroke_m" in measured
-    fig = plt.figure(figsize=(16, 13 if stroke else 11), layout="constrained")
-    outer = fig.add_gridspec(1, 2, width_ratios=(2.2, 1.0))
+    fig = plt.figure(figsize=(16, 14 if stroke else 12), layout="constrained")
+    outer = fig.add_gridspec(1, 2, width_ratios=(2.0, 1.0))
     left = outer[0].subgridspec(5 if stroke else 4, 1,
                                 height_ratios=(3.0, 2.0, *((1.6,) if stroke else ()), 1.1, 1.1))
-    right = outer[1].subgridspec(len(zooms) + 1, 1, height_ratios=(*[1.0] * len(zooms), 1.4))
+    right = outer[1].subgridspec(len(zooms) + 1, 1,
+                                 height_ratios=(*[1.0] * len(zooms), 1.2 + 0.6 * len(zooms)))
     ax_f = fig.add_subplot(left[0])
     ax_p = fig.add_subplot(left[1], sharex=ax_f)
     ax_v = fig.add_subplot(left[3 if stroke else 2], sharex=ax_f)
@@ -326,8 +378,11 @@ def run_figure(result: Result, path: str | Path,
     ax_v.set_ylabel("mode [-]")
     _shade_events(ax_v, w, t_end, label=False)
     ax_v.grid(alpha=0.3)
-    ax_u.plot(t, c["u"], color="#0072B2", lw=0.6, label="valve opening u")
+    ax_u.plot(t, c["u"], color="#0072B2", lw=0.6,
+              label="u: the controller's command in [−1, 1] (> 0 pressurize, < 0 release), "
+                    "which the valve logic turns into the modes above")
     ax_u.set_ylabel("u [-]")
+    _legend_above(ax_u)
     ax_u.set_xlabel("time [s]")
     _shade_events(ax_u, w, t_end, label=False)
     ax_u.grid(alpha=0.3)
@@ -339,7 +394,8 @@ def run_figure(result: Result, path: str | Path,
                        raw_as_line=True)
         ax.set_title(f"zoom: {title}", fontsize=9, loc="left")
         ax.set_xlabel("time [s]")
-    _energy_bars(fig.add_subplot(right[len(zooms)]), [result.architecture], [result])
+    _energy_bars(fig.add_subplot(right[len(zooms)]), [result.architecture], [result],
+                 below=True)
     fig.suptitle(f"{result.scenario} {result.architecture} {result.controller}/"
                  f"{result.estimator} seed {result.seed}, variant "
                  f"{result.metadata.get('variant', 'nominal')}")
@@ -365,7 +421,7 @@ def _bars(ax: Axes, labels: Sequence[str], series: Mapping[str, Sequence[float]]
         colour = STYLES[name]["color"] if name in STYLES else shades[j % 4]
         bars = ax.bar(x, values, width=width, color=colour, hatch=hatches[j % 4],
                       edgecolor="0.6" if name == "tp" else "black", lw=0.5, label=name)
-        ax.bar_label(bars, labels=[_number(v, values) for v in values], fontsize=7,
+        ax.bar_label(bars, labels=[_number(v, values) for v in values], fontsize=9,
                      padding=1)
     ax.axhline(0.0, color="black", lw=0.6)
     ax.set_xticks(range(len(labels)), labels, rotation=20)
@@ -509,6 +565,250 @@ def variants_figure(variants: Sequence[str], series: Mapping[str, Mapping[str, S
         _bars(ax, list(variants), values, unit.rstrip("]"), name)
     fig.suptitle(title)
     return _save(fig, Path(path))
+
+
+# ----------------------------------------------------------------------------- sweeps
+
+DISPLAY_UNITS: dict[str, tuple[float, str]] = {
+    "N": (1e-3, "kN"), "Pa": (1e-6, "MPa"), "Pa (absolute)": (1e-6, "MPa abs"),
+    "J": (1e-3, "kJ"), "W": (1e-3, "kW"), "m": (1e3, "mm"), "m^2": (1e6, "mm²"),
+    "m^3": (1e6, "cm³"), "m^3/s": (6e4, "L/min"), "N/m": (1e-6, "kN/mm"),
+    "m/s^2": (1.0, "m/s²"), "1": (1.0, ""),
+}
+"""SI unit -> (scale, display unit) on the figures; other units are shown as they are."""
+CASE = ("scenario", "architecture", "controller", "estimator", "variant", "duration_s",
+        "inputs")
+"""Columns of a results row that make one line of a sweep figure (with the other swept
+parameters)."""
+NOT_METRICS = ("run_key", "point", "scenario", "architecture", "controller", "estimator",
+               "variant", "seed", "duration_s", "inputs", "error")
+
+
+def display_unit(unit: str) -> tuple[float, str]:
+    """(scale, display unit) of SI ``unit`` (:data:`DISPLAY_UNITS`)."""
+    return DISPLAY_UNITS.get(unit, (1.0, unit))
+
+
+def column_words(name: str) -> str:
+    """A results column in plain words: the label of :data:`trackmj.metrics.METRIC_DISPLAY`,
+    else the name without its unit suffix, ``_`` and ``.`` as spaces (a swept key: its
+    last two parts, e.g. "fluid bulk modulus")."""
+    from trackmj.campaign import is_key_column
+    from trackmj.params import UNIT_SUFFIXES
+
+    if name in METRIC_DISPLAY:
+        return METRIC_DISPLAY[name][0]
+    if name == "wall_time_s":
+        return "wall time of a run"
+    parts = name.split(".")
+    if is_key_column(name):
+        parts = [p for p in parts[1:] if not p.isdigit()][-2:]
+    last = parts[-1]
+    for suffix, _ in UNIT_SUFFIXES:
+        if last.endswith(suffix) and len(last) > len(suffix):
+            last = last[: -len(suffix)]
+            break
+    return " ".join([*parts[:-1], last]).replace("_", " ").strip()
+
+
+def column_label(name: str) -> str:
+    """Axis label of a results column: plain words and display unit ("tension RMSE,
+    low-pass [kN]")."""
+    from trackmj.campaign import column_unit
+
+    unit = METRIC_DISPLAY[name][2] if name in METRIC_DISPLAY else \
+        display_unit(column_unit(name))[1]
+    return f"{column_words(name)} [{unit}]" if unit and unit != "1" else column_words(name)
+
+
+def varies(values: Sequence[Any]) -> bool:
+    """Whether the finite ``values`` differ by more than :data:`CONSTANT_REL` (relative)."""
+    from trackmj.campaign import finite
+
+    v = finite(values)
+    return len(v) > 1 and max(v) - min(v) > CONSTANT_REL * max(abs(max(v)), abs(min(v)))
+
+
+def sweep_figures(rows: Sequence[Mapping[str, Any]], fig_dir: Path, *,
+                  redraw: bool = True) -> list[Path]:
+    """``fig_dir/<metric>.png`` for every metric (and the wall time) of the results ``rows``
+    (failed runs left out by the caller) that varies across them: one panel per swept
+    parameter, the metric's mean ± std over seeds at each parameter point, a line per case
+    (scenario, architecture, controller, ...) and per combination of the other swept
+    parameters (points that share none, e.g. Latin hypercube samples, stand alone). Without
+    swept parameters (e.g. a controller comparison): bars, a group per scenario, a bar per
+    case, mean ± std over seeds. ``redraw=False`` keeps a figure that exists. Returns the
+    paths of the varying metrics' figures."""
+    from trackmj.campaign import is_key_column
+
+    rows = [dict(r) for r in rows]
+    if not rows:
+        return []
+    swept = sorted({k for r in rows for k in r if is_key_column(k)})
+    skip = set(NOT_METRICS) | set(swept)
+    metrics = sorted({k for r in rows for k in r if k not in skip
+                      and isinstance(r[k], int | float) and not isinstance(r[k], bool)})
+    paths = []
+    for metric in metrics:
+        if not varies([r.get(metric) for r in rows]):
+            continue
+        path = fig_dir / f"{metric}.png"
+        paths.append(path)
+        if path.is_file() and not redraw:
+            continue
+        fig = _metric_figure(rows, metric, swept) if swept else _case_figure(rows, metric)
+        _save_figure(fig, path)
+    return paths
+
+
+def _save_figure(fig: Any, path: Path) -> Path:
+    """A pyplot-free :class:`matplotlib.figure.Figure` as PNG at ``path``, atomically."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110)
+    write_bytes_atomic(path, buffer.getvalue())
+    return path
+
+
+def scenario_order(name: str) -> tuple[int, str]:
+    """Built-in scenarios in their order (W1-W5, NL1), then the others by name."""
+    from trackmj.scenarios import BUILTIN
+
+    return (BUILTIN.index(name), "") if name in BUILTIN else (len(BUILTIN), name)
+
+
+LINE_STYLES = (("-", "o"), ("--", "s"), (":", "^"), ("-.", "D"), ((0, (5, 1, 1, 1)), "v"),
+               ((0, (1, 3)), "P"))
+"""Line style and marker of the lines of one case (the other swept parameters' values)."""
+CONSTANT_REL = 1e-9
+"""A metric whose finite values differ by less than this (relative) does not vary: no
+figure."""
+MAX_LABELLED_LINES = 6
+"""More lines per case than this are drawn thin and unlabelled."""
+
+
+def _metric_figure(rows: list[dict[str, Any]], metric: str, swept: list[str]) -> Any:
+    """One panel per swept key: the metric's mean ± std over seeds against the key, a
+    colour per case, a line style per combination of the other keys."""
+    from matplotlib.figure import Figure  # no pyplot: no global figure state
+
+    cases = sorted({tuple(r.get(c) for c in CASE) for r in rows}, key=str)
+    colors = matplotlib.colormaps["tab10"]
+    m_scale = display_unit(column_unit(metric))[0]
+    width, height = 4.8 * len(swept) + 0.8, 4.4
+    fig = Figure(figsize=(width, height))
+    axes = fig.subplots(1, len(swept), squeeze=False, sharey=True)[0]
+    # fixed margins [in] instead of tight_layout, which draws the figure once more
+    fig.subplots_adjust(left=0.85 / width, right=1.0 - 0.2 / width, bottom=0.6 / height,
+                        top=1.0 - 0.45 / height, wspace=0.12)
+    for ax, key in zip(axes, swept, strict=True):
+        k_scale = display_unit(column_unit(key))[0]
+        others = [k for k in swept if k != key]
+        for c, case in enumerate(cases):
+            lines: dict[tuple, dict[Any, list[float]]] = {}
+            for r in rows:
+                if tuple(r.get(n) for n in CASE) == case and key in r:
+                    lines.setdefault(tuple(r.get(k) for k in others), {}).setdefault(
+                        r[key], []).append(r.get(metric))
+            series = sorted(lines.items(), key=lambda item: [_sortable(v) for v in item[0]])
+            scatter = len(series) > 1 and all(len(points) == 1 for _, points in series)
+            if scatter:   # e.g. LHS samples: no two points share the other keys' values
+                series = [((), {x: ys for _, points in series for x, ys in points.items()})]
+            labelled = len(series) <= MAX_LABELLED_LINES
+            for j, (line, points) in enumerate(series):
+                x = sorted(points)
+                stats = np.array([mean_std(points[v])[:2] for v in x])
+                style, marker = LINE_STYLES[j % len(LINE_STYLES)]
+                joined = len(x) > 1 and not scatter
+                ax.errorbar(np.array(x, dtype=float) * k_scale, stats[:, 0] * m_scale,
+                            yerr=stats[:, 1] * m_scale, color=colors(c % 10), marker=marker,
+                            ms=4, capsize=3, lw=1.0 if labelled else 0.6,
+                            ls=style if joined else "none", alpha=1.0 if labelled else 0.5,
+                            label=_series_label(case, cases, others, line)
+                            if labelled or j == 0 else None)
+        xs = [float(r[key]) for r in rows if r.get(key) is not None]
+        if min(xs) > 0 and max(xs) / min(xs) > 30:
+            ax.set_xscale("log")
+        ax.set_xlabel(column_label(key), fontsize=9)
+        ax.grid(alpha=0.3)
+        if len(ax.get_legend_handles_labels()[1]) > 1 or len(cases) > 1:
+            ax.legend(fontsize=9, loc="best")
+    axes[0].set_ylabel(column_label(metric))
+    n_seeds = len({r["seed"] for r in rows})
+    case_text = _case_label(cases[0], cases) if len(cases) == 1 else f"{len(cases)} cases"
+    fig.suptitle(f"{column_words(metric)}: mean ± std over {n_seeds} "
+                 f"seed{'s' * (n_seeds > 1)} ({case_text})", fontsize=10)
+    return fig
+
+
+HATCHES = ("", "//", "..", "xx", "\\\\", "++", "oo", "--")
+"""Bar hatches, so that the cases of a bar figure read in grayscale too."""
+
+
+def _case_figure(rows: list[dict[str, Any]], metric: str) -> Any:
+    """Grouped bars: a group per scenario, a bar per other case (architecture, controller,
+    ...: the fields that differ) with its mean ± std over seeds and its value above it."""
+    from matplotlib.figure import Figure
+
+    scenarios = sorted({r["scenario"] for r in rows}, key=scenario_order)
+    cases = sorted({tuple(r.get(c) for c in CASE[1:]) for r in rows}, key=str)
+    labels = [_case_label(("", *case), [("", *c) for c in cases]).strip() for case in cases]
+    colors = matplotlib.colormaps["tab10"]
+    m_scale = display_unit(column_unit(metric))[0]
+    width, height = max(6.0, 1.1 * len(scenarios) * max(1, len(cases)) / 2 + 2.6), 4.4
+    fig = Figure(figsize=(width, height))
+    ax = fig.subplots()
+    fig.subplots_adjust(left=0.85 / width, right=1.0 - 1.7 / width, bottom=0.6 / height,
+                        top=1.0 - 0.45 / height)
+    bar = 0.8 / len(cases)
+    measured = np.zeros(len(scenarios), bool)
+    for j, (case, label) in enumerate(zip(cases, labels, strict=True)):
+        stats = np.array([mean_std([r.get(metric) for r in rows if r["scenario"] == sc
+                                    and tuple(r.get(c) for c in CASE[1:]) == case])[:2]
+                          for sc in scenarios]) * m_scale
+        measured |= np.isfinite(stats[:, 0])
+        x = np.arange(len(scenarios)) - 0.4 + bar * (j + 0.5)
+        ax.bar(x, stats[:, 0], bar, yerr=stats[:, 1], capsize=2, color=colors(j % 10),
+               hatch=HATCHES[j % len(HATCHES)], edgecolor="black", lw=0.5, label=label)
+        for xi, (value, std) in zip(x, stats, strict=True):   # above the error bar
+            if math.isfinite(value):
+                ax.text(xi, value + std if value >= 0 else value - std, f"{value:.3g}",
+                        ha="center", va="bottom" if value >= 0 else "top", fontsize=9)
+    for i in np.flatnonzero(~measured):    # e.g. a settling time where nothing steps
+        ax.text(i, 0.0, "no value", ha="center", va="bottom", fontsize=9, color="0.4")
+    ax.set_xticks(range(len(scenarios)), scenarios)
+    ax.set_xlim(-0.5, len(scenarios) - 0.5)      # groups without a value keep their place
+    ax.axhline(0.0, color="black", lw=0.6)
+    ax.grid(axis="y", alpha=0.3)
+    ax.set_ylabel(column_label(metric))
+    ax.set_xlabel("scenario")
+    ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    n_seeds = len({r["seed"] for r in rows})
+    fig.suptitle(f"{column_words(metric)}: mean ± std over {n_seeds} "
+                 f"seed{'s' * (n_seeds > 1)}", fontsize=10)
+    return fig
+
+
+def _sortable(value: Any) -> tuple[int, Any]:
+    return (1, 0.0) if value is None else (0, value)
+
+
+def _series_label(case: tuple, cases: list[tuple], others: list[str], line: tuple) -> str:
+    """Legend text: the case (if there are several) and the other keys' values."""
+    parts = [_case_label(case, cases)] if len(cases) > 1 else []
+    for key, value in zip(others, line, strict=False):   # () for scattered samples
+        if value is not None:
+            scale, unit = display_unit(column_unit(key))
+            shown = f" {unit}" if unit and unit != "1" else ""
+            parts.append(f"{column_words(key)} = {value * scale:.4g}{shown}")
+    return ", ".join(parts) or _case_label(case, cases)
+
+
+def _case_label(case: tuple, cases: list[tuple]) -> str:
+    """The case fields that differ between cases (all of them if there is one case:
+    scenario, architecture, controller)."""
+    varying = [i for i in range(len(CASE)) if len({c[i] for c in cases}) > 1]
+    shown = varying or [0, 1, 2]
+    return " ".join(str(case[i]) for i in shown if CASE[i] != "inputs") or "runs"
 
 
 CHANNEL_DISPLAY: dict[str, tuple[str, float]] = {

@@ -145,13 +145,33 @@ class Readout(NamedTuple):
     closure_error_m: float
 
 
-READOUT_UNITS: dict[str, str] = {
-    "t_s": "s", "tension_N": "N", "p_head_Pa": "Pa", "p_rod_Pa": "Pa", "p_supply_Pa": "Pa",
-    "stroke_m": "m", "stroke_velocity_m_s": "m/s", "q_supply_m3_s": "m^3/s",
-    "e_supply_J": "J", "p_work_J": "J", "mech_work_J": "J", "chassis_acc_z_m_s2": "m/s^2",
+COLUMN_UNITS: dict[str, str] = {
+    "t_s": "s",
+    "tension_N": "N",
+    "tension_ref_N": "N",
+    "p_head_Pa": "Pa",
+    "p_rod_Pa": "Pa",
+    "p_supply_Pa": "Pa",
+    "stroke_m": "m",
+    "stroke_velocity_m_s": "m/s",
+    "q_supply_m3_s": "m^3/s",
+    "valve_mode": "1",
+    "u": "1",
+    "e_supply_J": "J",
+    "p_work_J": "J",
+    "mech_work_J": "J",
+    "chassis_acc_z_m_s2": "m/s^2",
     "closure_error_m": "m",
 }
-"""Unit of every :class:`Readout` field ("1": dimensionless)."""
+"""The one column -> unit table of a closed-loop run's timeseries, in the contract's order
+("1": dimensionless): the :class:`Readout` fields, the command's ``valve_mode`` and ``u``
+(:data:`COMMAND_UNITS`) and the reference ``tension_ref_N`` (:data:`REFERENCE_UNITS`)."""
+COMMAND_UNITS = {"valve_mode": "1", "u": "1"}
+"""Columns the recorder takes from the command (valve mode −1/0/+1, opening u [-])."""
+REFERENCE_UNITS = {"tension_ref_N": "N"}
+"""Column the recorder takes from the schedule (F_ref at the end of each step)."""
+READOUT_UNITS: dict[str, str] = {name: COLUMN_UNITS[name] for name in Readout._fields}
+"""Unit of every :class:`Readout` field."""
 
 
 class ElementLog(NamedTuple):

@@ -10,11 +10,14 @@ tuned toward them.
 Runs: every scenario's variants × seeds × architectures (``tp``, ``dp-a``, ``dp-b`` by
 default, the study's three) with the scenario's controller, plus the baseline controllers
 (``lmpc``, ``pid``) on ``tp`` in W1 for the controller claims. They run on the shared
-executor; each run is written to ``OUT/runs/<scenario>-<arch>-<controller>-<variant>-s<seed>/``
-as it finishes, and a run already complete there (same scenario, architecture, controller,
-variant, seed and duration) is read back instead of run again, so an interrupted report
-resumes. A dp-a run needs its tp run's track load: when only the dp-a run is missing, the
-executor runs the tp case again for it (deterministic per seed, so the same load).
+executor as a campaign (:mod:`trackmj.campaign`); each run is written to
+``OUT/runs/<scenario>-<arch>-<controller>-<variant>-s<seed>/`` and its row to
+``OUT/results.parquet`` as it finishes, and a run already done there (the same identity:
+inputs and code) is read back instead of run again, so an interrupted report resumes. A
+``--duration`` shorter than a scenario's events moves them inside the run
+(:func:`event_moves`); the report says where to. A dp-a run needs its tp run's track
+load: when only the dp-a run is missing, the executor runs the tp case again for it
+(deterministic per seed, so the same load).
 """
 
 from __future__ import annotations
@@ -26,13 +29,15 @@ import sys
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from trackmj.executor import Executor, RunOutcome, RunSpec
+from trackmj.campaign import PlannedRun, Store, check_campaign_dir, finite, plan_run, run_campaign
+from trackmj.campaign import mean_std as statistics
+from trackmj.executor import RunOutcome, RunSpec, overrides_tuple
 from trackmj.figures import (
     overlay_figure,
     psd_figure,
@@ -49,9 +54,10 @@ from trackmj.metrics import (
     lookup,
     prediction_vs_tp,
 )
-from trackmj.results import Result, ResultDirectoryError, read_result, write_result
+from trackmj.results import Result
 from trackmj.results import _json_ready as jsonable  # the one JSON form of metrics
-from trackmj.scenarios import load_scenario
+from trackmj.scenarios import describe_moves, load_scenario
+from trackmj.sim.setup import prepare
 
 REPORT_ARCHS = ("tp", "dp-a", "dp-b")
 """Architectures of a report by default: the study's three (tp-weak with ``--archs``)."""
@@ -73,25 +79,49 @@ def run_name(scenario: str, architecture: str, controller: str, variant: str, se
     return f"{scenario}-{architecture}-{controller}-{variant}-s{seed}"
 
 
+def event_moves(scenario: str, duration: float | None) -> dict[str, float]:
+    """The scenario overrides that move ``scenario``'s events inside a run of ``duration``
+    [s] (:func:`trackmj.scenarios.moved_events`; {} for the scenario's own duration)."""
+    from trackmj.scenarios import moved_events
+
+    return {} if duration is None else moved_events(load_scenario(scenario), duration)
+
+
 def plan(scenarios: Sequence[str], seeds: Sequence[int], duration: float | None,
          archs: Sequence[str] = REPORT_ARCHS,
-         baselines: Sequence[str] = BASELINES, tensioner: str | None = None) -> list[RunSpec]:
+         baselines: Sequence[str] = BASELINES, tensioner: str | None = None,
+         ) -> list[PlannedRun]:
     """Every run of a report: each scenario's variants × seeds × ``archs`` with its own
     controller, then ``baselines`` on tp in the nominal :data:`BASELINE_SCENARIOS`;
     ``tensioner`` (a tensioner file) replaces the hydraulic element where an architecture
-    has one (:func:`tensioner_for`)."""
+    has one (:func:`tensioner_for`). A ``duration`` that would cut off a scenario's step,
+    pulse or drop moves its events inside the run (:func:`event_moves`). Each run is
+    validated here (ParameterError before anything runs) and known by its identity
+    (:func:`trackmj.campaign.run_key`)."""
     specs = []
     for name in scenarios:
         sc = load_scenario(name)
+        moves = overrides_tuple({f"scenario.{k}": v
+                                 for k, v in event_moves(name, duration).items()})
         specs += [RunSpec(scenario=name, architecture=arch, controller=sc.controller,
                           seed=seed, duration=duration, variant=variant.name,
-                          tensioner=tensioner_for(arch, tensioner))
+                          overrides=moves, tensioner=tensioner_for(arch, tensioner))
                   for variant in sc.variants for seed in seeds for arch in archs]
         if sc.name in BASELINE_SCENARIOS:
             specs += [RunSpec(scenario=name, architecture="tp", controller=c, seed=seed,
-                              duration=duration, tensioner=tensioner)
+                              duration=duration, overrides=moves, tensioner=tensioner)
                       for c in baselines if c != sc.controller for seed in seeds]
-    return specs
+    setups: dict[RunSpec, Any] = {}
+    runs = []
+    for spec in specs:
+        unseeded = replace(spec, seed=0)
+        if unseeded not in setups:          # validated once per case, not once per seed
+            setups[unseeded] = prepare(**unseeded.prepare_kwargs())
+        setup = replace(setups[unseeded], seed=spec.seed)
+        runs.append(plan_run(spec, setup=setup, name=run_name(
+            setup.scenario.name, setup.architecture, setup.controller, setup.variant.name,
+            setup.seed)))
+    return runs
 
 
 def tensioner_for(architecture: str, tensioner: str | None) -> str | None:
@@ -102,32 +132,6 @@ def tensioner_for(architecture: str, tensioner: str | None) -> str | None:
 
     replaceable = ARCHITECTURES[architecture].element == REPLACEABLE_ELEMENT
     return tensioner if replaceable else None
-
-
-def _spec_dir(runs_dir: Path, spec: RunSpec) -> Path:
-    return runs_dir / run_name(load_scenario(spec.scenario).name, spec.architecture,
-                               spec.controller or load_scenario(spec.scenario).controller,
-                               spec.variant, spec.seed)
-
-
-def completed(runs_dir: Path, spec: RunSpec) -> Result | None:
-    """The run of ``spec`` if ``runs_dir`` holds it complete (metrics.json written last by
-    the whole-directory writer) with the same identity and duration, measured on stated
-    windows (an ``evaluation`` table: not a run of an older trackmj); else None."""
-    path = _spec_dir(runs_dir, spec)
-    try:
-        result = read_result(path)
-    except (FileNotFoundError, OSError, ValueError, KeyError):
-        return None
-    sc = load_scenario(spec.scenario)
-    meta = result.metadata
-    duration = sc.duration_s if spec.duration is None else spec.duration
-    same = (meta.get("scenario") == sc.name and meta.get("architecture") == spec.architecture
-            and meta.get("controller") == (spec.controller or sc.controller)
-            and meta.get("variant") == spec.variant and meta.get("seed") == str(spec.seed)
-            and math.isclose(float(meta.get("duration_s", "nan")), duration)
-            and isinstance(result.metrics.get("evaluation"), Mapping))
-    return result if same else None
 
 
 @dataclass
@@ -146,52 +150,30 @@ class MatrixRun:
     run_wall_s: dict[str, list[float]] = field(default_factory=dict)
 
 
-def run_matrix(specs: Sequence[RunSpec], out_dir: str | Path, *, workers: int | None = None,
-               scheduler: str | None = None, progress: bool = True) -> MatrixRun:
-    """Run ``specs`` on the shared executor, writing each run under ``OUT/runs`` as it
-    finishes and reading back the ones already complete there; a progress bar counts all
-    of them (the resumed ones from the start). A failed run is reported and left out."""
-    runs_dir = Path(out_dir) / RUNS
-    runs_dir.mkdir(parents=True, exist_ok=True)
+def run_matrix(runs: Sequence[PlannedRun], out_dir: str | Path, *, workers: int | None = None,
+               scheduler: str | None = None, progress: bool = True,
+               executor: Any = None) -> MatrixRun:
+    """Make the runs of a report in ``out_dir`` (a campaign of kind ``report``,
+    :mod:`trackmj.campaign`): each run is written to ``OUT/runs/<name>/`` and its row to
+    ``OUT/results.parquet`` as it finishes; a run already done there (same identity) is
+    read back instead. A failed run is reported and left out."""
     start = time.perf_counter()
     load_start = os.getloadavg()[0]
-    have = {spec: completed(runs_dir, spec) for spec in specs}
-    todo = [spec for spec in specs if have[spec] is None]
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(specs), initial=len(specs) - len(todo), unit="run",
-                   desc="report", mininterval=0.5)
-    failed: list[tuple[RunSpec, str]] = []
     run_wall: dict[str, list[float]] = defaultdict(list)
 
-    def on_done(outcome: RunOutcome) -> None:
+    def on_outcome(run: PlannedRun, outcome: RunOutcome) -> None:
         run_wall[outcome.spec.architecture].append(outcome.wall_time_s)
-        if outcome.ok:
-            write_result(outcome.result, _spec_dir(runs_dir, outcome.spec))
-            have[outcome.spec] = outcome.result
-        else:
-            failed.append((outcome.spec, outcome.error or "failed"))
-            message = (f"trackmj: {outcome.spec.scenario} {outcome.spec.architecture} "
-                       f"{outcome.spec.controller} {outcome.spec.variant} seed "
-                       f"{outcome.spec.seed}: {outcome.error}")
-            if bar is not None:
-                bar.write(message, file=sys.stderr)
-            else:
-                print(message, file=sys.stderr)
-        if bar is not None:
-            bar.update(1)
+        if not outcome.ok:
+            print(f"trackmj: {run.name}: {outcome.error}", file=sys.stderr)
 
-    try:
-        if todo:
-            with Executor(workers=workers, scheduler=scheduler) as executor:
-                executor.map(todo, on_done=on_done)
-    finally:
-        if bar is not None:
-            bar.close()
-    return MatrixRun([r for r in have.values() if r is not None], failed,
-                     len(specs) - len(todo), time.perf_counter() - start,
+    with Store(out_dir, "report", markers=(RUNS, REPORT)) as store:
+        made = run_campaign(store, runs, executor=executor, workers=workers,
+                            scheduler=scheduler, progress="report" if progress else None,
+                            need_results=True, on_outcome=on_outcome)
+    results = [made.results[r.key] for r in {r.key: r for r in runs}.values()
+               if r.key in made.results]
+    return MatrixRun(results, [(o.spec, o.error or "failed") for o in made.failed],
+                     made.resumed, time.perf_counter() - start,
                      workers or (None if scheduler else os.cpu_count()),
                      (load_start, os.getloadavg()[0]), dict(run_wall))
 
@@ -226,9 +208,10 @@ class Matrix:
         return sorted({case[0] for case, _ in self.runs})
 
     def architectures(self, scenario: str) -> list[str]:
+        from trackmj.sim.registry import ARCHITECTURES
+
         found = {a for (case, a) in self.runs if case[0] == scenario}
-        order = ["tp", "tp-weak", "dp-a", "dp-b"]
-        return sorted(found, key=lambda a: order.index(a) if a in order else len(order))
+        return [a for a in ARCHITECTURES if a in found]   # the registry's order
 
     def controller(self, scenario: str) -> str:
         """The scenario's own controller (the one its architectures ran with)."""
@@ -261,25 +244,22 @@ class Matrix:
 # ----------------------------------------------------------------------------- statistics
 
 def _finite(values: Iterable[float]) -> list[float]:
-    return [v for v in values if math.isfinite(v)]
+    return finite(values)
 
 
 def mean_std(values: Iterable[float], scale: float = 1.0, digits: int = 3) -> str:
-    """"mean ± std" of the finite values (population std over seeds), scaled; "–" if none;
-    "(k of n undefined)" appended when some are NaN (e.g. never settled)."""
+    """"mean ± std" of the finite values (population std over seeds,
+    :func:`trackmj.campaign.mean_std`), scaled; "–" if none; "(k of n undefined)" appended
+    when some are NaN (e.g. never settled)."""
     values = list(values)
-    finite = _finite(values)
-    missing = len(values) - len(finite)
+    mean, std, n = statistics(values)
+    missing = len(values) - n
     tail = f" ({missing} of {len(values)} undefined)" if missing else ""
-    if not finite:
+    if not n:
         return "–" + tail
-    mean = float(np.mean(finite)) * scale
-    if len(finite) == 1:
-        return f"{mean:.{digits}g}" + tail
-    std = float(np.std(finite)) * scale
-    if std <= 1e-9 * abs(mean):        # equal but for rounding
-        std = 0.0
-    return f"{mean:.{digits}g} ± {std:.2g}" + tail
+    if n == 1:
+        return f"{mean * scale:.{digits}g}" + tail
+    return f"{mean * scale:.{digits}g} ± {std * scale:.2g}" + tail
 
 
 def percent(values: Iterable[float]) -> str:
@@ -745,8 +725,16 @@ def _condition_section(m: Matrix, scenario: str, out: Path) -> list[str]:
     seeds = sorted({r.seed for r in runs})
     scope = "all variants × seeds" if variant is None else "seeds"
     lines = [f"## {scenario}: {sc.title}", "",
-             f"{sc.controller} controller; mean ± std over {scope} {seeds}.", "",
-             "| metric | " + " | ".join(archs) + " |", "|---|" + "---|" * len(archs)]
+             f"{sc.controller} controller; mean ± std over {scope} {seeds}.", ""]
+    durations = {float(r.metadata.get("duration_s", sc.duration_s)) for r in runs}
+    for duration in sorted(durations):
+        moves = event_moves(scenario, duration)
+        if moves:
+            lines += [f"The {duration:g} s runs would cut off events of the {sc.duration_s:g} s "
+                      f"scenario, so its schedule after the evaluation start "
+                      f"({sc.evaluation.start_s:g} s) is compressed linearly into the run "
+                      f"(README, Usage, Durations): {describe_moves(sc, moves)}.", ""]
+    lines += ["| metric | " + " | ".join(archs) + " |", "|---|" + "---|" * len(archs)]
     for key in TABLE_METRICS:
         label, scale, unit = METRIC_DISPLAY[key]
         cells = [mean_std(m.values(scenario, a, key, variant=variant).values(), scale)
@@ -894,25 +882,11 @@ def write_report(results: Sequence[Result], out_dir: str | Path,
     return path
 
 
-def check_collection_dir(out: str | Path, markers: Sequence[str], what: str) -> Path:
-    """``out`` (created) if it can hold a ``what`` (a report, a comparison): absent, empty,
-    or holding one of ``markers`` (a previous one, which it replaces or resumes); else
-    ResultDirectoryError, before anything runs."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise ResultDirectoryError(f"--out {out}: is a file, not a directory")
-    if out.is_dir() and any(out.iterdir()) and not any((out / m).exists() for m in markers):
-        raise ResultDirectoryError(f"--out {out}: an existing directory that holds no trackmj "
-                                   f"{what} ({' or '.join(markers)} missing); refusing to "
-                                   "write into it")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
-
-
 def check_report_dir(out: str | Path) -> Path:
     """``out`` if it can hold a report: absent, empty, or a previous report's directory
-    (``runs/`` or ``report.md`` in it, so an interrupted report resumes)."""
-    return check_collection_dir(out, (RUNS, REPORT), "report")
+    (``campaign.json``, ``runs/`` or ``report.md`` in it, so an interrupted report
+    resumes)."""
+    return check_campaign_dir(out, ("campaign.json", RUNS, REPORT), "report")
 
 
 # ----------------------------------------------------------------------------- compare
@@ -934,36 +908,28 @@ class CompareRun:
 
 def check_compare_dir(out: str | Path) -> Path:
     """``out`` if it can hold a comparison: absent, empty or a previous comparison."""
-    return check_collection_dir(out, (COMPARE,), "comparison")
+    return check_campaign_dir(out, ("campaign.json", COMPARE), "comparison")
 
 
 def compare(base: Mapping[str, Any], controllers: Sequence[str], out_dir: str | Path, *,
             seed: int, workers: int | None = None, scheduler: str | None = None) -> CompareRun:
     """Every architecture with each controller on one case (``base``: the RunSpec fields but
-    architecture, controller and seed); each run is written to ``OUT/<arch>-<controller>/``
-    (the run contract plus its figure) as it finishes."""
+    architecture, controller and seed), a campaign of kind ``compare``
+    (:mod:`trackmj.campaign`): each run is written to ``OUT/<arch>-<controller>/`` (the run
+    contract plus its figure) as it finishes; a run already done there is read back."""
     from trackmj.sim.registry import ARCHITECTURES
 
-    out = check_compare_dir(out_dir)
     fields = {k: v for k, v in base.items() if k != "tensioner"}
     specs = [RunSpec(**fields, architecture=a, controller=c, seed=seed,
                      tensioner=tensioner_for(a, base.get("tensioner")))
              for c in controllers for a in ARCHITECTURES]
-    results, failed = [], []
-
-    def on_done(outcome: RunOutcome) -> None:
-        if not outcome.ok:
-            failed.append((outcome.spec, outcome.error or "failed"))
-            return
-        r = outcome.result
-        write_result(r, out / f"{r.architecture}-{r.controller}",
-                     extras={"timeseries.png": lambda path: run_figure(r, path)})
-        results.append(r)
-
-    with Executor(workers=workers, scheduler=scheduler) as executor:
-        executor.map(specs, on_done=on_done, progress=f"compare {base['scenario']}")
-    order = {(s.architecture, s.controller): k for k, s in enumerate(specs)}
-    results.sort(key=lambda r: order.get((r.architecture, r.controller), len(order)))
+    runs = [plan_run(s, name=f"{s.architecture}-{s.controller}") for s in specs]
+    with Store(out_dir, "compare", markers=(COMPARE,), what="comparison", runs=".") as store:
+        made = run_campaign(store, runs, workers=workers, scheduler=scheduler,
+                            progress=f"compare {base['scenario']}", need_results=True,
+                            extras=lambda r: {"timeseries.png": lambda path: run_figure(r, path)})
+    results = [made.results[r.key] for r in runs if r.key in made.results]
+    failed = [(o.spec, o.error or "failed") for o in made.failed]
     predictions: dict[str, dict[str, dict[str, Any]]] = {}
     for c in controllers:
         tp = next((r for r in results if r.controller == c and r.architecture == "tp"), None)

@@ -52,26 +52,7 @@ import pyarrow.parquet as pq
 
 from trackmj import __version__
 from trackmj.io import current_umask
-
-COLUMN_UNITS: dict[str, str] = {
-    "t_s": "s",
-    "tension_N": "N",
-    "tension_ref_N": "N",
-    "p_head_Pa": "Pa",
-    "p_rod_Pa": "Pa",
-    "p_supply_Pa": "Pa",
-    "stroke_m": "m",
-    "stroke_velocity_m_s": "m/s",
-    "q_supply_m3_s": "m^3/s",
-    "valve_mode": "1",
-    "u": "1",
-    "e_supply_J": "J",
-    "p_work_J": "J",
-    "mech_work_J": "J",
-    "chassis_acc_z_m_s2": "m/s^2",
-    "closure_error_m": "m",
-}
-"""Contract columns of a closed-loop run in order, with their units ("1": dimensionless)."""
+from trackmj.ports import COLUMN_UNITS
 
 INT_COLUMNS = {"valve_mode": pa.int8()}
 NUMPY_TYPES = {pa.float64(): np.float64, pa.int8(): np.int8}
@@ -282,10 +263,27 @@ def _json_read(value: Any) -> Any:
         else value
 
 
+NUMERIC_METADATA = {"seed": int, "duration_s": float}
+"""Run metadata written as numbers in metrics.json (the Arrow metadata holds strings)."""
+
+
+def _metadata_value(key: str, text: str) -> Any:
+    if text.startswith("{"):
+        return json.loads(text)
+    kind = NUMERIC_METADATA.get(key)
+    if kind is not None:
+        try:
+            return kind(text)
+        except ValueError:
+            return text
+    return text
+
+
 def metrics_json(result: Result) -> str:
     """The text of ``metrics.json`` for ``result``; metadata stored as JSON objects (e.g. the
-    files and overrides of the run) are written as objects."""
-    run = {k: json.loads(v) if v.startswith("{") else v for k, v in result.metadata.items()}
+    files and overrides of the run) are written as objects, the seed and the duration
+    (:data:`NUMERIC_METADATA`) as numbers."""
+    run = {k: _metadata_value(k, v) for k, v in result.metadata.items()}
     return json.dumps({"run": run, "metrics": _json_ready(result.metrics)},
                       indent=2, sort_keys=True, allow_nan=False) + "\n"
 

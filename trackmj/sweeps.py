@@ -47,66 +47,62 @@ Output directory ``DIR``:
   column per swept key (named by the key), every scalar metric (nested metric tables
   flattened as ``table.key``, e.g. ``energy_J.pump``), ``wall_time_s`` (the run's wall time
   in its worker) and ``error`` (null, or ``"Type: message"`` for a run that failed).
-  Each column's unit is in its Arrow field metadata (``unit``) where the name states one.
+  Each column's unit is in its Arrow field metadata (``unit``) where the name states one,
+  and all of them in the schema metadata ``units`` (JSON); see :mod:`trackmj.campaign`.
 - ``sweep.toml``: the spec as given; ``figures/<metric>.png``: each metric against each
   swept parameter, mean ± std over seeds (without swept parameters: bars per scenario and
   case); ``runs/<case>/``: every run's result directory
   with ``keep_runs``.
 
 Resume: a run whose ``run_key`` already has a row is skipped (a failed one too, unless
-``retry_failed``). The key hashes everything that determines the run: the validated model,
-hydraulic, control and scenario parameters (after overrides), the variant, architecture,
-controller, estimator, seed, duration and the trackmj version; a changed file changes it.
-Rows of runs the current spec does not ask for are kept.
+``retry_failed``). The key is the run's identity (:func:`trackmj.campaign.run_key`: the
+validated model, hydraulic, control and scenario parameters after overrides, the variant,
+architecture, controller, estimator, seed, duration, tensioner and FMU file hashes and the
+hash of trackmj's source); a changed file or a changed code changes it. Rows of runs the
+current spec does not ask for are kept. A ``duration_s`` that would cut off a scenario's
+step, ramp, pulse or drop moves the events the spec does not set itself inside the run
+(:func:`trackmj.scenarios.moved_events`). Figures are drawn for the metrics that vary
+across the runs, once: a resumed sweep that makes no run keeps the figures there are.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import fcntl
-import hashlib
 import itertools
 import json
 import math
-import time
-import types
-import typing
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from trackmj.campaign import (
+    RESULTS,
+    PlannedRun,
+    Store,
+    _key_field,
+    plan_run,
+    read_rows,
+    read_units,
+    run_campaign,
+)
 from trackmj.params import (
     FILE_KINDS,
     Location,
     ParameterError,
     Parameters,
     build,
-    file_fields,
     load_file,
     param,
     parse_overrides,
-    unit_from_name,
 )
 from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS, by_name, choices
 
-RESULTS = "results.parquet"
 SPEC_COPY = "sweep.toml"
 FIGURES = "figures"
-RUNS = "runs"
-WRITE_PERIOD_S = 2.0
-"""results.parquet is rewritten at most this often while runs finish [s]."""
 MAX_RUNS = 100_000
 """Largest sweep accepted: a grid grows as the product of its value counts."""
 KEY_PATTERN = rf"({'|'.join(FILE_KINDS)})(\.[A-Za-z0-9_]+)+"
-IDENTITY = ("run_key", "point", "scenario", "architecture", "controller", "estimator",
-            "variant", "seed", "duration_s", "inputs")
-"""Columns naming a run, first in every row."""
-TEXT_COLUMNS = ("run_key", "scenario", "architecture", "controller", "estimator", "variant",
-                "inputs", "error")
-CASE = ("scenario", "architecture", "controller", "estimator", "variant", "duration_s",
-        "inputs")
-"""Columns that make one line of a figure (with the other swept parameters)."""
 
 
 # ----------------------------------------------------------------------------- spec
@@ -281,58 +277,6 @@ def load_sweep(spec: str | Path | Mapping[str, Any] | SweepSpec) -> SweepSpec:
 
 # ----------------------------------------------------------------------------- points
 
-def _key_field(key: str) -> Any:
-    """The (type hint, Spec) that the file of ``key`` declares for it, or None if the key
-    does not exist (the file's validator then says why)."""
-    kind, *parts = key.split(".")
-    hint: Any = file_schema(kind)
-    spec = None
-    for part in parts:
-        origin, args = typing.get_origin(hint), typing.get_args(hint)
-        if origin is tuple and part.isdigit() and dataclasses.is_dataclass(args[0]):
-            hint = args[0]
-            continue
-        if origin in (dict, Mapping) and dataclasses.is_dataclass(args[1]):
-            hint = args[1]
-            continue
-        if not dataclasses.is_dataclass(hint):
-            return None
-        found = file_fields(hint).get(part)
-        if found is None:
-            return None
-        hint, spec = found.hint, found.spec
-    if typing.get_origin(hint) in (typing.Union, types.UnionType):
-        hint = next(a for a in typing.get_args(hint) if a is not type(None))
-    return hint, spec
-
-
-def file_schema(kind: str) -> type:
-    """The root parameter class of file kind ``kind`` (one of FILE_KINDS)."""
-    if kind == "model":
-        from trackmj.model.params import ModelParams
-
-        return ModelParams
-    if kind == "hydraulics":
-        from trackmj.hydraulics.params import HydraulicParams
-
-        return HydraulicParams
-    if kind == "control":
-        from trackmj.control.params import ControlConfig
-
-        return ControlConfig
-    from trackmj.scenarios import ScenarioFile
-
-    return ScenarioFile
-
-
-def key_unit(key: str) -> str:
-    """Unit of a swept key as its file declares it ('' if unknown)."""
-    found = _key_field(key)
-    if found is not None and found[1] is not None and found[1].unit:
-        return found[1].unit
-    return unit_from_name(key.rsplit(".", 1)[-1]) or ""
-
-
 def _typed(spec: SweepSpec, index: int, value: float) -> float | int:
     """``value`` as the type the swept key's file declares (int keys take integers)."""
     p = spec.table.parameters[index]
@@ -403,44 +347,9 @@ def parameter_points(spec: SweepSpec) -> list[dict[str, float | int]]:
             for point in raw]
 
 
+
+
 # ----------------------------------------------------------------------------- runs
-
-@dataclass(frozen=True)
-class PlannedRun:
-    """One run of a sweep: its executor spec, identity row fields and parameter point."""
-
-    key: str
-    spec: Any   # trackmj.executor.RunSpec
-    point: int
-    values: dict[str, float | int]
-    identity: dict[str, Any]
-
-
-def _run_key(setup: Any) -> str:
-    """Hash of everything that determines a run (see the module docstring)."""
-    from trackmj import __version__
-
-    scenario = {f.name: repr(getattr(setup.scenario, f.name))
-                for f in dataclasses.fields(setup.scenario) if f.name != "source"}
-    ident = {"version": __version__, "architecture": setup.architecture,
-             "controller": setup.controller, "estimator": setup.estimator,
-             "seed": setup.seed, "duration_s": repr(setup.duration_s),
-             "variant": repr(setup.variant), "model": repr(setup.model),
-             "hydraulics": repr(setup.hydraulics), "control": repr(setup.control),
-             "scenario": scenario}
-    if setup.tensioner is not None:
-        ident["tensioner"] = tensioner_identity(setup.tensioner)
-    text = json.dumps(ident, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()[:20]
-
-
-def tensioner_identity(tensioner: Any) -> str:
-    """The tensioner file's validated content and, for an FMU, the hash of the FMU file."""
-    text = repr((tensioner.passive, tensioner.fmu))
-    if tensioner.description is not None:
-        text += hashlib.sha256(tensioner.description.path.read_bytes()).hexdigest()
-    return text
-
 
 def _fixed_overrides(spec: SweepSpec) -> dict[str, Any]:
     """The spec's ``set`` items as ``{"KIND.TABLE.KEY": value}``; a key that is also swept
@@ -459,11 +368,16 @@ def _fixed_overrides(spec: SweepSpec) -> dict[str, Any]:
     return fixed
 
 
+
+
 def plan(spec: SweepSpec) -> list[PlannedRun]:
-    """Every run of ``spec``, each validated by :func:`trackmj.sim.setup.prepare` (the
-    same checks as ``trackmj run``); ParameterError naming the spec and the run if one is
-    invalid, before anything runs."""
+    """Every run of ``spec`` (:class:`trackmj.campaign.PlannedRun`), each validated by
+    :func:`trackmj.sim.setup.prepare` (the same checks as ``trackmj run``); ParameterError
+    naming the spec and the run if one is invalid, before anything runs. A duration that
+    would cut off one of a scenario's events moves the events inside the run
+    (:func:`trackmj.scenarios.moved_events`); the moves are fixed overrides of the run."""
     from trackmj.executor import RunSpec, overrides_tuple
+    from trackmj.scenarios import load_scenario, moved_events
     from trackmj.sim.setup import prepare
 
     table = spec.table
@@ -484,6 +398,13 @@ def plan(spec: SweepSpec) -> list[PlannedRun]:
             table.controllers or (None,)):
         overrides = fixed | point
         try:
+            if table.duration_s is not None:
+                given = {k.partition(".")[2]: v for k, v in overrides.items()
+                         if k.startswith("scenario.")}
+                moves = moved_events(load_scenario(scenario, overrides=given),
+                                     table.duration_s)
+                overrides = {f"scenario.{k}": v for k, v in moves.items()
+                             if k not in given} | overrides
             setup = prepare(scenario, architecture=arch, controller=controller,
                             estimator=table.estimator, duration=table.duration_s,
                             variant=table.variant, overrides=overrides, **files)
@@ -495,123 +416,13 @@ def plan(spec: SweepSpec) -> list[PlannedRun]:
                        estimator=setup.estimator, duration=setup.duration_s,
                        variant=setup.variant.name, overrides=overrides_tuple(overrides),
                        **files)
-        identity = {"point": index, "scenario": setup.scenario.name, "architecture": arch,
-                    "controller": setup.controller, "estimator": setup.estimator,
-                    "variant": setup.variant.name, "duration_s": setup.duration_s,
-                    "inputs": inputs}
         for seed in table.seeds:
             seeded = dataclasses.replace(setup, seed=seed)
-            key = _run_key(seeded)
-            runs.append(PlannedRun(key, dataclasses.replace(base, seed=seed), index,
-                                   dict(point), {"run_key": key, **identity, "seed": seed}))
-    return runs
-
-
-def flatten_metrics(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, float]:
-    """Scalar metrics as ``{name: float}``; nested tables become ``table.key`` columns
-    (any depth); strings, lists and other non-numbers are left out."""
-    out: dict[str, float] = {}
-    for name, value in metrics.items():
-        if isinstance(value, Mapping):
-            out |= flatten_metrics(value, f"{prefix}{name}.")
-        elif isinstance(value, bool):
-            out[prefix + name] = float(value)
-        elif isinstance(value, int | float) or _is_numpy_scalar(value):
-            out[prefix + name] = float(value)
-    return out
-
-
-def _is_numpy_scalar(value: Any) -> bool:
-    return type(value).__module__ == "numpy" and getattr(value, "ndim", 1) == 0
-
-
-def _row(run: PlannedRun, outcome: Any) -> dict[str, Any]:
-    row: dict[str, Any] = dict(run.identity) | dict(run.values)
-    if outcome.ok:
-        row |= flatten_metrics(outcome.result.metrics)
-    row["wall_time_s"] = outcome.wall_time_s
-    row["error"] = outcome.error
-    return row
-
-
-# ----------------------------------------------------------------------------- table
-
-def _column_type(name: str, values: list[Any]) -> Any:
-    import pyarrow as pa
-
-    if name in ("point", "seed"):
-        return pa.int64()
-    if name in TEXT_COLUMNS:
-        return pa.string()
-    present = [v for v in values if v is not None]
-    if present and all(isinstance(v, int) and not isinstance(v, bool) for v in present):
-        return pa.int64()
-    return pa.float64()
-
-
-def is_key_column(name: str) -> bool:
-    """Whether results column ``name`` holds a swept key (``KIND.TABLE.KEY``)."""
-    kind, dot, _ = name.partition(".")
-    return bool(dot) and kind in FILE_KINDS
-
-
-def column_unit(name: str) -> str:
-    """Unit of a results column: a swept key's declared unit, else its name's suffix."""
-    if is_key_column(name):
-        return key_unit(name)
-    if name in ("point", "seed"):
-        return "1"
-    return unit_from_name(name.rsplit(".", 1)[-1]) or ""
-
-
-def _table(rows: Sequence[Mapping[str, Any]]) -> Any:
-    """Arrow table of the rows: identity, swept keys, metrics, wall time, error; a row
-    lacking a column (another spec, a metric added later) holds null there."""
-    import pyarrow as pa
-
-    names: dict[str, None] = dict.fromkeys(IDENTITY)
-    for row in rows:
-        names |= dict.fromkeys(k for k in row if is_key_column(k))
-    for row in rows:
-        names |= dict.fromkeys(k for k in row if k not in ("wall_time_s", "error"))
-    names |= dict.fromkeys(("wall_time_s", "error"))
-    arrays, fields = [], []
-    for name in names:
-        values = [row.get(name) for row in rows]
-        dtype = _column_type(name, values)
-        if dtype == pa.float64():
-            values = [None if v is None else float(v) for v in values]
-        arrays.append(pa.array(values, type=dtype))
-        unit = column_unit(name)
-        fields.append(pa.field(name, dtype, metadata={"unit": unit} if unit else None))
-    return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
-
-
-def _write_table(rows: Sequence[Mapping[str, Any]], path: Path) -> None:
-    """Write the rows (in run order: scenario, architecture, controller, point, seed) as
-    ``path``, atomically."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    from trackmj.io import write_bytes_atomic
-
-    ordered = sorted(rows, key=lambda r: (*(str(r.get(k)) for k in ("scenario", "architecture",
-                                                                      "controller")),
-                                          r.get("point", -1), r.get("seed", -1)))
-    sink = pa.BufferOutputStream()
-    pq.write_table(_table(ordered), sink, compression="zstd")
-    write_bytes_atomic(path, sink.getvalue().to_pybytes())
-
-
-def _read_rows(path: Path) -> list[dict[str, Any]]:
-    """The rows of an existing results.parquet ([] if there is none)."""
-    if not path.is_file():
-        return []
-    import pyarrow.parquet as pq
-
-    rows = pq.read_table(path).to_pylist()
-    return [{k: v for k, v in row.items()
-             if v is not None or k == "error"} for row in rows]
+            runs.append(plan_run(
+                dataclasses.replace(base, seed=seed), setup=seeded, point=index,
+                values=point, inputs=inputs,
+                name=f"{setup.scenario.name}-{arch}-{setup.controller}-p{index}-s{seed}"))
+    return [dataclasses.replace(r, name=f"{r.name}-{r.key[:8]}") for r in runs]
 
 
 def read_sweep(out_dir: str | Path) -> Any:
@@ -623,19 +434,15 @@ def read_sweep(out_dir: str | Path) -> Any:
     out_dir : str or Path
         The sweep's output directory (or the parquet file itself).
     """
-    import pyarrow.parquet as pq
-
     from trackmj.results import _require
 
-    _require("pandas", "read_sweep()", "'trackmj[pandas]'")
+    pandas = _require("pandas", "read_sweep()", "'trackmj[pandas]'")
     path = Path(out_dir)
     path = path / RESULTS if path.is_dir() else path
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no sweep results here")
-    table = pq.read_table(path)
-    frame = table.to_pandas()
-    frame.attrs["units"] = {f.name: (f.metadata or {}).get(b"unit", b"").decode()
-                            for f in table.schema}
+    frame = pandas.read_parquet(path)
+    frame.attrs["units"] = read_units(path)
     return frame
 
 
@@ -661,52 +468,6 @@ class SweepSummary:
                 f"{self.results} -> {self.out}")
 
 
-class _DirectoryLock:
-    """An exclusive lock on a sweep directory for one writer at a time."""
-
-    def __init__(self, out: Path) -> None:
-        self.path = out / ".sweep.lock"
-        self._fh: Any = None
-
-    def __enter__(self) -> _DirectoryLock:
-        from trackmj.results import ResultDirectoryError
-
-        self._fh = open(self.path, "a")   # held until __exit__
-        try:
-            fcntl.flock(self._fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            self._fh.close()
-            raise ResultDirectoryError(f"{self.path.parent}: another trackmj sweep is "
-                                       "writing this directory; wait for it or choose "
-                                       "another --out") from None
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        fcntl.flock(self._fh, fcntl.LOCK_UN)
-        self._fh.close()
-
-
-def _output_dir(out: Path) -> Path:
-    from trackmj.results import ResultDirectoryError
-
-    if out.exists() and not out.is_dir():
-        raise ResultDirectoryError(f"--out {out}: is a file, not a directory")
-    if out.is_dir() and any(p.name not in (RESULTS, SPEC_COPY, FIGURES, RUNS, ".sweep.lock")
-                            and not p.name.startswith(f".{RESULTS}.") for p in out.iterdir()):
-        raise ResultDirectoryError(f"--out {out}: an existing directory that holds "
-                                   f"something other than a trackmj sweep ({RESULTS}, "
-                                   f"{SPEC_COPY}, {FIGURES}/, {RUNS}/); refusing to write "
-                                   "into it")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
-
-
-def _run_dir_name(run: PlannedRun) -> str:
-    ident = run.identity
-    return (f"{ident['scenario']}-{ident['architecture']}-{ident['controller']}"
-            f"-p{run.point}-s{ident['seed']}-{run.key[:8]}")
-
-
 def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
           workers: int | None = None, scheduler: str | None = None, executor: Any = None,
           keep_runs: bool = False, retry_failed: bool = False, plot: bool = True,
@@ -729,7 +490,8 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
     retry_failed : bool
         Run again the runs whose rows hold an error.
     plot : bool
-        Draw the figures (:func:`plot_sweep`) at the end.
+        Draw the figures (:func:`plot_sweep`) at the end: every figure when a run was made
+        now, else only the missing ones.
     progress : bool
         Show a progress bar over the simulated seconds of the runs.
     tensioner : str or Path, optional
@@ -745,303 +507,33 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
         spec = dataclasses.replace(spec, table=dataclasses.replace(
             spec.table, tensioner=str(Path(tensioner).resolve())))
     runs = plan(spec)
-    out = _output_dir(Path(out))
-    results = out / RESULTS
-    with _DirectoryLock(out):
+    with Store(out, "sweep", markers=(SPEC_COPY, FIGURES)) as store:
         from trackmj.io import write_text_atomic
-        from trackmj.results import write_result
 
         if spec.text:
-            write_text_atomic(out / SPEC_COPY, spec.text)
-        rows = {row["run_key"]: row for row in _read_rows(results)}
-        todo = [r for r in runs
-                if r.key not in rows or (retry_failed and rows[r.key].get("error"))]
-        todo = list({r.key: r for r in todo}.values())
-        by_spec = {r.spec: r for r in todo}
-        failed = 0
-        writer = _TableWriter(results)
-        outcomes = (_outcomes([r.spec for r in todo], executor, workers, scheduler, progress)
-                    if todo else iter(()))   # nothing to run starts no cluster
-        try:
-            for outcome in outcomes:
-                run = by_spec[outcome.spec]
-                rows[run.key] = _row(run, outcome)
-                failed += not outcome.ok
-                if keep_runs and outcome.ok:
-                    write_result(outcome.result, out / RUNS / _run_dir_name(run))
-                writer.changed(rows)
-        finally:   # also on Ctrl-C or an error: the rows that arrived are kept
-            writer.flush(rows)
-        figures = plot_sweep(out, keys={r.key for r in runs}) if plot else []
+            write_text_atomic(store.out / SPEC_COPY, spec.text)
+        made = run_campaign(store, runs, executor=executor, workers=workers,
+                            scheduler=scheduler, progress="sweep" if progress else None,
+                            keep_runs=keep_runs, retry_failed=retry_failed)
+        figures = (plot_sweep(store.out, keys={r.key for r in runs},
+                              redraw=bool(made.outcomes)) if plot else [])
     distinct = len({r.key for r in runs})   # LHS samples rounded onto one integer coincide
-    return SweepSummary(out, results, distinct, len(todo), distinct - len(todo), failed,
-                        figures)
-
-
-class _TableWriter:
-    """Rewrites results.parquet as rows arrive, at most as often as keeps the rewriting
-    (it grows with the rows) under ~5 % of the time: every WRITE_PERIOD_S, or 20 times the
-    last write's duration if that is longer; :meth:`flush` writes what is pending."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.pending = False
-        self.last_s = -math.inf
-        self.period_s = WRITE_PERIOD_S
-
-    def changed(self, rows: Mapping[str, Mapping[str, Any]]) -> None:
-        self.pending = True
-        if time.monotonic() - self.last_s >= self.period_s:
-            self.flush(rows)
-
-    def flush(self, rows: Mapping[str, Mapping[str, Any]]) -> None:
-        if not self.pending:
-            return
-        start = time.monotonic()
-        _write_table(list(rows.values()), self.path)
-        self.last_s = time.monotonic()
-        self.period_s = max(WRITE_PERIOD_S, 20.0 * (self.last_s - start))
-        self.pending = False
-
-
-def _outcomes(specs: list[Any], executor: Any, workers: int | None, scheduler: str | None,
-              progress: bool) -> Iterator[Any]:
-    from trackmj.executor import Executor
-
-    label = "sweep" if progress else None
-    if executor is not None:
-        yield from executor.as_completed(specs, progress=label)
-        return
-    with Executor(workers=workers, scheduler=scheduler) as ex:
-        yield from ex.as_completed(specs, progress=label)
+    ran = len(made.outcomes)
+    return SweepSummary(store.out, store.results, distinct, ran, distinct - ran,
+                        len(made.failed), figures)
 
 
 # ----------------------------------------------------------------------------- figures
 
-DISPLAY_UNITS: dict[str, tuple[float, str]] = {
-    "N": (1e-3, "kN"), "Pa": (1e-6, "MPa"), "Pa (absolute)": (1e-6, "MPa abs"),
-    "J": (1e-3, "kJ"), "W": (1e-3, "kW"), "m": (1e3, "mm"), "m^2": (1e6, "mm²"),
-    "m^3": (1e6, "cm³"), "m^3/s": (6e4, "L/min"), "N/m": (1e-6, "kN/mm"),
-}
-"""SI unit -> (scale, display unit) on the figures; other units are shown as they are."""
-
-
-def _display(unit: str) -> tuple[float, str]:
-    return DISPLAY_UNITS.get(unit, (1.0, unit))
-
-
-def _label(name: str, unit: str) -> str:
-    shown = _display(unit)[1]
-    return f"{name} [{shown}]" if shown and shown != "1" else name
-
-
-def plot_sweep(out_dir: str | Path, *, keys: set[str] | None = None) -> list[Path]:
-    """Draw ``DIR/figures/<metric>.png`` from ``DIR/results.parquet``: for every metric
-    (and the wall time) one panel per swept parameter, the metric's mean ± std over seeds
-    at each parameter point; a line per case (scenario, architecture, controller, ...)
-    and per combination of the other swept parameters (points that share none, e.g. Latin
-    hypercube samples, stand alone). A sweep without swept parameters (e.g. a controller
-    comparison) gets bars instead: a group per scenario, a bar per case within it, mean ±
-    std over seeds. Failed runs are left out.
-
-    keys: only the rows of these runs (default: every row). Returns the figure paths.
-    """
-    import numpy as np
+def plot_sweep(out_dir: str | Path, *, keys: set[str] | None = None,
+               redraw: bool = True) -> list[Path]:
+    """Draw ``DIR/figures/<metric>.png`` from ``DIR/results.parquet`` for every metric that
+    varies across the runs (:func:`trackmj.figures.sweep_figures`); ``keys``: only the rows
+    of these runs (default: every row); ``redraw=False`` keeps the figures that exist.
+    Returns the paths of the figures of the varying metrics (drawn now or kept)."""
+    from trackmj.figures import sweep_figures
 
     out = Path(out_dir)
-    rows = [r for r in _read_rows(out / RESULTS)
+    rows = [r for r in read_rows(out / RESULTS)
             if not r.get("error") and (keys is None or r["run_key"] in keys)]
-    if not rows:
-        return []
-    swept = sorted({k for r in rows for k in r if is_key_column(k)})
-    skip = set(IDENTITY) | set(swept) | {"error"}
-    metrics = sorted({k for r in rows for k in r if k not in skip
-                      and isinstance(r[k], int | float)})
-    paths = []
-    for metric in metrics:
-        values = [r.get(metric) for r in rows]
-        if not any(v is not None and math.isfinite(v) for v in values):
-            continue
-        fig = (_metric_figure(rows, metric, swept, np) if swept
-               else _case_figure(rows, metric, np))
-        paths.append(_save(fig, out / FIGURES / f"{metric}.png"))
-    return paths
-
-
-def _save(fig: Any, path: Path) -> Path:
-    import io
-
-    from trackmj.io import write_bytes_atomic
-
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110)
-    write_bytes_atomic(path, buffer.getvalue())
-    return path
-
-
-LINE_STYLES = (("-", "o"), ("--", "s"), (":", "^"), ("-.", "D"), ((0, (5, 1, 1, 1)), "v"),
-               ((0, (1, 3)), "P"))
-"""Line style and marker of the lines of one case (the other swept parameters' values)."""
-CONSTANT_REL = 1e-6
-"""A metric whose values differ by less than this (relative) is drawn as a constant."""
-MAX_LABELLED_LINES = 6
-"""More lines per case than this are drawn thin and unlabelled."""
-
-
-def _metric_figure(rows: list[dict[str, Any]], metric: str, swept: list[str], np: Any) -> Any:
-    """One panel per swept key: the metric's mean ± std over seeds against the key, a
-    colour per case, a line style per combination of the other keys."""
-    import matplotlib
-    from matplotlib.figure import Figure  # no pyplot: no global figure state, no backend
-
-    cases = sorted({tuple(r.get(c) for c in CASE) for r in rows}, key=str)
-    colors = matplotlib.colormaps["tab10"]
-    m_scale = _display(column_unit(metric))[0]
-    width, height = 4.8 * len(swept) + 0.8, 4.4
-    fig = Figure(figsize=(width, height))
-    axes = fig.subplots(1, len(swept), squeeze=False, sharey=True)[0]
-    # fixed margins [in] instead of tight_layout, which draws the figure once more
-    fig.subplots_adjust(left=0.85 / width, right=1.0 - 0.2 / width, bottom=0.6 / height,
-                        top=1.0 - 0.45 / height, wspace=0.12)
-    for ax, key in zip(axes, swept, strict=True):
-        k_scale = _display(column_unit(key))[0]
-        others = [k for k in swept if k != key]
-        for c, case in enumerate(cases):
-            lines: dict[tuple, dict[Any, list[float]]] = {}
-            for r in rows:
-                if tuple(r.get(n) for n in CASE) == case and key in r:
-                    lines.setdefault(tuple(r.get(k) for k in others), {}).setdefault(
-                        r[key], []).append(_finite(r.get(metric)))
-            series = sorted(lines.items(), key=lambda item: [_sortable(v) for v in item[0]])
-            scatter = len(series) > 1 and all(len(points) == 1 for _, points in series)
-            if scatter:   # e.g. LHS samples: no two points share the other keys' values
-                series = [((), {x: ys for _, points in series for x, ys in points.items()})]
-            labelled = len(series) <= MAX_LABELLED_LINES
-            for j, (line, points) in enumerate(series):
-                x = sorted(points)
-                stats = np.array([_mean_std(points[v], np) for v in x])
-                style, marker = LINE_STYLES[j % len(LINE_STYLES)]
-                joined = len(x) > 1 and not scatter
-                ax.errorbar(np.array(x, dtype=float) * k_scale, stats[:, 0] * m_scale,
-                            yerr=stats[:, 1] * m_scale, color=colors(c % 10), marker=marker,
-                            ms=4, capsize=3, lw=1.0 if labelled else 0.6,
-                            ls=style if joined else "none", alpha=1.0 if labelled else 0.5,
-                            label=_series_label(case, cases, others, line)
-                            if labelled or j == 0 else None)
-        xs = [float(r[key]) for r in rows if r.get(key) is not None]
-        if min(xs) > 0 and max(xs) / min(xs) > 30:
-            ax.set_xscale("log")
-        ax.set_xlabel(_label(key, column_unit(key)), fontsize=8)
-        ax.grid(alpha=0.3)
-        if len(ax.get_legend_handles_labels()[1]) > 1 or len(cases) > 1:
-            ax.legend(fontsize=7, loc="best")
-    values = [_finite(r.get(metric)) * m_scale for r in rows]
-    finite = [v for v in values if math.isfinite(v)]
-    if max(finite) - min(finite) <= CONSTANT_REL * max(abs(max(finite)), abs(min(finite))):
-        middle = 0.5 * (max(finite) + min(finite))   # constant: no offset-notation noise
-        half = abs(middle) * 0.05 if middle else 1.0
-        axes[0].set_ylim(middle - half, middle + half)
-        axes[0].yaxis.get_major_formatter().set_useOffset(False)
-        fig.text(0.005, 0.01, f"constant within {CONSTANT_REL:g} (relative) over the sweep",
-                 ha="left", va="bottom", fontsize=7, color="0.4")
-    axes[0].set_ylabel(_label(metric, column_unit(metric)))
-    n_seeds = len({r["seed"] for r in rows})
-    case_text = _case_label(cases[0], cases) if len(cases) == 1 else f"{len(cases)} cases"
-    fig.suptitle(f"{metric}: mean ± std over {n_seeds} seed{'s' * (n_seeds > 1)} "
-                 f"({case_text})", fontsize=10)
-    return fig
-
-
-HATCHES = ("", "//", "..", "xx", "\\\\", "++", "oo", "--")
-"""Bar hatches, so that the cases of a bar figure read in grayscale too."""
-
-
-def _case_figure(rows: list[dict[str, Any]], metric: str, np: Any) -> Any:
-    """Grouped bars: a group per scenario, a bar per other case (architecture, controller,
-    ...: the fields that differ) with its mean ± std over seeds and its value above it."""
-    import matplotlib
-    from matplotlib.figure import Figure
-
-    scenarios = sorted({r["scenario"] for r in rows}, key=_scenario_order)
-    cases = sorted({tuple(r.get(c) for c in CASE[1:]) for r in rows}, key=str)
-    labels = [_case_label(("", *case), [("", *c) for c in cases]).strip() for case in cases]
-    colors = matplotlib.colormaps["tab10"]
-    m_scale = _display(column_unit(metric))[0]
-    width, height = max(6.0, 1.1 * len(scenarios) * max(1, len(cases)) / 2 + 2.6), 4.4
-    fig = Figure(figsize=(width, height))
-    ax = fig.subplots()
-    fig.subplots_adjust(left=0.85 / width, right=1.0 - 1.7 / width, bottom=0.6 / height,
-                        top=1.0 - 0.45 / height)
-    bar = 0.8 / len(cases)
-    measured = np.zeros(len(scenarios), bool)
-    for j, (case, label) in enumerate(zip(cases, labels, strict=True)):
-        stats = np.array([_mean_std([_finite(r.get(metric)) for r in rows
-                                     if r["scenario"] == sc
-                                     and tuple(r.get(c) for c in CASE[1:]) == case], np)
-                          for sc in scenarios]) * m_scale
-        measured |= np.isfinite(stats[:, 0])
-        x = np.arange(len(scenarios)) - 0.4 + bar * (j + 0.5)
-        ax.bar(x, stats[:, 0], bar, yerr=stats[:, 1], capsize=2, color=colors(j % 10),
-               hatch=HATCHES[j % len(HATCHES)], edgecolor="black", lw=0.5, label=label)
-        for xi, (value, std) in zip(x, stats, strict=True):   # above the error bar
-            if math.isfinite(value):
-                ax.text(xi, value + std if value >= 0 else value - std, f"{value:.3g}",
-                        ha="center", va="bottom" if value >= 0 else "top", fontsize=6)
-    for i in np.flatnonzero(~measured):    # e.g. a settling time where nothing steps
-        ax.text(i, 0.0, "no value", ha="center", va="bottom", fontsize=7, color="0.4")
-    ax.set_xticks(range(len(scenarios)), scenarios)
-    ax.set_xlim(-0.5, len(scenarios) - 0.5)      # groups without a value keep their place
-    ax.axhline(0.0, color="black", lw=0.6)
-    ax.grid(axis="y", alpha=0.3)
-    ax.set_ylabel(_label(metric, column_unit(metric)))
-    ax.set_xlabel("scenario")
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
-    n_seeds = len({r["seed"] for r in rows})
-    fig.suptitle(f"{metric}: mean ± std over {n_seeds} seed{'s' * (n_seeds > 1)}",
-                 fontsize=10)
-    return fig
-
-
-def _scenario_order(name: str) -> tuple[int, str]:
-    """Built-in scenarios in their order (W1-W5, NL1), then the others by name."""
-    builtin = _builtin_scenarios()
-    return (builtin.index(name), "") if name in builtin else (len(builtin), name)
-
-
-def _finite(value: Any) -> float:
-    return math.nan if value is None else float(value)
-
-
-def _sortable(value: Any) -> tuple[int, Any]:
-    return (1, 0.0) if value is None else (0, value)
-
-
-def _series_label(case: tuple, cases: list[tuple], others: list[str], line: tuple) -> str:
-    """Legend text: the case (if there are several) and the other keys' values."""
-    parts = [_case_label(case, cases)] if len(cases) > 1 else []
-    for key, value in zip(others, line, strict=False):   # () for scattered samples
-        if value is not None:
-            scale, unit = _display(column_unit(key))
-            shown = f" {unit}" if unit and unit != "1" else ""
-            parts.append(f"{_short(key)} = {value * scale:.4g}{shown}")
-    return ", ".join(parts) or _case_label(case, cases)
-
-
-def _mean_std(values: list[float], np: Any) -> tuple[float, float]:
-    finite = [v for v in values if math.isfinite(v)]
-    if not finite:
-        return math.nan, 0.0
-    return float(np.mean(finite)), float(np.std(finite)) if len(finite) > 1 else 0.0
-
-
-def _short(key: str) -> str:
-    return key.rsplit(".", 1)[-1]
-
-
-def _case_label(case: tuple, cases: list[tuple]) -> str:
-    """The case fields that differ between cases (all of them if there is one case:
-    scenario, architecture, controller)."""
-    varying = [i for i in range(len(CASE)) if len({c[i] for c in cases}) > 1]
-    shown = varying or [0, 1, 2]
-    return " ".join(str(case[i]) for i in shown if CASE[i] != "inputs") or "runs"
-
+    return sweep_figures(rows, out / FIGURES, redraw=redraw)

@@ -18,14 +18,16 @@ import mujoco
 import numpy as np
 import pyarrow as pa
 
-from trackmj.ports import COUPLING_STEP_S, READOUT_UNITS, Command, Readout
+from trackmj.ports import (
+    COMMAND_UNITS,
+    COUPLING_STEP_S,
+    READOUT_UNITS,
+    REFERENCE_UNITS,
+    Command,
+    Readout,
+)
 from trackmj.results import make_table
 from trackmj.sim.loop import Schedule
-
-COMMAND_UNITS = {"valve_mode": "1", "u": "1"}
-"""Columns the recorder takes from the command (valve mode −1/0/+1, opening u [-])."""
-REFERENCE_UNITS = {"tension_ref_N": "N"}
-"""Column the recorder takes from the schedule (F_ref at the end of each step)."""
 
 
 class Recorder:
