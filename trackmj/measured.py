@@ -222,3 +222,62 @@ def load_measured(path: str | Path, duration_s: float,
     if not trace.columns:
         raise ParameterError(f"{trace.file}: no column to compare besides t_s")
     return resample(trace, duration_s)
+
+
+@dataclass(frozen=True)
+class InputSignal:
+    """A time-series input of a run read from a file: ``values`` on the 1 ms grid ``t_s``
+    (k·h from 0; linear interpolation of the file), held between grid points and beyond
+    the ends (zero-order, as a 1 kHz set-point is applied); ``file`` and ``column`` name
+    where it came from (the header as written)."""
+
+    file: str
+    column: str
+    t_s: np.ndarray
+    values: np.ndarray
+
+    def __call__(self, t_s: np.ndarray | float) -> np.ndarray:
+        """The signal at ``t_s`` [s], shape of ``t_s``."""
+        i = np.searchsorted(self.t_s, np.asarray(t_s, dtype=float), side="right") - 1
+        return self.values[np.clip(i, 0, len(self.values) - 1)]
+
+    def check_covers(self, duration_s: float, what: str) -> None:
+        """ParameterError naming the file and column unless the file spans the run."""
+        if self.t_s[-1] < duration_s - COVER_TOLERANCE_S:
+            raise ParameterError(f"{self.file} column {self.column!r} ({what}): ends at "
+                                 f"{self.t_s[-1]:g} s, too short to cover the run "
+                                 f"(0 .. {duration_s:g} s)")
+
+
+def input_signal(path: str | Path, column: str | None, suffix: str,
+                 what: str) -> InputSignal:
+    """Read one input column (SI name or header as written, e.g. ``F_ref [kN]``; default the
+    file's only column besides time) whose unit is SI ``suffix`` (``N``, ``Pa``, ``m_s``).
+
+    ParameterError naming the file and column for a missing column, another unit, or what
+    :func:`read_trace` refuses; ``what`` names the input in messages."""
+    trace = read_trace(path, [])
+    named = {name: header for name, header in trace.headers.items() if name != TIME}
+    if column is None:
+        if len(named) != 1:
+            raise ParameterError(f"{trace.file} ({what}): has {len(named)} signal columns "
+                                 f"({', '.join(named.values()) or 'none'}); name one with "
+                                 "column = ...")
+        name = next(iter(named))
+    else:
+        by_header = {header: name for name, header in named.items()}
+        name = by_header.get(column, column)
+        if name not in named:
+            raise ParameterError(f"{trace.file} ({what}): no column {column!r} (has: "
+                                 f"{', '.join(named.values()) or 'none'})")
+    if not name.endswith("_" + suffix):
+        raise ParameterError(f"{trace.file} column {named[name]!r} ({what}): is in "
+                             f"{name.rpartition('_')[2]}; {what} needs a unit of {suffix} "
+                             f"(e.g. {what.split()[0]}_{suffix} or a unit in brackets)")
+    trace = read_trace(path, [name])
+    if trace.t_s[0] > COUPLING_STEP_S + COVER_TOLERANCE_S:
+        raise ParameterError(f"{trace.where(TIME)} ({what}): starts at {trace.t_s[0]:g} s; "
+                             f"an input must start by {COUPLING_STEP_S:g} s")
+    t = COUPLING_STEP_S * np.arange(0, int(np.floor(trace.t_s[-1] / COUPLING_STEP_S
+                                                      + 1e-9)) + 1)
+    return InputSignal(trace.file, named[name], t, trace.resample(name, t))
