@@ -115,3 +115,29 @@ def test_from_file_excludes_the_built_in_keys_and_a_longer_run_is_refused(tmp_pa
     code = main(["run", str(ok), "--duration", "3.0", "--out", str(tmp_path / "r")])
     err = capsys.readouterr().err
     assert code == 2 and "ref.csv column 'F_ref_N'" in err and "too short" in err, err
+
+
+def test_all_channels_carry_units_and_agree_with_the_contract_columns(tmp_path):
+    """--channels all: the two heads average to p_head_Pa, the main valve's two supply edges
+    add up to q_supply_m3_s, the hitch load is the file's along its line."""
+    from trackmj.sim.run import simulate
+
+    t = 1e-3 * np.arange(0, 2501)
+    write_csv(tmp_path / "h.csv", {"t_s": t, "hitch_kN": 4.0 * (t > 0.3)})
+    path = scenario_with(tmp_path, {"[terrain]": '[hitch]\nfrom_file = "h.csv"\n'
+                                                 'pull_angle_deg = 20.0\n\n[terrain]'})
+    result = simulate(path, duration=0.6, channels="all")
+    c, units = result.columns(), result.units
+    assert units["p_head_L_Pa"] == "Pa" and units["q_V_L_m3_s"] == "m^3/s"
+    assert units["upper_strand_tension_N"] == "N" and units["hitch_pull_N"] == "N"
+    np.testing.assert_allclose(0.5 * (c["p_head_L_Pa"] + c["p_head_R_Pa"]), c["p_head_Pa"],
+                               rtol=1e-12)
+    np.testing.assert_allclose(c["q_main_PA_m3_s"] + c["q_main_PB_m3_s"], c["q_supply_m3_s"],
+                               rtol=1e-12, atol=1e-15)
+    on = c["t_s"] - 1e-3 > 0.3          # the load acting over a step is the one at its start
+    np.testing.assert_allclose(c["hitch_pull_N"][on], 4e3 * np.cos(np.radians(20.0)))
+    np.testing.assert_allclose(c["hitch_down_N"][~on], 0.0)
+    assert (c["upper_strand_tension_N"] > 0.0).all() and np.isfinite(
+        c["lower_strand_tension_N"]).all()
+    with pytest.raises(ParameterError, match="channels = 'some'"):
+        simulate(SHORT, duration=0.1, channels="some")

@@ -212,7 +212,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                     estimator=args.estimator, seed=args.seed, duration=args.duration,
                     variant=args.variant, **_files(args))
     check_duration(setup.scenario, setup.duration_s)
-    measured = None if args.measured is None else measured_log(setup, args.measured)
+    measured = (None if args.measured is None
+                else measured_log(setup, args.measured, args.channels))
     key = inputs_key(setup)
     defaults = not (args.estimator or args.duration is not None or args.set or args.model
                     or args.hydraulics or args.control or args.tensioner)
@@ -225,7 +226,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             "give --overwrite to replace it, or another --out")
     with ResultWriter(out) as writer:
         result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True,
-                     measured=measured)
+                     measured=measured, channels=args.channels)
         result = stamped(result, inputs_key=key, run_key=run_key(setup))
         writer.commit(result, csv=args.csv,
                       extras={"timeseries.png": lambda path: run_figure(result, path,
@@ -581,6 +582,9 @@ def build_parser() -> argparse.ArgumentParser:
                      "and any of the run's columns, e.g. tension_N, p_head [MPa], stroke_mm) "
                      "overlaid in the figure and compared in metrics.json "
                      "(prediction_vs_measured)")
+    run.add_argument("--channels", choices=("default", "all"), default="default",
+                     help="all: also record per-cylinder pressures, valve flows, strand "
+                          "tensions and the hitch load (units in units.json)")
     run.add_argument("--overwrite", action="store_true", help="replace a result of other "
                      "inputs in the output folder (the same inputs replace it anyway)")
     run.set_defaults(func=_cmd_run)

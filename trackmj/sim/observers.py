@@ -67,9 +67,70 @@ class Recorder:
         cols["t_s"] = self._time[: self.rows]
         return cols
 
-    def table(self, metadata: Mapping[str, Any]) -> pa.Table:
-        """The recorded steps as an Arrow table with units and run ``metadata``."""
-        return make_table(self.columns(), self.units, metadata)
+    def table(self, metadata: Mapping[str, Any],
+              extra: ChannelRecorder | None = None) -> pa.Table:
+        """The recorded steps as an Arrow table with units and run ``metadata`` (and the
+        ``extra`` channels' columns after the contract's)."""
+        columns, units = self.columns(), dict(self.units)
+        if extra is not None:
+            columns |= extra.columns(self.rows)
+            units |= extra.units
+        return make_table(columns, units, metadata)
+
+
+CHANNEL_SETS = ("default", "all")
+"""``--channels``: the contract columns, or those and every channel below."""
+
+
+class ChannelRecorder:
+    """The extra channels of ``--channels all`` (what the element and the mechanics have):
+
+    - hydraulic element: ``p_head_L_Pa``, ``p_head_R_Pa`` (each cylinder's head; both rods
+      share one node, ``p_rod_Pa``), ``p_line_A_Pa`` [Pa gauge]; the valve and circuit flows
+      ``q_<name>_m3_s`` [m³/s], a -> b as ``hydraulics.tensioner.FLOW_NAMES`` names them
+      (main_PA supply -> line A, main_AT line A -> tank, main_PB supply -> rod node,
+      main_BT rod node -> tank, V_L / V_R line A -> head L / R, relief, make-up, leakage,
+      pump);
+    - MuJoCo track: ``upper_strand_tension_N``, ``lower_strand_tension_N`` [N], the mean pin
+      tension of the upper strand and of the rear lower run;
+    - every run: the hitch load applied, ``hitch_pull_N`` (rearward), ``hitch_down_N`` [N]
+      in the chassis frame (the scenario's, whether the mechanics takes it or not).
+    """
+
+    def __init__(self, schedule: Schedule, element: Any, track: Any) -> None:
+        from trackmj.hydraulics.tensioner import FLOW_NAMES, HydraulicTensioner
+
+        tensioner = getattr(element, "tensioner", None)
+        self._hydraulic = tensioner if isinstance(tensioner, HydraulicTensioner) else None
+        self._flows = FLOW_NAMES
+        self._track = track
+        self.units: dict[str, str] = {}
+        if self._hydraulic is not None:
+            self.units |= {"p_head_L_Pa": "Pa", "p_head_R_Pa": "Pa", "p_line_A_Pa": "Pa"}
+            self.units |= {f"q_{name}_m3_s": "m^3/s" for name in FLOW_NAMES}
+        if track is not None:
+            self.units |= {"upper_strand_tension_N": "N", "lower_strand_tension_N": "N"}
+        self._measured = [n for n in self.units]
+        self.data = np.full((schedule.steps, len(self._measured)), np.nan)
+        self._hitch = np.array([(i.hitch_pull_N, i.hitch_down_N) for i in schedule.inputs])
+        self.units |= {"hitch_pull_N": "N", "hitch_down_N": "N"}
+
+    def on_step(self, k: int, readout: Readout, command: Command) -> None:
+        row, j = self.data[k], 0
+        if self._hydraulic is not None:
+            rec = self._hydraulic.record
+            row[:3] = rec.p_head_L_Pa, rec.p_head_R_Pa, rec.p_line_A_Pa
+            row[3:3 + len(self._flows)] = [rec.flows_m3_s[n] for n in self._flows]
+            j = 3 + len(self._flows)
+        if self._track is not None:
+            strands = self._track.strand_tensions_N()
+            row[j:j + 2] = strands.upper_N, strands.lower_N
+
+    def columns(self, rows: int) -> dict[str, np.ndarray]:
+        """Column name -> values of the first ``rows`` steps, shape (rows,)."""
+        cols = {name: self.data[:rows, i] for i, name in enumerate(self._measured)}
+        cols["hitch_pull_N"], cols["hitch_down_N"] = self._hitch[:rows, 0], self._hitch[:rows, 1]
+        return cols
 
 
 _STATE = ("tension_N", "p_head_Pa", "p_rod_Pa", "stroke_m", "stroke_velocity_m_s")
