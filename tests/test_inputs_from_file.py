@@ -141,3 +141,22 @@ def test_all_channels_carry_units_and_agree_with_the_contract_columns(tmp_path):
         c["lower_strand_tension_N"]).all()
     with pytest.raises(ParameterError, match="channels = 'some'"):
         simulate(SHORT, duration=0.1, channels="some")
+
+
+def test_parquet_inputs_and_the_identity_follows_the_file_content(tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from trackmj.campaign import run_key
+    from trackmj.sim.setup import prepare
+
+    t = 1e-3 * np.arange(0, 2501)
+    path = scenario_with(tmp_path, {REFERENCE_TABLE: '[reference]\nfrom_file = "ref.parquet"\n'})
+    keys = []
+    for level_kN in (12.0, 13.0):
+        pq.write_table(pa.table({"t_s": t, "F_ref_kN": np.full(t.shape, level_kN)}),
+                       tmp_path / "ref.parquet")
+        setup = prepare(path)
+        assert setup.scenario.reference_N(1.0) == level_kN * 1e3
+        keys.append(run_key(setup))
+    assert keys[0] != keys[1]

@@ -16,6 +16,7 @@ strictly increasing, every value finite, and, for a run, the time covering the r
 
 from __future__ import annotations
 
+import hashlib
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -235,6 +236,12 @@ class InputSignal:
     column: str
     t_s: np.ndarray
     values: np.ndarray
+
+    def __repr__(self) -> str:
+        """Names the file, the column and the SHA-256 of the signal (a run's identity,
+        :func:`trackmj.campaign.identity`, changes with the file's content)."""
+        digest = hashlib.sha256(self.t_s.tobytes() + self.values.tobytes()).hexdigest()
+        return f"InputSignal({self.file!r}, {self.column!r}, sha256={digest})"
 
     def __call__(self, t_s: np.ndarray | float) -> np.ndarray:
         """The signal at ``t_s`` [s], shape of ``t_s``."""

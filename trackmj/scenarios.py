@@ -110,10 +110,10 @@ class Header(Parameters):
             raise at.error("seeds", self.seeds, "lists a seed twice")
 
 
-FROM_FILE_DOC = ("optional: a CSV or Parquet file (relative to the scenario file) with t_s "
+FROM_FILE_DOC = ("a CSV or Parquet file (relative to the scenario file) with t_s "
                  "and the signal, in SI or with its unit in the header (README, Measured "
                  "data)")
-COLUMN_DOC = "optional: the file's column (default: its only one besides t_s)"
+COLUMN_DOC = "the file's column (default: its only one besides t_s)"
 
 
 def _one_source(cls: type, at: Location, given: dict[str, Any], from_file: str | None) -> None:
@@ -213,9 +213,9 @@ class Supply(Parameters):
         default=None, doc="supply model; optional: the hydraulic file's [supply].default_model")
     drops: tuple[SupplyDrop, ...] = param(default=(),
                                           doc="optional set-point drops (not with 'unloading')")
-    from_file: str | None = param(default=None, doc="optional: the set-point p_set(t) from "
-                                  "a file, a column in Pa (not with 'unloading' or drops); "
-                                  + FROM_FILE_DOC[10:])
+    from_file: str | None = param(default=None, doc="the set-point p_set(t) from a file, a "
+                                  "column in Pa (not with 'unloading' or drops): "
+                                  + FROM_FILE_DOC)
     column: str | None = param(default=None, doc=COLUMN_DOC)
 
     def cross_check(self, at: Location) -> None:
@@ -307,7 +307,7 @@ class Hitch(Parameters):
     the horizontal, > 0 a towed load, as :class:`LoadPulse` hitch_N); added to the load
     pulses."""
 
-    from_file: str = param(doc=FROM_FILE_DOC[10:])
+    from_file: str = param(doc=FROM_FILE_DOC)
     pull_angle_deg: float = param(0.0, 60.0, doc="line of the hitch force below horizontal")
     column: str | None = param(default=None, doc=COLUMN_DOC)
 
