@@ -11,14 +11,16 @@ trajectory smoothly, and the nominal values reproduce the logged run bit for bit
 remains is the MuJoCo track's own roughness (contacts): a relative change of 1e-4 moves
 the 2 Hz low-pass of F_ten by ~3 N beyond the linear trend, so the finite-difference step
 is relative and large (``fd_step_rel``, default 3 %), where the trend dominates (measured
-on the test's fit: with 0.3 % the roughness inflates JᵀJ and the intervals shrink 4-fold,
-from 1 % to 3 % they widen by half, from 3 % to 10 % by a quarter as the trend bends).
+on a 3 s log of the same kind, 1 ms residuals, one-sided differences: with 0.3 % the
+roughness inflates JᵀJ and the standard errors shrink 4-fold against 3 %; from 1 % to 3 %
+they grow by half, from 3 % to 10 % by a quarter as the trend bends).
 
 Residuals are the channels of the log that the run records (:data:`FIT_CHANNELS`), each
 divided by its sensor's noise σ (the control file's ``[sensors]``: pressure and stroke;
 F_ten by the head-pressure σ times the two head areas, assumed: no load cell in the
-study), as block means over ``block_s`` (10 ms: white noise stays white with σ/√m) on the
-samples from ``start_s`` to the end. The parameters are scaled to θ ∈ [0, 1] over their
+study), as block means over ``block_s`` (10 ms: white noise stays white with σ/√m; the
+contact events below are not averaged out by it, 50 ms halves them) on the samples from
+``start_s`` to the end. The parameters are scaled to θ ∈ [0, 1] over their
 bounds (log-uniform for positive bounds); :func:`scipy.optimize.least_squares` (trust
 region reflective, forward differences) fits them, optionally from the best of a
 Latin-hypercube sample of ``start_points`` points evaluated in parallel on the Dask
@@ -67,7 +69,6 @@ from trackmj.ports import COUPLING_STEP_S, Command
 
 FIT_CHANNELS = ("tension_N", "p_head_Pa", "p_rod_Pa", "stroke_m")
 """Log columns the fit compares with the replayed run (any subset, at least one)."""
-COMMAND = ("valve_mode", "u")
 CALIBRATION_JSON = "calibration.json"
 CALIBRATION_PNG = "calibration.png"
 CONFIDENCE = 0.95
@@ -114,8 +115,7 @@ class CalibrateTable(Parameters):
                                unit="1", doc="relative finite-difference step")
     block_s: float = param(0.001, 1.0, default=0.01,
                            doc="residuals are block means over this long (white sensor "
-                           "noise stays white, σ/√m; the track's contact chatter averages "
-                           "out)")
+                           "noise stays white, σ/√m; fewer, equally informative residuals)")
     max_evaluations: int = param(1, 1000, unit="1", default=40,
                                  doc="most residual evaluations of the local fit")
     set: tuple[str, ...] | None = param(default=None,
@@ -347,9 +347,16 @@ class Problem:
 
 
 def _lhs_cost(problem: Problem, values: dict[str, float]) -> tuple[float, dict[str, Any]]:
-    """Cost of one start point (in a worker): (0.5 Σr², its run record)."""
+    """Cost of one start point (in a worker): (0.5 Σr², its run record); a point whose run
+    leaves physics costs inf and its record says why."""
+    from trackmj.sim.observers import PhysicsError
+
     problem = Problem(problem.spec, problem.scenario, problem.logs, [])
-    r = problem.weighted(values, "start")
+    try:
+        r = problem.weighted(values, "start")
+    except PhysicsError as exc:
+        return math.inf, {"purpose": "start", "values": dict(values), "cost": None,
+                          "error": str(exc)}
     return float(0.5 * r @ r), problem.runs[0]
 
 
@@ -371,7 +378,11 @@ def _best_start(problem: Problem, workers: int | None) -> dict[str, float]:
         futures = ex.client.map(_lhs_cost, [problem] * len(points), points, pure=False)
         outcomes = ex.client.gather(futures)
     problem.runs.extend(run for _, run in outcomes)
-    return points[int(np.argmin([cost for cost, _ in outcomes]))]
+    costs = [cost for cost, _ in outcomes]
+    if not np.isfinite(costs).any():
+        raise ParameterError(f"every one of the {len(points)} start points left physics "
+                             f"(first: {outcomes[0][1]['error']}); narrow the bounds")
+    return points[int(np.argmin(costs))]
 
 
 def _fd_steps(problem: Problem, theta: np.ndarray, step: float) -> np.ndarray:

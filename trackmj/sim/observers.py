@@ -24,6 +24,7 @@ from trackmj.ports import (
     READOUT_UNITS,
     REFERENCE_UNITS,
     Command,
+    Element,
     Readout,
 )
 from trackmj.results import make_table
@@ -83,48 +84,31 @@ CHANNEL_SETS = ("default", "all")
 
 
 class ChannelRecorder:
-    """The extra channels of ``--channels all`` (what the element and the mechanics have):
+    """The extra channels of ``--channels all``: the element's own (``Element.channels``,
+    e.g. the hydraulic element's per-cylinder head pressures and every valve flow), the
+    MuJoCo track's ``upper_strand_tension_N`` and ``lower_strand_tension_N`` [N] (mean pin
+    tension of the upper strand and of the rear lower run; none without a track), and the
+    hitch load applied, ``hitch_pull_N`` (rearward) and ``hitch_down_N`` [N] in the chassis
+    frame (the scenario's, whether the mechanics takes it or not)."""
 
-    - hydraulic element: ``p_head_L_Pa``, ``p_head_R_Pa`` (each cylinder's head; both rods
-      share one node, ``p_rod_Pa``), ``p_line_A_Pa`` [Pa gauge]; the valve and circuit flows
-      ``q_<name>_m3_s`` [m³/s], a -> b as ``hydraulics.tensioner.FLOW_NAMES`` names them
-      (main_PA supply -> line A, main_AT line A -> tank, main_PB supply -> rod node,
-      main_BT rod node -> tank, V_L / V_R line A -> head L / R, relief, make-up, leakage,
-      pump);
-    - MuJoCo track: ``upper_strand_tension_N``, ``lower_strand_tension_N`` [N], the mean pin
-      tension of the upper strand and of the rear lower run;
-    - every run: the hitch load applied, ``hitch_pull_N`` (rearward), ``hitch_down_N`` [N]
-      in the chassis frame (the scenario's, whether the mechanics takes it or not).
-    """
-
-    def __init__(self, schedule: Schedule, element: Any, track: Any) -> None:
-        from trackmj.hydraulics.tensioner import FLOW_NAMES, HydraulicTensioner
-
-        tensioner = getattr(element, "tensioner", None)
-        self._hydraulic = tensioner if isinstance(tensioner, HydraulicTensioner) else None
-        self._flows = FLOW_NAMES
-        self._track = track
-        self.units: dict[str, str] = {}
-        if self._hydraulic is not None:
-            self.units |= {"p_head_L_Pa": "Pa", "p_head_R_Pa": "Pa", "p_line_A_Pa": "Pa"}
-            self.units |= {f"q_{name}_m3_s": "m^3/s" for name in FLOW_NAMES}
+    def __init__(self, schedule: Schedule, element: Element, track: Any) -> None:
+        self._element, self._track = element, track
+        self.units: dict[str, str] = dict(element.channels)
+        self._n_element = len(self.units)
         if track is not None:
             self.units |= {"upper_strand_tension_N": "N", "lower_strand_tension_N": "N"}
-        self._measured = [n for n in self.units]
+        self._measured = list(self.units)
         self.data = np.full((schedule.steps, len(self._measured)), np.nan)
         self._hitch = np.array([(i.hitch_pull_N, i.hitch_down_N) for i in schedule.inputs])
         self.units |= {"hitch_pull_N": "N", "hitch_down_N": "N"}
 
     def on_step(self, k: int, readout: Readout, command: Command) -> None:
-        row, j = self.data[k], 0
-        if self._hydraulic is not None:
-            rec = self._hydraulic.record
-            row[:3] = rec.p_head_L_Pa, rec.p_head_R_Pa, rec.p_line_A_Pa
-            row[3:3 + len(self._flows)] = [rec.flows_m3_s[n] for n in self._flows]
-            j = 3 + len(self._flows)
+        row, n = self.data[k], self._n_element
+        if n:
+            row[:n] = self._element.channel_values()
         if self._track is not None:
             strands = self._track.strand_tensions_N()
-            row[j:j + 2] = strands.upper_N, strands.lower_N
+            row[n:n + 2] = strands.upper_N, strands.lower_N
 
     def columns(self, rows: int) -> dict[str, np.ndarray]:
         """Column name -> values of the first ``rows`` steps, shape (rows,)."""
