@@ -29,6 +29,8 @@ def test_scenarios_lists_each_builtin_on_one_line(capsys) -> None:
     for name in BUILTIN:
         (line,) = [ln for ln in lines if ln.startswith(name + " ")]
         assert load_scenario(name).title in line
+    listed = " ".join(lines).replace(",", " ").split()      # W5's variants, for --variant
+    assert all(v.name in listed for v in load_scenario("W5").variants)
 
 
 def test_unknown_scenario_answers_with_the_names_that_exist(capsys) -> None:

@@ -9,7 +9,7 @@ import pytest
 from synthetic import energy_table, synthetic_result
 
 from trackmj.cli import main
-from trackmj.report import CompareRun, check_compare_dir, write_compare
+from trackmj.compare import CompareRun, check_compare_dir, write_compare
 from trackmj.results import read_result
 from trackmj.scenarios import load_scenario
 from trackmj.sim.registry import ARCHITECTURES

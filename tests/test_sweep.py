@@ -132,7 +132,8 @@ def test_scattered_samples_are_plotted_per_metric(tmp_path, monkeypatch) -> None
     rows = [{"run_key": f"k{i}", "point": i, "scenario": "W1", "architecture": "tp",
              "controller": "nmpc", "estimator": "ekf", "variant": "nominal", "seed": 0,
              "duration_s": 1.5, "inputs": "{}", SPEED: 0.5 + 0.25 * i, BULK: 1e9 * (1 + i),
-             "rmse_N": 100.0 * i, "only_nan_N": math.nan, "wall_time_s": 1.0, "error": None}
+             "rmse_N": 100.0 * i, "only_nan_N": math.nan, "wall_time_s": 1.0, "error": None,
+             "energy_J.friction": 3.0 * i, "friction_loss_J": 3.0 * i}
             for i in range(5)]
     rows[4] |= {"rmse_N": None, "error": "PhysicsError: ..."}
     write_table(rows, tmp_path / "results.parquet")
@@ -142,14 +143,15 @@ def test_scattered_samples_are_plotted_per_metric(tmp_path, monkeypatch) -> None
     original = figures_module._metric_figure
     monkeypatch.setattr(figures_module, "_metric_figure",
                         lambda *args: drawn.append(original(*args)) or drawn[-1])
-    figures = plot_sweep(tmp_path)
-    assert sorted(p.name for p in figures) == ["rmse_N.png"]
+    figures = plot_sweep(tmp_path)      # a metric stored twice is drawn once
+    assert sorted(p.name for p in figures) == ["friction_loss_J.png", "rmse_N.png"]
     assert all(p.read_bytes()[:4] == b"\x89PNG" for p in figures)
-    ax = drawn[0].axes[0]
+    assert "the same values: energy_J.friction" in drawn[0].texts[-1].get_text()
+    ax = drawn[1].axes[0]
     assert ax.get_ylabel() == "tension RMSE, raw [kN]"
     assert ax.get_xlabel() == "fluid bulk modulus [MPa]"
     plot_sweep(tmp_path, redraw=False)      # what exists is not drawn again
-    assert len(drawn) == 1
+    assert len(drawn) == 2
 
 
 def test_a_sweep_without_swept_keys_gets_bars_per_scenario_and_case(tmp_path,
@@ -256,17 +258,22 @@ def test_resume_skips_the_rows_already_written(grid, executor) -> None:
     assert (out / "results.parquet").read_bytes() == before
 
 
-def test_figures_per_metric_and_redraw(grid, tmp_path) -> None:
-    out, _, summary = grid
+def test_figures_per_metric_and_redraw(grid, executor) -> None:
+    out, spec, summary = grid
     names = {p.name for p in summary.figures}
     assert {"rmse_N.png", "energy_J.pump.png", "wall_time_s.png"} <= names
     assert "fluctuation_N.png" not in names   # NaN in a 1.5 s run (steady window from 5 s)
+    assert not names & {"mujoco_warnings.png", "evaluation.psd_max_Hz.png"}   # constants
     for path in summary.figures:
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     (out / "figures" / "rmse_N.png").unlink()
     assert main(["sweep", "--plot", str(out)]) == 0
     assert (out / "figures" / "rmse_N.png").is_file()
     assert len(list((out / "figures").glob("*.png"))) == len(summary.figures)
+    stamps = {p.name: p.stat().st_mtime_ns for p in (out / "figures").glob("*.png")}
+    again = sweep(spec, out, executor=executor, progress=False)   # resumes: nothing to run
+    assert again.ran == 0 and len(again.figures) == len(summary.figures)
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "figures").glob("*.png")} == stamps
 
 
 def test_a_failing_run_becomes_an_error_row(executor, tmp_path) -> None:

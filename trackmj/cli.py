@@ -272,7 +272,7 @@ def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from trackmj.report import compare, write_compare
+    from trackmj.compare import compare, write_compare
     from trackmj.scenarios import check_duration
     from trackmj.sim.setup import prepare
 
@@ -366,7 +366,10 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
         print(f"{sc.name:<{width}}{sc.title} ({sc.duration_s:g} s, {sc.controller}/"
               f"{sc.estimator})")
         if len(sc.variants) > 1:
-            print(f"{'':<{width}}--variant " + ", ".join(v.name for v in sc.variants))
+            import textwrap
+
+            print(textwrap.fill("--variant " + ", ".join(v.name for v in sc.variants), 90,
+                                initial_indent=" " * width, subsequent_indent=" " * (width + 10)))
     print("or any scenario TOML file in the same format (experiments/*.toml)")
     for title, registry in (("architectures (--arch)", ARCHITECTURES),
                             ("controllers (--controller)", CONTROLLERS),
@@ -556,7 +559,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler, "
                        "e.g. tcp://HOST:8786, instead of a local cluster")
 
-    def run_args(p: argparse.ArgumentParser) -> None:
+    def run_args(p: argparse.ArgumentParser, out_help: str) -> None:
         p.add_argument("scenario", help="a built-in scenario (W1-W5, NL1; trackmj "
                        "scenarios) or a scenario TOML file")
         p.add_argument("--estimator", choices=choices(ESTIMATORS),
@@ -565,11 +568,13 @@ def build_parser() -> argparse.ArgumentParser:
                        help="noise and terrain seed")
         p.add_argument("--duration", type=_duration,
                        help="simulated time [s] (default: the scenario's)")
-        p.add_argument("--out", metavar="DIR", help="output directory")
+        p.add_argument("--out", metavar="DIR", help=out_help)
         file_args(p)
 
     run = sub.add_parser("run", help="one closed-loop run of a scenario")
-    run_args(run)
+    run_args(run, "output directory (default: runs/SCENARIO-ARCH-CONTROLLER-sSEED, with "
+                  "-VARIANT and a short hash of the inputs when they are not the scenario's "
+                  "own; a folder holding a run of other inputs is refused unless --overwrite)")
     run.add_argument("--arch", default="tp", choices=choices(ARCHITECTURES),
                      help="coupling architecture")
     run.add_argument("--controller", metavar="NAME",
@@ -591,7 +596,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     compare = sub.add_parser("compare", help="all architectures on one scenario, with each "
                              "reduced one's prediction error against tp")
-    run_args(compare)
+    run_args(compare, "output directory (default: runs/compare-SCENARIO); runs already done "
+                      "in it are kept")
     compare.add_argument("--controllers", help="comma list, e.g. nmpc,lmpc,pid (each on every "
                          "architecture; one more figure overlays the controllers)")
     executor_args(compare)

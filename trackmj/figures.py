@@ -573,7 +573,7 @@ DISPLAY_UNITS: dict[str, tuple[float, str]] = {
     "N": (1e-3, "kN"), "Pa": (1e-6, "MPa"), "Pa (absolute)": (1e-6, "MPa abs"),
     "J": (1e-3, "kJ"), "W": (1e-3, "kW"), "m": (1e3, "mm"), "m^2": (1e6, "mm²"),
     "m^3": (1e6, "cm³"), "m^3/s": (6e4, "L/min"), "N/m": (1e-6, "kN/mm"),
-    "m/s^2": (1.0, "m/s²"), "1": (1.0, ""),
+    "m/s^2": (1.0, "m/s²"), "N^2·s": (1e-6, "kN²·s"), "1": (1.0, ""),
 }
 """SI unit -> (scale, display unit) on the figures; other units are shown as they are."""
 CASE = ("scenario", "architecture", "controller", "estimator", "variant", "duration_s",
@@ -582,6 +582,10 @@ CASE = ("scenario", "architecture", "controller", "estimator", "variant", "durat
 parameters)."""
 NOT_METRICS = ("run_key", "point", "scenario", "architecture", "controller", "estimator",
                "variant", "seed", "duration_s", "inputs", "error")
+
+
+WORDS = {"lp": "low-pass", "rms": "RMS", "ise": "integral of squared error"}
+"""Abbreviations of metric names in plain words (on the sweep figures' axes)."""
 
 
 def display_unit(unit: str) -> tuple[float, str]:
@@ -603,12 +607,14 @@ def column_words(name: str) -> str:
     parts = name.split(".")
     if is_key_column(name):
         parts = [p for p in parts[1:] if not p.isdigit()][-2:]
-    last = parts[-1]
-    for suffix, _ in UNIT_SUFFIXES:
-        if last.endswith(suffix) and len(last) > len(suffix):
-            last = last[: -len(suffix)]
-            break
-    return " ".join([*parts[:-1], last]).replace("_", " ").strip()
+    def bare(part: str) -> str:
+        for suffix, _ in UNIT_SUFFIXES:
+            if part.endswith(suffix) and len(part) > len(suffix):
+                return part[: -len(suffix)]
+        return part
+
+    words = " ".join(bare(p) for p in parts).replace("_", " ").split()
+    return " ".join(WORDS.get(w, w) for w in words)
 
 
 def column_label(name: str) -> str:
@@ -637,8 +643,10 @@ def sweep_figures(rows: Sequence[Mapping[str, Any]], fig_dir: Path, *,
     (scenario, architecture, controller, ...) and per combination of the other swept
     parameters (points that share none, e.g. Latin hypercube samples, stand alone). Without
     swept parameters (e.g. a controller comparison): bars, a group per scenario, a bar per
-    case, mean ± std over seeds. ``redraw=False`` keeps a figure that exists. Returns the
-    paths of the varying metrics' figures."""
+    case, mean ± std over seeds. Metrics with the same value in every run (a metric stored
+    twice, e.g. ``friction_loss_J`` and ``energy_J.friction``) share one figure, named after
+    the first and naming the others. ``redraw=False`` keeps a figure that exists. Returns
+    the paths of the figures."""
     from trackmj.campaign import is_key_column
 
     rows = [dict(r) for r in rows]
@@ -648,15 +656,22 @@ def sweep_figures(rows: Sequence[Mapping[str, Any]], fig_dir: Path, *,
     skip = set(NOT_METRICS) | set(swept)
     metrics = sorted({k for r in rows for k in r if k not in skip
                       and isinstance(r[k], int | float) and not isinstance(r[k], bool)})
+    same: dict[tuple, list[str]] = {}      # one figure per series of values: drawn once
+    for metric in sorted(metrics, key=lambda m: (m.count("."), m)):   # top-level names first
+        values = [r.get(metric) for r in rows]
+        if varies(values):
+            same.setdefault(tuple(None if v is None or v != v else v for v in values),
+                            []).append(metric)
     paths = []
-    for metric in metrics:
-        if not varies([r.get(metric) for r in rows]):
-            continue
+    for metric, *also in sorted(same.values()):
         path = fig_dir / f"{metric}.png"
         paths.append(path)
         if path.is_file() and not redraw:
             continue
         fig = _metric_figure(rows, metric, swept) if swept else _case_figure(rows, metric)
+        if also:
+            fig.text(0.995, 0.005, "the same values: " + ", ".join(also), ha="right",
+                     va="bottom", fontsize=9, color="0.35")
         _save_figure(fig, path)
     return paths
 

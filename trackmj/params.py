@@ -72,6 +72,7 @@ MAX_FILE_BYTES = 1 << 20
 
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = (
     ("_m3_s_Pa", "m^3/(s·Pa)"),
+    ("_N2s", "N^2·s"),
     ("_Pa_abs", "Pa (absolute)"),
     ("_cycles_m", "1/m"),
     ("_N_s_m", "N·s/m"),
