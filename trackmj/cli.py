@@ -644,7 +644,7 @@ def build_parser() -> argparse.ArgumentParser:
         "calibrate", help="fit --set keys to measured logs -> DIR/calibration.json",
         description="Fit the keys of a calibration spec within their bounds to measured logs "
                     "(least squares; the logs' valve command replayed in the spec's "
-                    "conditions), with 95 %% intervals; see the README ('Calibrate').")
+                    "conditions), with 95 % intervals; see the README ('Calibrate').")
     calib.add_argument("spec", help="calibration spec TOML ([calibrate], "
                        "[[calibrate.parameters]])")
     calib.add_argument("--measured", nargs="+", required=True, metavar="LOG",

@@ -94,9 +94,10 @@ class Trace:
         """ParameterError naming the file if a column is missing."""
         missing = [n for n in names if n not in self.columns]
         if missing:
+            hint = ("" if missing[0] in DIMENSIONLESS else "; name it in SI (tension_N) or "
+                    "with its unit (tension_kN, p_head [MPa])")
             raise ParameterError(f"{self.file}: no column {missing[0]!r} (has: "
-                                 f"{', '.join(self.headers.values())}); name it in SI "
-                                 "(tension_N) or with its unit (tension_kN, p_head [MPa])")
+                                 f"{', '.join(self.headers.values())}){hint}")
 
     def check_covers(self, duration_s: float, what: str = "the run") -> None:
         """ParameterError naming the file and time column unless t spans [0, duration_s]."""
