@@ -2,7 +2,21 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
+
 import pytest
+
+
+def pytest_configure(config) -> None:
+    """Generated models go to a cache of this test session, not the user's cache (the
+    variable is inherited by the executor's worker processes)."""
+    os.environ["TRACKMJ_CACHE"] = tempfile.mkdtemp(prefix="trackmj-test-cache-")
+
+
+def pytest_unconfigure(config) -> None:
+    shutil.rmtree(os.environ.pop("TRACKMJ_CACHE", ""), ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

@@ -15,6 +15,8 @@ from trackmj.model import (
     default_xml_path,
     generate_mjcf,
 )
+from trackmj.model.generate import scene_path
+from trackmj.model.mjcf import join_mjcf, read_mjcf, split_mjcf
 from trackmj.plant import PassiveTensioner, TrackPlant
 from trackmj.ports import ForceLaw
 from trackmj.terrain import RoadProfile
@@ -69,13 +71,28 @@ def _strip_keyframe(xml: str) -> tuple[str, np.ndarray]:
 
 
 def test_generated_xml_equals_committed(model_params) -> None:
-    committed = default_xml_path().read_text()
+    """The generator makes the committed machine and scene parts (lf1352.xml and
+    lf1352_scene.xml, which includes it) exactly, up to the keyframe's last rounding step;
+    the scene loaded by MuJoCo (its include resolved) compiles to the model of the joined
+    text the runs use."""
     generated = generate_mjcf(model_params)
-    structure_c, home_c = _strip_keyframe(committed)
-    structure_g, home_g = _strip_keyframe(generated)
-    assert structure_g == structure_c, "run `trackmj model generate` and commit lf1352.xml"
+    machine, scene = split_mjcf(generated, "lf1352.xml")
+    assert scene == scene_path(default_xml_path()).read_text(), REGENERATE
+    structure_c, home_c = _strip_keyframe(default_xml_path().read_text())
+    structure_g, home_g = _strip_keyframe(machine)
+    assert structure_g == structure_c, REGENERATE
     # the settled keyframe is rounded to 1 µm; allow one rounding step of platform noise
     np.testing.assert_allclose(home_g, home_c, rtol=0, atol=2.01e-6)
+    assert join_mjcf(scene, machine) == generated
+    from_file = mujoco.MjModel.from_xml_path(str(scene_path(default_xml_path())))
+    joined = mujoco.MjModel.from_xml_string(read_mjcf(scene_path(default_xml_path())))
+    assert (from_file.nbody, from_file.ngeom, from_file.nq) == (joined.nbody, joined.ngeom,
+                                                                joined.nq)
+    np.testing.assert_array_equal(from_file.geom_solref, joined.geom_solref)
+    np.testing.assert_array_equal(from_file.key_qpos, joined.key_qpos)
+
+
+REGENERATE = "run `trackmj model generate` and commit models/lf1352.xml, lf1352_scene.xml"
 
 
 def test_initial_layout_closes_without_penetration(model_params) -> None:

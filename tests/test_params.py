@@ -60,10 +60,10 @@ def test_solver_choices_and_integer_counts(tmp_path) -> None:
         load_model_params(_variant(tmp_path, "warmstart = false", "warmstart = 0"))
 
 
-def test_wrong_link_count_is_rejected(tmp_path) -> None:
-    with pytest.raises(ParameterError, match=r"variant\.toml \[track\]\.link_count = 80 but the "
-                       r"LF1352 model .*needs exactly 82"):
-        load_model_params(_variant(tmp_path, "link_count = 82", "link_count = 80"))
+def test_link_count_that_cannot_close_is_rejected(tmp_path) -> None:
+    with pytest.raises(ParameterError, match=r"variant\.toml \[track\]\.link_count = 60 links × "
+                       r"0\.075 m = 4\.500 m; this layout needs .* use 74–94 links"):
+        load_model_params(_variant(tmp_path, "link_count = 82", "link_count = 60"))
 
 
 def test_cross_field_checks_name_file_table_and_key(tmp_path) -> None:

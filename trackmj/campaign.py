@@ -99,6 +99,20 @@ def machine_files_hash() -> str:
     return digest.hexdigest()
 
 
+def machine_identity(machine: Any) -> str:
+    """A machine's name and the content of the files its runs read besides the validated
+    parameters: the identified idler and the reference MJCF (scene joined with its machine
+    part), as SHA-256."""
+    from trackmj.model.mjcf import read_mjcf
+
+    text = machine.name
+    if machine.idler is not None:
+        text += _file_hash(machine.idler)
+    if machine.reference_mjcf is not None:
+        text += hashlib.sha256(read_mjcf(machine.reference_mjcf).encode()).hexdigest()
+    return text
+
+
 def _file_hash(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
@@ -124,6 +138,11 @@ def identity(setup: Any) -> dict[str, Any]:
         "scenario": scenario, "machine_files": machine_files_hash(), "source": source_hash()}
     if setup.tensioner is not None:
         ident["tensioner"] = tensioner_identity(setup.tensioner)
+    from trackmj.machines import DEFAULT_MACHINE
+
+    machine = getattr(setup, "machine", None)
+    if machine is not None and machine.name != DEFAULT_MACHINE:
+        ident["machine"] = machine_identity(machine)
     if setup.controller_file is not None:
         ident["controller_file"] = repr(setup.controller_file)
         described = setup.controller_file.description

@@ -16,10 +16,10 @@ from pathlib import Path
 def _cmd_model_info(args: argparse.Namespace) -> int:
     import mujoco
 
-    from trackmj.model import MODEL_NAME
     from trackmj.plant import TrackPlant
 
-    plant = TrackPlant.load(args.model, args.params)
+    plant = TrackPlant.load(args.model, args.params, machine=args.machine,
+                            overrides=_model_overrides(args.set))
     m, d = plant.model, plant.data
     p = plant.params
     link_mass = p.track.link_mass_kg * plant.link_count
@@ -29,7 +29,8 @@ def _cmd_model_info(args: argparse.Namespace) -> int:
                         or (m.geom_contype[j] & m.geom_conaffinity[i]))
     tension = plant.pin_tensions_N()
     rows = [
-        ("model", f"{MODEL_NAME} ({plant.model_path})"),
+        ("model", f"{m.names[:m.names.index(0)].decode()} "
+                  f"({plant.model_path or 'generated, cached'})"),
         ("bodies", f"{m.nbody - 1} (+ world)"),
         ("degrees of freedom", f"{m.nv} (generalised coordinates {m.nq})"),
         ("links", f"{plant.link_count}, pitch {p.track.pitch_m * 1e3:.1f} mm, "
@@ -52,17 +53,96 @@ def _cmd_model_info(args: argparse.Namespace) -> int:
                         f"upper strand {tension[plant.upper_strand_pins()].mean() / 1e3:.2f} "
                         "kN)"),
     ]
+    rows += _geometry_rows(plant)
     width = max(len(label) for label, _ in rows) + 2
     for label, text in rows:
         print(f"{label:<{width}}{text}")
     return 0
 
 
+def _geometry_rows(plant: object) -> list[tuple[str, str]]:
+    """The derived geometry of the plant's layout and what its home keyframe measures."""
+    import math
+
+    from trackmj.model import compute_layout
+    from trackmj.model.geometry import catenary_sag_m, derive_geometry, measured_sag_m
+
+    p = plant.params
+    layout = compute_layout(p)
+    g = derive_geometry(p, layout)
+    weight = float(plant.model.body_subtreemass[0]) * p.simulation.gravity_m_s2
+    ground = plant.contact_forces_N()["ground"]
+    end = "front" if p.sprocket.x_m > p.idler.x_m else "rear"
+    rows = [
+        ("layout", f"sprocket at the {end}, idler slide "
+                   f"{math.degrees(p.idler.slide_angle_rad):.1f}° above horizontal, idler "
+                   f"centre x {layout.idler_x_m:.4f} m (guess {p.idler.x_m:g} m)"),
+        ("perimeter", f"loop {g.loop_m:.4f} m ({p.track.link_count} × "
+                      f"{p.track.pitch_m * 1e3:.1f} mm), path round the pin circles "
+                      f"{g.path_m:.4f} m, layout closure {g.closure_m * 1e3:.2g} mm"),
+        ("wraps", ", ".join(f"{name} {math.degrees(a):.1f}°"
+                            for name, a in g.wraps_rad.items() if a > 1e-6)),
+    ]
+    pins = plant.pins_layout_frame()
+    upper_N = float(plant.pin_tensions_N()[plant.upper_strand_pins()].mean())
+    for s in g.spans:
+        text = f"{s.start} -> {s.end}: {s.length_m * 1e3:.0f} mm"
+        sag, chord = measured_sag_m(s, pins, p.track.pitch_m) if s.upper else (0.0, 0.0)
+        if chord > 0.0:
+            text += (f", sag at home {sag * 1e3:.1f} mm over {chord * 1e3:.0f} mm (shallow "
+                     f"catenary at the home tension "
+                     f"{catenary_sag_m(p, s, upper_N, chord) * 1e3:.1f} mm)")
+        rows.append(("upper span" if s.upper else "lower span", text))
+    rows += [
+        ("weight this side", f"{weight / 1e3:.2f} kN (Σ ground normal force at home "
+                             f"{ground / 1e3:.2f} kN)"),
+        ("static strand tension", f"{g.strand_tension_N / 1e3:.2f} kN at the preload "
+                                  f"{p.tensioner.preload_N / 1e3:.1f} kN (idler geometry "
+                                  f"factor {g.idler_factor:.4f}; frictionless idler)"),
+    ]
+    return rows
+
+
 def _cmd_model_generate(args: argparse.Namespace) -> int:
+    from trackmj.machines import resolve
     from trackmj.model import load_model_params, write_model
 
-    path = write_model(args.out, load_model_params(args.params))
+    machine = resolve(args.machine)
+    out = args.out or (machine.reference_mjcf and machine.reference_mjcf.with_name(
+        machine.reference_mjcf.name.removesuffix("_scene.xml") + ".xml"))
+    if out is None:
+        raise ValueError(f"machine {machine.name} has no reference_mjcf in "
+                         f"{machine.file.name}: give --out FILE.xml")
+    params = load_model_params(args.params or machine.mechanics,
+                               overrides=_model_overrides(args.set))
+    path = write_model(out, params, machine.name)
     print(f"wrote {path}")
+    return 0
+
+
+def _model_overrides(items: list[str]) -> dict:
+    """The ``model`` entries of ``--set`` items (commands on the bare track take no
+    others)."""
+    from trackmj.params import ParameterError, parse_overrides
+
+    sets = parse_overrides(items)
+    other = [kind for kind, keys in sets.items() if keys and kind != "model"]
+    if other:
+        raise ParameterError(f"--set {other[0]}.*: this command takes only model.* keys "
+                             "(the bare track has no hydraulics, control or scenario)")
+    return sets["model"]
+
+
+def _cmd_machines(args: argparse.Namespace) -> int:
+    from trackmj.machines import DEFAULT_MACHINE, shipped
+
+    machines = shipped()
+    width = max(len(name) for name in machines) + 2
+    for name, m in machines.items():
+        default = " (default)" if name == DEFAULT_MACHINE else ""
+        print(f"{name:<{width}}{m.description}{default}")
+    print("or any machine file (*_machine.toml naming its mechanics, hydraulics and control "
+          "files; see README, Your machine)")
     return 0
 
 
@@ -70,7 +150,8 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     from trackmj.drive import drive
 
     result = drive(args.speed, args.duration, model=args.model, params=args.params,
-                   preload_N=args.preload, out_dir=args.out, tensioner=args.tensioner)
+                   preload_N=args.preload, out_dir=args.out, tensioner=args.tensioner,
+                   machine=args.machine, overrides=_model_overrides(args.set))
     m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
     print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s: {m['real_time_factor']:.2f}x "
           f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
@@ -79,7 +160,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     print(f"idler force        mean {s['idler_force_mean_N'] / 1e3:7.2f} kN   "
           f"min {s['idler_force_min_N'] / 1e3:7.2f}  max {s['idler_force_max_N'] / 1e3:7.2f}")
     print(f"strand tension     upper {s['upper_strand_tension_mean_N'] / 1e3:5.2f} kN, "
-          f"rear lower run {s['lower_strand_tension_mean_N'] / 1e3:5.2f} kN")
+          f"sprocket lower run {s['lower_strand_tension_mean_N'] / 1e3:5.2f} kN")
     print(f"vehicle speed      {s['vehicle_speed_mean_m_s']:.3f} m/s "
           f"(sprocket pitch speed {s['track_speed_mean_m_s']:.3f} m/s)")
     contacts = sum(e["contact_work_J"].values())
@@ -159,7 +240,7 @@ def _files(args: argparse.Namespace) -> dict:
     """The parameter files, tensioner file and ``--set`` overrides given on the command
     line."""
     return dict(model=args.model, hydraulics=args.hydraulics, control=args.control,
-                overrides=args.set, tensioner=args.tensioner)
+                overrides=args.set, tensioner=args.tensioner, machine=args.machine)
 
 
 def _tensioner_line(described: dict) -> str:
@@ -268,7 +349,18 @@ def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
     return dict(scenario=scenario, estimator=getattr(args, "estimator", None),
                 duration=args.duration, overrides=overrides_tuple(args.set),
                 model=as_path(args.model), hydraulics=as_path(args.hydraulics),
-                control=as_path(args.control), tensioner=as_path(args.tensioner))
+                control=as_path(args.control), tensioner=as_path(args.tensioner),
+                machine=_machine_spec(args.machine))
+
+
+def _machine_spec(machine: str | None) -> str | None:
+    """A machine for a RunSpec: a shipped name as given, a machine file as an absolute
+    path (workers may run elsewhere)."""
+    from trackmj.machines import names
+
+    if machine is None or machine.strip().lower() in names():
+        return machine
+    return str(Path(machine).resolve())
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
@@ -316,8 +408,12 @@ def _cmd_report(args: argparse.Namespace) -> int:
         from trackmj.tensioner import load_tensioner
 
         load_tensioner(args.tensioner)   # refused here, before any run, if it is bad
+    if args.machine is not None:
+        from trackmj.machines import resolve
+
+        resolve(args.machine)   # refused here, before any run, if it is bad
     specs = plan(args.scenarios.split(","), list(range(args.seeds)), args.duration, archs,
-                 baselines, tensioner=args.tensioner)
+                 baselines, tensioner=args.tensioner, machine=_machine_spec(args.machine))
     matrix = run_matrix(specs, out, workers=args.workers, scheduler=args.scheduler)
     path = write_report(matrix.results, out, matrix)
     print(f"{len(matrix.results)} runs ({matrix.resumed} resumed, {len(matrix.failed)} failed) "
@@ -413,7 +509,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     out = Path(args.out or f"runs/sweep-{Path(args.spec).stem}")
     summary = sweep(args.spec, out, workers=args.workers, scheduler=args.scheduler,
                     keep_runs=args.keep_runs, retry_failed=args.retry_failed,
-                    tensioner=args.tensioner)
+                    tensioner=args.tensioner, machine=_machine_spec(args.machine))
     print(summary)
     print(f"{len(summary.figures)} figures -> {out / 'figures'}")
     return 1 if summary.failed else 0
@@ -515,18 +611,33 @@ def build_parser() -> argparse.ArgumentParser:
                        "([fmu]) or a spring-damper ([passive]) replacing the hydraulic "
                        "element (see README, FMI)")
 
+    def machine_arg(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--machine", metavar="NAME|FILE", help="a shipped machine ('trackmj "
+                       "machines') or a machine file *_machine.toml (default: lf1352)")
+
     def model_args(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--model", help="MJCF file (default: packaged models/lf1352.xml)")
-        p.add_argument("--params", help="parameter TOML (default: packaged lf1352.toml)")
+        machine_arg(p)
+        p.add_argument("--model", help="MJCF file (default: the machine's model, generated "
+                       "and cached unless it is the committed reference)")
+        p.add_argument("--params", help="model parameter TOML (default: the machine's)")
+        p.add_argument("--set", metavar="model.TABLE.KEY=VALUE", action="append", default=[],
+                       help="override one key of the model file (repeatable), e.g. "
+                            "--set model.track.link_count=80")
 
     model = sub.add_parser("model", help="inspect or regenerate the track model")
     model_sub = model.add_subparsers(dest="model_command", required=True)
     info = model_sub.add_parser("info", help="summary: bodies, DOF, links, masses, contacts")
     model_args(info)
     info.set_defaults(func=_cmd_model_info)
-    gen = model_sub.add_parser("generate", help="regenerate lf1352.xml from the TOML")
-    gen.add_argument("--params", help="parameter TOML (default: packaged lf1352.toml)")
-    gen.add_argument("--out", help="output MJCF path (default: packaged lf1352.xml)")
+    gen = model_sub.add_parser("generate", help="regenerate a machine's reference MJCF "
+                               "(models/lf1352.xml) from its files")
+    machine_arg(gen)
+    gen.add_argument("--params", help="model parameter TOML (default: the machine's)")
+    gen.add_argument("--set", metavar="model.TABLE.KEY=VALUE", action="append", default=[],
+                     help="override one key of the model file (repeatable)")
+    gen.add_argument("--out", help="output MJCF path NAME.xml, the machine part; the scene "
+                     "NAME_scene.xml beside it includes it (default: the machine's "
+                     "reference_mjcf)")
     gen.set_defaults(func=_cmd_model_generate)
 
     drive = sub.add_parser("drive", help="drive the track with the passive tensioner")
@@ -541,12 +652,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     def file_args(p: argparse.ArgumentParser) -> None:
         tensioner_arg(p)
+        machine_arg(p)
         p.add_argument("--model", metavar="FILE",
-                       help="model parameter TOML (default: packaged models/lf1352.toml)")
+                       help="model parameter TOML (default: the machine's mechanics)")
         p.add_argument("--hydraulics", metavar="FILE", help="hydraulic parameter TOML "
-                       "(default: packaged models/lf1352_hydraulics.toml)")
+                       "(default: the machine's)")
         p.add_argument("--control", metavar="FILE", help="control parameter TOML "
-                       "(default: packaged models/lf1352_control.toml)")
+                       "(default: the machine's)")
         p.add_argument("--set", metavar="KIND.TABLE.KEY=VALUE", action="append", default=[],
                        help="override one key of a file (repeatable), KIND one of model, "
                             "hydraulics, control, scenario; e.g. "
@@ -613,6 +725,7 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--baselines", default="lmpc,pid",
                         help="baseline controllers run on tp in W1 ('' for none)")
     tensioner_arg(report)
+    machine_arg(report)
     executor_args(report)
     report.add_argument("--out", default="runs/report",
                         help="output directory; runs already complete in it are kept")
@@ -637,6 +750,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--retry-failed", action="store_true",
                        help="run again the runs whose rows hold an error")
     tensioner_arg(sweep)
+    machine_arg(sweep)
     executor_args(sweep)
     sweep.set_defaults(func=_cmd_sweep)
 
@@ -655,6 +769,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "Latin-hypercube start (start_points in the spec; default one per "
                        "core)")
     calib.set_defaults(func=_cmd_calibrate)
+    machines = sub.add_parser("machines", help="list the shipped machines")
+    machines.set_defaults(func=_cmd_machines)
 
     scenarios = sub.add_parser("scenarios", help="list the built-in operating conditions")
     scenarios.set_defaults(func=_cmd_scenarios)

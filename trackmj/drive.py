@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from trackmj.machine import machine
+from trackmj.machine import machine as host_machine
 from trackmj.plant import PassiveTensioner, TrackPlant
 from trackmj.ports import COUPLING_STEP_S, TensionerElement
 from trackmj.track_energy import TrackEnergyLedger
@@ -72,10 +72,14 @@ def _file_tensioner(path: str | Path, stroke_m: float) -> tuple[TensionerElement
 def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = None,
           params: str | Path | None = None, preload_N: float | None = None,
           out_dir: str | Path | None = None,
-          tensioner: str | Path | None = None) -> DriveResult:
+          tensioner: str | Path | None = None, machine: str | Path | None = None,
+          overrides: dict[str, Any] | None = None) -> DriveResult:
     """Drive the track at ``speed_m_s`` [m/s] (ramped over min(1 s, duration/4)) for
     ``duration_s`` [s] with the passive tensioner (its ``preload_N`` [N] if given) or the
     ``tensioner`` file's, and book the energy ledger from rest; write ``out_dir`` if given.
+    ``machine``, ``params`` (a model file replacing the machine's mechanics), ``overrides``
+    (``{dotted key: value}`` of the model file) and ``model`` (an MJCF file) as in
+    :meth:`TrackPlant.load`.
 
     Raises ValueError for a speed outside [−5, 5] m/s or a duration outside (0, 3600] s,
     ParameterError for a bad tensioner file (before any work), PhysicsError or FmuError if
@@ -88,12 +92,12 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
         raise ValueError(f"duration {duration_s!r} s: allowed (0, {MAX_DURATION_S}]")
     if tensioner is not None and preload_N is not None:
         raise ValueError("give a preload or a tensioner file, not both")
-    plant = TrackPlant.load(model, params)
+    plant = TrackPlant.load(model, params, machine=machine, overrides=overrides)
     if tensioner is not None:
         element, described = _file_tensioner(tensioner, plant.stroke_m)
     else:
         element = PassiveTensioner.from_params(plant.params)
-        described = {"element": "passive", "file": "packaged"}
+        described = {"element": "passive", "file": "model"}
         if preload_N is not None:
             if not (math.isfinite(preload_N) and preload_N >= 0.0):
                 raise ValueError(f"preload {preload_N!r} N: must be finite and >= 0")
@@ -131,7 +135,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
         "tensioner": described,
         **({"preload_N": element.preload_N} if described["element"] == "passive" else {}),
         "real_time_factor": duration_s / wall, "plant_real_time_factor": duration_s / plant_wall,
-        "wall_time_s": wall, "machine": machine(),
+        "wall_time_s": wall, "machine": host_machine(),
         "track_energy": energy.to_dict(),
         "steady": _steady_means(series, ramp_s + 1.0 if duration_s > ramp_s + 1.0 else 0.0),
         "max_pin_gap_m": float(series["max_pin_gap_m"].max()),

@@ -46,6 +46,7 @@ class RunSpec:
     hydraulics: str | None = None
     control: str | None = None
     tensioner: str | None = None
+    machine: str | None = None
 
     def as_tp(self) -> RunSpec:
         """The same case in the tp architecture (what a dp-a run replays)."""
@@ -63,7 +64,7 @@ class RunSpec:
                     controller=self.controller, estimator=self.estimator, seed=self.seed,
                     duration=self.duration, variant=self.variant, set=dict(self.overrides),
                     model=self.model, hydraulics=self.hydraulics, control=self.control,
-                    tensioner=self.tensioner)
+                    tensioner=self.tensioner, machine=self.machine)
 
 
 @dataclass

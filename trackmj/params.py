@@ -15,7 +15,7 @@ annotation                accepted value
                           ``max_len`` characters)
 ``Literal["a", "b"]``     one of the listed values
 ``tuple[float, float]``   an array of exactly that many items
-``tuple[float, ...]``     a non-empty array of items
+``tuple[float, ...]``     a non-empty array of items (empty allowed with ``allow_empty``)
 ``X | None``              ``None`` only as a code default: TOML has no null, so "not given"
 a Parameters dataclass    a table ``[name]``
 ``tuple[D, ...]``         an array of tables ``[[name]]`` (may be empty)
@@ -140,6 +140,7 @@ class Spec:
     pattern: str | None = None
     max_len: int | None = None
     doc: str = ""
+    allow_empty: bool = False
 
     def range_text(self) -> str:
         """The allowed range as text, e.g. ``(0, 1e+11]``; '' if unbounded."""
@@ -154,7 +155,8 @@ def param(low: float | None = None, high: float | None = None, *, unit: str | No
           open_low: bool = False, open_high: bool = False,
           choices: Sequence[Any] | None = None, pattern: str | None = None,
           max_len: int | None = None, default: Any = dataclasses.MISSING,
-          default_factory: Any = dataclasses.MISSING, doc: str = "") -> Any:
+          default_factory: Any = dataclasses.MISSING, doc: str = "",
+          allow_empty: bool = False) -> Any:
     """Dataclass field with its allowed range, unit and meaning.
 
     Parameters
@@ -172,13 +174,16 @@ def param(low: float | None = None, high: float | None = None, *, unit: str | No
     doc : str
         One line on what the value means (shown in errors for missing keys and by
         :func:`describe_schema`).
+    allow_empty : bool
+        A ``tuple[X, ...]`` field may be an empty array (e.g. no return rollers).
 
     Returns
     -------
     dataclasses.Field
     """
     spec = Spec(low, high, unit, open_low, open_high,
-                None if choices is None else tuple(choices), pattern, max_len, doc)
+                None if choices is None else tuple(choices), pattern, max_len, doc,
+                allow_empty)
     return dataclasses.field(default=default, default_factory=default_factory,
                              metadata={"param": spec})
 
@@ -398,7 +403,8 @@ def _coerce(value: Any, hint: Any, spec: Spec, at: Location,
         if not isinstance(value, list | tuple):
             raise fail(f"expected {_expected(hint)}, got {_kind(value)}")
         variable = len(args) == 2 and args[1] is Ellipsis
-        if variable and not value and not dataclasses.is_dataclass(args[0]):
+        if variable and not value and not (dataclasses.is_dataclass(args[0])
+                                           or spec.allow_empty):
             raise fail(f"expected {_expected(hint)}, got an empty array")
         if not variable and len(value) != len(args):
             raise fail(f"expected {_expected(hint)}, got {len(value)}")
@@ -824,7 +830,10 @@ def describe_schema(cls: type, prefix: str = "") -> list[KeySpec]:
             default = None if fld.required else repr(f.default if f.default is not
                                                       dataclasses.MISSING else f.default_factory())
             choices = f"one of {list(fld.spec.choices)}" if fld.spec.choices else ""
-            rows.append(KeySpec(key, _expected(fld.hint), fld.spec.unit or "",
+            expected = _expected(fld.hint)
+            if fld.spec.allow_empty:
+                expected = expected.replace("a non-empty array", "an array (may be empty)")
+            rows.append(KeySpec(key, expected, fld.spec.unit or "",
                                 fld.spec.range_text() or choices, default, fld.spec.doc))
     return rows
 

@@ -6,7 +6,7 @@ Sign conventions (see also :mod:`trackmj.ports`):
   (tensioning). Stroke velocity v = ds/dt [m/s].
 * tensioner force [N] > 0 pushes the idler carrier outward.
 * pin tension [N] > 0 pulls the two links of a pin apart along the track (tension);
-  pin k joins link_{k-1} and link_k; array index k, shape (82,). Each pin is a compliant
+  pin k joins link_{k-1} and link_k; array index k, shape (link_count,). Each pin is a compliant
   ``connect`` with a stated stiffness (``[pins]`` of the model file); its tension is the
   force that connect transmits, along the bisector of the two links.
 * chassis pose (x [m] forward, z [m] up, pitch [rad] about +y, nose-down positive).
@@ -15,19 +15,22 @@ Sign conventions (see also :mod:`trackmj.ports`):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
 
 from trackmj.model import (
     ModelParams,
-    default_xml_path,
+    link_name,
     load_model_params,
+    pin_name,
     with_heightfield,
 )
+from trackmj.model.mjcf import read_mjcf
 from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElement
 from trackmj.terrain import RoadProfile
 
@@ -76,19 +79,21 @@ class DerailmentStatus:
 
 @dataclass(frozen=True)
 class StrandTension:
-    """Mean pin tension [N] of the upper strand (slack side, set by the tensioner) and of
-    the rear lower run between sprocket and rearmost road wheel (tight side, carries the
-    traction)."""
+    """Mean pin tension [N] of the upper strand and of the sprocket's lower run (between
+    the sprocket and its nearest road wheel). Driving forward with the sprocket at the rear
+    the lower run is the tight side (it carries the traction) and the upper strand the
+    slack side set by the tensioner; with the sprocket at the front the upper strand is
+    the tight side."""
 
     upper_N: float
     lower_N: float
 
 
 class TrackPlant:
-    """One LF1352 track side in MuJoCo with named accessors.
+    """One track side in MuJoCo with named accessors (any machine's generated model).
 
     State layout: ``data.qpos`` holds chassis (x, z, pitch), sprocket angle, idler slide,
-    six suspension slides, then (x, z, pitch) of each free link link_00..link_81; use the
+    the suspension slides, then (x, z, pitch) of each free link link_00..; use the
     accessors rather than raw indices. The coupling step is 1 ms; the MuJoCo timestep
     must divide it (``substeps`` MuJoCo steps per coupling step). Sign conventions: see the
     module docstring (stroke outward positive, tensioner force > 0 pushes the idler out).
@@ -141,10 +146,10 @@ class TrackPlant:
         self._drive = m.actuator("sprocket_drive").id
         n = params.track.link_count
         self.link_count = n
-        self._link_body = np.array([m.body(f"link_{k:02d}").id for k in range(n)])
-        self._pin_geom = np.array([m.geom(f"link_{k:02d}_pin").id for k in range(n)])
+        self._link_body = np.array([m.body(link_name(k)).id for k in range(n)])
+        self._pin_geom = np.array([m.geom(link_name(k) + "_pin").id for k in range(n)])
         # the pin connects are the model's only equalities, in pin order: 3 rows each
-        pin_eq = [m.equality(f"pin_{k:02d}").id for k in range(n)]
+        pin_eq = [m.equality(pin_name(k)).id for k in range(n)]
         if m.neq != n or pin_eq != list(range(n)):
             raise ValueError(f"{m.neq} equalities: expected the {n} pin connects pin_00.. "
                              "only, in order (regenerate the model)")
@@ -163,24 +168,40 @@ class TrackPlant:
     @classmethod
     def load(cls, xml_path: str | Path | None = None,
              param_path: str | Path | None = None,
-             terrain: RoadProfile | None = None) -> TrackPlant:
-        """Load the committed model (default ``models/lf1352.xml``) and its parameters.
+             terrain: RoadProfile | None = None, *, machine: str | Path | None = None,
+             overrides: Mapping[str, Any] | None = None) -> TrackPlant:
+        """Load a machine's track (default the packaged LF1352).
 
-        terrain: optional road profile replacing the flat ground by a heightfield (see
+        machine: a shipped machine's name or a machine file (:mod:`trackmj.machines`);
+        param_path: a model parameter file replacing the machine's mechanics; overrides:
+        ``{dotted key: value}`` of the model file (``--set model.KEY=VALUE``); xml_path: an
+        MJCF file to load instead of the model of those parameters (the machine's committed
+        reference for its own parameters, else generated and cached; a scene that includes
+        its machine part is joined with it). terrain: optional
+        road profile replacing the flat ground by a heightfield (see
         :func:`trackmj.model.with_heightfield`).
         """
-        path = Path(xml_path) if xml_path is not None else default_xml_path()
-        if not path.is_file():
-            raise FileNotFoundError(f"model file not found: {path}")
+        from trackmj.machines import is_own, mechanics, model_mjcf, resolve
+
+        mach = resolve(machine)
+        params = (load_model_params(param_path or mach.mechanics, overrides=overrides)
+                  if param_path is not None or overrides else mechanics(mach))
+        if xml_path is not None:
+            path: Path | None = Path(xml_path)
+            if not path.is_file():
+                raise FileNotFoundError(f"model file not found: {path}")
+            text = read_mjcf(path)
+        else:
+            path = mach.reference_mjcf if is_own(params, mach) else None
+            text = model_mjcf(params, mach)
         try:
-            if terrain is None:
-                model = mujoco.MjModel.from_xml_path(str(path))
-            else:
-                mjcf = with_heightfield(path.read_text(), terrain)
-                model = mujoco.MjModel.from_xml_string(mjcf)
+            if terrain is not None:
+                text = with_heightfield(text, terrain)
+            model = mujoco.MjModel.from_xml_string(text)
         except ValueError as exc:
-            raise ValueError(f"{path}: MuJoCo could not load the model: {exc}") from None
-        plant = cls(model, load_model_params(param_path))
+            raise ValueError(f"{path or 'generated model'}: MuJoCo could not load the model: "
+                             f"{exc}") from None
+        plant = cls(model, params)
         plant.model_path = path
         return plant
 
@@ -322,11 +343,11 @@ class TrackPlant:
         return int(sum(w.number for w in self.data.warning))
 
     def pin_positions(self) -> np.ndarray:
-        """World (x, z) of every pin [m], shape (82, 2)."""
+        """World (x, z) of every pin [m], shape (link_count, 2)."""
         return self.data.geom_xpos[self._pin_geom][:, [0, 2]].copy()
 
     def pin_tensions_N(self) -> np.ndarray:
-        """Tension in every pin [N], shape (82,), positive pulling the links apart.
+        """Tension in every pin [N], shape (link_count,), positive pulling the links apart.
 
         The force the pin's ``connect`` transmits (MuJoCo's ``efc_force``, the force the
         last step applied), projected on the bisector of the two links' axes. It is the
@@ -385,6 +406,12 @@ class TrackPlant:
         # undo the rotation about +y by `pitch`: x' = c x - s z, z' = s x + c z
         return np.column_stack([c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]])
 
+    def pins_layout_frame(self) -> np.ndarray:
+        """(x, z) of every pin [m] in the chassis frame, placed as the chassis was at the
+        layout (origin at ride height): comparable with the layout's coordinates,
+        (link_count, 2)."""
+        return self._chassis_frame_pins() + np.array([0.0, self.params.chassis.ride_height_m])
+
     def _home_envelope(self) -> np.ndarray:
         from scipy.spatial import ConvexHull
 
@@ -392,7 +419,7 @@ class TrackPlant:
         return pts[ConvexHull(pts).vertices]  # counter-clockwise
 
     def envelope_excursion_m(self) -> np.ndarray:
-        """Distance of each pin outside its home envelope (chassis frame) [m], (82,)."""
+        """Distance of each pin outside its home envelope (chassis frame) [m], (link_count,)."""
         pts = self._chassis_frame_pins()
         hull = self._envelope
         edges = np.roll(hull, -1, axis=0) - hull
@@ -412,12 +439,15 @@ class TrackPlant:
 
     def _lower_mask(self, pts: np.ndarray) -> np.ndarray:
         p = self.params
-        return ((pts[:, 0] > p.sprocket.x_m) & (pts[:, 0] < min(p.road_wheels.x_m))
+        sx, wheels = p.sprocket.x_m, p.road_wheels.x_m
+        lo, hi = (sx, min(wheels)) if sx < p.idler.x_m else (max(wheels), sx)
+        return ((pts[:, 0] > lo) & (pts[:, 0] < hi)
                 & (pts[:, 1] < p.sprocket.z_m - p.chassis.ride_height_m - 0.05))
 
     def lower_strand_pins(self) -> np.ndarray:
-        """Indices of pins in the rear lower run: between the sprocket and the rearmost
-        road wheel, 5 cm below the sprocket centre (the tight side driving forward)."""
+        """Indices of pins in the sprocket's lower run: between the sprocket and its
+        nearest road wheel, 5 cm below the sprocket centre. With the sprocket at the rear
+        it is the tight side driving forward; at the front the upper strand is."""
         return np.nonzero(self._lower_mask(self._chassis_frame_pins()))[0]
 
     def derailment(self) -> DerailmentStatus:

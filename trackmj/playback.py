@@ -11,7 +11,7 @@ Scene (:meth:`PlaybackRecorder.log_frame`, one row per frame; ``scene/terrain`` 
 
 - ``scene/terrain``: ground profile (flat plane or the ``terrain`` heightfield) at the two
   shoe edges, y = ±width/2;
-- ``scene/track/links``: the rail line through the 82 pins (y = 0) and the two shoe edges;
+- ``scene/track/links``: the rail line through the pins (y = 0) and the two shoe edges;
 - ``scene/track/pins``: pin points coloured by pin tension (blue low → red high);
 - ``scene/wheels/<body>`` for sprocket, idler, road_wheel_1..6, return_roller_1..2: the
   body pose (``Transform3D``, one row per frame) and, static in the body frame, the outline
@@ -47,6 +47,7 @@ import rerun.blueprint as rrb
 from rerun.components import TensorDataBatch
 
 from trackmj.io import install
+from trackmj.model import link_name
 from trackmj.plant import TrackPlant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.results import Result
@@ -210,7 +211,7 @@ class PlaybackRecorder:
         """
         m = plant.model
         self.half_width_m = 0.5 * plant.params.track.link_width_m
-        self._pin_geoms = np.array([m.geom(f"link_{k:02d}_pin").id
+        self._pin_geoms = np.array([m.geom(link_name(k) + "_pin").id
                                     for k in range(plant.link_count)])
         wheels = [i for i in range(m.ngeom)
                   if m.geom_type[i] == mujoco.mjtGeom.mjGEOM_CYLINDER

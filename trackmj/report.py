@@ -97,11 +97,12 @@ def event_moves(scenario: str, duration: float | None) -> dict[str, float]:
 def plan(scenarios: Sequence[str], seeds: Sequence[int], duration: float | None,
          archs: Sequence[str] = REPORT_ARCHS,
          baselines: Sequence[str] = BASELINES, tensioner: str | None = None,
-         ) -> list[PlannedRun]:
+         machine: str | None = None) -> list[PlannedRun]:
     """Every run of a report: each scenario's variants × seeds × ``archs`` with its own
     controller, then ``baselines`` on tp in the nominal :data:`BASELINE_SCENARIOS`;
     ``tensioner`` (a tensioner file) replaces the hydraulic element where an architecture
-    has one (:func:`tensioner_for`). A ``duration`` that would cut off a scenario's step,
+    has one (:func:`tensioner_for`); ``machine`` (a shipped name or a machine file) is
+    every run's. A ``duration`` that would cut off a scenario's step,
     pulse or drop moves its events inside the run (:func:`event_moves`). Each run is
     validated here (ParameterError before anything runs) and known by its identity
     (:func:`trackmj.campaign.run_key`)."""
@@ -112,11 +113,13 @@ def plan(scenarios: Sequence[str], seeds: Sequence[int], duration: float | None,
                                  for k, v in event_moves(name, duration).items()})
         specs += [RunSpec(scenario=name, architecture=arch, controller=sc.controller,
                           seed=seed, duration=duration, variant=variant.name,
-                          overrides=moves, tensioner=tensioner_for(arch, tensioner))
+                          overrides=moves, tensioner=tensioner_for(arch, tensioner),
+                          machine=machine)
                   for variant in sc.variants for seed in seeds for arch in archs]
         if sc.name in BASELINE_SCENARIOS:
             specs += [RunSpec(scenario=name, architecture="tp", controller=c, seed=seed,
-                              duration=duration, overrides=moves, tensioner=tensioner)
+                              duration=duration, overrides=moves, tensioner=tensioner,
+                              machine=machine)
                       for c in baselines if c != sc.controller for seed in seeds]
     setups: dict[RunSpec, Any] = {}
     runs = []

@@ -86,6 +86,7 @@ from trackmj.campaign import (
     read_units,
     run_campaign,
 )
+from trackmj.machines import names
 from trackmj.params import (
     FILE_KINDS,
     Location,
@@ -165,6 +166,9 @@ class SweepTable(Parameters):
     estimator: str | None = param(choices=choices(ESTIMATORS), default=None,
                                   doc="state estimator (default: the scenario's)")
     variant: str = param(max_len=64, default="nominal", doc="scenario variant (W5)")
+    machine: str | None = param(max_len=4096, default=None,
+                                doc="a shipped machine's name or a machine file (default "
+                                    "lf1352)")
     model: str | None = param(max_len=4096, default=None, doc="model parameter file")
     hydraulics: str | None = param(max_len=4096, default=None,
                                    doc="hydraulic parameter file")
@@ -389,7 +393,9 @@ def plan(spec: SweepSpec) -> list[PlannedRun]:
         raise ParameterError(f"{spec.where()}: {n_runs} runs; a sweep has at most "
                              f"{MAX_RUNS} (fewer values, or method = 'lhs')")
     files = {"model": spec.path(table.model), "hydraulics": spec.path(table.hydraulics),
-             "control": spec.path(table.control), "tensioner": spec.path(table.tensioner)}
+             "control": spec.path(table.control), "tensioner": spec.path(table.tensioner),
+             "machine": (table.machine if table.machine is None or table.machine in names()
+                         else spec.path(table.machine))}
     inputs = json.dumps({"files": {k: v for k, v in files.items() if v},
                          "set": list(table.set or ())}, sort_keys=True)
     runs = []
@@ -471,7 +477,8 @@ class SweepSummary:
 def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
           workers: int | None = None, scheduler: str | None = None, executor: Any = None,
           keep_runs: bool = False, retry_failed: bool = False, plot: bool = True,
-          progress: bool = True, tensioner: str | Path | None = None) -> SweepSummary:
+          progress: bool = True, tensioner: str | Path | None = None,
+          machine: str | None = None) -> SweepSummary:
     """Run a parameter study (see the module docstring for the spec and the output).
 
     Parameters
@@ -496,6 +503,9 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
         Show a progress bar over the simulated seconds of the runs.
     tensioner : str or Path, optional
         A tensioner file for every run (the CLI's ``--tensioner``; replaces the spec's).
+    machine : str, optional
+        A shipped machine's name or a machine file for every run (the CLI's
+        ``--machine``; replaces the spec's).
 
     Returns
     -------
@@ -506,6 +516,9 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
     if tensioner is not None:
         spec = dataclasses.replace(spec, table=dataclasses.replace(
             spec.table, tensioner=str(Path(tensioner).resolve())))
+    if machine is not None:
+        spec = dataclasses.replace(spec, table=dataclasses.replace(spec.table,
+                                                                   machine=machine))
     runs = plan(spec)
     with Store(out, "sweep", markers=(SPEC_COPY, FIGURES)) as store:
         from trackmj.io import write_text_atomic

@@ -37,6 +37,7 @@ from dataclasses import asdict, dataclass, field
 import mujoco
 import numpy as np
 
+from trackmj.model import link_name
 from trackmj.plant import TrackPlant
 
 PARTNERS = ("ground", "ground_friction", "sprocket", "road_wheels", "idler",
@@ -110,7 +111,7 @@ class TrackEnergyLedger:
         self._drive_dof = int(m.jnt_dofadr[m.actuator_trnid[self._drive, 0]])
         self._tensioner_dof = int(m.jnt_dofadr[m.joint("idler_slide").id])
         self._damped_dofs = np.nonzero(m.dof_damping > 0.0)[0]   # the suspension slides
-        if np.any(m.dof_damping[m.jnt_dofadr[[m.joint(f"link_{k:02d}_pitch").id
+        if np.any(m.dof_damping[m.jnt_dofadr[[m.joint(link_name(k) + "_pitch").id
                                               for k in range(plant.link_count)]]] > 0.0):
             raise ValueError("energy ledger: link hinges must not carry joint damping")
         # the implicit part of the step, qDeriv·Δv, in MuJoCo's sparse layout

@@ -13,10 +13,10 @@ the importing tool through the FMU's embedded Python (see :mod:`trackmj.fmi.expo
 A communication step is any integer multiple of 1 ms (a doStep of another length fails).
 Both save and restore their state (canGetAndSetFMUstate: a copy of the MuJoCo state and,
 for the plant, of the hydraulics), so an importer can roll back and couple strongly.
-Parameters (set before initialisation): ``machine`` ("lf1352", the packaged machine, or
-a model parameter file), ``terrain`` ("flat", or a scenario name or file whose road
-profile is used, drawn from ``seed``), ``seed``; the plant also ``scenario`` (its
-initial tension and supply model; default W1).
+Parameters (set before initialisation): ``machine`` (a shipped machine's name, default
+"lf1352", a machine file ``*_machine.toml``, or a model parameter file), ``terrain``
+("flat", or a scenario name or file whose road profile is used, drawn from ``seed``),
+``seed``; the plant also ``scenario`` (its initial tension and supply model; default W1).
 """
 
 from __future__ import annotations
@@ -41,11 +41,17 @@ PLANT_OUTPUTS = ("p_head_measured_Pa", "p_rod_measured_Pa", "stroke_measured_m",
                  "velocity_m_s", "chassis_acc_z_m_s2")
 
 
-def model_file(machine: str) -> str | None:
-    """The model parameter file of ``machine``: None (the packaged LF1352) for "" or
-    "lf1352", else the file it names. The one place the FMUs resolve a machine, passed on as
-    the run's ``model`` (where ``trackmj.sim.setup.prepare`` takes a run's model files)."""
-    return None if machine.strip().lower() in ("", "lf1352") else machine
+def machine_files(machine: str) -> dict[str, str | None]:
+    """``prepare`` arguments for the FMU parameter ``machine``: a shipped machine's name
+    ("" the default, lf1352) or a machine file (``*_machine.toml``) through the machine
+    registry (:func:`trackmj.machines.resolve`); any other TOML is a model parameter file
+    on the default machine. The one place the FMUs resolve a machine."""
+    from trackmj.machines import MACHINE_SUFFIX, names
+
+    text = machine.strip()
+    if not text or text.lower() in names() or text.endswith(MACHINE_SUFFIX):
+        return {"machine": text or None, "model": None}
+    return {"machine": None, "model": text}
 
 
 def _steps(step_size: float) -> int:
@@ -65,7 +71,8 @@ class _Base(Fmi2Slave):
         self.machine, self.terrain, self.seed = "lf1352", "flat", 0
         self.register_variable(String("machine", causality=Fmi2Causality.parameter,
                                       variability=Fmi2Variability.fixed,
-                                      description="machine: lf1352 or a model TOML"))
+                                      description="machine: a shipped name (lf1352), a "
+                                                  "*_machine.toml or a model TOML"))
         self.register_variable(String("terrain", causality=Fmi2Causality.parameter,
                                       variability=Fmi2Variability.fixed,
                                       description="flat, or a scenario whose road is used"))
@@ -83,7 +90,7 @@ class _Base(Fmi2Slave):
         from trackmj.sim.setup import prepare
 
         name = scenario if self.terrain in ("", "flat") else self.terrain
-        return prepare(name, model=model_file(self.machine), seed=int(self.seed))
+        return prepare(name, seed=int(self.seed), **machine_files(self.machine))
 
     def _outputs_track(self, plant, derailment: bool) -> None:
         self.stroke_m = plant.stroke_m
@@ -189,7 +196,7 @@ class PlantSlave(_Base):
         from trackmj.sim.setup import prepare
 
         terrain = None if self.terrain in ("", "flat") else self.terrain
-        setup = prepare(terrain or self.scenario, model=model_file(self.machine),
+        setup = prepare(terrain or self.scenario, **machine_files(self.machine),
                         seed=int(self.seed))
         self.asm = asm = assemble(setup)
         self.plant = asm.track

@@ -1,5 +1,6 @@
-"""Generation of ``models/lf1352.xml``: layout, a check of the initial state, and the
-``home`` keyframe found by settling under gravity with the passive tensioner preload.
+"""Generation of a machine's MJCF (``models/lf1352.xml`` for the study's): layout, a check
+of the initial state, and the ``home`` keyframe found by settling under gravity with the
+passive tensioner preload.
 
 Settling uses MuJoCo alone (no plant): the passive spring-damper
 F = preload − k·(s − s_layout) − c·v is the tensioner actuator's affine bias
@@ -16,8 +17,8 @@ import numpy as np
 
 from trackmj.io import write_text_atomic
 from trackmj.model.layout import compute_layout
-from trackmj.model.mjcf import build_mjcf
-from trackmj.model.params import ModelParams, default_xml_path, load_model_params
+from trackmj.model.mjcf import build_mjcf, split_mjcf
+from trackmj.model.params import MODEL_NAME, ModelParams, default_xml_path, load_model_params
 from trackmj.params import ParameterError
 
 SETTLE_DURATION_S = 3.0
@@ -37,7 +38,7 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
     if worst < -MAX_INITIAL_PENETRATION_M:
         raise ParameterError(f"initial layout penetrates by {-worst * 1e3:.2f} mm "
                              f"(limit {MAX_INITIAL_PENETRATION_M * 1e3:.1f} mm): check radii "
-                             "and positions in lf1352.toml")
+                             "and positions in the model file")
     steps = round(duration_s / model.opt.timestep)
     for _ in range(steps):
         mujoco.mj_step(model, data)
@@ -46,8 +47,8 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
     return data
 
 
-def generate_mjcf(params: ModelParams | None = None) -> str:
-    """Full MJCF of the model with the settled ``home`` keyframe.
+def generate_mjcf(params: ModelParams | None = None, name: str = MODEL_NAME) -> str:
+    """Full MJCF of the model with the settled ``home`` keyframe (``name``: the machine's).
 
     Keyframe values are rounded to 1e-6 so the committed file does not depend on the
     last bits of floating-point arithmetic.
@@ -56,11 +57,22 @@ def generate_mjcf(params: ModelParams | None = None) -> str:
     layout = compute_layout(params)
     model = mujoco.MjModel.from_xml_string(build_mjcf(params, layout))
     data = settle(model, params, SETTLE_DURATION_S)
-    return build_mjcf(params, layout, home_qpos=np.round(data.qpos, 6))
+    return build_mjcf(params, layout, home_qpos=np.round(data.qpos, 6), name=name)
 
 
-def write_model(path: str | Path | None = None, params: ModelParams | None = None) -> Path:
-    """Generate the model and write it atomically (default: packaged lf1352.xml)."""
+def scene_path(path: str | Path) -> Path:
+    """The scene file beside a machine's MJCF ``NAME.xml``: ``NAME_scene.xml``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}_scene.xml")
+
+
+def write_model(path: str | Path | None = None, params: ModelParams | None = None,
+                name: str = MODEL_NAME) -> Path:
+    """Generate the model and write its two parts atomically (Menagerie habit): the machine
+    to ``path`` (default: packaged lf1352.xml) and the scene that includes it (ground,
+    light) to :func:`scene_path`. Returns the scene's path, the file to load."""
     path = Path(path) if path is not None else default_xml_path()
-    write_text_atomic(path, generate_mjcf(params))
-    return path
+    machine, scene = split_mjcf(generate_mjcf(params, name), path.name)
+    write_text_atomic(path, machine)
+    write_text_atomic(scene_path(path), scene)
+    return scene_path(path)

@@ -3,15 +3,20 @@
 The model is planar (x forward, z up, all hinges about +y):
 
 * ``chassis``: slide x, slide z, hinge y (``chassis_x``, ``chassis_z``, ``chassis_pitch``).
-* ``sprocket`` (rear, hinge ``sprocket_hinge``, velocity servo ``sprocket_drive``) with
+* ``sprocket`` (rear or front, hinge ``sprocket_hinge``, velocity servo ``sprocket_drive``;
+  a positive speed turns it so the vehicle travels forward, wherever it sits) with
   ``tooth_count`` capsule teeth around a hub on which the link rails seat.
-* ``idler_carrier`` on prismatic joint ``idler_slide`` (+x = outward = tensioning) carrying
-  ``idler``; actuator ``tensioner`` is affine: force = ctrl + biasprm[2]·v so that
+* ``idler_carrier`` on prismatic joint ``idler_slide`` carrying ``idler``, at the end
+  opposite the sprocket; the slide axis points outward (away from the sprocket, +x for a
+  front idler, −x for a rear one), inclined by ``[idler].slide_angle_rad`` above the
+  horizontal, so a positive slide position and a positive tensioner force always tension
+  the track. Actuator ``tensioner`` is affine: force = ctrl + biasprm[2]·v so that
   ``implicitfast`` integrates a cylinder's dF/dv implicitly.
-* ``road_wheel_1..6`` on vertical spring-damper slides ``road_wheel_k_suspension``;
-  ``return_roller_1..2`` fixed to the chassis.
-* ``link_00..link_81``: rigid links, numbered in the running direction for forward travel
-  (bottom strand rearward, over the sprocket, top strand forward, round the idler).
+* ``road_wheel_1..N`` on vertical spring-damper slides ``road_wheel_k_suspension``;
+  ``return_roller_1..M`` (M may be 0) fixed to the chassis.
+* ``link_00..link_{n-1}`` (:func:`link_name`): rigid links, numbered in the running
+  direction for forward travel (bottom strand rearward, up round the rear wheel, top strand
+  forward, down round the front wheel).
   Pin k joins link_{k-1} and link_k. Every link is a free planar body (world slides
   ``link_kk_x``, ``link_kk_z``, hinge ``link_kk_pitch`` through its centre of mass) and
   every pin is a ``connect`` equality ``pin_kk`` with the stated pin stiffness and damping
@@ -39,11 +44,12 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from trackmj.model.layout import Layout, hub_radius
+from trackmj.model.layout import Layout, hub_radius, outward_sign, slide_axis
 from trackmj.model.params import MODEL_NAME, ModelParams
 from trackmj.model.soft import SoftConstraint, body_inv_weight, row_diag, soft_constraint
 from trackmj.params import ParameterError
@@ -52,6 +58,17 @@ from trackmj.terrain import RoadProfile, heightfield
 _RAIL, _PIN = 8, 16  # contype bits of link rails and pin spheres
 TERRAIN_WIDTH_M = 2.0
 TERRAIN_BASE_M = 0.5
+
+
+def link_name(k: int) -> str:
+    """Name of link k (body; its joints add ``_x``, ``_z``, ``_pitch``, geoms ``_rail``,
+    ``_pin``, ``_shoe``): ``link_00`` .. ``link_99``, ``link_100`` .. for any count."""
+    return f"link_{k:02d}"
+
+
+def pin_name(k: int) -> str:
+    """Name of pin k, the connect joining link k−1 and link k (``pin_00`` ..)."""
+    return f"pin_{k:02d}"
 
 
 def _fmt(*values: float) -> str:
@@ -194,13 +211,15 @@ def _idler(chassis: ET.Element, p: ModelParams, layout: Layout) -> None:
     """Idler wheel on the tensioning carrier (prismatic ``idler_slide``)."""
     ride, half_w = p.chassis.ride_height_m, p.track.link_width_m / 2.0
     ix, iz = layout.idler_center
+    ux, uz = slide_axis(p)
     carrier = _sub(chassis, "body", name="idler_carrier", pos=_fmt(ix, 0, iz - ride))
-    _sub(carrier, "joint", name="idler_slide", type="slide", axis="1 0 0",
+    _sub(carrier, "joint", name="idler_slide", type="slide", axis=_fmt(ux, 0, uz),
          range=_fmt(*p.idler.slide_range_m))
     _sub(carrier, "inertial", pos="0 0 0", mass=_fmt(p.idler.carrier_mass_kg),
          diaginertia="0.5 0.5 0.5")
     _sub(carrier, "geom", name="idler_carrier_visual", class_="visual", type="box",
-         pos=_fmt(-0.25, -0.3, 0), size="0.25 0.04 0.04", rgba="0.3 0.3 0.8 1")
+         pos=_fmt(-0.25 * outward_sign(p), -0.3, 0), size="0.25 0.04 0.04",
+         rgba="0.3 0.3 0.8 1")
     _sub(carrier, "site", name="idler_force_site", pos="0 0 0", size="0.02")
     idler = _sub(carrier, "body", name="idler", pos="0 0 0")
     _sub(idler, "inertial", pos="0 0 0", mass=_fmt(p.idler.mass_kg),
@@ -242,14 +261,14 @@ def _link_inertia(p: ModelParams) -> tuple[float, float, float]:
 
 
 def _link_directions(layout: Layout) -> np.ndarray:
-    """Angle of every link's axis (pin k -> pin k+1) from +x towards +z [rad], (82,)."""
+    """Angle of every link's axis (pin k -> pin k+1) from +x towards +z [rad], (link_count,)."""
     pins = layout.pins
     step = np.roll(pins, -1, axis=0) - pins
     return np.arctan2(step[:, 1], step[:, 0])
 
 
 def _links(root: ET.Element, world: ET.Element, p: ModelParams, layout: Layout) -> None:
-    """The 82 links as free planar bodies joined by one ``connect`` per pin.
+    """The links as free planar bodies joined by one ``connect`` per pin.
 
     Link k has its origin at pin k and its x axis towards pin k+1; its joints are world
     slides ``link_kk_x``, ``link_kk_z`` and the hinge ``link_kk_pitch`` about +y through
@@ -264,24 +283,24 @@ def _links(root: ET.Element, world: ET.Element, p: ModelParams, layout: Layout) 
     direction = _link_directions(layout)
     for k in range(n):
         quat = _quat_y(direction[k])
-        body = _sub(world, "body", name=f"link_{k:02d}", pos=_fmt(pins[k, 0], 0, pins[k, 1]),
+        body = _sub(world, "body", name=link_name(k), pos=_fmt(pins[k, 0], 0, pins[k, 1]),
                     quat=quat)
         rot = np.empty(9)
         mujoco.mju_quat2Mat(rot, np.array([float(v) for v in quat.split()]))
         rot = rot.reshape(3, 3)
         # slide axes are given in the body frame: world x and z seen from the link
-        _sub(body, "joint", name=f"link_{k:02d}_x", type="slide",
+        _sub(body, "joint", name=link_name(k) + "_x", type="slide",
              axis=_fmt(*(rot.T @ (1.0, 0.0, 0.0))))
-        _sub(body, "joint", name=f"link_{k:02d}_z", type="slide",
+        _sub(body, "joint", name=link_name(k) + "_z", type="slide",
              axis=_fmt(*(rot.T @ (0.0, 0.0, 1.0))))
-        _sub(body, "joint", name=f"link_{k:02d}_pitch", class_="link_pitch",
+        _sub(body, "joint", name=link_name(k) + "_pitch", class_="link_pitch",
              pos=_fmt(pitch / 2, 0, 0))
         _sub(body, "inertial", pos=_fmt(pitch / 2, 0, 0), mass=_fmt(t.link_mass_kg),
              diaginertia=_fmt(*_link_inertia(p)))
-        _sub(body, "geom", name=f"link_{k:02d}_rail", class_="rail",
+        _sub(body, "geom", name=link_name(k) + "_rail", class_="rail",
              fromto=_fmt(0, 0, 0, pitch, 0, 0))
-        _sub(body, "geom", name=f"link_{k:02d}_pin", class_="pin", pos="0 0 0")
-        _sub(body, "geom", name=f"link_{k:02d}_shoe", class_="visual", type="box",
+        _sub(body, "geom", name=link_name(k) + "_pin", class_="pin", pos="0 0 0")
+        _sub(body, "geom", name=link_name(k) + "_shoe", class_="visual", type="box",
              pos=_fmt(pitch / 2, 0, 0), size=_fmt(pitch * 0.48, half_w, t.rail_radius_m),
              rgba="0.25 0.25 0.28 1")
     if joint.torsional_stiffness_N_m_rad > 0.0 or joint.torsional_damping_N_m_s_rad > 0.0:
@@ -291,16 +310,16 @@ def _links(root: ET.Element, world: ET.Element, p: ModelParams, layout: Layout) 
             # twist from in-line is (dir_k − q_k) − (dir_{k-1} − q_{k-1}): zero when the
             # tendon length q_k − q_{k-1} equals dir_k − dir_{k-1} (wrapped to ±π)
             neutral = math.remainder(direction[k] - direction[k - 1], 2.0 * math.pi)
-            fixed = _sub(tendon, "fixed", name=f"pin_{k:02d}_torsion",
+            fixed = _sub(tendon, "fixed", name=pin_name(k) + "_torsion",
                          stiffness=_fmt(joint.torsional_stiffness_N_m_rad),
                          damping=_fmt(joint.torsional_damping_N_m_s_rad),
                          springlength=_fmt(neutral))
-            _sub(fixed, "joint", joint=f"link_{k:02d}_pitch", coef="1")
-            _sub(fixed, "joint", joint=f"link_{(k - 1) % n:02d}_pitch", coef="-1")
+            _sub(fixed, "joint", joint=link_name(k) + "_pitch", coef="1")
+            _sub(fixed, "joint", joint=link_name((k - 1) % n) + "_pitch", coef="-1")
     equality = _sub(root, "equality")
     for k in range(n):
-        _sub(equality, "connect", name=f"pin_{k:02d}", class_="pin_joint",
-             body1=f"link_{(k - 1) % n:02d}", body2=f"link_{k:02d}",
+        _sub(equality, "connect", name=pin_name(k), class_="pin_joint",
+             body1=link_name((k - 1) % n), body2=link_name(k),
              anchor=_fmt(pitch, 0, 0))
 
 
@@ -314,7 +333,7 @@ def _check_torsion(p: ModelParams) -> None:
     this model at 1 ms it diverges from 0.2 N·m·s/rad (0.15 holds); the limit is
     I/(20·h), about half of that.
     """
-    joint, where = p.pin_joint, f"lf1352.toml [{p.pin_joint_table}]"
+    joint, where = p.pin_joint, f"model file [{p.pin_joint_table}]"
     inertia, h = _link_inertia(p)[1], p.simulation.timestep_s
     stiffness_limit = inertia / (p.solver.soft_margin * h * h)
     damping_limit = inertia / (20.0 * h)
@@ -365,24 +384,29 @@ def soft_constraints(p: ModelParams, model: mujoco.MjModel) -> dict[str, SoftCon
                               float(model.geom_friction[g, 0]), float(model.opt.impratio))
         stiffness, damping, key = stated[kind]
         out[name] = soft_constraint(stiffness, damping, rows, diag, h, margin,
-                                    f"lf1352.toml {key}")
+                                    f"model file {key}")
     joint = p.pin_joint
     rows, diag = row_diag(2.0 * link, condim=1)
     out["pin"] = soft_constraint(joint.radial_stiffness_N_m, joint.radial_damping_N_s_m, rows,
-                                 diag, h, margin, f"lf1352.toml [{p.pin_joint_table}]")
+                                 diag, h, margin, f"model file [{p.pin_joint_table}]")
     return out
 
 
 def _map_soft_constraints(root: ET.Element, p: ModelParams) -> None:
     """Set solref/solimp of the partner geoms and of the pin class from the stated
-    stiffness and damping (compiles the model once for its row diagonals)."""
+    stiffness and damping (compiles the model once for its row diagonals). The ground's go
+    on the ``ground`` class, so the scene's ground geom (and a heightfield) carries none."""
     model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
     mapping = soft_constraints(p, model)
+    classes = {"ground": root.find("default/default[@class='collision']"
+                                   "/default[@class='ground']/geom")}
     for geom in root.iter("geom"):
-        soft = mapping.get(geom.get("name", ""))
+        name = geom.get("name", "")
+        soft = mapping.get(name)
         if soft is not None:
-            geom.set("solref", _fmt(*soft.solref))
-            geom.set("solimp", _fmt(*soft.solimp))
+            target = classes.get(name, geom)
+            target.set("solref", _fmt(*soft.solref))
+            target.set("solimp", _fmt(*soft.solimp))
     pin_class = root.find("default/default[@class='pin_joint']/equality")
     pin_class.set("solref", _fmt(*mapping["pin"].solref))
     pin_class.set("solimp", _fmt(*mapping["pin"].solimp))
@@ -398,9 +422,12 @@ def _actuators(root: ET.Element, p: ModelParams) -> None:
          gainprm="1", biastype="affine", biasprm="0 0 0")
 
 
-def build_mjcf(p: ModelParams, layout: Layout, home_qpos: np.ndarray | None = None) -> str:
-    """MJCF text of the track side for ``layout``; ``home_qpos`` adds the ``home`` keyframe."""
-    root = ET.Element("mujoco", model=MODEL_NAME)
+def build_mjcf(p: ModelParams, layout: Layout, home_qpos: np.ndarray | None = None,
+               name: str = MODEL_NAME) -> str:
+    """MJCF text of the track side for ``layout``; ``home_qpos`` adds the ``home`` keyframe;
+    ``name``: the machine's (the model's name and the parameter file ``NAME.toml`` named in
+    the header)."""
+    root = ET.Element("mujoco", model=name)
     _header(root, p)
     _defaults(root, p)
     world = _world(root)
@@ -417,9 +444,72 @@ def build_mjcf(p: ModelParams, layout: Layout, home_qpos: np.ndarray | None = No
         _sub(keyframe, "key", name="home", qpos=" ".join(f"{v:.6f}" for v in home_qpos),
              ctrl=_fmt(0.0, p.tensioner.preload_N))
     ET.indent(root, space="  ")
-    header = ("<!-- Generated by trackmj.model from lf1352.toml; do not edit by hand.\n"
-              "     Regenerate with: trackmj model generate -->\n")
-    return header + ET.tostring(root, encoding="unicode") + "\n"
+    return _header_comment(name) + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _header_comment(name: str, part: str = "") -> str:
+    return (f"<!-- Generated by trackmj.model from {name}.toml{part}; do not edit by hand.\n"
+            "     Regenerate with: trackmj model generate -->\n")
+
+
+SCENE_ITEMS = ("light[@name='sun']", "geom[@name='ground']", "geom[@name='ground_visual']")
+"""What the scene holds besides the ground assets (MuJoCo Menagerie's scene.xml habit)."""
+
+
+def _strip_comment(mjcf: str) -> str:
+    return mjcf.split("-->", 1)[1] if mjcf.lstrip().startswith("<!--") else mjcf
+
+
+def split_mjcf(mjcf: str, machine_file: str) -> tuple[str, str]:
+    """The machine and scene parts of a full model (Menagerie habit): the scene holds the
+    ground's texture and material, the light and the ground, and includes ``machine_file``
+    (the machine part's file name), which holds everything else. :func:`join_mjcf` undoes
+    it."""
+    root = ET.fromstring(_strip_comment(mjcf))
+    name = root.get("model")
+    asset = root.find("asset")
+    root.remove(asset)
+    world = root.find("worldbody")
+    items = [world.find(path) for path in SCENE_ITEMS]
+    for item in items:
+        world.remove(item)
+    scene = ET.Element("mujoco", model=name)
+    _sub(scene, "include", file=machine_file)
+    scene.append(asset)
+    scene_world = _sub(scene, "worldbody")
+    scene_world.extend(items)
+    for part in (root, scene):
+        ET.indent(part, space="  ")
+    return (_header_comment(name, ", the machine (its scene includes it)")
+            + ET.tostring(root, encoding="unicode") + "\n",
+            _header_comment(name, ", the scene: ground and light")
+            + ET.tostring(scene, encoding="unicode") + "\n")
+
+
+def join_mjcf(scene: str, machine: str) -> str:
+    """One self-contained MJCF of a scene and the machine part it includes: the scene's
+    assets after the machine's defaults, its light and ground first in the worldbody (the
+    compiled model is the one of the full model :func:`split_mjcf` split)."""
+    scene_root = ET.fromstring(_strip_comment(scene))
+    root = ET.fromstring(_strip_comment(machine))
+    position = list(root).index(root.find("default")) + 1
+    root.insert(position, scene_root.find("asset"))
+    world = root.find("worldbody")
+    for k, item in enumerate(scene_root.find("worldbody")):
+        world.insert(k, item)
+    ET.indent(root, space="  ")
+    return _header_comment(root.get("model")) + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def read_mjcf(path: str | Path) -> str:
+    """The MJCF text of ``path`` as one self-contained model: a scene that includes its
+    machine part (relative to the scene's directory) is joined (:func:`join_mjcf`)."""
+    path = Path(path)
+    text = path.read_text()
+    include = ET.fromstring(_strip_comment(text)).find("include")
+    if include is None:
+        return text
+    return join_mjcf(text, (path.parent / include.get("file")).read_text())
 
 
 def with_heightfield(mjcf: str, profile: RoadProfile) -> str:
@@ -434,7 +524,7 @@ def with_heightfield(mjcf: str, profile: RoadProfile) -> str:
     if not (math.isfinite(profile.dx_m) and profile.dx_m > 0.0):
         raise ParameterError(f"terrain dx_m = {profile.dx_m!r} must be > 0")
     field = heightfield(profile, width_m=TERRAIN_WIDTH_M, base_m=TERRAIN_BASE_M)
-    root = ET.fromstring(mjcf.split("-->", 1)[1] if mjcf.lstrip().startswith("<!--") else mjcf)
+    root = ET.fromstring(_strip_comment(mjcf))
     nrow, ncol = field.data.shape
     _sub(root.find("asset"), "hfield", name="terrain", nrow=str(nrow), ncol=str(ncol),
          size=_fmt(*field.size), elevation=" ".join(f"{v:.6f}" for v in field.data.ravel()))

@@ -1,4 +1,5 @@
-"""Mechanical parameters of the LF1352 track side (``models/lf1352.toml``) as frozen dataclasses.
+"""Mechanical parameters of one track side (``models/lf1352.toml`` for the study's machine)
+as frozen dataclasses, with the checks that refuse a layout the generator cannot build.
 
 Units are SI (m, kg, N, s, rad); each field declares its allowed range with
 :func:`trackmj.params.param`, and :func:`load_model_params` refuses unknown keys, wrong types
@@ -84,11 +85,14 @@ class IdlerParams(Parameters):
     carrier_mass_kg: float = param(0.1, 1e4)
     slide_range_m: tuple[float, float] = param(-1.0, 1.0)
     stroke_at_layout_m: float = param(0.0, 1.0, doc="cylinder stroke at slide q = 0 [m]")
+    slide_angle_rad: float = param(-math.pi / 4, math.pi / 4, default=0.0,
+                                   doc="inclination of the carrier slide above the "
+                                       "horizontal, outward (optional: 0 = horizontal) [rad]")
 
 
 @dataclass(frozen=True)
 class RoadWheelParams(Parameters):
-    count: int = param(1, 12, unit="1")
+    count: int = param(2, 10, unit="1")
     radius_m: float = param(0.02, 1.0)
     x_m: tuple[float, ...] = param(-10.0, 10.0)
     mass_kg: float = param(0.1, 1e4)
@@ -100,7 +104,8 @@ class RoadWheelParams(Parameters):
 @dataclass(frozen=True)
 class ReturnRollerParams(Parameters):
     radius_m: float = param(0.01, 1.0)
-    x_m: tuple[float, ...] = param(-10.0, 10.0)
+    x_m: tuple[float, ...] = param(-10.0, 10.0, allow_empty=True,
+                                   doc="roller positions, 0-4 of them ([] for none) [m]")
     z_m: float = param(0.0, 5.0)
 
 
@@ -165,7 +170,7 @@ class SolverParams(Parameters):
 
 @dataclass(frozen=True)
 class ModelParams(Parameters):
-    """All mechanical parameters of one track side (SI units, see lf1352.toml)."""
+    """All mechanical parameters of one track side (SI units, e.g. lf1352.toml)."""
 
     simulation: SimulationParams
     track: TrackParams
@@ -212,17 +217,91 @@ def load_model_params(path: str | Path | None = None,
     return load_file(ModelParams, path, overrides=overrides)
 
 
+MAX_RETURN_ROLLERS = 4
+
+
 def _check_consistency(p: ModelParams, at: Location) -> None:
-    if p.track.link_count != 82:
-        raise at.error(("track", "link_count"), p.track.link_count, "but the LF1352 model "
-                       "(names link_00..link_81) needs exactly 82")
-    if len(p.road_wheels.x_m) != p.road_wheels.count:
-        raise at.error(("road_wheels", "x_m"), p.road_wheels.x_m,
-                       f"has {len(p.road_wheels.x_m)} entries, count = {p.road_wheels.count}")
+    if COUPLING_STEP_S / p.simulation.timestep_s % 1.0 > 1e-9:
+        raise at.error(("simulation", "timestep_s"), p.simulation.timestep_s,
+                       "must divide the 1 ms coupling step")
     lo, hi = p.idler.slide_range_m
     if not lo < 0.0 < hi:
         raise at.error(("idler", "slide_range_m"), p.idler.slide_range_m,
                        "must bracket 0 (low < 0 < high)")
-    if COUPLING_STEP_S / p.simulation.timestep_s % 1.0 > 1e-9:
-        raise at.error(("simulation", "timestep_s"), p.simulation.timestep_s,
-                       "must divide the 1 ms coupling step")
+    _check_layout(p, at)
+
+
+def _check_layout(p: ModelParams, at: Location) -> None:
+    """Geometry a track can be laid round: wheels in the span, clear of each other, above
+    the ground line; then the loop closure (:func:`trackmj.model.layout.check_closure`)."""
+    from trackmj.model.layout import (
+        CLEARANCE_M,
+        check_closure,
+        road_wheel_z,
+        sprocket_outer_radius,
+    )
+
+    rw, rr, s, i = p.road_wheels, p.return_rollers, p.sprocket, p.idler
+    if abs(s.x_m - i.x_m) < s.tooth_radius_m:
+        raise at.error(("idler", "x_m"), i.x_m, f"must differ from [sprocket].x_m = "
+                       f"{s.x_m:g} m (the sprocket and idler are the two ends of the track)")
+    if len(rw.x_m) != rw.count:
+        raise at.error(("road_wheels", "x_m"), rw.x_m,
+                       f"has {len(rw.x_m)} entries, count = {rw.count}")
+    if len(rr.x_m) > MAX_RETURN_ROLLERS:
+        raise at.error(("return_rollers", "x_m"), rr.x_m,
+                       f"has {len(rr.x_m)} rollers; at most {MAX_RETURN_ROLLERS}")
+    r_pin = p.track.pin_radius_m
+    rear, front = sorted((s.x_m, i.x_m))
+    wz = road_wheel_z(p)
+    for table, xs, radius in (("road_wheels", rw.x_m, rw.radius_m),
+                              ("return_rollers", rr.x_m, rr.radius_m)):
+        for k, x in enumerate(xs):
+            if not rear < x < front:
+                raise at.error((table, "x_m"), xs, f"entry {k} ({x:g} m) lies outside the span "
+                               f"between sprocket and idler ({rear:g} .. {front:g} m)")
+        for k in range(1, len(xs)):
+            if xs[k] - xs[k - 1] < 2.0 * radius + CLEARANCE_M:
+                raise at.error((table, "x_m"), xs, f"entries {k - 1} and {k} are "
+                               f"{xs[k] - xs[k - 1]:g} m apart: must increase by at least "
+                               f"2·radius_m + {CLEARANCE_M * 1e3:g} mm = "
+                               f"{2.0 * radius + CLEARANCE_M:g} m")
+    if max(rw.x_m) - min(rw.x_m) < 2.0 * p.track.pitch_m:
+        raise at.error(("road_wheels", "x_m"), rw.x_m, f"span {max(rw.x_m) - min(rw.x_m):g} m "
+                       f"from first to last: at least two links (2·pitch_m = "
+                       f"{2.0 * p.track.pitch_m:g} m) must lie flat between them")
+    if not min(rw.x_m) < 0.0 < max(rw.x_m):
+        raise at.error(("road_wheels", "x_m"), rw.x_m, "must straddle the chassis centre "
+                       "of mass at x = 0 (else the machine tips over its end wheel)")
+    spr_reach = rw.radius_m + sprocket_outer_radius(p) + CLEARANCE_M
+    for k, x in enumerate(rw.x_m):
+        if math.hypot(x - s.x_m, wz - s.z_m) < spr_reach:
+            raise at.error(("road_wheels", "x_m"), rw.x_m, f"entry {k} ({x:g} m) touches the "
+                           f"sprocket teeth: keep its centre {spr_reach:.3f} m from the "
+                           "sprocket's")
+    # a tooth sits between two seated pins, half a tooth pitch round from each
+    rp, rt = p.sprocket_pitch_radius_m, p.sprocket_pitch_radius_m + s.tooth_radial_offset_m
+    pocket = math.sqrt(rp * rp + rt * rt - 2.0 * rp * rt * math.cos(math.pi / s.tooth_count))
+    if s.tooth_radius_m + r_pin > pocket:
+        raise at.error(("sprocket", "tooth_radius_m"), s.tooth_radius_m,
+                       f"does not fit between two seated pins: at most {pocket - r_pin:.4f} m "
+                       f"with {s.tooth_count} teeth, pitch {p.track.pitch_m:g} m and pin radius "
+                       f"{r_pin:g} m")
+    floor = r_pin
+    if s.z_m - p.sprocket_pitch_radius_m < floor:
+        raise at.error(("sprocket", "z_m"), s.z_m, f"puts the sprocket's lowest pin below "
+                       f"the ground line: at least {floor + p.sprocket_pitch_radius_m:.4f} m "
+                       "(pin radius + pitch radius)")
+    if rr.x_m:
+        wheel_top = wz + rw.radius_m
+        need = wheel_top + rr.radius_m + CLEARANCE_M
+        if rr.z_m < need:
+            raise at.error(("return_rollers", "z_m"), rr.z_m, f"puts the rollers onto the "
+                           f"road wheels (tops at {wheel_top:.3f} m): at least {need:.3f} m")
+        for k, x in enumerate(rr.x_m):
+            reach = rr.radius_m + sprocket_outer_radius(p) + CLEARANCE_M
+            if math.hypot(x - s.x_m, rr.z_m - s.z_m) < reach:
+                raise at.error(("return_rollers", "x_m"), rr.x_m, f"entry {k} ({x:g} m) "
+                               f"touches the sprocket teeth: keep its centre {reach:.3f} m "
+                               "from the sprocket's")
+    check_closure(p, at)

@@ -21,7 +21,7 @@ import numpy as np
 
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
-from trackmj.machine import machine
+from trackmj.machine import machine as host_machine
 from trackmj.metrics import compute_metrics, prediction_vs_measured
 from trackmj.params import ParameterError
 from trackmj.ports import COUPLING_STEP_S, StepInputs, steps_per_period
@@ -77,7 +77,8 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
              control: str | Path | None = None, set: Overrides | None = None,
              rrd: str | Path | None = None, progress: bool = False,
              tp_result: Result | None = None, tensioner: str | Path | None = None,
-             measured: str | Path | None = None, channels: str = "default") -> Result:
+             machine: str | Path | None = None, measured: str | Path | None = None,
+             channels: str = "default") -> Result:
     """Run one operating condition in closed loop.
 
     Parameters
@@ -97,7 +98,7 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     variant : str
         Name of a scenario variant (W5 perturbations); ``"nominal"`` by default.
     model, hydraulics, control : str or Path, optional
-        Parameter files replacing the packaged ``models/lf1352*.toml``.
+        Parameter files replacing the machine's (``models/lf1352*.toml`` by default).
     set : mapping or sequence of str, optional
         Overrides of file keys, ``{"hydraulics.fluid.bulk_modulus_Pa": 1.2e9}`` or
         ``["hydraulics.fluid.bulk_modulus_Pa=1.2e9"]`` (the CLI's ``--set``); KIND is
@@ -111,6 +112,9 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     tensioner : str or Path, optional
         A tensioner file (:mod:`trackmj.tensioner`: an FMU or a passive spring-damper)
         replacing the hydraulic plugin of tp, tp-weak and dp-a.
+    machine : str or Path, optional
+        A shipped machine's name (``trackmj machines``) or a machine file
+        (``*_machine.toml``, see :mod:`trackmj.machines`); default ``"lf1352"``.
     measured : str or Path, optional
         A measured log (:mod:`trackmj.measured`: CSV or Parquet, ``t_s`` and any of the
         run's columns, e.g. ``tension_N``, ``p_head [MPa]``); the metrics get
@@ -139,7 +143,7 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     setup = prepare(scenario, architecture=architecture, controller=controller,
                     estimator=estimator, seed=seed, duration=duration, variant=variant,
                     model=model, hydraulics=hydraulics, control=control, overrides=set,
-                    tensioner=tensioner)
+                    tensioner=tensioner, machine=machine)
     log = None if measured is None else measured_log(setup, measured, channels)
     return run(setup, rrd=rrd, progress=progress, tp_result=tp_result, measured=log,
                channels=channels)
@@ -224,7 +228,7 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
                 bar.close()
         wall = time.perf_counter() - wall_start
     meta = run_metadata(setup.scenario.name, setup.architecture, setup.controller,
-                        setup.estimator, setup.seed, machine(), variant=setup.variant.name,
+                        setup.estimator, setup.seed, host_machine(), variant=setup.variant.name,
                         duration_s=setup.duration_s, files=setup.files,
                         overrides=setup.overrides)
     result = Result(recorder.table(meta, extra), {})

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -20,14 +21,17 @@ import mujoco
 
 from trackmj.control.params import ControlConfig, load_config
 from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
-from trackmj.identify import EquivalentIdler, identify_idler
-from trackmj.model import ModelParams, default_xml_path, generate_mjcf, load_model_params
+from trackmj.identify import EquivalentIdler, ModalTerm, identify_idler
+from trackmj.io import write_text_atomic
+from trackmj.machines import DEFAULT_MACHINE, Machine, is_own, mechanics, model_mjcf, resolve
+from trackmj.model import ModelParams, load_model_params
+from trackmj.model.cache import cache_dir, model_key
 from trackmj.model.mjcf import with_heightfield
 from trackmj.params import FILE_KINDS, ParameterError, parse_overrides
 from trackmj.plant import TrackPlant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.scenarios import Scenario, Variant, load_scenario
-from trackmj.sim.config import load_idler
+from trackmj.sim.config import IDENTIFICATION, SCALARS, load_idler
 from trackmj.sim.registry import (
     ARCHITECTURES,
     CONTROLLERS,
@@ -42,26 +46,33 @@ MAX_DURATION_S = 3600.0
 
 
 @functools.cache
-def _packaged_model() -> ModelParams:
-    return load_model_params()
-
-
-@functools.cache
-def _model_mjcf(params: ModelParams) -> str:
-    """MJCF text for ``params``: the committed file for the packaged parameters, otherwise
-    generated (layout and a settled home keyframe, ~1 s), once per process."""
-    if params == _packaged_model():
-        return default_xml_path().read_text()
-    return generate_mjcf(params)
-
-
-@functools.cache
-def _idler(params: ModelParams) -> EquivalentIdler:
-    """The packaged track's identified idler, or a fresh identification on another model."""
-    if params == _packaged_model():
-        return load_idler()
-    return identify_idler(lambda: TrackPlant(
-        mujoco.MjModel.from_xml_string(_model_mjcf(params)), params))
+def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
+    """The machine's identified idler for its own mechanics, or an identification on another
+    model (cached by content hash beside its generated MJCF): the packaged idler file's
+    force levels and amplitude (:data:`trackmj.sim.config.IDENTIFICATION`, chosen for the
+    LF1352's preload) scaled by this model's preload over the LF1352's."""
+    if machine.idler is not None and is_own(params, machine):
+        return load_idler(machine.idler)
+    path = cache_dir() / f"{machine.name}-{model_key(params)[:32]}-idler.json"
+    try:
+        data = json.loads(path.read_text())
+        return EquivalentIdler(**data["idler"], modes=tuple(ModalTerm(**m)
+                                                            for m in data["modes"]))
+    except (FileNotFoundError, ValueError, KeyError, TypeError):
+        pass
+    reference = mechanics(resolve(DEFAULT_MACHINE)).tensioner.preload_N
+    scale = params.tensioner.preload_N / reference
+    args = {k: v * scale if k in ("force_low_N", "force_high_N", "amplitude_N") else v
+            for k, v in IDENTIFICATION.items()}
+    idler = identify_idler(lambda: TrackPlant(
+        mujoco.MjModel.from_xml_string(model_mjcf(params, machine)), params), **args)
+    record = {"idler": {name: float(getattr(idler, name)) for name in SCALARS},
+              "modes": [dataclasses.asdict(m) for m in idler.modes]}
+    try:
+        write_text_atomic(path, json.dumps(record))
+    except OSError:
+        pass
+    return idler
 
 
 @dataclass(frozen=True)
@@ -93,6 +104,7 @@ class RunSetup:
     element: str = "hydraulic"
     tensioner: TensionerFile | None = None
     controller_file: Any = None
+    machine: Machine = field(default_factory=lambda: resolve(DEFAULT_MACHINE))
 
     @property
     def steps(self) -> int:
@@ -119,11 +131,11 @@ class RunSetup:
     @property
     def idler(self) -> EquivalentIdler:
         """Equivalent idler of the run's track model (identified once per process)."""
-        return _idler(self.model)
+        return _idler(self.model, self.machine)
 
     def mjcf(self, terrain: RoadProfile | None) -> str:
         """MJCF text of the run's track model, on ``terrain`` (None: flat ground)."""
-        text = _model_mjcf(self.model)
+        text = model_mjcf(self.model, self.machine)
         return text if terrain is None else with_heightfield(text, terrain)
 
 
@@ -203,7 +215,8 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
             duration: float | None = None, variant: str = "nominal",
             model: str | Path | None = None, hydraulics: str | Path | None = None,
             control: str | Path | None = None, overrides: Overrides | None = None,
-            tensioner: str | Path | None = None) -> RunSetup:
+            tensioner: str | Path | None = None,
+            machine: str | Path | Machine | None = None) -> RunSetup:
     """Load and validate every input of one run; ParameterError (a ValueError) naming the
     file, key or option and what is allowed, before anything is built.
 
@@ -211,7 +224,11 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
     they pass the same validation as the files. ``tensioner``: a tensioner file
     (:mod:`trackmj.tensioner`) replacing the architecture's hydraulic element, its FMU
     checked here. ``controller`` may be ``"fmu:FILE.toml"`` (:mod:`trackmj.fmi.controller`).
+    ``machine``: a shipped machine's name or a machine file (:mod:`trackmj.machines`;
+    default lf1352) whose mechanics, hydraulics and control files the run takes unless
+    ``model``, ``hydraulics`` or ``control`` override them.
     """
+    mach = resolve(machine)
     sets = overrides_by_kind(overrides)
     if isinstance(scenario, Scenario) and sets["scenario"]:
         scenario = scenario.source
@@ -246,24 +263,26 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
                                  f"file applies to {', '.join(replaceable)}")
         tensioner_file = load_tensioner(tensioner)
         element = tensioner_file.element
-    files = {"scenario": str(sc.source),
-             "model": str(model) if model else "packaged",
-             "hydraulics": str(hydraulics) if hydraulics else "packaged",
-             "control": str(control) if control else "packaged"}
+    own = "packaged" if mach.file.parent == resolve(DEFAULT_MACHINE).file.parent else None
+    files = {"scenario": str(sc.source), "machine": mach.name,
+             "model": str(model) if model else own or str(mach.mechanics),
+             "hydraulics": str(hydraulics) if hydraulics else own or str(mach.hydraulics),
+             "control": str(control) if control else own or str(mach.control)}
     if tensioner is not None:
         files["tensioner"] = str(tensioner)
     if controller_file is not None:
         files["controller"] = str(controller_file.file)
-    model_params = (load_model_params(model, overrides=sets["model"])
-                    if model or sets["model"] else _packaged_model())
-    control_config = load_config(control, overrides=sets["control"])
+    model_params = (load_model_params(model or mach.mechanics, overrides=sets["model"])
+                    if model or sets["model"] else mechanics(mach))
+    control_config = load_config(control or mach.control, overrides=sets["control"])
     _check_bands_agree(sc, control_config, files["control"])
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,
         estimator=estimator, seed=seed, duration_s=duration_s, model=model_params,
-        hydraulics=scaled_hydraulics(load_hydraulic_params(hydraulics,
+        hydraulics=scaled_hydraulics(load_hydraulic_params(hydraulics or mach.hydraulics,
                                                            overrides=sets["hydraulics"]), var),
         control=control_config, files=files,
         overrides={f"{kind}.{key}": value for kind, keys in sets.items()
                    for key, value in keys.items()},
-        element=element, tensioner=tensioner_file, controller_file=controller_file)
+        element=element, tensioner=tensioner_file, controller_file=controller_file,
+        machine=mach)

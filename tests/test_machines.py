@@ -1,0 +1,325 @@
+"""Machines and the general layout generator: machine files and the registry, any plausible
+single-side layout generates, closes and drives, infeasible ones are refused naming the key
+and what would fit, generated models are cached by content hash."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import mujoco
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from trackmj.cli import main
+from trackmj.machines import load_machine, model_mjcf, resolve, shipped
+from trackmj.model import compute_layout, generate_mjcf, load_model_params
+from trackmj.model.cache import cache_dir, cached_mjcf
+from trackmj.model.geometry import derive_geometry
+from trackmj.model.layout import chords_fitting, slide_axis
+from trackmj.params import ParameterError
+from trackmj.plant import PassiveTensioner, TrackPlant
+
+FRONT = {"sprocket.x_m": 1.10, "idler.x_m": -1.35, "chassis.hitch_x_m": 1.30}
+"""LF1352 mirrored: sprocket at the front, idler and tensioner at the rear."""
+
+
+# ----------------------------------------------------------------------------- machine files
+
+def test_shipped_machines_listed_one_line_each(capsys) -> None:
+    assert main(["machines"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    machines = shipped()
+    assert "lf1352" in machines
+    for name, m in machines.items():
+        assert sum(line.startswith(name + " ") for line in lines) == 1
+        assert m.mechanics.is_file() and m.hydraulics.is_file() and m.control.is_file()
+
+
+def test_machine_file_resolves_relative_paths_and_names_a_missing_file(tmp_path) -> None:
+    lf = resolve("lf1352")
+    path = tmp_path / "mine_machine.toml"
+    path.write_text(f'[machine]\nname = "mine"\ndescription = "a copy"\n'
+                    f'mechanics = "{lf.mechanics}"\nhydraulics = "{lf.hydraulics}"\n'
+                    f'control = "{lf.control}"\n')
+    mine = resolve(str(path))
+    assert mine.name == "mine" and mine.mechanics == lf.mechanics
+    assert mine.idler is None and mine.reference_mjcf is None
+    path.write_text(path.read_text().replace(str(lf.control), "nowhere.toml"))
+    with pytest.raises(ParameterError, match=r"mine_machine\.toml \[machine\]\.control = "
+                                             r"'nowhere\.toml': no such file"):
+        load_machine(path)
+    with pytest.raises(ParameterError, match=r"lf1352\.toml is a model parameter file, not a "
+                                             r"machine file: give it as --model"):
+        resolve(str(lf.mechanics))
+    with pytest.raises(ParameterError, match=r"machine 'm1': not a shipped machine \(lf1352"):
+        resolve("m1")
+
+
+def test_reference_mjcf_for_own_parameters_generated_and_cached_otherwise() -> None:
+    lf = resolve("lf1352")
+    own = load_model_params(lf.mechanics)
+    # the committed scene joined with its machine part: the model MuJoCo compiles from the
+    # scene file itself (its include resolved by MuJoCo)
+    joined = mujoco.MjModel.from_xml_string(model_mjcf(own, lf))
+    from_file = mujoco.MjModel.from_xml_path(str(lf.reference_mjcf))
+    assert _model_bytes(joined) == _model_bytes(from_file)
+    other = load_model_params(overrides={"track.link_count": 80})
+    text = model_mjcf(other, lf)
+    cached = list(cache_dir().glob("lf1352-*.xml"))
+    assert any(path.read_text() == text for path in cached)
+    cached_mjcf.cache_clear()        # a new process: read back from the directory
+    assert cached_mjcf(other, "lf1352") == text
+    assert text.count("<body name=\"link_") == 80
+
+
+def _model_bytes(model: mujoco.MjModel) -> bytes:
+    buffer = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)
+    mujoco.mj_saveModel(model, None, buffer)
+    return buffer.tobytes()
+
+
+# ----------------------------------------------------------------------------- refusals
+
+def test_infeasible_link_count_names_the_counts_that_close(tmp_path) -> None:
+    with pytest.raises(ParameterError) as info:
+        load_model_params(overrides={"track.link_count": 60})
+    text = str(info.value)
+    assert text.startswith("--set model.track.link_count = 60 links × 0.075 m = 4.500 m;")
+    lo, hi = (int(v) for v in re.search(r"use (\d+)–(\d+) links", text).groups())
+    for n in (lo, hi):     # the counts it proposes close the loop; one more each way does not
+        load_model_params(overrides={"track.link_count": n})
+    for n in (lo - 1, hi + 1):
+        with pytest.raises(ParameterError, match="links or move the idler"):
+            load_model_params(overrides={"track.link_count": n})
+
+
+@pytest.mark.parametrize(("overrides", "message"), [
+    ({"road_wheels.x_m": [-0.75, -0.45, -0.15, 0.15, 0.45, 1.6]},
+     r"road_wheels\]?\.x_m = .* entry 5 \(1\.6 m\) lies outside the span"),
+    ({"road_wheels.x_m": [-0.75, -0.45, -0.15, 0.15, 0.2, 0.75]},
+     r"road_wheels\]?\.x_m = .* entries 3 and 4 are 0\.05 m apart"),
+    ({"road_wheels.count": 3, "road_wheels.x_m": [-0.75, -0.5, -0.25]},
+     r"must straddle the chassis centre of mass"),
+    ({"road_wheels.x_m": [-0.95, -0.45, -0.15, 0.15, 0.45, 0.75]},
+     r"entry 0 \(-0\.95 m\) touches the sprocket teeth"),
+    ({"return_rollers.z_m": 0.30}, r"return_rollers\]?\.z_m = 0\.3 puts the rollers onto"),
+    ({"return_rollers.x_m": [-0.6, -0.3, 0.0, 0.3, 0.6]}, r"at most 4"),
+    ({"idler.x_m": 0.95}, r"idler\]?\.x_m = 0\.95 puts the idler .* into "
+                          r"\[road_wheels\]\.x_m\[5\]"),
+    ({"sprocket.z_m": 0.15}, r"sprocket\]?\.z_m = 0\.15 puts the sprocket's lowest pin "
+                             r"below the ground line"),
+    ({"road_wheels.count": 1, "road_wheels.x_m": [0.0]}, r"count = 1 .*\[2, 10\]"),
+    ({"sprocket.tooth_radius_m": 0.03}, r"tooth_radius_m = 0\.03 does not fit between two "
+                                        r"seated pins: at most 0\.0246 m with 14 teeth"),
+])
+def test_implausible_layouts_are_refused_naming_the_key(overrides, message) -> None:
+    with pytest.raises(ParameterError, match=message):
+        load_model_params(overrides=overrides)
+
+
+def test_cli_refuses_a_layout_with_one_line_and_exit_2(capsys) -> None:
+    assert main(["drive", "--duration", "0.1", "--set", "model.track.link_count=40"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert "use 74–94 links or move the idler" in err
+
+
+# ----------------------------------------------------------------------------- layouts
+
+def test_76_links_with_five_road_wheels_generate_and_close() -> None:
+    p = load_model_params(overrides={"track.link_count": 76, "road_wheels.count": 5,
+                                     "road_wheels.x_m": [-0.72, -0.36, 0.0, 0.36, 0.72]})
+    layout = compute_layout(p)
+    g = derive_geometry(p, layout)
+    assert layout.pins.shape == (76, 2)
+    assert g.closure_m < 1e-7
+    assert sum(g.wraps_rad.values()) == pytest.approx(2.0 * math.pi, abs=1e-9)
+    # the pin polygon is inscribed in the path round the vertex circles: 76 chords of
+    # 75 mm, each shorter than its arc where it wraps
+    assert 76 * 0.075 < g.path_m < 76 * 0.075 + 0.02
+    assert layout.idler_x_m < p.idler.x_m          # a shorter loop pulls the idler in
+
+
+@pytest.fixture(scope="module")
+def front_drive():
+    from trackmj.drive import drive
+
+    return drive(1.5, 3.0, overrides=FRONT)
+
+
+def test_front_sprocket_slide_points_rearward() -> None:
+    p = load_model_params(overrides=FRONT)
+    assert slide_axis(p) == (-1.0, 0.0)
+    plant = TrackPlant.load(overrides=FRONT)
+    m = plant.model
+    np.testing.assert_array_equal(m.jnt_axis[m.joint("idler_slide").id], (-1.0, 0.0, 0.0))
+    # standing at home (settled under the passive spring) the tensioner pushes the idler
+    # out, and both strands at the frictionless idler carry F / (d_in − d_out)·u (5 %: the
+    # mean over the sagging 2.5 m span, the layout's strand directions, 3 s of settling)
+    force = PassiveTensioner.from_params(p).force_law(0.0, plant.stroke_m, 0.0).force_N
+    g = derive_geometry(p, compute_layout(p))
+    upper = plant.pin_tensions_N()[plant.upper_strand_pins()].mean()
+    assert force > 0.5 * p.tensioner.preload_N
+    assert upper == pytest.approx(force / g.idler_factor, rel=0.05)
+
+
+def test_front_sprocket_layout_drives_with_the_idler_pushed_out(front_drive) -> None:
+    m, s = front_drive.metrics, front_drive.metrics["steady"]
+    preload = 13e3
+    assert 0.6 * preload < s["idler_force_mean_N"] < 1.2 * preload
+    assert s["idler_force_min_N"] > 0.0
+    assert np.isfinite(s["upper_strand_tension_mean_N"])
+    assert np.isfinite(s["lower_strand_tension_mean_N"])
+    # a front sprocket turning forward pulls the upper strand: it is the tight side
+    assert s["upper_strand_tension_mean_N"] > s["lower_strand_tension_mean_N"]
+    assert m["derailment_checks_failed"] == 0 and m["mujoco_warnings"] == 0
+    assert m["max_pin_gap_m"] < 0.5e-3
+    energy = m["track_energy"]
+    assert abs(energy["residual_J"]) < 1e-6 * energy["drive_work_J"]
+
+
+# ----------------------------------------------------------------------------- property
+
+@st.composite
+def layouts(draw) -> dict:
+    """Overrides of lf1352.toml making a plausible single-side layout; the link count is
+    the one that closes the loop with the idler at its x_m (rounded)."""
+    pitch = draw(st.floats(0.05, 0.16))
+    teeth = draw(st.integers(9, 16))
+    count = draw(st.integers(2, 7))
+    wheel_r = draw(st.floats(0.08, 0.15))
+    spacing = 2.0 * wheel_r + draw(st.floats(0.03, 0.25))
+    xs = [round((k - (count - 1) / 2) * spacing, 4) for k in range(count)]
+    r_pitch = pitch / (2.0 * math.sin(math.pi / teeth))
+    idler_r = draw(st.floats(0.12, 0.30))
+    end = xs[-1] + wheel_r
+    s_x = -(end + r_pitch + 0.06 + draw(st.floats(0.0, 0.2)))
+    i_x = end + idler_r + 0.08 + draw(st.floats(0.0, 0.2))
+    top = max(0.014 + r_pitch, idler_r + 0.05) + draw(st.floats(0.05, 0.2))
+    s_z, i_z = top, top - draw(st.floats(0.0, 0.05))
+    rollers = sorted(draw(st.lists(st.floats(-0.4, 0.4), max_size=2, unique=True)))
+    rollers = [round(x * (xs[-1] - xs[0]) / 0.8, 3) for x in rollers]
+    if len(rollers) == 2 and rollers[1] - rollers[0] < 0.2:
+        rollers = rollers[:1]
+    front = draw(st.booleans())
+    if front:
+        s_x, i_x = -s_x, -i_x
+    scale = pitch / 0.075             # link, pin and tooth sizes follow the pitch
+    o = {"track.pitch_m": pitch, "track.link_mass_kg": 3.5 * scale,
+         "track.pin_radius_m": 0.014 * scale, "sprocket.tooth_radius_m": 0.02 * scale,
+         "sprocket.tooth_radial_offset_m": 0.005 * scale,
+         "sprocket.tooth_count": teeth, "sprocket.x_m": s_x, "sprocket.z_m": s_z,
+         "idler.x_m": i_x, "idler.z_m": i_z, "idler.radius_m": idler_r,
+         "idler.slide_angle_rad": draw(st.floats(-0.3, 0.3)),
+         "road_wheels.count": count, "road_wheels.x_m": xs, "road_wheels.radius_m": wheel_r,
+         "return_rollers.x_m": rollers, "return_rollers.z_m": top + 0.05,
+         "return_rollers.radius_m": 0.05, "chassis.hitch_x_m": s_x}
+    return o
+
+
+def _with_closing_count(o: dict) -> dict:
+    """``o`` with a link count that closes the loop: the middle of the range the refusal
+    of 100 links names (or 100 if that closes)."""
+    try:
+        p = load_model_params(overrides=o | {"track.link_count": 100})
+    except ParameterError as exc:
+        found = re.search(r"use (\d+)(?:–(\d+))? links", str(exc))
+        assume(found is not None)
+        lo, hi = int(found.group(1)), int(found.group(2) or found.group(1))
+        assume(20 <= lo and hi <= 200)
+        return o | {"track.link_count": (lo + hi) // 2}
+    assert chords_fitting(p, p.idler.x_m) > 0.0
+    return o | {"track.link_count": 100}
+
+
+@settings(max_examples=4, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(layouts())
+def test_random_plausible_layouts_generate_close_and_drive(o) -> None:
+    o = _with_closing_count(o)
+    assert 20 <= o["track.link_count"] <= 200
+    p = load_model_params(overrides=o)
+    layout = compute_layout(p)
+    assert derive_geometry(p, layout).closure_m < 1e-4
+    plant = TrackPlant(mujoco.MjModel.from_xml_string(generate_mjcf(p)), p)
+    assert plant.closure_error_m < 1e-4
+    plant.run(PassiveTensioner.from_params(p), 2.0, track_speed=lambda t: min(t, 1.0))
+    assert plant.warning_count == 0
+    assert np.isfinite(plant.data.qpos).all()
+    assert plant.closure_error_m < 0.5e-3
+    assert plant.idler_force_N > 0.0
+    assert not plant.derailment().any
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(layouts(), st.sampled_from(["short", "long", "outside", "overlap", "low"]))
+def test_random_infeasible_layouts_are_refused_with_a_message(o, how) -> None:
+    o = _with_closing_count(o)
+    n, xs = o["track.link_count"], list(o["road_wheels.x_m"])
+    bad = {"short": {"track.link_count": max(20, int(n * 0.7))},
+           "long": {"track.link_count": min(200, int(n * 1.4) + 2)},
+           "outside": {"road_wheels.x_m": [*xs[:-1], 3.0 * abs(o["idler.x_m"])]},
+           "overlap": {"road_wheels.x_m": [*xs[:-1], xs[-2] + 0.01]},
+           "low": {"sprocket.z_m": 0.01}}[how]
+    key = {"short": "link_count", "long": "link_count", "outside": "road_wheels.x_m",
+           "overlap": "road_wheels.x_m", "low": "sprocket.z_m"}[how]
+    with pytest.raises(ParameterError, match=re.escape(key)):
+        load_model_params(overrides=o | bad)
+
+
+def test_run_on_a_machine_file_of_another_layout(tmp_path) -> None:
+    """A user's machine (the mirrored, front-sprocket LF1352 as mechanics, the LF1352's
+    hydraulics and control files as stand-ins) runs W2 closed loop from its machine file:
+    the model generated and cached (and given the road's heightfield), the idler
+    identified on it."""
+    import json
+
+    lf = resolve("lf1352")
+    text = lf.mechanics.read_text()
+    for old, new in (("x_m = -1.10 ", "x_m = 1.10 "), ("x_m = 1.35 ", "x_m = -1.35 "),
+                     ("hitch_x_m = -1.30", "hitch_x_m = 1.30")):
+        assert old in text
+        text = text.replace(old, new, 1)
+    (tmp_path / "front.toml").write_text(text)
+    (tmp_path / "front_machine.toml").write_text(
+        f'[machine]\nname = "front"\ndescription = "LF1352 mirrored"\nmechanics = '
+        f'"front.toml"\nhydraulics = "{lf.hydraulics}"\ncontrol = "{lf.control}"\n')
+    out = tmp_path / "run"
+    assert main(["run", "W2", "--duration", "2", "--machine",
+                 str(tmp_path / "front_machine.toml"), "--out", str(out)]) == 0
+    doc = json.loads((out / "metrics.json").read_text())
+    m = doc["metrics"]
+    assert doc["run"]["files"]["machine"] == "front"
+    assert m["mujoco_warnings"] == 0
+    # W2 holds 15 kN on a random road: the tensioner pushes the rear idler out as commanded
+    means = m["acceptance"]      # lowest and highest 0.5 s mean after the start-up
+    assert 0.9 * 15e3 < means["mean_min_N"] <= means["mean_max_N"] < 1.1 * 15e3
+    assert list(cache_dir().glob("front-*-idler.json"))
+
+
+def test_link_and_pin_names_past_100_links() -> None:
+    """123 links of 50 mm (pins and teeth scaled with the pitch): the plant finds every
+    link, pin and connect by name on the generated layout (no settling needed)."""
+    from trackmj.model import build_mjcf
+
+    p = load_model_params(overrides={"track.pitch_m": 0.05, "track.link_count": 123,
+                                     "track.link_mass_kg": 2.3, "track.pin_radius_m": 0.009,
+                                     "sprocket.tooth_radius_m": 0.013,
+                                     "sprocket.tooth_count": 21})
+    plant = TrackPlant(mujoco.MjModel.from_xml_string(build_mjcf(p, compute_layout(p))), p)
+    assert plant.link_count == 123 and plant.model.neq == 123
+    assert plant.model.body("link_122").id > plant.model.body("link_99").id
+    assert plant.closure_error_m < 1e-6
+
+
+@pytest.mark.parametrize("command", [["run", "W1"], ["compare", "W1"], ["report"],
+                                     ["sweep", "spec.toml"], ["drive"], ["model", "info"],
+                                     ["model", "generate"]])
+def test_every_command_takes_a_machine(command) -> None:
+    from trackmj.cli import build_parser
+
+    args = build_parser().parse_args([*command, "--machine", "my_machine.toml"])
+    assert args.machine == "my_machine.toml"
