@@ -6,6 +6,7 @@ from __future__ import annotations
 import ast
 import math
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -63,6 +64,7 @@ class _ConstantElement:
 
     pressure_nodes = ()
     stroke_range_m = (-1.0, 1.0)
+    channels: ClassVar[dict[str, str]] = {}
 
     def __init__(self, force_N: float) -> None:
         self.force_N, self.t_s, self.work_J = force_N, 0.0, 0.0
@@ -80,6 +82,9 @@ class _ConstantElement:
     def log(self) -> ElementLog:
         nan = math.nan   # the sensors see a fixed head and rod pressure
         return ElementLog(self.t_s, 8e6, 1e5, nan, nan, self.force_N, 0.0, nan, self.work_J)
+
+    def channel_values(self) -> tuple[()]:
+        return ()
 
     def node_pressures(self) -> tuple[float, ...]:
         return ()

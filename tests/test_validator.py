@@ -308,7 +308,8 @@ def test_optional_keys_are_documented_as_optional() -> None:
     rows = {r.key: r for r in describe_schema(ScenarioFile)}
     assert rows["reference.ramps[].end_s"].default == "None"
     assert rows["variants[].friction_scale"].default == "1.0"
-    assert rows["track.speed_m_s"].default is None          # required
+    assert rows["scenario.duration_s"].default is None      # required
+    assert "without from_file" in rows["track.speed_m_s"].doc   # required unless a file
 
 
 def test_shipped_files_cite_sources_a_user_has() -> None:

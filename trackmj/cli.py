@@ -286,13 +286,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from trackmj.playback import RUN_RRD
     from trackmj.results import ResultDirectoryError, ResultWriter
     from trackmj.scenarios import check_duration
-    from trackmj.sim.run import run
+    from trackmj.sim.run import measured_log, run
     from trackmj.sim.setup import prepare
 
     setup = prepare(args.scenario, architecture=args.arch, controller=args.controller,
                     estimator=args.estimator, seed=args.seed, duration=args.duration,
                     variant=args.variant, **_files(args))
     check_duration(setup.scenario, setup.duration_s)
+    measured = (None if args.measured is None
+                else measured_log(setup, args.measured, args.channels))
     key = inputs_key(setup)
     defaults = not (args.estimator or args.duration is not None or args.set or args.model
                     or args.hydraulics or args.control or args.tensioner)
@@ -304,16 +306,40 @@ def _cmd_run(args: argparse.Namespace) -> int:
             f"--out {out}: holds a run of other inputs ({what}; this run's are {key[:8]}); "
             "give --overwrite to replace it, or another --out")
     with ResultWriter(out) as writer:
-        result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True)
+        result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True,
+                     measured=measured, channels=args.channels)
         result = stamped(result, inputs_key=key, run_key=run_key(setup))
         writer.commit(result, csv=args.csv,
-                      extras={"timeseries.png": lambda path: run_figure(result, path)})
+                      extras={"timeseries.png": lambda path: run_figure(result, path,
+                                                                        measured)})
     print(f"{setup.scenario.name} ({setup.scenario.title}), {result.architecture}, "
           f"{result.controller}/{result.estimator}, seed {result.seed} -> {out}")
     if result.metrics.get("tensioner", {}).get("element") == "fmu":
         print(_tensioner_line(result.metrics["tensioner"]))
     print(_summary_table([result], "{r.architecture}"))
+    if measured is not None:
+        print(_measured_table(result.metrics["prediction_vs_measured"], args.measured))
     return 0
+
+
+MEASURED_DISPLAY = {"N": (1e-3, "kN"), "Pa": (1e-6, "MPa"), "m": (1e3, "mm"), "": (1.0, "-")}
+"""Display scale and unit of a compared channel, by its SI unit."""
+
+
+def _measured_table(table: dict, log: str) -> str:
+    """Markdown table of ``prediction_vs_measured``: one row per channel."""
+    lines = [f"prediction vs measured ({Path(log).name}; tracking window; > 0 lag: the "
+             "simulation lags)", "",
+             "| channel | RMSE raw | RMSE low-pass | peak (sim − meas) | lag [ms] |",
+             "|---|---|---|---|---|"]
+    for name, row in table.items():
+        unit = name.rpartition("_")[2] if "_" in name else ""
+        scale, shown = MEASURED_DISPLAY.get(unit, (1.0, unit))
+        cells = [row.get(f"{k}_{unit}", float("nan")) * scale
+                 for k in ("rmse", "rmse_lp", "peak_error")]
+        lines.append(f"| {name} [{shown}] | " + " | ".join(f"{v:.3g}" for v in cells)
+                     + f" | {row['lag_s'] * 1e3:.0f} |")
+    return "\n".join(lines)
 
 
 def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
@@ -489,6 +515,25 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 1 if summary.failed else 0
 
 
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from trackmj.fitting import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
+
+    out = Path(args.out)
+    done = calibrate(args.spec, args.measured, out, workers=args.workers)
+    doc = done.document
+    runs = len(doc["runs"])
+    print(f"calibrated {len(doc['estimates'])} keys on {len(args.measured)} log(s), {runs} "
+          f"runs in {doc['wall_time_s']:.0f} s ({doc['optimizer']['message']})")
+    for key, value in doc["estimates"].items():
+        low, high = doc["intervals"][key]
+        bound = "  (at a bound)" if doc["at_bound"][key] else ""
+        print(f"  {key} = {value:.5g}   95 % [{low:.5g}, {high:.5g}]{bound}")
+    rms = ", ".join(f"{name} {value:.4g}" for name, value in doc["residual_rms"].items())
+    print(f"  residual RMS (SI): {rms}")
+    print(f"-> {out / CALIBRATION_JSON}, {out / CALIBRATION_PNG}")
+    return 0
+
+
 def _cmd_fmu_export(args: argparse.Namespace) -> int:
     from trackmj.fmi.export import export
 
@@ -650,6 +695,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--variant", default="nominal", help="W5 variant name")
     run.add_argument("--csv", action="store_true", help="also write timeseries.csv")
     run.add_argument("--rrd", action="store_true", help="also write a Rerun recording")
+    run.add_argument("--measured", metavar="LOG", help="a measured log (CSV or Parquet: t_s "
+                     "and any of the run's columns, e.g. tension_N, p_head [MPa], stroke_mm) "
+                     "overlaid in the figure and compared in metrics.json "
+                     "(prediction_vs_measured)")
+    run.add_argument("--channels", choices=("default", "all"), default="default",
+                     help="all: also record per-cylinder pressures, valve flows, strand "
+                          "tensions and the hitch load (units in units.json)")
     run.add_argument("--overwrite", action="store_true", help="replace a result of other "
                      "inputs in the output folder (the same inputs replace it anyway)")
     run.set_defaults(func=_cmd_run)
@@ -702,6 +754,21 @@ def build_parser() -> argparse.ArgumentParser:
     executor_args(sweep)
     sweep.set_defaults(func=_cmd_sweep)
 
+    calib = sub.add_parser(
+        "calibrate", help="fit --set keys to measured logs -> DIR/calibration.json",
+        description="Fit the keys of a calibration spec within their bounds to measured logs "
+                    "(least squares; the logs' valve command replayed in the spec's "
+                    "conditions), with 95 % intervals; see the README ('Calibrate').")
+    calib.add_argument("spec", help="calibration spec TOML ([calibrate], "
+                       "[[calibrate.parameters]])")
+    calib.add_argument("--measured", nargs="+", required=True, metavar="LOG",
+                       help="CSV or Parquet logs: t_s, valve_mode and any of tension_N, "
+                            "p_head_Pa, p_rod_Pa, stroke_m (or with units: p_head [MPa])")
+    calib.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    calib.add_argument("--workers", type=_positive_int, help="Dask workers for a "
+                       "Latin-hypercube start (start_points in the spec; default one per "
+                       "core)")
+    calib.set_defaults(func=_cmd_calibrate)
     machines = sub.add_parser("machines", help="list the shipped machines")
     machines.set_defaults(func=_cmd_machines)
 

@@ -18,12 +18,13 @@ idler carrier outward.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from trackmj.hydraulics import HydraulicTensioner
-from trackmj.hydraulics.tensioner import NODE_NAMES
+from trackmj.hydraulics.tensioner import FLOW_NAMES, NODE_NAMES
 from trackmj.params import ParameterError
 from trackmj.plant import PassiveTensioner
 from trackmj.ports import COUPLING_STEP_S, ElementLog, ForceLaw
@@ -66,6 +67,14 @@ class HydraulicElement:
     methods (no call in between at 1 kHz)."""
 
     pressure_nodes = NODE_NAMES
+    channels: ClassVar[Mapping[str, str]] = {"p_head_L_Pa": "Pa", "p_head_R_Pa": "Pa",
+                                   "p_line_A_Pa": "Pa",
+                                   **{f"q_{name}_m3_s": "m^3/s" for name in FLOW_NAMES}}
+    """Each cylinder's head (both rods share one node, the readout's p_rod_Pa), line A, and
+    every flow of the circuit a -> b as :data:`~trackmj.hydraulics.tensioner.FLOW_NAMES`
+    names them (main_PA supply -> line A, main_AT line A -> tank, main_PB supply -> rod
+    node, main_BT rod node -> tank, V_L / V_R line A -> head, relief, make-up, leakage,
+    pump)."""
 
     def __init__(self, tensioner: HydraulicTensioner) -> None:
         self.tensioner = tensioner
@@ -85,6 +94,11 @@ class HydraulicElement:
     def node_pressures(self) -> tuple[float, ...]:
         """(line A, head L, head R, rod node, supply) [Pa gauge] now."""
         return self.tensioner.pressures
+
+    def channel_values(self) -> list[float]:
+        rec = self.tensioner.record
+        return [rec.p_head_L_Pa, rec.p_head_R_Pa, rec.p_line_A_Pa,
+                *(rec.flows_m3_s[name] for name in FLOW_NAMES)]
 
     def run_metrics(self, duration_s: float) -> dict[str, Any]:
         """Interface residual, friction loss and ledger balance error [J], and the energy
@@ -165,6 +179,7 @@ class IdealForceSource:
     """
 
     pressure_nodes = ("head", "rod")
+    channels: ClassVar[Mapping[str, str]] = {}
 
     def __init__(self, force_N: float, rate_N_s: float, lag_s: float, damping_N_s_m: float,
                  area_head_m2: float, area_rod_m2: float, tank_Pa: float,
@@ -214,6 +229,9 @@ class IdealForceSource:
         return ElementLog(self.t_s, self.p_head_Pa, self.tank, NAN, NAN, self.force_N,
                           self.supply_J, self.work_J, self.work_J)
 
+    def channel_values(self) -> tuple[()]:
+        return ()
+
     def node_pressures(self) -> tuple[float, float]:
         """(equivalent head, rod = tank) [Pa gauge]."""
         return (self.p_head_Pa, self.tank)
@@ -248,6 +266,7 @@ class PassiveElement(PassiveTensioner):
     books the work it does on the mechanics, ∫F·v dt, its only energy term."""
 
     pressure_nodes = ()
+    channels: ClassVar[Mapping[str, str]] = {}
 
     def __init__(self, preload_N: float, stiffness_N_m: float, damping_N_s_m: float,
                  stroke_ref_m: float, stroke_range_m: tuple[float, float],
@@ -278,6 +297,9 @@ class PassiveElement(PassiveTensioner):
                           self.work_J)
 
     def node_pressures(self) -> tuple[float, ...]:
+        return ()
+
+    def channel_values(self) -> tuple[()]:
         return ()
 
     def run_metrics(self, duration_s: float) -> dict[str, Any]:

@@ -306,25 +306,54 @@ def _energy_bars(ax: Axes, labels: Sequence[str], results: Sequence[Result], *,
                   bbox_to_anchor=(1.01, 1.0), frameon=False, fontsize=9, borderaxespad=0.0)
 
 
-def run_figure(result: Result, path: str | Path) -> Path:
+MEASURED_COLOUR = "#D55E00"
+"""Colour of a measured log's channels overlaid on a run."""
+
+
+def run_figure(result: Result, path: str | Path,
+               measured: Mapping[str, np.ndarray] | None = None) -> Path:
     """One run: tension (raw band, low-pass, reference, F band, events), chamber and supply
     pressures, valve mode (−1/0/+1), valve opening u, zoom panels on the step, each
-    disturbance edge (or a second of steady running) and the energy breakdown."""
+    disturbance edge (or a second of steady running) and the energy breakdown. With a
+    ``measured`` log on the run's grid (:func:`trackmj.measured.resample`), its tension,
+    pressures and stroke are overlaid, low-passed like the run's (a stroke panel is added
+    for a measured stroke)."""
     w = windows_of(result)
     c = result.columns()
     t = c["t_s"]
     t_end = float(t[-1])
     zooms = _zoom_windows(w, t_end)
-    fig = plt.figure(figsize=(16, 12), layout="constrained")
+    measured = dict(measured or {})
+    stroke = "stroke_m" in measured
+    fig = plt.figure(figsize=(16, 14 if stroke else 12), layout="constrained")
     outer = fig.add_gridspec(1, 2, width_ratios=(2.0, 1.0))
-    left = outer[0].subgridspec(4, 1, height_ratios=(3.0, 2.0, 1.1, 1.1))
+    left = outer[0].subgridspec(5 if stroke else 4, 1,
+                                height_ratios=(3.0, 2.0, *((1.6,) if stroke else ()), 1.1, 1.1))
     right = outer[1].subgridspec(len(zooms) + 1, 1,
                                  height_ratios=(*[1.0] * len(zooms), 1.2 + 0.6 * len(zooms)))
     ax_f = fig.add_subplot(left[0])
     ax_p = fig.add_subplot(left[1], sharex=ax_f)
-    ax_v = fig.add_subplot(left[2], sharex=ax_f)
-    ax_u = fig.add_subplot(left[3], sharex=ax_f)
+    ax_v = fig.add_subplot(left[3 if stroke else 2], sharex=ax_f)
+    ax_u = fig.add_subplot(left[4 if stroke else 3], sharex=ax_f)
     _tension_panel(ax_f, [(result.architecture, result)], w)
+    fc = w.lowpass_cutoff_Hz
+    if "tension_N" in measured:
+        ax_f.plot(t, lowpass(t, measured["tension_N"], fc) / 1e3, color=MEASURED_COLOUR,
+                  lw=1.2, ls="--", label=f"measured F_ten {fc:g} Hz low-pass")
+    for name, ls in (("p_head_Pa", "-"), ("p_rod_Pa", "--")):
+        if name in measured:
+            ax_p.plot(t, lowpass(t, measured[name], fc) / 1e6, color=MEASURED_COLOUR, ls=ls,
+                      lw=1.1, label=f"measured {name[:-3]} {fc:g} Hz low-pass")
+    if stroke:
+        ax_y = fig.add_subplot(left[2], sharex=ax_f)
+        ax_y.plot(t, lowpass(t, c["stroke_m"], fc) * 1e3, color="black", lw=1.1,
+                  label=f"stroke {fc:g} Hz low-pass")
+        ax_y.plot(t, lowpass(t, measured["stroke_m"], fc) * 1e3, color=MEASURED_COLOUR,
+                  ls="--", lw=1.1, label=f"measured stroke {fc:g} Hz low-pass")
+        ax_y.set_ylabel("stroke [mm]")
+        ax_y.grid(alpha=0.3)
+        ax_y.tick_params(labelbottom=False)
+        _legend_above(ax_y)
     _legend_above(ax_f, ncol=4)
     if np.isfinite(c["p_head_Pa"]).all():
         tb, lo, hi = _envelope(t, c["p_head_Pa"])
@@ -342,7 +371,7 @@ def run_figure(result: Result, path: str | Path) -> Path:
     _shade_events(ax_p, w, t_end, label=False)
     ax_p.set_ylabel("pressure [MPa]")
     ax_p.grid(alpha=0.3)
-    _legend_above(ax_p)
+    _legend_above(ax_p, ncol=3 if measured else None)
     ax_v.step(t, c["valve_mode"], where="post", color="black", lw=0.8, label="valve mode")
     ax_v.set_yticks([-1, 0, 1], ["−1 release", "0 hold", "+1 pressurize"])
     ax_v.set_ylim(-1.4, 1.4)
@@ -796,3 +825,37 @@ def _case_label(case: tuple, cases: list[tuple]) -> str:
     shown = varying or [0, 1, 2]
     return " ".join(str(case[i]) for i in shown if CASE[i] != "inputs") or "runs"
 
+
+CHANNEL_DISPLAY: dict[str, tuple[str, float]] = {
+    "tension_N": ("F_ten [kN]", 1e-3), "p_head_Pa": ("p_head [MPa]", 1e-6),
+    "p_rod_Pa": ("p_rod [MPa]", 1e-6), "stroke_m": ("stroke [mm]", 1e3)}
+"""Label and display scale of the channels a log is compared on."""
+
+
+def calibration_figure(t: np.ndarray, panels: Sequence[tuple[str, Mapping[str, np.ndarray],
+                                                             Mapping[str, np.ndarray],
+                                                             Mapping[str, np.ndarray]]],
+                       title: str, path: str | Path) -> Path:
+    """Measured (grey) against fitted (black) and the fit's start (dashed), one row per
+    channel, one column per log; ``panels``: (log name, measured, start, fitted), each a
+    channel -> values on ``t`` [s] (SI)."""
+    names = [c for c in CHANNEL_DISPLAY if any(c in p[1] for p in panels)]
+    fig, axes = plt.subplots(len(names), len(panels), squeeze=False, sharex=True,
+                             figsize=(8.0 * len(panels), 2.3 * len(names) + 1.4),
+                             layout="constrained")
+    for j, (name, measured, start, fitted) in enumerate(panels):
+        for i, channel in enumerate(names):
+            ax = axes[i][j]
+            label, scale = CHANNEL_DISPLAY[channel]
+            if channel in measured:
+                ax.plot(t, measured[channel] * scale, color="0.6", lw=0.5, label="measured")
+                ax.plot(t, start[channel] * scale, color="#0072B2", ls="--", lw=1.0,
+                        label="start of the fit")
+                ax.plot(t, fitted[channel] * scale, color="black", lw=1.1, label="fitted")
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+        axes[0][j].set_title(f"log {name}", fontsize=10, loc="right")
+        axes[-1][j].set_xlabel("time [s]")
+    _legend_above(axes[0][0], ncol=3)
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, Path(path))

@@ -599,6 +599,12 @@ def _describe_missing(name: str, fld: _Field, at: Location) -> str:
     return f"{at.table()}: missing key {name!r} ({', '.join(bits)}){doc}"
 
 
+def missing_key(cls: type, name: str, at: Location, hint: str = "") -> ParameterError:
+    """The loader's "missing key" error for field ``name`` of ``cls`` at ``at`` (type, unit,
+    range, doc), with ``hint`` appended, for a key that a cross-check finds missing."""
+    return ParameterError(_describe_missing(name, _schema(cls)[name], at) + hint)
+
+
 def _unknown(key: str, value: Any, names: Sequence[str], at: Location) -> ParameterError:
     what = (f"table {_path_text((*at.path, key))}" if isinstance(value, dict) and not at.path
             else f"key {key!r}")

@@ -36,7 +36,7 @@ physics guard, ``stroke_range_m`` (the travel the guard allows) and, at the end,
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol, runtime_checkable
 
@@ -214,11 +214,18 @@ class Element(TensionerElement, Protocol):
 
     pressure_nodes: names of the values ``node_pressures()`` returns [Pa gauge] (empty for an
     element without pressures); stroke_range_m: (lowest, highest) stroke [m] the element's
-    travel (with its end stops' allowance) admits, checked by the physics guard.
+    travel (with its end stops' allowance) admits, checked by the physics guard;
+    channels: the extra columns ``channel_values()`` returns, name -> unit, recorded with
+    ``--channels all`` (empty for an element with none).
     """
 
     pressure_nodes: tuple[str, ...]
     stroke_range_m: tuple[float, float]
+    channels: Mapping[str, str]
+
+    def channel_values(self) -> Sequence[float]:
+        """The ``channels`` after the last completed step, in their order (SI)."""
+        ...
 
     def set_valves(self, mode: int, u: float, supply_set_Pa: float) -> None:
         """The step's valve command: applied mode +1/0/−1, the controller's opening u [-],

@@ -315,16 +315,17 @@ def _exchange(a: Path, b: Path) -> bool:
     raise OSError(code, os.strerror(code), str(b))
 
 
-def check_output_dir(out: Path) -> Path:
+def check_output_dir(out: Path, marker: str = METRICS) -> Path:
     """``out`` resolved, or ResultDirectoryError if it cannot take a result: an existing file,
-    a directory that holds something other than a trackmj result, or a parent that cannot be
-    created or written. Nothing is created but the parent directories."""
+    a directory that holds something other than a trackmj result (no ``marker`` file in it),
+    or a parent that cannot be created or written. Nothing is created but the parent
+    directories."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ResultDirectoryError(f"--out {out}: is a file, not a directory")
-    if out.is_dir() and any(out.iterdir()) and not (out / METRICS).is_file():
+    if out.is_dir() and any(out.iterdir()) and not (out / marker).is_file():
         raise ResultDirectoryError(f"--out {out}: an existing directory that holds no trackmj "
-                                   f"result ({METRICS} missing); refusing to replace it")
+                                   f"result ({marker} missing); refusing to replace it")
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -341,10 +342,11 @@ class ResultWriter:
     runs); ``w.commit(result, ...)`` writes the result files into the stage and swaps it in.
     Leaving the block without a commit (an exception, Ctrl-C) removes the stage and leaves
     ``out`` as it was. A second writer of the same ``out`` is refused while the lock is held.
+    ``marker``: the file that marks an existing ``out`` as a trackmj result it may replace.
     """
 
-    def __init__(self, out: str | Path) -> None:
-        self.out = check_output_dir(Path(out))
+    def __init__(self, out: str | Path, marker: str = METRICS) -> None:
+        self.out = check_output_dir(Path(out), marker)
         self.stage: Path | None = None
         self.committed = False
         self._lock: Any = None

@@ -50,6 +50,7 @@ characters). Tables may carry a ``source`` string; unlike parameter files they n
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import math
 from collections.abc import Callable, Mapping
@@ -61,6 +62,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 
 from trackmj.hydraulics.params import PressureProfile, SupplyModel
+from trackmj.measured import InputSignal, input_signal
 from trackmj.metrics import MetricWindows
 from trackmj.params import (
     Location,
@@ -68,6 +70,7 @@ from trackmj.params import (
     Parameters,
     build,
     construct,
+    missing_key,
     param,
     read_toml,
 )
@@ -122,12 +125,41 @@ class Header(Parameters):
             raise at.error("seeds", self.seeds, "lists a seed twice")
 
 
+FROM_FILE_DOC = ("a CSV or Parquet file (relative to the scenario file) with t_s "
+                 "and the signal, in SI or with its unit in the header (README, Measured "
+                 "data)")
+COLUMN_DOC = "the file's column (default: its only one besides t_s)"
+
+
+def _one_source(cls: type, at: Location, given: dict[str, Any], from_file: str | None) -> None:
+    """With from_file none of ``given`` (key -> value, None if absent); without it all."""
+    if from_file is not None:
+        extra = [k for k, v in given.items() if v not in (None, ())]
+        if extra:
+            raise at.error(extra[0], given[extra[0]], "is given with from_file; the file is "
+                           "the whole signal (give one or the other)")
+    else:
+        missing = [k for k, v in given.items() if v is None]
+        if missing:
+            raise missing_key(cls, missing[0], at, "; or give from_file")
+
+
 @dataclass(frozen=True)
 class Track(Parameters):
-    """Sprocket-driven track speed, reached by a linear ramp from standstill."""
+    """Sprocket-driven track speed, reached by a linear ramp from standstill, or read from
+    a file (``from_file``, a column in m/s)."""
 
-    speed_m_s: float = param(0.0, 5.0, doc="track speed commanded to the sprocket servo")
-    ramp_s: float = param(0.0, 10.0, doc="duration of the linear start from standstill")
+    speed_m_s: float | None = param(0.0, 5.0, default=None,
+                                    doc="track speed commanded to the sprocket servo "
+                                    "(required without from_file)")
+    ramp_s: float | None = param(0.0, 10.0, default=None,
+                                 doc="duration of the linear start from standstill "
+                                 "(required without from_file)")
+    from_file: str | None = param(default=None, doc=FROM_FILE_DOC)
+    column: str | None = param(default=None, doc=COLUMN_DOC)
+
+    def cross_check(self, at: Location) -> None:
+        _one_source(Track, at, {"speed_m_s": self.speed_m_s, "ramp_s": self.ramp_s}, self.from_file)
 
 
 @dataclass(frozen=True)
@@ -163,17 +195,26 @@ class Ramp(Parameters):
 
 @dataclass(frozen=True)
 class Reference(Parameters):
-    """F_ref(t) = initial_N + Σ steps + Σ ramps [N]."""
+    """F_ref(t) = initial_N + Σ steps + Σ ramps [N], or read from a file (``from_file``, a
+    column in N)."""
 
     initial_N: float | None = param(0.0, REFERENCE_MAX_N, default=None,
-                                    doc="F_ref at t = 0 (absolute)")
+                                    doc="F_ref at t = 0 (absolute; or initial_rel, or from_file)")
     initial_rel: float | None = param(0.0, 3.0, default=None, unit="1",
                                       doc="F_ref at t = 0 over the nominal tension")
     steps: tuple[Step, ...] = param(default=(), doc="optional reference steps")
     ramps: tuple[Ramp, ...] = param(default=(), doc="optional reference ramps")
+    from_file: str | None = param(default=None, doc=FROM_FILE_DOC)
+    column: str | None = param(default=None, doc=COLUMN_DOC)
 
     def cross_check(self, at: Location) -> None:
-        _one_of(self, at, "initial_N", "initial_rel")
+        if self.from_file is not None:
+            _one_source(Reference, at, {"initial_N": self.initial_N,
+                                        "initial_rel": self.initial_rel,
+                                        "steps": self.steps or None,
+                                        "ramps": self.ramps or None}, self.from_file)
+        else:
+            _one_of(self, at, "initial_N", "initial_rel")
 
 
 @dataclass(frozen=True)
@@ -206,8 +247,17 @@ class Supply(Parameters):
         default=None, doc="supply model; optional: the hydraulic file's [supply].default_model")
     drops: tuple[SupplyDrop, ...] = param(default=(),
                                           doc="optional set-point drops (not with 'unloading')")
+    from_file: str | None = param(default=None, doc="the set-point p_set(t) from a file, a "
+                                  "column in Pa (not with 'unloading' or drops): "
+                                  + FROM_FILE_DOC)
+    column: str | None = param(default=None, doc=COLUMN_DOC)
 
     def cross_check(self, at: Location) -> None:
+        if self.from_file is not None:
+            _one_source(Supply, at, {"drops": self.drops or None}, self.from_file)
+            if self.model == "unloading":
+                raise at.error("model", self.model, "takes no set-point from_file (see "
+                               "[[supply.drops]])")
         if self.drops and self.model == "unloading":
             raise at.error("model", self.model,
                            "takes no [[supply.drops]]: with the pump unloaded and its check "
@@ -296,6 +346,17 @@ def _one_of(table: Parameters, at: Location, absolute: str, relative: str) -> No
         raise ParameterError(f"{at.table()}: give exactly one of {absolute!r} (absolute) and "
                              f"{relative!r} (relative to the machine's nominal); got "
                              f"{given or 'neither'}")
+
+
+@dataclass(frozen=True)
+class Hitch(Parameters):
+    """A rear-hitch load read from a file (a column in N along the line pull_angle_deg below
+    the horizontal, > 0 a towed load, as :class:`LoadPulse` hitch_N); added to the load
+    pulses."""
+
+    from_file: str = param(doc=FROM_FILE_DOC)
+    pull_angle_deg: float = param(0.0, 60.0, doc="line of the hitch force below horizontal")
+    column: str | None = param(default=None, doc=COLUMN_DOC)
 
 
 def _check_window(window: SupplyDrop | LoadPulse, at: Location, edge_s: float,
@@ -402,6 +463,8 @@ class ScenarioFile(Parameters):
         "set-point")
     load_pulses: tuple[LoadPulse, ...] = param(default=(), doc="optional load pulses")
     variants: tuple[Variant, ...] = param(default=(), doc="optional parameter variants")
+    hitch: Hitch | None = param(  # noqa: RUF009 (param() returns a dataclasses.Field)
+        default=None, doc="optional hitch load from a file")
 
     file_kind: ClassVar[str] = "scenario"
 
@@ -421,7 +484,8 @@ class ScenarioFile(Parameters):
             if t >= duration:
                 raise at.error(key, t, f"is at or after the end of the run "
                                f"([scenario].duration_s = {duration!r})")
-        _check_reference_range(self.reference, duration, at.child("reference"))
+        if self.reference.from_file is None:
+            _check_reference_range(self.reference, duration, at.child("reference"))
         names = [v.name for v in self.variants]
         for i, name in enumerate(names):
             if name in names[:i]:
@@ -489,6 +553,10 @@ class Scenario:
     machines_reason: str = ""
     nominal_tension_N: float | None = None
     """The nominal tension the relative values were resolved with [N] (None: all absolute)."""
+    hitch: Hitch | None = None
+    signals: Mapping[str, InputSignal] = dataclasses.field(init=False, compare=False,
+                                                           repr=False)
+    """The from_file inputs ("reference", "supply", "track", "hitch"), read on construction."""
 
     def __post_init__(self) -> None:
         header = construct(Header, Location(label=f"Scenario {self.name!r}", path=("scenario",)),
@@ -499,7 +567,31 @@ class Scenario:
         construct(ScenarioFile, Location(label=f"Scenario {self.name!r}"), scenario=header,
                   track=self.track, reference=self.reference, supply=self.supply,
                   terrain=self.terrain, limits=self.limits, evaluation=self.evaluation,
-                  load_pulses=self.load_pulses, variants=self.variants)
+                  load_pulses=self.load_pulses, variants=self.variants, hitch=self.hitch)
+        signals = {}
+        for what, table, suffix in (("reference", self.reference, "N"),
+                                    ("supply", self.supply, "Pa"),
+                                    ("track", self.track, "m_s"), ("hitch", self.hitch, "N")):
+            if table is not None and table.from_file is not None:
+                signals[what] = _input_signal(self.source.parent / table.from_file,
+                                              table.column, suffix, INPUT_NAMES[what])
+        object.__setattr__(self, "signals", signals)
+        self.check_inputs(self.duration_s)
+
+    def check_inputs(self, duration_s: float) -> None:
+        """ParameterError naming the file and column if a from_file input does not cover a
+        run of ``duration_s`` [s] or F_ref from a file leaves [0, 50 kN]."""
+        for what, signal in self.signals.items():
+            signal.check_covers(duration_s, INPUT_NAMES[what])
+        ref = self.signals.get("reference")
+        if ref is not None:
+            keep = ref.t_s <= duration_s + COUPLING_STEP_S
+            bad = (ref.values < 0.0) | (ref.values > REFERENCE_MAX_N)
+            if (bad & keep).any():
+                k = int(np.argmax(bad & keep))
+                raise ParameterError(f"{ref.file} column {ref.column!r} (reference F_ref): "
+                                     f"{ref.values[k]:.6g} N at t = {ref.t_s[k]:.6g} s; it "
+                                     f"must stay in [0, {REFERENCE_MAX_N:g}] N over the run")
 
     def check_machine(self, machine: str) -> None:
         """ParameterError (one line, the reason) if the condition does not apply to
@@ -512,6 +604,8 @@ class Scenario:
     # ------------------------------------------------------------------ signals
     def reference_N(self, t_s: np.ndarray | float) -> np.ndarray:
         """F_ref(t) [N], same shape as ``t_s`` (vectorised)."""
+        if "reference" in self.signals:
+            return self.signals["reference"](t_s)
         return _reference(self.reference, np.asarray(t_s, dtype=float))
 
     def reference_preview(self, t0_s: float, n: int, dt_s: float) -> np.ndarray:
@@ -521,6 +615,8 @@ class Scenario:
     def supply_setpoint_Pa(self, t_s: np.ndarray | float, nominal_Pa: float) -> np.ndarray:
         """Supply set-point p_set(t) [Pa]: ``nominal_Pa`` (the hydraulic file's
         [supply].setpoint_Pa) with the drops applied, shape of t_s (vectorised)."""
+        if "supply" in self.signals:
+            return self.signals["supply"](t_s)
         t = np.asarray(t_s, dtype=float)
         p = np.full(t.shape, float(nominal_Pa))
         for d in self.supply.drops:
@@ -528,10 +624,13 @@ class Scenario:
             p = p + (d.pressure_Pa - nominal_Pa) * on
         return p
 
-    def supply_setpoint_profile(self, nominal_Pa: float) -> PressureProfile | None:
+    def supply_setpoint_profile(self, nominal_Pa: float) -> Callable[[float], float] | None:
         """:meth:`supply_setpoint_Pa` as a piecewise-linear profile with breakpoints at the
-        drops' edges (a zero transition becomes a 1 µs ramp ending at the edge), or None
-        without drops (constant ``nominal_Pa``)."""
+        drops' edges (a zero transition becomes a 1 µs ramp ending at the edge), the file's
+        signal of a from_file supply, or None without drops (constant ``nominal_Pa``)."""
+        if "supply" in self.signals:
+            signal = self.signals["supply"]
+            return lambda t_s: float(signal(t_s))
         if not self.supply.drops:
             return None
         times = {0.0}
@@ -545,14 +644,34 @@ class Scenario:
 
     def track_speed_m_s(self, t_s: np.ndarray | float) -> np.ndarray:
         """Commanded track speed [m/s]: linear ramp from 0 over ramp_s, then constant."""
+        if "track" in self.signals:
+            return self.signals["track"](t_s)
         t = np.asarray(t_s, dtype=float)
         return self.track.speed_m_s * _edge(t, 0.0, self.track.ramp_s)
+
+    def distance_m(self, duration_s: float) -> float:
+        """Track distance driven in ``duration_s`` [s] [m]."""
+        if "track" in self.signals:
+            t = np.linspace(0.0, duration_s, max(2, round(duration_s / COUPLING_STEP_S) + 1))
+            return float(np.trapezoid(self.track_speed_m_s(t), t))
+        return self.track.speed_m_s * max(duration_s - 0.5 * self.track.ramp_s, 0.0)
+
+    def steady_speed_m_s(self, duration_s: float) -> float:
+        """Mean commanded track speed over the steady window [steady_start_s, duration] [m/s]
+        (the speed of a file's trace there; the constant speed otherwise)."""
+        if "track" not in self.signals:
+            return self.track.speed_m_s
+        t = np.arange(self.evaluation.steady_start_s, duration_s, COUPLING_STEP_S)
+        return float(np.mean(self.track_speed_m_s(t))) if len(t) else 0.0
 
     def hitch_force_N(self, t_s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Rear-hitch load (pull rearward [N], push down [N]) in the chassis frame that
         applies the load pulses; each of shape of t_s."""
         pull = self._pulses(t_s, lambda p: p.hitch_N * math.cos(math.radians(p.pull_angle_deg)))
         down = self._pulses(t_s, lambda p: p.hitch_N * math.sin(math.radians(p.pull_angle_deg)))
+        if "hitch" in self.signals:
+            load, angle = self.signals["hitch"](t_s), math.radians(self.hitch.pull_angle_deg)
+            pull, down = pull + load * math.cos(angle), down + load * math.sin(angle)
         return pull, down
 
     def _pulses(self, t_s: np.ndarray | float,
@@ -570,7 +689,7 @@ class Scenario:
         if tr.kind == "flat":
             return None
         duration = self.duration_s if duration_s is None else duration_s
-        distance = self.track.speed_m_s * max(duration - 0.5 * self.track.ramp_s, 0.0)
+        distance = self.distance_m(duration)
         length = distance + tr.margin_m - tr.x_start_m
         rng = np.random.default_rng([seed, TERRAIN_SEED_SALT])
         prof = road_profile(length, tr.dx_m, tr.road_class, rng, n_min=tr.n_min_cycles_m,
@@ -607,7 +726,7 @@ class Scenario:
         dist += tuple((d.start_s, d.end_s) for d in self.supply.drops)
         labels = tuple(f"load pulse {p.delta_N / 1e3:+g} kN" for p in self.load_pulses)
         labels += tuple(f"supply drop to {d.pressure_Pa / 1e6:g} MPa" for d in self.supply.drops)
-        ev, speed = self.evaluation, self.track.speed_m_s
+        ev, speed = self.evaluation, self.steady_speed_m_s(duration)
         tooth = None
         if link_pitch_m is not None and speed > 0.0:
             f_tooth = speed / link_pitch_m
@@ -630,6 +749,24 @@ class Scenario:
 
 
 # ---------------------------------------------------------------------- loading
+
+INPUT_NAMES = {"reference": "reference F_ref", "supply": "supply set-point p_set",
+               "track": "track speed", "hitch": "hitch load"}
+"""What each from_file input is called in messages."""
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_signal(path: Path, mtime_ns: int, column: str | None, suffix: str,
+                   what: str) -> InputSignal:
+    return input_signal(path, column, suffix, what)
+
+
+def _input_signal(path: Path, column: str | None, suffix: str, what: str) -> InputSignal:
+    """The file's input signal, read once per file version."""
+    if not path.is_file():
+        raise ParameterError(f"{what}: from_file {path} not found")
+    return _cached_signal(path.resolve(), path.stat().st_mtime_ns, column, suffix, what)
+
 
 def scenario_path(name_or_path: str | Path) -> Path:
     """Path of a built-in scenario (``W1``..``W5``, case-insensitive) or of a custom file."""
@@ -741,7 +878,8 @@ def load_scenario(name_or_path: str | Path,
                     track=f.track, reference=f.reference, supply=f.supply, terrain=f.terrain,
                     load_pulses=f.load_pulses, variants=f.variants or (NOMINAL,),
                     limits=f.limits, evaluation=f.evaluation, machines=h.machines,
-                    machines_reason=h.machines_reason, nominal_tension_N=nominal_tension_N)
+                    machines_reason=h.machines_reason, nominal_tension_N=nominal_tension_N,
+                    hitch=f.hitch)
 
 
 
@@ -802,9 +940,11 @@ def check_duration(sc: Scenario, duration_s: float) -> None:
     if cut:
         e = cut[0]
         more = f" (and {len(cut) - 1} more)" if len(cut) > 1 else ""
+        starts_inside = e.times[0][1] >= e.needs_s     # a step or open ramp: start < duration
+        least = f"more than {e.needs_s:g}" if starts_inside else f"{e.needs_s:g} or more"
         raise ParameterError(
             f"--duration {duration_s:g} s cuts off {sc.source.name} {e.what}{more}: it needs "
-            f"the run to last {e.needs_s:g} s; give --duration {e.needs_s:g} or more, or move "
+            f"the run to last {least} s; give --duration {least}, or move "
             f"the event with --set scenario.{e.times[0][0]}=...")
 
 

@@ -41,7 +41,8 @@ from __future__ import annotations
 import math
 import time
 import weakref
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -194,6 +195,11 @@ class FmuElement:
             p_rod = pressures.get("p_rod_Pa", tank)
         return ElementLog(self.t_s, p_head, p_rod, pressures.get("p_supply_Pa", NAN), NAN,
                           self.force_N, NAN, NAN, self.mech_work_J)
+
+    channels: ClassVar[Mapping[str, str]] = {}
+
+    def channel_values(self) -> tuple[()]:
+        return ()
 
     def node_pressures(self) -> list[float]:
         out = self._outputs

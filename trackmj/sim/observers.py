@@ -24,6 +24,7 @@ from trackmj.ports import (
     READOUT_UNITS,
     REFERENCE_UNITS,
     Command,
+    Element,
     Readout,
 )
 from trackmj.results import make_table
@@ -67,9 +68,53 @@ class Recorder:
         cols["t_s"] = self._time[: self.rows]
         return cols
 
-    def table(self, metadata: Mapping[str, Any]) -> pa.Table:
-        """The recorded steps as an Arrow table with units and run ``metadata``."""
-        return make_table(self.columns(), self.units, metadata)
+    def table(self, metadata: Mapping[str, Any],
+              extra: ChannelRecorder | None = None) -> pa.Table:
+        """The recorded steps as an Arrow table with units and run ``metadata`` (and the
+        ``extra`` channels' columns after the contract's)."""
+        columns, units = self.columns(), dict(self.units)
+        if extra is not None:
+            columns |= extra.columns(self.rows)
+            units |= extra.units
+        return make_table(columns, units, metadata)
+
+
+CHANNEL_SETS = ("default", "all")
+"""``--channels``: the contract columns, or those and every channel below."""
+
+
+class ChannelRecorder:
+    """The extra channels of ``--channels all``: the element's own (``Element.channels``,
+    e.g. the hydraulic element's per-cylinder head pressures and every valve flow), the
+    MuJoCo track's ``upper_strand_tension_N`` and ``lower_strand_tension_N`` [N] (mean pin
+    tension of the upper strand and of the rear lower run; none without a track), and the
+    hitch load applied, ``hitch_pull_N`` (rearward) and ``hitch_down_N`` [N] in the chassis
+    frame (the scenario's, whether the mechanics takes it or not)."""
+
+    def __init__(self, schedule: Schedule, element: Element, track: Any) -> None:
+        self._element, self._track = element, track
+        self.units: dict[str, str] = dict(element.channels)
+        self._n_element = len(self.units)
+        if track is not None:
+            self.units |= {"upper_strand_tension_N": "N", "lower_strand_tension_N": "N"}
+        self._measured = list(self.units)
+        self.data = np.full((schedule.steps, len(self._measured)), np.nan)
+        self._hitch = np.array([(i.hitch_pull_N, i.hitch_down_N) for i in schedule.inputs])
+        self.units |= {"hitch_pull_N": "N", "hitch_down_N": "N"}
+
+    def on_step(self, k: int, readout: Readout, command: Command) -> None:
+        row, n = self.data[k], self._n_element
+        if n:
+            row[:n] = self._element.channel_values()
+        if self._track is not None:
+            strands = self._track.strand_tensions_N()
+            row[n:n + 2] = strands.upper_N, strands.lower_N
+
+    def columns(self, rows: int) -> dict[str, np.ndarray]:
+        """Column name -> values of the first ``rows`` steps, shape (rows,)."""
+        cols = {name: self.data[:rows, i] for i, name in enumerate(self._measured)}
+        cols["hitch_pull_N"], cols["hitch_down_N"] = self._hitch[:rows, 0], self._hitch[:rows, 1]
+        return cols
 
 
 _STATE = ("tension_N", "p_head_Pa", "p_rod_Pa", "stroke_m", "stroke_velocity_m_s")

@@ -22,13 +22,16 @@ import numpy as np
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.machine import machine as host_machine
-from trackmj.metrics import compute_metrics
+from trackmj.metrics import compute_metrics, prediction_vs_measured
+from trackmj.params import ParameterError
 from trackmj.ports import COUPLING_STEP_S, StepInputs, steps_per_period
 from trackmj.results import Result, run_metadata
 from trackmj.scenarios import Scenario
 from trackmj.sim.architectures import assemble
 from trackmj.sim.loop import Schedule, run_loop
 from trackmj.sim.observers import (
+    CHANNEL_SETS,
+    ChannelRecorder,
     PhysicsGuard,
     PhysicsLimits,
     PlaybackFrames,
@@ -74,7 +77,8 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
              control: str | Path | None = None, set: Overrides | None = None,
              rrd: str | Path | None = None, progress: bool = False,
              tp_result: Result | None = None, tensioner: str | Path | None = None,
-             machine: str | Path | None = None) -> Result:
+             machine: str | Path | None = None, measured: str | Path | None = None,
+             channels: str = "default") -> Result:
     """Run one operating condition in closed loop.
 
     Parameters
@@ -111,6 +115,14 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     machine : str or Path, optional
         A shipped machine's name (``trackmj machines``) or a machine file
         (``*_machine.toml``, see :mod:`trackmj.machines`); default ``"lf1352"``.
+    measured : str or Path, optional
+        A measured log (:mod:`trackmj.measured`: CSV or Parquet, ``t_s`` and any of the
+        run's columns, e.g. ``tension_N``, ``p_head [MPa]``); the metrics get
+        ``prediction_vs_measured`` (:func:`trackmj.metrics.prediction_vs_measured`).
+    channels : str
+        ``"default"``: the contract columns; ``"all"``: also per-cylinder pressures, valve
+        flows, strand tensions and the hitch load, with units
+        (:class:`trackmj.sim.observers.ChannelRecorder`).
 
     Returns
     -------
@@ -127,16 +139,48 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     trackmj.fmi.FmuError
         An FMU failed during the run (the message names the FMU and the call).
     """
+    _check_channels(channels)
     setup = prepare(scenario, architecture=architecture, controller=controller,
                     estimator=estimator, seed=seed, duration=duration, variant=variant,
                     model=model, hydraulics=hydraulics, control=control, overrides=set,
                     tensioner=tensioner, machine=machine)
-    return run(setup, rrd=rrd, progress=progress, tp_result=tp_result)
+    log = None if measured is None else measured_log(setup, measured, channels)
+    return run(setup, rrd=rrd, progress=progress, tp_result=tp_result, measured=log,
+               channels=channels)
+
+
+def _check_channels(channels: str) -> None:
+    if channels not in CHANNEL_SETS:
+        raise ParameterError(f"channels = {channels!r}: allowed {', '.join(CHANNEL_SETS)}")
+
+
+def measured_log(setup: RunSetup, path: str | Path,
+                 channels: str = "default") -> dict[str, np.ndarray]:
+    """The measured log at ``path`` on the run's grid, checked against the columns the run
+    records with ``channels`` and its duration before the run (ParameterError naming the
+    file and column)."""
+    from trackmj.hydraulics.tensioner import FLOW_NAMES
+    from trackmj.measured import load_measured
+    from trackmj.results import COLUMN_UNITS
+
+    names = list(COLUMN_UNITS)
+    if channels == "all":
+        names += [*EXTRA_CHANNELS, *(f"q_{n}_m3_s" for n in FLOW_NAMES)]
+    return load_measured(path, setup.duration_s, names)
+
+
+EXTRA_CHANNELS = ("p_head_L_Pa", "p_head_R_Pa", "p_line_A_Pa", "upper_strand_tension_N",
+                  "lower_strand_tension_N", "hitch_pull_N", "hitch_down_N")
+"""Columns of ``channels="all"`` besides the flows (:class:`ChannelRecorder`) that a
+measured log may hold too."""
 
 
 def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = False,
-        tp_result: Result | None = None) -> Result:
-    """Run a prepared setup (see :func:`simulate` for the arguments and the result)."""
+        tp_result: Result | None = None,
+        measured: dict[str, np.ndarray] | None = None, channels: str = "default") -> Result:
+    """Run a prepared setup (see :func:`simulate` for the arguments and the result;
+    ``measured``: a log from :func:`measured_log`)."""
+    _check_channels(channels)
     if ARCHITECTURES[setup.architecture].replays_tp and tp_result is None:
         tp_result = run(dataclasses.replace(setup, architecture="tp"))
     with capture_mujoco_warnings() as warnings:
@@ -155,6 +199,10 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
         guard = PhysicsGuard(physics_limits(setup, element.stroke_range_m), warnings,
                              element.node_pressures, element.pressure_nodes)
         observers = [recorder, guard]
+        extra = (ChannelRecorder(sched, asm.element, asm.track) if channels == "all"
+                 else None)
+        if extra is not None:
+            observers.append(extra)
         bar = Progress(setup.steps, f"{setup.scenario.name} {setup.architecture}") \
             if progress else None
         if bar is not None:
@@ -183,7 +231,7 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
                         setup.estimator, setup.seed, host_machine(), variant=setup.variant.name,
                         duration_s=setup.duration_s, files=setup.files,
                         overrides=setup.overrides)
-    result = Result(recorder.table(meta), {})
+    result = Result(recorder.table(meta, extra), {})
     windows = setup.scenario.metric_windows(setup.duration_s,
                                             link_pitch_m=setup.model.track.pitch_m)
     m = compute_metrics(result.columns(), windows, control_period_s=controller.period_s,
@@ -195,6 +243,9 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
                                             > controller.period_s))
     if asm.track is not None:
         m["mujoco_warnings"] = float(asm.track.warning_count)
+    if measured is not None:
+        m["prediction_vs_measured"] = prediction_vs_measured(result.columns(), measured,
+                                                             windows)
     result.metrics = m
     if playback is not None:
         playback.log_timeseries(result)

@@ -276,6 +276,7 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
     if not (math.isfinite(duration_s) and COUPLING_STEP_S <= duration_s <= MAX_DURATION_S):
         raise ParameterError(f"duration = {duration!r} s: allowed "
                              f"[{COUPLING_STEP_S:g}, {MAX_DURATION_S:g}] s")
+    sc.check_inputs(duration_s)
     if sc.evaluation.start_s >= duration_s:
         raise ParameterError(f"duration = {duration_s:g} s ends before the evaluation starts "
                              f"({sc.source.name} [evaluation].start_s = "

@@ -1,0 +1,220 @@
+"""Calibration against measured logs (trackmj.fitting) and the log reader (trackmj.measured).
+
+The log is made with trackmj itself: a closed-loop run of a short step-up/step-down
+condition with the head-branch restrictor area and the oil bulk modulus off nominal, plus
+sensor noise at the study's σ (0.15 MPa, 0.2 mm; models/lf1352_control.toml [sensors]).
+The fit must recover both values within its stated 95 % intervals.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackmj.params import ParameterError
+
+DATA = Path(__file__).parent / "data"
+SCENARIO = DATA / "steps_short.toml"
+DURATION_S = 2.5
+AREA = "hydraulics.metering.head_branch_area_m2"
+BULK = "hydraulics.fluid.bulk_modulus_Pa"
+TRUTH = {AREA: 3.0e-8, BULK: 1.1e9}
+"""Off nominal (the hydraulic file has 4.0e-8 m² and 1.4e9 Pa)."""
+NOMINAL = {AREA: 4.0e-8, BULK: 1.4e9}
+
+
+def write_csv(path: Path, columns: dict[str, np.ndarray]) -> Path:
+    """A plain CSV, header as given (units in it), full float precision."""
+    names = list(columns)
+    rows = np.column_stack([columns[n] for n in names])
+    np.savetxt(path, rows, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    return path
+
+
+@pytest.fixture(scope="module")
+def truth_run():
+    from trackmj.sim.run import simulate
+
+    return simulate(SCENARIO, set=TRUTH, seed=0).columns()
+
+
+@pytest.fixture(scope="module")
+def noisy_log(truth_run, tmp_path_factory):
+    from trackmj.control.params import load_config
+
+    sensors = load_config().sensors
+    rng = np.random.default_rng(1)
+    c = truth_run
+    n = len(c["t_s"])
+    path = tmp_path_factory.mktemp("log") / "rig.csv"
+    return write_csv(path, {
+        "t_s": c["t_s"],
+        "p_head [MPa]": (c["p_head_Pa"] + rng.normal(0.0, sensors.pressure_noise_std_Pa, n))
+        / 1e6,
+        "stroke_mm": (c["stroke_m"] + rng.normal(0.0, sensors.stroke_noise_std_m, n)) * 1e3,
+        "valve_mode": c["valve_mode"]})
+
+
+def spec_file(tmp: Path, **extra: object) -> Path:
+    lines = ["[calibrate]", f'scenario = "{SCENARIO}"', f"duration_s = {DURATION_S}",
+             "seed = 0", *(f"{k} = {v!r}" for k, v in extra.items()),
+             "[[calibrate.parameters]]", f'key = "{AREA}"', "bounds = [1.6e-8, 8.0e-8]",
+             "[[calibrate.parameters]]", f'key = "{BULK}"', "bounds = [0.6e9, 2.0e9]"]
+    path = tmp / "spec.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_replayed_valve_command_reproduces_the_run(truth_run):
+    """The fit's open-loop plant under the run's own valve command is the run, bit for bit
+    (what makes a fit at the true values leave the sensor noise alone)."""
+    from trackmj.fitting import replay
+    from trackmj.sim.setup import prepare
+
+    setup = prepare(SCENARIO, seed=0, overrides=TRUTH)
+    mode = truth_run["valve_mode"].astype(float)
+    out = replay(setup, mode, truth_run["u"], ["tension_N", "p_head_Pa", "stroke_m"])
+    for name, values in out.items():
+        np.testing.assert_array_equal(values, truth_run[name], err_msg=name)
+
+
+def test_calibration_recovers_off_nominal_values(noisy_log, tmp_path):
+    from trackmj.control.params import load_config
+    from trackmj.fitting import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
+
+    out = tmp_path / "cal"
+    done = calibrate(spec_file(tmp_path), [noisy_log], out)
+    doc = json.loads((out / CALIBRATION_JSON).read_text())
+    assert doc == json.loads(json.dumps(done.document))
+    for key, truth in TRUTH.items():
+        low, high = doc["intervals"][key]
+        assert low <= truth <= high, (key, doc["estimates"][key], low, high)
+        assert not low <= NOMINAL[key] <= high, (key, low, high)   # the fit moved
+        assert high - low < 0.2 * truth                             # and says how well
+    sensors = load_config().sensors
+    # at the estimate what is left is the sensor noise
+    assert doc["residual_rms"]["p_head_Pa"] == pytest.approx(sensors.pressure_noise_std_Pa,
+                                                             rel=0.05)
+    assert doc["residual_rms"]["stroke_m"] == pytest.approx(sensors.stroke_noise_std_m,
+                                                            rel=0.05)
+    assert {run["purpose"] for run in doc["runs"]} >= {"fit", "jacobian", "interval"}
+    assert (out / CALIBRATION_PNG).stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(("header", "name", "scale"), [
+    ("tension_kN", "tension_N", 1e3), ("p_head [MPa]", "p_head_Pa", 1e6),
+    ("p_rod_bar", "p_rod_Pa", 1e5), ("stroke_mm", "stroke_m", 1e-3),
+    ("t [ms]", "t_s", 1e-3), ("tension_N", "tension_N", 1.0), ("valve_mode", "valve_mode", 1.0),
+    ("q_supply [L/min]", "q_supply_m3_s", 1e-3 / 60.0)])
+def test_headers_name_their_unit(header, name, scale):
+    from trackmj.measured import si_name
+
+    assert si_name(header) == (name, pytest.approx(scale))
+
+
+@pytest.mark.parametrize(("mutate", "words"), [
+    (lambda c: c["t_s"].__setitem__(5, c["t_s"][3]), ["rig.csv column 't_s'", "not strictly "
+                                                       "increasing at row 6"]),
+    (lambda c: c["p_head [MPa]"].__setitem__(9, np.nan), ["rig.csv column 'p_head [MPa]'",
+                                                            "row 10", "nan"]),
+    (lambda c: c.update(t_s=c["t_s"] * 0.5), ["rig.csv column 't_s'", "too short"]),
+])
+def test_bad_logs_are_refused_naming_file_and_column(tmp_path, mutate, words):
+    from trackmj.fitting import load_log
+
+    t = 1e-3 * np.arange(1, 2501)
+    cols = {"t_s": t, "p_head [MPa]": np.full(t.shape, 5.0), "valve_mode": np.zeros(t.shape)}
+    mutate(cols)
+    path = write_csv(tmp_path / "rig.csv", cols)
+    with pytest.raises(ParameterError) as info:
+        load_log(path, DURATION_S)
+    for word in words:
+        assert word in str(info.value)
+
+
+def test_a_log_without_a_fit_channel_or_command_is_refused(tmp_path):
+    from trackmj.fitting import load_log
+
+    t = 1e-3 * np.arange(1, 2501)
+    path = write_csv(tmp_path / "rig.csv", {"t_s": t, "valve_mode": np.zeros(t.shape)})
+    with pytest.raises(ParameterError, match=r"rig\.csv: no channel to fit"):
+        load_log(path, DURATION_S)
+    path = write_csv(tmp_path / "rig.csv", {"t_s": t, "p_head_Pa": np.zeros(t.shape)})
+    with pytest.raises(ParameterError, match=r"rig\.csv: no column 'valve_mode'"):
+        load_log(path, DURATION_S)
+
+
+def test_cli_refuses_a_bad_spec_before_any_run(tmp_path, capsys):
+    from trackmj.cli import main
+
+    spec = spec_file(tmp_path).read_text().replace("bounds = [0.6e9, 2.0e9]",
+                                                   "bounds = [2.0e9, 0.6e9]")
+    (tmp_path / "spec.toml").write_text(spec)
+    t = 1e-3 * np.arange(1, 2501)
+    log = write_csv(tmp_path / "rig.csv", {"t_s": t, "p_head_Pa": np.zeros(t.shape),
+                                           "valve_mode": np.zeros(t.shape)})
+    code = main(["calibrate", str(tmp_path / "spec.toml"), "--measured", str(log), "--out",
+                 str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "spec.toml [[calibrate.parameters]][1].bounds" in err and "high > low" in err
+    assert not (tmp_path / "out").exists()
+
+
+# ---------------------------------------------------------------------- run --measured
+
+def test_lag_by_cross_correlation_finds_a_known_delay():
+    from trackmj.metrics import lag_s
+
+    t = 1e-3 * np.arange(1, 4001)
+    ref = np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 1.9 * t)
+    late = np.sin(2 * np.pi * 0.7 * (t - 0.037)) + 0.3 * np.sin(2 * np.pi * 1.9 * (t - 0.037))
+    assert lag_s(t, late, ref, (0.5, 4.0)) == pytest.approx(0.037, abs=1e-9)
+    assert lag_s(t, ref, late, (0.5, 4.0)) == pytest.approx(-0.037, abs=1e-9)
+
+
+def test_trace_errors_of_a_constant_offset():
+    from trackmj.metrics import trace_errors
+
+    t = 1e-3 * np.arange(1, 3001)
+    y_ref = 12e3 + 3e3 * (t >= 1.0)
+    e = trace_errors(t, y_ref + 250.0, y_ref, (0.5, 3.0), 2.0)
+    assert e["rmse"] == pytest.approx(250.0) and e["peak_error"] == pytest.approx(250.0)
+    # the low-pass is linear: the offset passes whole (DC gain 1)
+    assert e["rmse_lp"] == pytest.approx(250.0, rel=1e-6)
+    assert e["peak_abs_error_lp"] == pytest.approx(250.0, rel=1e-6)
+
+
+def test_a_run_compared_with_its_own_log_has_no_error(truth_run, tmp_path):
+    from trackmj.sim.run import simulate
+
+    c = truth_run
+    log = write_csv(tmp_path / "own.csv", {"t [ms]": c["t_s"] * 1e3,
+                                           "tension_kN": c["tension_N"] / 1e3,
+                                           "p_head_Pa": c["p_head_Pa"]})
+    result = simulate(SCENARIO, set=TRUTH, seed=0, measured=log)
+    table = result.metrics["prediction_vs_measured"]
+    assert set(table) == {"tension_N", "p_head_Pa"}
+    assert table["tension_N"]["rmse_N"] == pytest.approx(0.0, abs=1e-9)
+    assert table["tension_N"]["rmse_lp_N"] == pytest.approx(0.0, abs=1e-9)
+    assert table["p_head_Pa"]["peak_error_Pa"] == pytest.approx(0.0, abs=1e-6)
+    assert table["p_head_Pa"]["lag_s"] == 0.0
+
+
+@pytest.mark.parametrize(("columns", "words"), [
+    ({"t_s": 1e-3 * np.arange(1, 2501), "hitch_kN": np.zeros(2500)},
+     ["bad.csv column 'hitch_kN'", "not a column of the run"]),
+    ({"t_s": 1e-3 * np.arange(1, 1001), "tension_N": np.zeros(1000)},
+     ["bad.csv column 't_s'", "too short"]),
+])
+def test_run_refuses_a_bad_measured_log_before_running(tmp_path, capsys, columns, words):
+    from trackmj.cli import main
+
+    log = write_csv(tmp_path / "bad.csv", columns)
+    code = main(["run", str(SCENARIO), "--measured", str(log), "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert code == 2 and all(w in err for w in words), err
+    assert not (tmp_path / "r").exists()

@@ -1,0 +1,162 @@
+"""Scenario inputs read from files: [reference], [supply], [track] from_file and [hitch]
+(trackmj.measured.input_signal through the one validator)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackmj.params import ParameterError
+from trackmj.scenarios import load_scenario
+
+DATA = Path(__file__).parent / "data"
+SHORT = DATA / "steps_short.toml"
+
+
+def write_csv(path: Path, columns: dict[str, np.ndarray]) -> Path:
+    names = list(columns)
+    np.savetxt(path, np.column_stack([columns[n] for n in names]), delimiter=",",
+               header=",".join(names), comments="", fmt="%.17g")
+    return path
+
+
+def scenario_with(tmp: Path, replace: dict[str, str]) -> Path:
+    text = SHORT.read_text()
+    for old, new in replace.items():
+        assert old in text
+        text = text.replace(old, new)
+    path = tmp / "from_file.toml"
+    path.write_text(text)
+    return path
+
+
+REFERENCE_TABLE = """[reference]
+initial_N = 12.0e3
+
+[[reference.steps]]
+time_s = 0.5
+delta_N = 3.0e3
+
+[[reference.steps]]
+time_s = 1.5
+delta_N = -3.0e3
+"""
+
+
+def test_a_reference_from_file_equal_to_the_built_in_one_gives_the_same_run(tmp_path):
+    from trackmj.sim.run import simulate
+
+    built_in = load_scenario(SHORT)
+    t = 1e-3 * np.arange(0, 2501)
+    write_csv(tmp_path / "ref.csv", {"t_s": t, "F_ref [kN]": built_in.reference_N(t) / 1e3})
+    path = scenario_with(tmp_path, {REFERENCE_TABLE: '[reference]\nfrom_file = "ref.csv"\n'})
+    from_file = load_scenario(path)
+    probe = np.linspace(0.0, 2.6, 5001)      # between grid points and beyond the end too
+    np.testing.assert_array_equal(from_file.reference_N(probe), built_in.reference_N(probe))
+    a = simulate(SHORT, duration=1.0).columns()
+    b = simulate(path, duration=1.0).columns()
+    for name in ("tension_N", "p_head_Pa", "stroke_m", "valve_mode", "tension_ref_N"):
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+def test_supply_track_and_hitch_from_files_are_the_signals_in_si(tmp_path):
+    t = 1e-3 * np.arange(0, 3001)
+    write_csv(tmp_path / "p.csv", {"t [ms]": t * 1e3, "p_set [bar]": 120.0 - 20.0 * (t > 1.0)})
+    write_csv(tmp_path / "v.csv", {"t_s": t, "speed_mm_s": 1500.0 * np.minimum(t, 1.0)})
+    write_csv(tmp_path / "h.csv", {"t_s": t, "hitch_kN": 5.0 * (t > 2.0), "other_N": 0 * t})
+    path = scenario_with(tmp_path, {
+        "[track]\nspeed_m_s = 1.5\nramp_s = 1.0\n": '[track]\nfrom_file = "v.csv"\n',
+        "[terrain]": '[supply]\nmodel = "prescribed"\nfrom_file = "p.csv"\n\n[hitch]\n'
+                     'from_file = "h.csv"\ncolumn = "hitch_kN"\npull_angle_deg = 30.0\n\n'
+                     '[terrain]'})
+    sc = load_scenario(path)
+    assert sc.supply_setpoint_Pa(0.5, 0.0) == 12e6 and sc.supply_setpoint_Pa(1.5, 0.0) == 10e6
+    assert sc.supply_setpoint_profile(0.0)(1.5) == 10e6
+    assert sc.track_speed_m_s(0.5) == pytest.approx(0.75) and sc.track_speed_m_s(2.0) == 1.5
+    pull, down = sc.hitch_force_N(np.array([1.0, 2.5]))
+    np.testing.assert_allclose(pull, [0.0, 5e3 * np.cos(np.radians(30.0))])
+    np.testing.assert_allclose(down, [0.0, 5e3 * np.sin(np.radians(30.0))])
+    # a ramp from standstill over 1 s, then 1.5 m/s: 0.75 m + 1.5 m/s * (2.5 - 1) s
+    assert sc.distance_m(2.5) == pytest.approx(0.75 + 1.5 * 1.5, rel=1e-6)
+
+
+@pytest.mark.parametrize(("columns", "words"), [
+    ({"t_s": [0.0, 0.002, 0.001, 3.0], "F_ref_N": [12e3] * 4},
+     ["ref.csv column 't_s'", "not strictly increasing"]),
+    ({"t_s": [0.0, 1.0, 2.0, 3.0], "F_ref_N": [12e3, np.nan, 12e3, 12e3]},
+     ["ref.csv column 'F_ref_N'", "row 2", "finite"]),
+    ({"t_s": [0.0, 1.0, 2.0], "F_ref_N": [12e3] * 3},
+     ["ref.csv column 'F_ref_N'", "too short to cover the run"]),
+    ({"t_s": [0.0, 3.0], "F_ref [MPa]": [1.0, 1.0]},
+     ["ref.csv column 'F_ref [MPa]'", "needs a unit of N"]),
+    ({"t_s": [0.0, 3.0], "F_ref_N": [12e3, 60e3]},
+     ["ref.csv column 'F_ref_N'", "must stay in [0, 50000] N"]),
+])
+def test_bad_input_files_are_refused_naming_file_and_column(tmp_path, columns, words):
+    write_csv(tmp_path / "ref.csv", {k: np.asarray(v, float) for k, v in columns.items()})
+    path = scenario_with(tmp_path, {REFERENCE_TABLE: '[reference]\nfrom_file = "ref.csv"\n'})
+    with pytest.raises(ParameterError) as info:
+        load_scenario(path)
+    assert all(w in str(info.value) for w in words), str(info.value)
+
+
+def test_from_file_excludes_the_built_in_keys_and_a_longer_run_is_refused(tmp_path, capsys):
+    from trackmj.cli import main
+
+    write_csv(tmp_path / "ref.csv", {"t_s": np.array([0.0, 2.5]), "F_ref_N": np.full(2, 12e3)})
+    both = scenario_with(tmp_path, {REFERENCE_TABLE: '[reference]\nfrom_file = "ref.csv"\n'
+                                    'initial_N = 12e3\n'})
+    with pytest.raises(ParameterError, match=r"\[reference\]\.initial_N = 12000.0 is given "
+                                             "with from_file"):
+        load_scenario(both)
+    ok = scenario_with(tmp_path, {REFERENCE_TABLE: '[reference]\nfrom_file = "ref.csv"\n'})
+    code = main(["run", str(ok), "--duration", "3.0", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert code == 2 and "ref.csv column 'F_ref_N'" in err and "too short" in err, err
+
+
+def test_all_channels_carry_units_and_agree_with_the_contract_columns(tmp_path):
+    """--channels all: the two heads average to p_head_Pa, the main valve's two supply edges
+    add up to q_supply_m3_s, the hitch load is the file's along its line."""
+    from trackmj.sim.run import simulate
+
+    t = 1e-3 * np.arange(0, 2501)
+    write_csv(tmp_path / "h.csv", {"t_s": t, "hitch_kN": 4.0 * (t > 0.3)})
+    path = scenario_with(tmp_path, {"[terrain]": '[hitch]\nfrom_file = "h.csv"\n'
+                                                 'pull_angle_deg = 20.0\n\n[terrain]'})
+    result = simulate(path, duration=0.6, channels="all")
+    c, units = result.columns(), result.units
+    assert units["p_head_L_Pa"] == "Pa" and units["q_V_L_m3_s"] == "m^3/s"
+    assert units["upper_strand_tension_N"] == "N" and units["hitch_pull_N"] == "N"
+    np.testing.assert_allclose(0.5 * (c["p_head_L_Pa"] + c["p_head_R_Pa"]), c["p_head_Pa"],
+                               rtol=1e-12)
+    np.testing.assert_allclose(c["q_main_PA_m3_s"] + c["q_main_PB_m3_s"], c["q_supply_m3_s"],
+                               rtol=1e-12, atol=1e-15)
+    on = c["t_s"] - 1e-3 > 0.3          # the load acting over a step is the one at its start
+    np.testing.assert_allclose(c["hitch_pull_N"][on], 4e3 * np.cos(np.radians(20.0)))
+    np.testing.assert_allclose(c["hitch_down_N"][~on], 0.0)
+    assert (c["upper_strand_tension_N"] > 0.0).all() and np.isfinite(
+        c["lower_strand_tension_N"]).all()
+    with pytest.raises(ParameterError, match="channels = 'some'"):
+        simulate(SHORT, duration=0.1, channels="some")
+
+
+def test_parquet_inputs_and_the_identity_follows_the_file_content(tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from trackmj.campaign import run_key
+    from trackmj.sim.setup import prepare
+
+    t = 1e-3 * np.arange(0, 2501)
+    path = scenario_with(tmp_path, {REFERENCE_TABLE: '[reference]\nfrom_file = "ref.parquet"\n'})
+    keys = []
+    for level_kN in (12.0, 13.0):
+        pq.write_table(pa.table({"t_s": t, "F_ref_kN": np.full(t.shape, level_kN)}),
+                       tmp_path / "ref.parquet")
+        setup = prepare(path)
+        assert setup.scenario.reference_N(1.0) == level_kN * 1e3
+        keys.append(run_key(setup))
+    assert keys[0] != keys[1]
