@@ -26,6 +26,15 @@ TRUTH = {AREA: 3.0e-8, BULK: 1.1e9}
 NOMINAL = {AREA: 4.0e-8, BULK: 1.4e9}
 
 
+def lf1352_sensors():
+    """The default machine's sensor noise (its control file read through the machine)."""
+    from trackmj import machines
+    from trackmj.control.params import load_config
+
+    nominal_N = machines.mechanics(machines.resolve("lf1352")).nominal_tension_N
+    return load_config(nominal_tension_N=nominal_N).sensors
+
+
 def write_csv(path: Path, columns: dict[str, np.ndarray]) -> Path:
     """A plain CSV, header as given (units in it), full float precision."""
     names = list(columns)
@@ -43,9 +52,7 @@ def truth_run():
 
 @pytest.fixture(scope="module")
 def noisy_log(truth_run, tmp_path_factory):
-    from trackmj.control.params import load_config
-
-    sensors = load_config().sensors
+    sensors = lf1352_sensors()
     rng = np.random.default_rng(1)
     c = truth_run
     n = len(c["t_s"])
@@ -82,7 +89,6 @@ def test_replayed_valve_command_reproduces_the_run(truth_run):
 
 
 def test_calibration_recovers_off_nominal_values(noisy_log, tmp_path):
-    from trackmj.control.params import load_config
     from trackmj.fitting import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
 
     out = tmp_path / "cal"
@@ -94,7 +100,7 @@ def test_calibration_recovers_off_nominal_values(noisy_log, tmp_path):
         assert low <= truth <= high, (key, doc["estimates"][key], low, high)
         assert not low <= NOMINAL[key] <= high, (key, low, high)   # the fit moved
         assert high - low < 0.2 * truth                             # and says how well
-    sensors = load_config().sensors
+    sensors = lf1352_sensors()
     # at the estimate what is left is the sensor noise
     assert doc["residual_rms"]["p_head_Pa"] == pytest.approx(sensors.pressure_noise_std_Pa,
                                                              rel=0.05)
