@@ -1,11 +1,13 @@
-"""Stated contact and pin parameters are the simulated ones (trackmj/model/soft.py).
+"""Stated contact and pin parameters are the simulated ones (trackmj/model/soft.py and the
+ground foundation, trackmj/foundation.py).
 
 Static: force / penetration of every loaded contact of the standing track equals the
-stated stiffness of its kind. Dynamic: the free vibration of a mass on a contact mapped
-by :func:`trackmj.model.soft.soft_constraint` decays with the stated damping and rings
-with the stated stiffness on the documented mass m + m_a, as semi-implicit Euler
-integrates them. Pins: a free span of the loop stretches as n pins in series, steel or
-rubber-bushed.
+stated stiffness of its kind, and the foundation carries the weight at its stated
+stiffness. Dynamic: the free vibration of a mass on a contact mapped by
+:func:`trackmj.model.soft.soft_constraint` decays with the stated damping and rings with the
+stated stiffness on the documented mass m + m_a, as semi-implicit Euler integrates them.
+Pins: a free span of free links stretches as n pins in series, steel or rubber-bushed
+(the chained structure's spans: tests/test_track_chains.py).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 import pytest
 
 from trackmj.elements import ConstantForce
+from trackmj.foundation import S_DELTA
 from trackmj.model import ModelParams, generate_mjcf
 from trackmj.model.soft import row_diag, soft_constraint
 from trackmj.plant import TrackPlant
@@ -64,23 +67,49 @@ def _static_stiffness(plant: TrackPlant, force_N: float = 13_000.0) -> dict[str,
     return out
 
 
+def _standing_foundation(plant: TrackPlant) -> tuple[float, float, float]:
+    """(Σ ground normal force [N], Σ penetration of the loaded pins [m], Σ K·δ over them
+    [N]) of the track standing settled (after :func:`_static_stiffness`)."""
+    f = plant.foundation
+    loaded = f.normal_forces_N > 0.0
+    delta = f.state[loaded, S_DELTA]
+    return (float(f.normal_forces_N.sum()), float(delta.sum()),
+            float(f.stiffness_N_m * delta.sum()))
+
+
 def test_static_contact_stiffness_is_the_stated_one(plant: TrackPlant) -> None:
+    """Every MuJoCo contact at its stated stiffness; the foundation carries the machine's
+    weight with each loaded pin at N = K·δ (at rest its damping term vanishes)."""
     p = plant.params
-    stated = {"ground": p.ground.stiffness_N_m, "tooth": p.contacts.tooth_stiffness_N_m}
     stiffness = _static_stiffness(plant)
-    assert {"ground", "rail:sprocket_hub", "rail:idler_wheel", "rail:road_wheel",
-            "rail:return_roller"} <= set(stiffness)
-    assert len(stiffness["ground"]) >= 10 and len(stiffness["rail:road_wheel"]) == 6
+    assert {"rail:sprocket_hub", "rail:idler_wheel", "rail:road_wheel",
+            "rail:return_roller"} <= set(stiffness) and "ground" not in stiffness
+    assert len(stiffness["rail:road_wheel"]) == 6
     for kind, values in stiffness.items():
-        target = stated.get(kind, p.contacts.rail_stiffness_N_m)
+        target = p.contacts.tooth_stiffness_N_m if kind == "tooth" else \
+            p.contacts.rail_stiffness_N_m
         np.testing.assert_allclose(values, target, rtol=STATIC_TOLERANCE, err_msg=kind)
+    total, _, elastic = _standing_foundation(plant)
+    weight = float(plant.model.body_subtreemass[0]) * p.simulation.gravity_m_s2
+    assert total == pytest.approx(weight, rel=0.005)
+    assert elastic == pytest.approx(total, rel=0.005)
+    assert np.count_nonzero(plant.foundation.normal_forces_N) >= 10
 
 
 def test_contact_stiffness_scale_multiplies_the_physical_stiffness(plant: TrackPlant) -> None:
-    """W5's perturbation keeps its meaning: x1.2 gives 1.2 x the stated ground stiffness."""
+    """W5's perturbation keeps its meaning: x1.2 gives 1.2 x the stated ground stiffness
+    (the weight on 1/1.2 of the sinkage) and 1.2 x every contact's."""
+    _static_stiffness(plant)
+    _, sinkage, _ = _standing_foundation(plant)
+    plant.reset()
     plant.scale_contact_stiffness(1.2)
-    ground = _static_stiffness(plant)["ground"]
-    np.testing.assert_allclose(ground, 1.2 * plant.params.ground.stiffness_N_m,
+    wheels = _static_stiffness(plant)["rail:road_wheel"]
+    total, scaled_sinkage, elastic = _standing_foundation(plant)
+    assert plant.foundation.stiffness_N_m == pytest.approx(1.2 * plant.params.ground
+                                                           .stiffness_N_m, rel=1e-12)
+    assert elastic == pytest.approx(total, rel=0.005)
+    assert scaled_sinkage == pytest.approx(sinkage / 1.2, rel=0.05)
+    np.testing.assert_allclose(wheels, 1.2 * plant.params.contacts.rail_stiffness_N_m,
                                rtol=STATIC_TOLERANCE)
 
 
@@ -105,7 +134,7 @@ def _contact_oscillator(mass_kg: float, stiffness: float, damping: float, condim
 
 
 @pytest.mark.parametrize(("stiffness", "damping", "condim", "mass_kg"),
-                         [(2.0e6, 2.0e4, 3, 100.0),    # ground foundation, pyramidal cone
+                         [(2.0e6, 2.0e4, 3, 100.0),    # the MJCF ground (viewer), pyramidal
                           (1.0e7, 1.2e4, 1, 200.0)])   # rail contact, frictionless
 def test_contact_free_vibration_has_the_stated_damping(stiffness: float, damping: float,
                                                        condim: int, mass_kg: float) -> None:
@@ -134,10 +163,12 @@ def test_contact_free_vibration_has_the_stated_damping(stiffness: float, damping
     assert math.isfinite(apparent) and apparent > 0.0
 
 
-def _bushed_plant(params: ModelParams) -> TrackPlant:
-    bushed = dataclasses.replace(params, bushings=dataclasses.replace(params.bushings,
-                                                                      enabled=True))
-    return TrackPlant(mujoco.MjModel.from_xml_string(generate_mjcf(bushed)), bushed)
+def _free_plant(params: ModelParams, bushings: bool) -> TrackPlant:
+    """Free links (every pin a connect), steel pins or the rubber bushings."""
+    free = dataclasses.replace(params, track=dataclasses.replace(params.track,
+                                                                structure="free"),
+                               bushings=dataclasses.replace(params.bushings, enabled=bushings))
+    return TrackPlant(mujoco.MjModel.from_xml_string(generate_mjcf(free)), free)
 
 
 def span_under_tension(plant: TrackPlant, force_N: float) -> tuple[int, int, float, float,
@@ -168,10 +199,10 @@ def span_under_tension(plant: TrackPlant, force_N: float) -> tuple[int, int, flo
 
 @pytest.mark.parametrize("pins", ["steel", "bushings"])
 def test_free_span_stretches_as_pins_in_series(model_params: ModelParams, pins: str) -> None:
-    """The upper span between return roller 2 and the idler holds n pins in series: its
-    length along the links grows by n·ΔT/K when the tension rises by ΔT (the links are
-    rigid), for the steel pins and for the rubber bushings."""
-    plant = TrackPlant.load() if pins == "steel" else _bushed_plant(model_params)
+    """On free links the upper span between return roller 2 and the idler holds n pins in
+    series: its length along the links grows by n·ΔT/K when the tension rises by ΔT (the
+    links are rigid), for the steel pins and for the rubber bushings."""
+    plant = _free_plant(model_params, bushings=pins == "bushings")
     p = plant.params
     assert p.pin_joint_table == ("pins" if pins == "steel" else "bushings")
     (_, _, l0, t0, _), (a, b, l1, t1, _) = (span_under_tension(plant, f)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 
-import mujoco
 import numpy as np
 import pytest
 from test_contacts import _static_stiffness
@@ -18,6 +17,7 @@ from trackmj import machines
 from trackmj.drive import drive
 from trackmj.elements import ConstantForce
 from trackmj.energy import accounted_J
+from trackmj.foundation import S_DELTA
 from trackmj.model.layout import slide_axis
 from trackmj.plant import TrackPlant
 from trackmj.sim.run import simulate
@@ -43,8 +43,7 @@ def standing(machine: str) -> dict:
     preload = p.tensioner.preload_N
     stiffness = _static_stiffness(plant, preload)   # settles 1.5 s, then 0.3 s of contacts
     m, d = plant.model, plant.data
-    ground = m.geom("ground").id
-    wrench, normal, exits, forces = np.zeros(6), [], [], []
+    normal, exits, forces = [], [], []
     pins = plant.pin_positions()
     centre = d.xpos[m.body("idler").id][[0, 2]]
     vertex_r = math.hypot(p.idler.radius_m + p.track.rail_radius_m, p.track.pitch_m / 2)
@@ -55,13 +54,7 @@ def standing(machine: str) -> dict:
     last = next(k for k in range(n) if on[k] and not on[(k + 1) % n])
     for _ in range(300):
         plant.step(ConstantForce(preload, 2e4))
-        total = 0.0
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if ground in (c.geom1, c.geom2):
-                mujoco.mj_contactForce(m, d, i, wrench)
-                total += wrench[0]
-        normal.append(total)
+        normal.append(plant.contact_forces_N()["ground"])
         tension = plant.pin_tensions_N()
         # the pins one link off the wrap: both their links are in the free span
         exits.append(0.5 * (tension[(first - 1) % n] + tension[(last + 1) % n]))
@@ -98,13 +91,21 @@ def test_ground_carries_the_weight(standing) -> None:
 
 def test_every_contact_has_its_stated_stiffness(standing) -> None:
     p = standing["plant"].params
-    stated = {"ground": p.ground.stiffness_N_m, "tooth": p.contacts.tooth_stiffness_N_m}
     stiffness = standing["stiffness"]
-    assert {"ground", "rail:road_wheel", "rail:idler_wheel"} <= set(stiffness)
+    assert {"rail:road_wheel", "rail:idler_wheel"} <= set(stiffness)
     assert len(stiffness["rail:road_wheel"]) >= p.road_wheels.count - 1
     for kind, values in stiffness.items():
-        target = stated.get(kind, p.contacts.rail_stiffness_N_m)
+        target = p.contacts.tooth_stiffness_N_m if kind == "tooth" else \
+            p.contacts.rail_stiffness_N_m
         np.testing.assert_allclose(values, target, rtol=0.10, err_msg=kind)
+    # the foundation: each loaded pin at N = K·δ at rest, its damping term B·v_n below the
+    # force of 1 mm/s (the standing track still creeps)
+    f = standing["plant"].foundation
+    loaded = f.normal_forces_N > 0.0
+    assert np.count_nonzero(loaded) >= 5
+    np.testing.assert_allclose(f.normal_forces_N[loaded],
+                               p.ground.stiffness_N_m * f.state[loaded, S_DELTA], rtol=0,
+                               atol=p.ground.damping_N_s_m * 1e-3)
 
 
 @pytest.fixture(scope="module")

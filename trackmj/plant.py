@@ -6,10 +6,14 @@ Sign conventions (see also :mod:`trackmj.ports`):
   (tensioning). Stroke velocity v = ds/dt [m/s].
 * tensioner force [N] > 0 pushes the idler carrier outward.
 * pin tension [N] > 0 pulls the two links of a pin apart along the track (tension);
-  pin k joins link_{k-1} and link_k; array index k, shape (link_count,). Each pin is a
-  compliant ``connect`` with a stated stiffness (``[pins]`` of the model file), or with
-  ``[track] structure = "pairs"`` every odd pin a hinge and every even connect two pins'
-  compliance; its tension is the force the pin transmits, along the bisector of the two links.
+  pin k joins link_{k-1} and link_k; array index k, shape (link_count,). With ``[track]
+  structure = "chains"`` (the default) the pins inside a chain are hinges and the pin
+  starting a chain is a compliant ``connect`` carrying the chain's pins in series; with
+  ``"free"`` every pin is a connect with the stated stiffness (``[pins]``). A pin's tension
+  is the force it transmits, along the bisector of the two links.
+* ground: the Kelvin–Voigt foundation under every pin (:mod:`trackmj.foundation`) replaces
+  the MJCF ground's contact; its forces act along the ground normal (N > 0 pushes the pin
+  out) and tangent (+x on flat ground).
 * chassis pose (x [m] forward, z [m] up, pitch [rad] about +y, nose-down positive).
 """
 
@@ -25,6 +29,7 @@ import mujoco
 import numba
 import numpy as np
 
+from trackmj.foundation import Foundation, FoundationLaw
 from trackmj.model import (
     ModelParams,
     link_name,
@@ -33,24 +38,23 @@ from trackmj.model import (
     with_heightfield,
 )
 from trackmj.model.mjcf import read_mjcf
-from trackmj.model.structure import equalise_pair_weights
+from trackmj.model.structure import equalise_link_weights
 from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElement
 from trackmj.terrain import RoadProfile
 
 
 @numba.njit(cache=True)
-def _largest_gap_m(efc_pos: np.ndarray, rows: int) -> float:
-    """Largest Euclidean norm [m] of the 3-row blocks efc_pos[0:rows] (rows % 3 == 0).
-
-    Each block is summed x² + y² + z² in that order, as ``np.einsum("ij,ij->i")`` does, and
-    √ is monotone, so the result equals the numpy expression it replaces bit for bit."""
+def _largest_pin_gap_m(efc_pos: np.ndarray, pins_per_connect: np.ndarray) -> float:
+    """Largest deflection of one pin [m]: each pin connect's gap (the Euclidean norm of its
+    3 rows, efc_pos[3c:3c+3], summed x² + y² + z² in that order) over the pins whose
+    compliance it carries in series (``pins_per_connect``, one per connect)."""
     largest = 0.0
-    for i in range(0, rows, 3):
-        a, b, c = efc_pos[i], efc_pos[i + 1], efc_pos[i + 2]
-        g2 = a * a + b * b + c * c
-        if g2 > largest:
-            largest = g2
-    return math.sqrt(largest)
+    for c in range(len(pins_per_connect)):
+        a, b, d = efc_pos[3 * c], efc_pos[3 * c + 1], efc_pos[3 * c + 2]
+        gap = math.sqrt(a * a + b * b + d * d) / pins_per_connect[c]
+        if gap > largest:
+            largest = gap
+    return largest
 
 
 @dataclass
@@ -111,9 +115,9 @@ class TrackPlant:
     """One track side in MuJoCo with named accessors (any machine's generated model).
 
     State layout: ``data.qpos`` holds chassis (x, z, pitch), sprocket angle, idler slide,
-    the suspension slides, then (x, z, pitch) of each free link link_00.. (pairs: of
-    each even link, followed by its odd child's pin hinge); use the accessors rather than
-    raw indices. The coupling step is 1 ms; the MuJoCo timestep
+    the suspension slides, then (x, z, pitch) of each free link link_00.. (chains: of
+    each chain's first link, followed by the pin hinges of the links it carries); use the
+    accessors rather than raw indices. The coupling step is 1 ms; the MuJoCo timestep
     must divide it (``substeps`` MuJoCo steps per coupling step). Sign conventions: see the
     module docstring (stroke outward positive, tensioner force > 0 pushes the idler out).
 
@@ -168,7 +172,7 @@ class TrackPlant:
         self._link_body = np.array([m.body(link_name(k)).id for k in range(n)])
         self._pin_geom = np.array([m.geom(link_name(k) + "_pin").id for k in range(n)])
         # the pin connects are the model's only equalities, in pin order: 3 rows each; the
-        # other pins are hinges (structure "pairs": link k hinged to link k-1 at pin k)
+        # other pins are hinges (structure "chains": link k hinged to link k-1 at pin k)
         hinged = [k for k in range(n) if m.body(link_name(k)).parentid != 0]
         connected = [k for k in range(n) if k not in hinged]
         pin_eq = [m.equality(pin_name(k)).id for k in connected]
@@ -178,8 +182,12 @@ class TrackPlant:
                              "is not a hinge, in pin order, only (regenerate the model)")
         self._pin_rows = 3 * m.neq
         self._connected_pins = np.array(connected, dtype=int)
+        # pins each connect carries in series: the links up to the next connect
+        self._pins_per_connect = np.diff([*connected, n]).astype(float)
         self._hinged_pins = np.array(hinged, dtype=int)
-        equalise_pair_weights(m)   # pairs: every link the straight pair's row weight
+        equalise_link_weights(m)   # chains: every link link_00's row weight
+        self.foundation = Foundation(m, self.data, self._pin_geom,
+                                     FoundationLaw.from_params(params))
         self._chassis_body = m.body("chassis").id
         self._hitch_site = m.site("rear_hitch").id
         self._sprocket_body = m.body("sprocket").id
@@ -321,9 +329,10 @@ class TrackPlant:
 
     def scale_contact_stiffness(self, scale: float) -> None:
         """Multiply the physical stiffness of every track contact by ``scale`` [-] (W5
-        perturbation). The partner geoms (ground, hub, idler, wheels, rollers, teeth) decide
-        every contact (priority) and carry a direct solref (−k, −b) with K = n·k/((1−d)·A)
-        (:mod:`trackmj.model.soft`), so k scales linearly; damping and impedance stay."""
+        perturbation): the foundation's K, and the partner geoms' (hub, idler, wheels,
+        rollers, teeth), which decide every contact (priority) and carry a direct solref
+        (−k, −b) with K = n·k/((1−d)·A) (:mod:`trackmj.model.soft`), so k scales
+        linearly; damping and impedance stay."""
         if not (math.isfinite(scale) and scale > 0.0):
             raise ValueError(f"contact stiffness scale must be > 0, got {scale!r}")
         m = self.model
@@ -331,6 +340,7 @@ class TrackPlant:
         if not np.any(direct):
             raise ValueError("no contact with a direct (physical) solref in this model")
         m.geom_solref[direct, 0] *= scale
+        self.foundation.scale_stiffness(scale)
 
     @property
     def chassis_acc_z_m_s2(self) -> float:
@@ -360,9 +370,10 @@ class TrackPlant:
     def closure_error_m(self) -> float:
         """Largest pin gap of the loop [m]: the deflection of the most loaded pin compliance
         (tension / stated pin stiffness, plus its damping share), at the start of the
-        last step. Every pin is a ``connect``; no pin is special. Evaluated every step (the
-        physics guard reads it), so in a compiled kernel (~1 µs instead of ~6)."""
-        return _largest_gap_m(self.data.efc_pos, self._pin_rows)
+        last step; a connect carrying m pins in series (structure "chains") stretches m
+        times that. Evaluated every step (the physics guard reads it), so in a compiled
+        kernel (~1 µs)."""
+        return _largest_pin_gap_m(self.data.efc_pos, self._pins_per_connect)
 
     @property
     def pin_rows(self) -> int:
@@ -413,10 +424,10 @@ class TrackPlant:
 
     def contact_forces_N(self) -> dict[str, float]:
         """Sum of contact normal forces on the track by partner [N]:
-        sprocket, road_wheels, idler, return_rollers, ground."""
+        sprocket, road_wheels, idler, return_rollers, ground (the foundation's)."""
         m, d = self.model, self.data
-        totals = dict.fromkeys(("sprocket", "road_wheels", "idler", "return_rollers",
-                                "ground"), 0.0)
+        totals = dict.fromkeys(("sprocket", "road_wheels", "idler", "return_rollers"), 0.0)
+        totals["ground"] = float(self.foundation.normal_forces_N.sum())
         wrench = np.zeros(6)
         for i in range(d.ncon):
             c = d.contact[i]
@@ -518,8 +529,13 @@ class TrackPlant:
             raise ValueError(f"tensioner returned a non-finite force law {law}")
         self._ctrl[self._tensioner] = force
         self._biasprm[self._tensioner, 2] = damping
+        foundation = self.foundation
         for _ in range(self.substeps):
-            mujoco.mj_step(m, d)
+            mujoco.mj_step1(m, d)
+            foundation.apply()
+            mujoco.mj_factorM(m, d)
+            mujoco.mj_step2(m, d)
+            foundation.finish()
         stroke = self.stroke_m
         if self.substeps == 1:
             velocity = self.stroke_velocity_m_s

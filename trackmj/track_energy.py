@@ -25,9 +25,11 @@ The residual r_k = (M_k·Δv − h·f)ᵀ·v_{k+1} is what the booked forces mis
 integrated (solver tolerance, an unbooked force); it is not a fitted quantity.
 
 Constraint work is booked per row, f_row·(J_row·Δq) with MuJoCo's Jacobian of the step, and
-summed by partner: ground (normal; its pyramid edges split into normal and friction),
-sprocket (hub and teeth), road wheels, idler, return rollers, pins (the pin connects) and
-joint limits. A contact's work includes what its explicit spring returns.
+summed by partner: sprocket (hub and teeth), road wheels, idler, return rollers, pins (the
+pin connects) and joint limits. The ground is the foundation force element
+(:mod:`trackmj.foundation`), booked as integrated: (F(v_k) − C·J·Δv)·(J·Δq) per pin, split
+into normal (ground) and friction (ground_friction). A contact's work includes what its
+explicit spring returns.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from dataclasses import asdict, dataclass, field
 import mujoco
 import numpy as np
 
+from trackmj.foundation import S_DELTA, S_N, foundation_penetration, foundation_work
 from trackmj.plant import TrackPlant
 
 PARTNERS = ("ground", "ground_friction", "sprocket", "road_wheels", "idler",
@@ -146,6 +149,8 @@ class TrackEnergyLedger:
         self._curvature = 0.0                      # Σ f·(J·Δq − Δr) of the constraints
         self._pending: dict[str, np.ndarray] | None = None
         self._pin_rows = plant.pin_rows
+        self._foundation_work = np.zeros(2)   # (normal, friction) [J]
+        self._foundation_pending: tuple[np.ndarray, ...] | None = None
         self._steps = 0
 
     def after_step(self) -> None:
@@ -180,6 +185,7 @@ class TrackEnergyLedger:
             wrench = d.xfrc_applied[self._chassis]
             t.hitch_work_J += float(wrench[:3] @ (self._jacp @ dq) + wrench[3:] @ (self._jacr @ dq))
         self._book_constraints(dq)
+        self._book_foundation(dq)
         # numerical terms (mass matrix of the step's start, still in qM)
         mujoco.mj_mulM(m, d, self._mdv, dv)
         mujoco.mj_mulM(m, d, self._mv, v1)
@@ -254,6 +260,37 @@ class TrackEnergyLedger:
         self._settle(d.efc_pos[pins], contacts)
         self._pending = pending
 
+    def _book_foundation(self, dq: np.ndarray) -> None:
+        """Work of the ground foundation over the step as integrated (normal and friction),
+        then the previous step's pins settled against their true change of penetration
+        (:meth:`_settle_foundation`)."""
+        f = self.plant.foundation
+        state, jac = f.state, f.jac
+        foundation_work(state, jac, f.pins, f.dofs, self._v_prev, self.plant.data.qvel,
+                        self._h, self._foundation_work)
+        self._settle_foundation(state[:, S_DELTA])
+        pushing = state[:, S_N] > 0.0
+        # J_n·Δq (a pin's unused dof slots hold J = 0)
+        rate = np.einsum("ij,ij->i", jac[pushing, 0, :], dq[f.dofs[pushing]])
+        self._foundation_pending = (pushing, state[pushing, S_N].copy(), rate,
+                                    state[:, S_DELTA].copy())
+
+    def _settle_foundation(self, penetration: np.ndarray) -> None:
+        """The previous step's foundation pins against the penetration ``penetration`` [m]
+        the step reached, as :meth:`_settle` does for contacts: the normal force's work on
+        J_n·Δq beyond the true change −Δδ is "constraint_curvature", its explicit spring's
+        ½·K·Δδ² "explicit_constraint_springs"."""
+        old = self._foundation_pending
+        if old is None:
+            return
+        pushing, force, rate, before = old
+        change = -(penetration[pushing] - before[pushing])   # the pins' distance change
+        curvature = force * (rate - change)
+        self._foundation_work[0] -= float(curvature.sum())
+        self._curvature += float(curvature.sum())
+        self._creation[_GROUND] += 0.5 * self.plant.foundation.stiffness_N_m * float(
+            change @ change)
+
     def _settle(self, pin_pos: np.ndarray,
                 contacts: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Book the previous step's constraint terms against the residuals of the state it
@@ -305,6 +342,14 @@ class TrackEnergyLedger:
                      (geoms[:, 0].astype(np.int64) * m.ngeom + geoms[:, 1],
                       d.contact.dist[:ncon]) if ncon else None)
         self._pending = None
+        f = self.plant.foundation
+        penetration = np.empty(len(f.pins))
+        foundation_penetration(d.geom_xpos, f.pins, f.radius, f.line, penetration)
+        self._settle_foundation(penetration)
+        self._foundation_pending = None
+        self._work[_GROUND] += self._foundation_work[0]
+        self._work[_FRICTION] += self._foundation_work[1]
+        self._foundation_work[:] = 0.0
         end = d.energy.copy()
         kinetic_next = self._kinetic_next_sum + float(end[1])
         t.kinetic_change_J = float(end[1] - self._start_energy[1])

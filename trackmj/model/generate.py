@@ -2,10 +2,11 @@
 of the initial state, and the ``home`` keyframe found by settling under gravity with the
 passive tensioner preload.
 
-Settling uses MuJoCo alone (no plant): the passive spring-damper
-F = preload − k·(s − s_layout) − c·v is the tensioner actuator's affine bias
-(``ctrl = preload``, ``biasprm = (0, −k, −c)``; the slide position is s − s_layout), which
-``implicitfast`` integrates with the damping implicit.
+Settling uses MuJoCo and the ground foundation (:mod:`trackmj.foundation`, as the plant
+steps them), no plant: the passive spring-damper F = preload − k·(s − s_layout) − c·v is
+the tensioner actuator's affine bias (``ctrl = preload``, ``biasprm = (0, −k, −c)``; the
+slide position is s − s_layout), which ``implicitfast`` integrates with the damping
+implicit.
 """
 
 from __future__ import annotations
@@ -15,11 +16,12 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from trackmj.foundation import Foundation, FoundationLaw, step
 from trackmj.io import write_text_atomic
 from trackmj.model.layout import compute_layout
-from trackmj.model.mjcf import build_mjcf, split_mjcf
+from trackmj.model.mjcf import build_mjcf, link_name, split_mjcf
 from trackmj.model.params import MODEL_NAME, ModelParams, default_xml_path, load_model_params
-from trackmj.model.structure import equalise_pair_weights
+from trackmj.model.structure import equalise_link_weights
 from trackmj.params import ParameterError
 
 SETTLE_DURATION_S = 3.0
@@ -29,8 +31,10 @@ MAX_INITIAL_PENETRATION_M = 1e-3
 def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> mujoco.MjData:
     """State after ``duration_s`` [s] from the layout, standing (sprocket servo at 0 rad/s),
     under the passive tensioner of ``params``; RuntimeError on MuJoCo warnings."""
-    equalise_pair_weights(model)
+    equalise_link_weights(model)
     data = mujoco.MjData(model)
+    pins = [model.geom(link_name(k) + "_pin").id for k in range(params.track.link_count)]
+    foundation = Foundation(model, data, pins, FoundationLaw.from_params(params))
     tensioner = model.actuator("tensioner").id
     t = params.tensioner
     model.actuator_biasprm[tensioner, :3] = (0.0, -t.stiffness_N_m, -t.damping_N_s_m)
@@ -43,7 +47,7 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
                              "and positions in the model file")
     steps = round(duration_s / model.opt.timestep)
     for _ in range(steps):
-        mujoco.mj_step(model, data)
+        step(model, data, foundation)
     if sum(w.number for w in data.warning):
         raise RuntimeError("MuJoCo warnings while settling the home keyframe")
     return data

@@ -52,7 +52,7 @@ import numpy as np
 from trackmj.model.layout import Layout, hub_radius, outward_sign, slide_axis
 from trackmj.model.params import MODEL_NAME, ModelParams
 from trackmj.model.soft import SoftConstraint, body_inv_weight, row_diag, soft_constraint
-from trackmj.model.structure import pair_links, pin_series_count
+from trackmj.model.structure import chain_links, pin_series_count
 from trackmj.params import ParameterError
 from trackmj.terrain import RoadProfile, heightfield
 
@@ -113,7 +113,8 @@ def _header(root: ET.Element, p: ModelParams) -> None:
                   iterations=str(p.solver.iterations), tolerance=_fmt(p.solver.tolerance),
                   cone=p.solver.cone)
     flags = {name: "disable" for name, on in (("warmstart", p.solver.warmstart),
-                                                ("midphase", p.solver.midphase)) if not on}
+                                                ("midphase", p.solver.midphase),
+                                                ("island", p.solver.island)) if not on}
     if flags:
         _sub(option, "flag", **flags)
     _sub(root, "size", memory="16M")
@@ -365,8 +366,9 @@ def contact_kind(geom_name: str) -> str | None:
 
 
 def soft_constraints(p: ModelParams, model: mujoco.MjModel) -> dict[str, SoftConstraint]:
-    """The MuJoCo parameters of every stated contact (by partner geom name) and of the pins
-    (key ``pin``), from the row diagonals of ``model`` (see :mod:`trackmj.model.soft`)."""
+    """The MuJoCo parameters of every stated contact (by partner geom name) and of every pin
+    connect (by its name, :func:`pin_name`), from the row diagonals of ``model`` (see
+    :mod:`trackmj.model.soft`)."""
     h, margin = p.simulation.timestep_s, p.solver.soft_margin
     link = body_inv_weight(model, "link_00")
     stated = {"ground": (p.ground.stiffness_N_m, p.ground.damping_N_s_m, "[ground]"),
@@ -386,16 +388,17 @@ def soft_constraints(p: ModelParams, model: mujoco.MjModel) -> dict[str, SoftCon
         stiffness, damping, key = stated[kind]
         out[name] = soft_constraint(stiffness, damping, rows, diag, h, margin,
                                     f"model file {key}")
-    joint, series = p.pin_joint, pin_series_count(p)   # pins in series on one connect
+    joint = p.pin_joint
     rows, diag = row_diag(2.0 * link, condim=1)
-    out["pin"] = soft_constraint(joint.radial_stiffness_N_m / series,
-                                 joint.radial_damping_N_s_m / series, rows, diag, h, margin,
-                                 f"model file [{p.pin_joint_table}]")
+    for k, series in pin_series_count(p).items():   # pins in series on one connect
+        out[pin_name(k)] = soft_constraint(joint.radial_stiffness_N_m / series,
+                                           joint.radial_damping_N_s_m / series, rows, diag,
+                                           h, margin, f"model file [{p.pin_joint_table}]")
     return out
 
 
 def _map_soft_constraints(root: ET.Element, p: ModelParams) -> None:
-    """Set solref/solimp of the partner geoms and of the pin class from the stated
+    """Set solref/solimp of the partner geoms and of the pin connects from the stated
     stiffness and damping (compiles the model once for its row diagonals). The ground's go
     on the ``ground`` class, so the scene's ground geom (and a heightfield) carries none."""
     model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
@@ -409,9 +412,17 @@ def _map_soft_constraints(root: ET.Element, p: ModelParams) -> None:
             target = classes.get(name, geom)
             target.set("solref", _fmt(*soft.solref))
             target.set("solimp", _fmt(*soft.solimp))
+    # the pin class takes pin_00's mapping; a connect carrying another number of pins in
+    # series (a chain of another length) carries its own
     pin_class = root.find("default/default[@class='pin_joint']/equality")
-    pin_class.set("solref", _fmt(*mapping["pin"].solref))
-    pin_class.set("solimp", _fmt(*mapping["pin"].solimp))
+    first = mapping[pin_name(0)]
+    pin_class.set("solref", _fmt(*first.solref))
+    pin_class.set("solimp", _fmt(*first.solimp))
+    for connect in root.iter("connect"):
+        soft = mapping[connect.get("name")]
+        if soft != first:
+            connect.set("solref", _fmt(*soft.solref))
+            connect.set("solimp", _fmt(*soft.solimp))
 
 
 def _actuators(root: ET.Element, p: ModelParams) -> None:
@@ -439,8 +450,8 @@ def build_mjcf(p: ModelParams, layout: Layout, home_qpos: np.ndarray | None = No
     _running_gear(chassis, p, layout)
     _check_torsion(p)
     _links(root, world, p, layout)
-    if p.track.structure == "pairs":
-        pair_links(root, p)
+    if p.track.structure == "chains":
+        chain_links(root, p)
     _actuators(root, p)
     _map_soft_constraints(root, p)
     if home_qpos is not None:

@@ -50,10 +50,13 @@ class TrackParams(Parameters):
     pin_radius_m: float = param(0.002, 0.05, doc="pin sphere radius [m]")
     link_width_m: float = param(0.05, 1.5, doc="shoe width [m], visual and inertia")
     ground_friction: float = param(0.0, 2.0, unit="1", doc="Coulomb coefficient pin-ground [-]")
-    structure: Literal["free", "pairs"] = param(
-        default="free", doc="free: every link a free planar body, every pin a connect; pairs: "
-        "two-link sub-chains (odd links hinged to the even link before them), 26 % cheaper "
-        "steps (benchmarks/README.md, issue 21); optional, older files mean free")
+    structure: Literal["free", "chains"] = param(
+        default="chains", doc="chains: hinged sub-chains of at most chain_links links joined "
+        "by pin connects (trackmj/model/structure.py); free: every link a free planar body, "
+        "every pin a connect (twice the step cost, benchmarks/README.md); optional: chains")
+    chain_links: int = param(2, 200, unit="1", default=4,
+                             doc="longest chain of hinged links for structure = chains "
+                                 "[-]; optional: 4")
 
 
 @dataclass(frozen=True)
@@ -115,8 +118,14 @@ class ReturnRollerParams(Parameters):
 
 @dataclass(frozen=True)
 class GroundParams(Parameters):
+    """The Kelvin–Voigt foundation under every pin (:mod:`trackmj.foundation`)."""
+
     stiffness_N_m: float = param(1e3, 1e10, doc="Kelvin-Voigt stiffness per pin contact [N/m]")
     damping_N_s_m: float = param(0.0, 1e8, doc="Kelvin-Voigt damping per pin contact [N·s/m]")
+    friction_slip_m_s: float = param(
+        1e-4, 1.0, default=0.01,
+        doc="slip speed of the regularised Coulomb friction: mu·N·v/sqrt(v² + s²) [m/s]; "
+            "optional: 0.01")
 
 
 @dataclass(frozen=True)
@@ -174,6 +183,9 @@ class SolverParams(Parameters):
     jacobian: Literal["dense", "sparse", "auto"] = param()
     warmstart: bool = param()
     midphase: bool = param(doc="per-body geom bounding-volume tree before the narrow phase")
+    island: bool = param(default=False,
+                         doc="MuJoCo's constraint islands (the whole track side is one "
+                             "island: they only add their own bookkeeping); optional: false")
 
 
 @dataclass(frozen=True)
@@ -243,6 +255,14 @@ def _check_consistency(p: ModelParams, at: Location) -> None:
     if not lo < 0.0 < hi:
         raise at.error(("idler", "slide_range_m"), p.idler.slide_range_m,
                        "must bracket 0 (low < 0 < high)")
+    # the foundation's spring is explicit (trackmj/foundation.py): a link pivoting about one
+    # pin puts m/3 at the other (a rod's end), which semi-implicit Euler holds below 4·m/h²
+    limit = 4.0 * (p.track.link_mass_kg / 3.0) / p.simulation.timestep_s ** 2
+    if p.ground.stiffness_N_m > limit:
+        raise at.error(("ground", "stiffness_N_m"), p.ground.stiffness_N_m,
+                       f"exceeds {limit:.3g} N/m, the explicit limit 4·m/h² of a pin carrying "
+                       f"a third of a link ({p.track.link_mass_kg:g} kg) at timestep "
+                       f"{p.simulation.timestep_s:g} s")
     _check_layout(p, at)
 
 

@@ -1,27 +1,31 @@
-"""Track structure "pairs": two-link sub-chains instead of 82 free links (issue 21).
+"""Track structure "chains": short hinged sub-chains joined by pin connects (issue 21).
 
 Applied to the generated MJCF tree after the free links and their pin connects exist
-(:func:`pair_links`), so the generator's link code stays one: every odd link k becomes a
-child of link k−1, hinged about +y at their shared pin k (the child's origin), and pin k's
-``connect`` is removed. 41 free planar parents (3 DOF each) carry one hinged child (1 DOF):
-nv 257 -> 175 and 123 instead of 246 pin-connect rows; callgrind 2.92M -> 2.16M
-instructions per bare step at 1.5 m/s (``benchmarks/README.md``, track structure candidates).
+(:func:`chain_links`), so the generator's link code stays one. The loop of n links is cut,
+from link_00 on, into c = ceil(n / L) consecutive chains of at most L links
+(``[track] chain_links``), their sizes as equal as possible (:func:`chain_sizes`). In each
+chain every link but the first becomes a child of the link before it, hinged about +y at
+their shared pin (the child's origin), and that pin's ``connect`` is removed; the first link
+of a chain stays a free planar body (3 DOF) and the connect at its pin closes the loop. For
+the LF1352 (82 links, L = 4: 19 chains of 4 and 2 of 3) this gives nv 257 -> 135 and 63
+instead of 246 pin-connect rows (``benchmarks/README.md``, track structure candidates).
+``chain_links = 2`` are the two-link pairs measured before.
 
-Physics kept (measured there): both links of a straight pair have the same
-``body_invweight0`` (0.130 1/kg, a free link 0.190), which the contact mapping of
-:mod:`trackmj.model.soft` uses (link_00's, one solref per partner geom). MuJoCo computes it at
-qpos0, the layout, where a pair laid on a wrap weighs up to 3.9 % more (its contacts would be
-up to ~4 % softer than stated); :func:`equalise_pair_weights` gives every link the straight
-pair's value after compiling (the plant and the generator's settle call it), so the static
-stiffness is the stated one within 0.1 % (ground) and 0.07 % (rails); each remaining connect
-carries the compliance of the two pins of its stretch in series (K/2, B/2,
-:func:`pin_series_count`), so a span stretches as before while the hinged pins are rigid.
-The revolution component stays ≤ 3 % of the link-passing one at 1.0/1.5/2.0 m/s, the
-half-link-passing component within 8 % of the free links', pin gaps ≤ 0.17 mm.
+Physics kept (measured there): every connect carries the compliance of its chain's pins in
+series (K/m, B/m for a chain of m links, :func:`pin_series_count`), so a span stretches as
+before while the hinged pins are rigid (the study's revolute pins). MuJoCo computes each
+link's ``body_invweight0`` at qpos0 and it differs with the link's place in its chain;
+:func:`equalise_link_weights` gives every link link_00's after compiling (the plant and the
+generator's settle call it), so one solref per partner geom keeps every contact at its
+stated stiffness (:mod:`trackmj.model.soft`). The revolution component of the idler force
+stays ≤ 4 % of the link-passing one at 1.0/1.5/2.0 m/s and the connect gaps ≤ 0.32 mm.
+The pins' torsional spring-damper (bushings) needs free links: their tendons join the links'
+pitch hinges, which chained links do not have.
 """
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 
 import mujoco
@@ -31,43 +35,65 @@ from trackmj.model.params import ModelParams
 from trackmj.params import ParameterError
 
 
-def pin_series_count(p: ModelParams) -> int:
-    """Pins whose compliance one pin ``connect`` carries: 2 for pairs, 1 for free links."""
-    return 2 if p.track.structure == "pairs" else 1
+def chain_sizes(link_count: int, max_links: int) -> list[int]:
+    """Links per chain, in loop order from link_00: ceil(n / L) chains of at most L links,
+    sizes differing by at most one, the longer ones spread evenly round the loop."""
+    count = math.ceil(link_count / max_links)
+    base, longer = divmod(link_count, count)
+    return [base + ((i + 1) * longer // count - i * longer // count) for i in range(count)]
+
+
+def chain_starts(p: ModelParams) -> list[int]:
+    """Index of the first link of every chain (its pin is a connect), ascending; every
+    link for ``structure = "free"``."""
+    n = p.track.link_count
+    if p.track.structure == "free":
+        return list(range(n))
+    sizes = chain_sizes(n, p.track.chain_links)
+    return [sum(sizes[:i]) for i in range(len(sizes))]
+
+
+def pin_series_count(p: ModelParams) -> dict[int, int]:
+    """Pins whose compliance each pin ``connect`` carries, by its pin index: the size of the
+    chain it begins (1 for every pin of free links)."""
+    starts = chain_starts(p)
+    ends = [*starts[1:], p.track.link_count]
+    return {s: e - s for s, e in zip(starts, ends, strict=True)}
 
 
 def hinged_pins(p: ModelParams) -> list[int]:
-    """Pins that are hinges (odd pins for pairs; none for free links)."""
-    return list(range(1, p.track.link_count, 2)) if p.track.structure == "pairs" else []
+    """Pins that are hinges (every pin inside a chain; none for free links)."""
+    starts = set(chain_starts(p))
+    return [k for k in range(p.track.link_count) if k not in starts]
 
 
 def _floats(text: str) -> np.ndarray:
     return np.array([float(v) for v in text.split()])
 
 
-def pair_links(root: ET.Element, p: ModelParams) -> None:
-    """Hinge every odd link to the even link before it (see the module docstring); refuses
-    an odd link count and torsional bushings (their tendons join pitch hinges that the
-    children no longer have)."""
-    n = p.track.link_count
-    if n % 2:
-        raise ParameterError(f"[track] structure = \"pairs\" needs an even link_count, got {n}")
+def chain_links(root: ET.Element, p: ModelParams) -> None:
+    """Hinge every link inside a chain to the link before it (see the module docstring);
+    refuses the torsional spring-damper of bushings (its tendons join pitch hinges that the
+    chained links no longer have)."""
     joint = p.pin_joint
     if joint.torsional_stiffness_N_m_rad > 0.0 or joint.torsional_damping_N_m_s_rad > 0.0:
-        raise ParameterError(f"[track] structure = \"pairs\" does not take the "
+        raise ParameterError(f"[track] structure = \"chains\" does not take the "
                              f"[{p.pin_joint_table}] torsional spring-damper; use "
                              "structure = \"free\" with it")
     from trackmj.model.mjcf import link_name, pin_name  # mjcf imports this module
 
     world = root.find("worldbody")
     bodies = {b.get("name"): b for b in world.findall("body")}
+    # world pose of every link at the layout, before any is re-parented
+    pose = {link_name(k): (_floats(bodies[link_name(k)].get("pos")),
+                           _floats(bodies[link_name(k)].get("quat")))
+            for k in range(p.track.link_count)}
+    rot, conj, rel_quat = np.empty(9), np.empty(4), np.empty(4)
     for k in hinged_pins(p):
         child, parent = bodies[link_name(k)], bodies[link_name(k - 1)]
-        qp, qc = _floats(parent.get("quat")), _floats(child.get("quat"))
-        rot = np.empty(9)
+        (pp, qp), (pc, qc) = pose[link_name(k - 1)], pose[link_name(k)]
         mujoco.mju_quat2Mat(rot, qp)
-        rel_pos = rot.reshape(3, 3).T @ (_floats(child.get("pos")) - _floats(parent.get("pos")))
-        conj, rel_quat = np.empty(4), np.empty(4)
+        rel_pos = rot.reshape(3, 3).T @ (pc - pp)
         mujoco.mju_negQuat(conj, qp)
         mujoco.mju_mulQuat(rel_quat, conj, qc)
         child.set("pos", " ".join(f"{v:.9g}" for v in rel_pos))
@@ -83,9 +109,9 @@ def pair_links(root: ET.Element, p: ModelParams) -> None:
         equality.remove(equality.find(f"connect[@name='{pin_name(k)}']"))
 
 
-def equalise_pair_weights(model: mujoco.MjModel) -> None:
-    """Give every link of a pairs model link_00's ``body_invweight0`` (the straight pair's;
-    see the module docstring); a free-link model is left as it is (all its links alike)."""
+def equalise_link_weights(model: mujoco.MjModel) -> None:
+    """Give every link of a chained model link_00's ``body_invweight0`` (see the module
+    docstring); a free-link model is left as it is (all its links alike)."""
     links = [b for b in range(model.nbody) if model.body(b).name.startswith("link_")]
     links.sort(key=lambda b: int(model.body(b).name.split("_")[1]))   # link_00 first
     if any(model.body_parentid[b] != 0 for b in links):

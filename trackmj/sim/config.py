@@ -140,7 +140,9 @@ def identify_packaged_idler() -> EquivalentIdler:
     from trackmj.identify import identify_idler
     from trackmj.plant import TrackPlant
 
-    return identify_idler(TrackPlant.load, **IDENTIFICATION)
+    idler = load_model_params().idler   # the fitted mass floored at what moves for sure
+    return identify_idler(TrackPlant.load, **IDENTIFICATION,
+                          min_mass_kg=idler.mass_kg + idler.carrier_mass_kg)
 
 
 def write_idler_file(idler: EquivalentIdler, path: str | Path,
