@@ -57,6 +57,57 @@ def _largest_pin_gap_m(efc_pos: np.ndarray, pins_per_connect: np.ndarray) -> flo
     return largest
 
 
+@numba.njit(cache=True)
+def _pin_tensions(efc_force: np.ndarray, cfrc_int: np.ndarray, xmat: np.ndarray,
+                  link_body: np.ndarray, connect_of_pin: np.ndarray,
+                  out: np.ndarray) -> None:
+    """Tension of every pin [N] into ``out`` (see :meth:`TrackPlant.pin_tensions_N`): the
+    force a pin transmits, from its connect's rows (``connect_of_pin`` >= 0) or, for a
+    hinged pin (−1), the translational part of its child link's ``cfrc_int`` reversed,
+    projected on the bisector of the two links' x axes (xmat columns 0, 3, 6)."""
+    n = len(link_body)
+    for k in range(n):
+        c = connect_of_pin[k]
+        if c >= 0:
+            fx, fy, fz = efc_force[3 * c], efc_force[3 * c + 1], efc_force[3 * c + 2]
+        else:
+            body = link_body[k]
+            fx, fy, fz = -cfrc_int[body, 3], -cfrc_int[body, 4], -cfrc_int[body, 5]
+        a, b = link_body[k], link_body[k - 1]   # links k and k−1 (k−1 = n−1 for k = 0)
+        bx = xmat[a, 0] + xmat[b, 0]
+        by = xmat[a, 3] + xmat[b, 3]
+        bz = xmat[a, 6] + xmat[b, 6]
+        norm = math.sqrt(bx * bx + by * by + bz * bz)
+        out[k] = (fx * bx + fy * by + fz * bz) / norm
+
+
+@numba.njit(cache=True)
+def _strands(geom_xpos: np.ndarray, pin_geom: np.ndarray, qpos: np.ndarray,
+             chassis_q: np.ndarray, bounds: np.ndarray, tension: np.ndarray,
+             upper: np.ndarray, lower: np.ndarray) -> tuple[float, float]:
+    """Upper-strand and lower-run masks of the pins (written into ``upper``, ``lower``) and
+    the mean ``tension`` over each [N] (NaN for an empty strand). Pins are taken in the
+    chassis frame: world (x, z) less the chassis origin (x, ride + z), turned back by its
+    pitch; ``bounds``: (ride height, upper level, lower run x from, x to, lower level) [m],
+    see :meth:`TrackPlant.upper_strand_pins`, :meth:`TrackPlant.lower_strand_pins`."""
+    x0, z0 = qpos[chassis_q[0]], bounds[0] + qpos[chassis_q[1]]
+    c, s = math.cos(qpos[chassis_q[2]]), math.sin(qpos[chassis_q[2]])
+    sum_u = sum_l = 0.0
+    n_u = n_l = 0
+    for k in range(len(pin_geom)):
+        rx, rz = geom_xpos[pin_geom[k], 0] - x0, geom_xpos[pin_geom[k], 2] - z0
+        px, pz = c * rx - s * rz, s * rx + c * rz   # undo the rotation about +y by pitch
+        upper[k] = pz > bounds[1]
+        lower[k] = bounds[2] < px < bounds[3] and pz < bounds[4]
+        if upper[k]:
+            sum_u += tension[k]
+            n_u += 1
+        if lower[k]:
+            sum_l += tension[k]
+            n_l += 1
+    return (sum_u / n_u if n_u else math.nan), (sum_l / n_l if n_l else math.nan)
+
+
 @dataclass
 class PassiveTensioner:
     """Preload spring-damper acting on the idler carrier (like Chrono's M113 idler).
@@ -182,6 +233,9 @@ class TrackPlant:
                              "is not a hinge, in pin order, only (regenerate the model)")
         self._pin_rows = 3 * m.neq
         self._connected_pins = np.array(connected, dtype=int)
+        self._connect_of_pin = np.full(n, -1, dtype=np.int64)
+        self._connect_of_pin[connected] = np.arange(len(connected))
+        self._tension = np.zeros(n)
         # pins each connect carries in series: the links up to the next connect
         self._pins_per_connect = np.diff([*connected, n]).astype(float)
         self._hinged_pins = np.array(hinged, dtype=int)
@@ -189,6 +243,15 @@ class TrackPlant:
         self.foundation = Foundation(m, self.data, self._pin_geom,
                                      FoundationLaw.from_params(params))
         self._chassis_body = m.body("chassis").id
+        # strands in the chassis frame (ride height, upper level; the sprocket's lower run:
+        # x from, to, level): 5 cm above the higher of sprocket and idler centres; between
+        # the sprocket and its nearest road wheel, 5 cm below the sprocket centre
+        ride, spr = params.chassis.ride_height_m, params.sprocket
+        wheels = params.road_wheels.x_m
+        lo, hi = (spr.x_m, min(wheels)) if spr.x_m < params.idler.x_m else (max(wheels), spr.x_m)
+        self._strand_bounds = np.array([ride, max(spr.z_m, params.idler.z_m) - ride + 0.05,
+                                        lo, hi, spr.z_m - ride - 0.05])
+        self._upper, self._lower = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
         self._hitch_site = m.site("rear_hitch").id
         self._sprocket_body = m.body("sprocket").id
         self._carrier_body = m.body("idler_carrier").id
@@ -393,34 +456,31 @@ class TrackPlant:
         """Tension in every pin [N], shape (link_count,), positive pulling the links apart.
 
         The force the pin's ``connect`` transmits (MuJoCo's ``efc_force``, the force the
-        last step applied), projected on the bisector of the two links' axes. It is the
-        pin compliance's elastic and viscous force K·gap + B·gap rate plus the constraint's
-        apparent-mass term (:mod:`trackmj.model.soft`), which carries the pins' own stretch
-        mode; no filtering.
+        last step applied; its residual is anchor(link_{k-1}) − anchor(link_k), the force
+        acting on link_{k-1}, forwards under tension), or for a hinged pin the force of
+        link_{k-1} on its child link_k (the translational part of ``cfrc_int`` after
+        ``mj_rnePostConstraint``, reversed), projected on the bisector of the two links'
+        axes. It is the pin compliance's elastic and viscous force K·gap + B·gap rate plus
+        the constraint's apparent-mass term (:mod:`trackmj.model.soft`), which carries the
+        pins' own stretch mode; no filtering.
         """
         d = self.data
-        # connect residual = anchor(link_{k-1}) − anchor(link_k); its force acts on
-        # link_{k-1}, forwards (towards link_k) under tension
-        force = np.empty((self.link_count, 3))
-        force[self._connected_pins] = d.efc_force[: self._pin_rows].reshape(-1, 3)
         if len(self._hinged_pins):
-            # a hinged pin transmits the force of link_{k-1} on its child link_k (the
-            # translational part of cfrc_int after the constraint forces); link_{k-1}
-            # feels the opposite, forwards under tension like a connect
             mujoco.mj_rnePostConstraint(self.model, d)
-            force[self._hinged_pins] = -d.cfrc_int[self._link_body[self._hinged_pins], 3:]
-        axes = d.xmat[self._link_body, 0::3]   # each link's x axis (towards the next pin)
-        bisector = axes + np.roll(axes, 1, axis=0)   # links k-1 and k at pin k
-        bisector /= np.linalg.norm(bisector, axis=1, keepdims=True)
-        return np.einsum("ij,ij->i", force, bisector)
+        _pin_tensions(d.efc_force, d.cfrc_int, d.xmat, self._link_body, self._connect_of_pin,
+                      self._tension)
+        return self._tension.copy()
 
     def strand_tensions_N(self) -> StrandTension:
         """Mean pin tension of the upper strand and of the rear lower run [N] (see
         :meth:`upper_strand_pins`, :meth:`lower_strand_pins`)."""
-        tension = self.pin_tensions_N()
-        pts = self._chassis_frame_pins()
-        return StrandTension(float(tension[self._upper_mask(pts)].mean()),
-                             float(tension[self._lower_mask(pts)].mean()))
+        return StrandTension(*self._strands(self.pin_tensions_N()))
+
+    def _strands(self, tension: np.ndarray) -> tuple[float, float]:
+        """Mean ``tension`` [N] over the upper strand and the lower run (the masks left in
+        ``_upper``, ``_lower``)."""
+        return _strands(self.data.geom_xpos, self._pin_geom, self._qpos, self._chassis_q,
+                        self._strand_bounds, tension, self._upper, self._lower)
 
     def contact_forces_N(self) -> dict[str, float]:
         """Sum of contact normal forces on the track by partner [N]:
@@ -479,26 +539,17 @@ class TrackPlant:
         return np.maximum((pts @ normals.T - offsets).max(axis=1), 0.0)
 
     def upper_strand_pins(self) -> np.ndarray:
-        """Indices of pins in the upper strand (above the sprocket and idler centres)."""
-        return np.nonzero(self._upper_mask(self._chassis_frame_pins()))[0]
-
-    def _upper_mask(self, pts: np.ndarray) -> np.ndarray:
-        ride = self.params.chassis.ride_height_m
-        level = max(self.params.sprocket.z_m, self.params.idler.z_m) - ride
-        return pts[:, 1] > level + 0.05
-
-    def _lower_mask(self, pts: np.ndarray) -> np.ndarray:
-        p = self.params
-        sx, wheels = p.sprocket.x_m, p.road_wheels.x_m
-        lo, hi = (sx, min(wheels)) if sx < p.idler.x_m else (max(wheels), sx)
-        return ((pts[:, 0] > lo) & (pts[:, 0] < hi)
-                & (pts[:, 1] < p.sprocket.z_m - p.chassis.ride_height_m - 0.05))
+        """Indices of pins in the upper strand (5 cm above the higher of the sprocket and
+        idler centres, chassis frame)."""
+        self._strands(self._tension)
+        return np.nonzero(self._upper)[0]
 
     def lower_strand_pins(self) -> np.ndarray:
         """Indices of pins in the sprocket's lower run: between the sprocket and its
         nearest road wheel, 5 cm below the sprocket centre. With the sprocket at the rear
         it is the tight side driving forward; at the front the upper strand is."""
-        return np.nonzero(self._lower_mask(self._chassis_frame_pins()))[0]
+        self._strands(self._tension)
+        return np.nonzero(self._lower)[0]
 
     def derailment(self) -> DerailmentStatus:
         excursion = float(self.envelope_excursion_m().max())
