@@ -1,4 +1,5 @@
-"""Coupled step (MuJoCo track + hydraulic plugin, strong coupling) vs the bare MuJoCo step.
+"""Coupled step (MuJoCo track + hydraulic plugin, strong coupling) vs the bare step (MuJoCo and
+the ground foundation, no element port).
 
 Both run in one process on the same spun-up state (driving at 1.5 m/s, hold mode), so the
 ratio is measured, not assembled from separate runs. The coupled step logs the plugin's
@@ -79,7 +80,7 @@ def main() -> None:
         plugin_t.append(plugin)
     b, c, p = min(bare_t), min(coupled_t), min(plugin_t)
     print(f"machine: {machine()}; supply {element_model}")
-    print(f"bare mj_step            {b * 1e6:8.1f} us/step  ({1e-3 / b:.2f}x real time)")
+    print(f"bare step (MuJoCo + foundation) {b * 1e6:8.1f} us/step  ({1e-3 / b:.2f}x real time)")
     print(f"coupled step (strong)   {c * 1e6:8.1f} us/step  ({1e-3 / c:.2f}x real time)")
     print(f"  plugin inside it      {p * 1e6:8.1f} us/step  ({p / b:.1%} of the bare step)")
     print(f"ratio coupled / bare    {c / b:.3f}")

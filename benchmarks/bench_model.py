@@ -1,6 +1,7 @@
 """Bare-model speed: wall time per 1 ms step driving at 1.5 m/s on flat ground.
 
-Reports, in one run: bare ``mj_step`` (tensioner as a fixed affine law set once), the
+Reports, in one run: the bare step, MuJoCo with the ground foundation (tensioner as a fixed
+affine law set once), the
 plant's coupled step with the passive tensioner element (Python port exchange every step),
 their ratio, the real-time factor, and MuJoCo's timer split (collision vs constraint).
 Run: ``python benchmarks/bench_model.py [--seconds 5]``.
@@ -49,7 +50,7 @@ def main() -> None:
     print(f"machine: {machine()}")
     print(f"model: nv {m.nv}, contacts {ncon}, constraint rows {nefc}, "
           f"{args.seconds:.1f} s simulated per case, best of 3")
-    print(f"bare mj_step           {bare * 1e6:8.1f} us/step   "
+    print(f"bare step              {bare * 1e6:8.1f} us/step   "
           f"real-time factor {1e-3 / bare:5.2f}x")
     print(f"  collision            {timers['mjTIMER_POS_COLLISION'] * 1e6:8.1f} us "
           f"({timers['mjTIMER_POS_COLLISION'] / timers['mjTIMER_STEP']:.0%})")

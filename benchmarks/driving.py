@@ -11,6 +11,7 @@ import time
 
 import mujoco
 
+from trackmj.foundation import step
 from trackmj.plant import PassiveTensioner, TrackPlant
 
 SPEED_M_S = 1.5
@@ -35,9 +36,10 @@ class DrivingSnapshot:
         mujoco.mj_forward(self.plant.model, d)
 
     def bare_step_s(self, steps: int) -> float:
-        """Wall time per bare ``mj_step`` [s] from the snapshot over ``steps`` steps, with the
-        passive law fixed once (preload + implicit damping) and no Python in the loop.
-        MuJoCo's timers hold this block's totals afterwards."""
+        """Wall time per bare step [s] from the snapshot over ``steps`` steps: MuJoCo and the
+        ground foundation (:func:`trackmj.foundation.step`), with the passive law fixed once
+        (preload + implicit damping) and no element port. MuJoCo's timers hold this block's
+        totals afterwards."""
         self.restore()
         plant, m, d = self.plant, self.plant.model, self.plant.data
         law = self.passive.force_law(plant.time_s, plant.stroke_m, plant.stroke_velocity_m_s)
@@ -47,6 +49,7 @@ class DrivingSnapshot:
         for timer in d.timer:
             timer.duration, timer.number = 0.0, 0
         start = time.perf_counter()
+        foundation = plant.foundation
         for _ in range(steps):
-            mujoco.mj_step(m, d)
+            step(m, d, foundation)
         return (time.perf_counter() - start) / steps

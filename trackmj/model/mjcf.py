@@ -17,18 +17,23 @@ The model is planar (x forward, z up, all hinges about +y):
 * ``link_00..link_{n-1}`` (:func:`link_name`): rigid links, numbered in the running
   direction for forward travel (bottom strand rearward, up round the rear wheel, top strand
   forward, down round the front wheel).
-  Pin k joins link_{k-1} and link_k. Every link is a free planar body (world slides
-  ``link_kk_x``, ``link_kk_z``, hinge ``link_kk_pitch`` through its centre of mass) and
-  every pin is a ``connect`` equality ``pin_kk`` with the stated pin stiffness and damping
-  (``[pins]``, or ``[bushings]`` when enabled), optionally with a torsional spring-damper
-  (fixed tendon ``pin_kk_torsion``). No link is a tree root for others: in a kinematic
+  Pin k joins link_{k-1} and link_k. The generator builds every link as a free planar body
+  (world slides ``link_kk_x``, ``link_kk_z``, hinge ``link_kk_pitch`` through its centre of
+  mass) and every pin as a ``connect`` equality ``pin_kk`` with the stated pin stiffness
+  and damping (``[pins]``, or ``[bushings]`` when enabled), optionally with a torsional
+  spring-damper (fixed tendon ``pin_kk_torsion``); with ``[track] structure = "chains"``
+  (the default) :func:`trackmj.model.structure.chain_links` then hinges the links of each
+  chain to one another (hinge ``link_kk_pin``) and keeps one connect per chain, carrying
+  the chain's pins in series. No link is the root of the whole loop: in a single kinematic
   tree the contact rows' missing J̇·q̇ term depends on each link's path to the root, which
   travels round the loop and put a once-per-revolution component into the idler force.
 
 Collision filtering (contype/conaffinity bits): link rails (8) touch wheels, hub, idler and
 rollers; pin spheres (16) touch the ground and sprocket teeth; links never touch links.
 Wheels and idler roll without friction on the rails (condim 1), so their spin decouples
-from the track and is not modelled; the ground contact carries Coulomb friction (condim 3).
+from the track and is not modelled. The ground geom's contact (condim 3, Coulomb friction)
+serves MuJoCo's own viewer: trackmj's plant switches it off and applies the Kelvin–Voigt
+foundation of :mod:`trackmj.foundation` instead (same stiffness and damping).
 
 Stated contacts: the partner geoms (ground, hub, idler, road wheels, rollers, teeth) have
 priority over the link geoms and carry the solref/solimp that give the stated Kelvin–Voigt
@@ -531,7 +536,8 @@ def with_heightfield(mjcf: str, profile: RoadProfile) -> str:
     """Replace the flat ground of ``mjcf`` by the heightfield of road ``profile``.
 
     The road is constant across the track (the model is planar); elevation 0 is the flat
-    ground level. The ground contact keeps the flat ground's foundation (class ``ground``).
+    ground level. The ground contact keeps the flat ground's foundation (class ``ground``);
+    the plant's foundation takes the heightfield's profile as its ground line.
     """
     heights = np.asarray(profile.z_m, dtype=float)
     if heights.ndim != 1 or len(heights) < 4 or not np.all(np.isfinite(heights)):
