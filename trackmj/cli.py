@@ -16,6 +16,7 @@ from pathlib import Path
 def _cmd_model_info(args: argparse.Namespace) -> int:
     import mujoco
 
+    from trackmj.model.structure import structure_text
     from trackmj.plant import TrackPlant
 
     plant = TrackPlant.load(args.model, args.params, machine=args.machine,
@@ -42,7 +43,7 @@ def _cmd_model_info(args: argparse.Namespace) -> int:
         ("", f"chassis share {p.chassis.mass_kg:.0f} kg, track {link_mass:.0f} kg, wheels "
              f"and carrier {total_mass - p.chassis.mass_kg - link_mass:.0f} kg"),
         ("geoms", f"{m.ngeom} ({contact_pairs} geom pairs can collide)"),
-        ("equalities", f"{m.neq} pin connects ({p.track.structure} links)"),
+        ("equalities", f"{m.neq} pin connects ({structure_text(p)})"),
         ("actuators", f"{m.nu}: {', '.join(m.actuator(i).name for i in range(m.nu))}"),
         ("timestep", f"{m.opt.timestep * 1e3:.3f} ms, integrator "
                      f"{mujoco.mjtIntegrator(m.opt.integrator).name}"),

@@ -314,6 +314,11 @@ class TrackPlant:
         self._speed_command = 0.0
         self._hitch_loaded = False
         mujoco.mj_forward(self.model, self.data)
+        # the ground acting at this state as in a step (the foundation's wrenches), then
+        # everything derived again with it
+        self.foundation.apply()
+        self.foundation.finish()
+        mujoco.mj_forward(self.model, self.data)
 
     def _contact_groups(self) -> dict[int, str]:
         groups = {self._sprocket_body: "sprocket", 0: "ground"}

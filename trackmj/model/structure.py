@@ -53,6 +53,16 @@ def chain_starts(p: ModelParams) -> list[int]:
     return [sum(sizes[:i]) for i in range(len(sizes))]
 
 
+def structure_text(p: ModelParams) -> str:
+    """One line on the loop's structure, e.g. "chains: 19 of 4 links, 2 of 3" or "free
+    links"."""
+    if p.track.structure == "free":
+        return "free links, every pin a connect"
+    sizes = chain_sizes(p.track.link_count, p.track.chain_links)
+    counts = sorted({size: sizes.count(size) for size in sizes}.items(), reverse=True)
+    return "chains: " + ", ".join(f"{count} of {size}" for size, count in counts) + " links"
+
+
 def pin_series_count(p: ModelParams) -> dict[int, int]:
     """Pins whose compliance each pin ``connect`` carries, by its pin index: the size of the
     chain it begins (1 for every pin of free links)."""
