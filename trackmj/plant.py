@@ -232,13 +232,12 @@ class TrackPlant:
             raise ValueError(f"{m.neq} equalities: expected one pin connect per pin that "
                              "is not a hinge, in pin order, only (regenerate the model)")
         self._pin_rows = 3 * m.neq
-        self._connected_pins = np.array(connected, dtype=int)
         self._connect_of_pin = np.full(n, -1, dtype=np.int64)
         self._connect_of_pin[connected] = np.arange(len(connected))
         self._tension = np.zeros(n)
         # pins each connect carries in series: the links up to the next connect
         self._pins_per_connect = np.diff([*connected, n]).astype(float)
-        self._hinged_pins = np.array(hinged, dtype=int)
+        self._has_hinged_pins = bool(hinged)
         equalise_link_weights(m)   # chains: every link link_00's row weight
         self.foundation = Foundation(m, self.data, self._pin_geom,
                                      FoundationLaw.from_params(params))
@@ -470,7 +469,7 @@ class TrackPlant:
         pins' own stretch mode; no filtering.
         """
         d = self.data
-        if len(self._hinged_pins):
+        if self._has_hinged_pins:
             mujoco.mj_rnePostConstraint(self.model, d)
         _pin_tensions(d.efc_force, d.cfrc_int, d.xmat, self._link_body, self._connect_of_pin,
                       self._tension)
