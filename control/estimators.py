@@ -24,8 +24,8 @@ variance. SI inside. The measurement is linear (H = [I3 0 0]), so both filters s
 exact linear update.
 
 The whole 1 kHz EKF step (predict + update) and the UKF's sigma-point step are SX
-functions evaluated on the filter's own arrays through
-:class:`~trackmj.control.fastcall.BufferedFunction`.
+functions evaluated on the filter's own arrays, compiled to machine code
+(:mod:`trackmj.control.compiled`, bit-identical to CasADi's virtual machine).
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
+from trackmj.control.compiled import CompiledFunction, bind
 from trackmj.control.fastcall import BufferedFunction
 from trackmj.control.model import ReducedModel, _rhs_generic
 from trackmj.control.params import EstimatorParams, PlantParams
@@ -153,7 +154,7 @@ class _KalmanBase:
         self._count = 0
         return mean
 
-    def _finish(self, step: BufferedFunction) -> None:
+    def _finish(self, step: CompiledFunction | BufferedFunction) -> None:
         """Evaluate ``step`` (writes x+, P+, innovation, S^-1), take x+ and P+, accumulate."""
         step()
         self.x[:] = self._x_out
@@ -194,7 +195,7 @@ class ExtendedKalmanFilter(_KalmanBase):
     ) -> None:
         super().__init__(model, params, dt, x0)
         self._u_ps = np.zeros(2)
-        self._step = BufferedFunction(
+        self._step = bind(
             _ekf_function(model.p, dt), [self.x, self.P, self._z, self._u_ps, self.Q, self._r],
             self._outputs)
 
@@ -239,9 +240,9 @@ class UnscentedKalmanFilter(_KalmanBase):
         self.wm[0] = lam / (n + lam)
         self.wc[0] = self.wm[0] + 1.0 - a * a + b
         self._point, self._u_ps, self._point_next = np.zeros(n), np.zeros(2), np.zeros(n)
-        self._propagate = BufferedFunction(_propagate_function(model.p, dt),
-                                           [self._point, self._u_ps], [self._point_next])
-        self._update = BufferedFunction(
+        self._propagate = bind(_propagate_function(model.p, dt),
+                               [self._point, self._u_ps], [self._point_next])
+        self._update = bind(
             _update_function(), [self.x, self.P, self._z, self._r], self._outputs)
 
     def step(self, z: NDArray[np.float64], u: float, p_s: float) -> NDArray[np.float64]:

@@ -12,8 +12,9 @@ from [u, s, X] (80 variables, 60 equalities at N = 15, d = 1) to a dense QP in [
 transposed (backward) recursion, so the merit penalty is sqpmethod's too.
 
 All symbolic work (Jacobian blocks, E_i^-1, the recursion, the condensed matrices) happens in
-SX functions built once; they and the QP solver are called through
-:class:`~trackmj.control.fastcall.BufferedFunction` on preallocated numpy arrays. Measured
+SX functions built once, compiled to machine code (:mod:`trackmj.control.compiled`,
+bit-identical to CasADi's virtual machine); they and the QP solver (through
+:class:`~trackmj.control.fastcall.BufferedFunction`) run on preallocated numpy arrays. Measured
 on 3000 recorded closed-loop problems: iterates equal ``sqpmethod`` with an exact QP solver
 (qpOASES) to 1e-14.
 """
@@ -27,6 +28,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
+from trackmj.control.compiled import bind
 from trackmj.control.fastcall import BufferedFunction
 from trackmj.control.ocp import Ocp
 
@@ -200,17 +202,17 @@ class CondensedSqp:
         self.w, self.p = np.zeros(nw), np.zeros(p.numel())
         self.lam_g, self.lam_x = np.zeros(ng), np.zeros(nw)
         self._t = np.zeros(1)
-        self._qp_data = BufferedFunction(qp_data, [self.w, self.p, self.lam_g, self.lam_x])
+        self._qp_data = bind(qp_data, [self.w, self.p, self.lam_g, self.lam_x])
         h, gq, aq, lba, uba, lbz, ubz, c_v, s_v, e_v, g_v, self._scal = self._qp_data.res
         zero_z, zero_a = np.zeros(nz), np.zeros(ineq.size)
         self._qp = BufferedFunction(qp, [h, gq, aq, lba, uba, lbz, ubz, zero_z.copy(), zero_z,
                                   zero_a, np.zeros(0), np.zeros(0)][: qp.n_in()])
         z_qp, _, lam_a, lam_z = self._qp.res
-        self._du_inf = BufferedFunction(du_fn, [self.w, self.p, self.lam_g, self.lam_x])
-        self._step = BufferedFunction(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v,
+        self._du_inf = bind(du_fn, [self.w, self.p, self.lam_g, self.lam_x])
+        self._step = bind(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v,
                                              lba, uba, lbz, ubz])
         self.dx, self.dlam_g, self.dlam_x, self._step_scal = self._step.res
-        self._merit = BufferedFunction(merit, [self.w, self.dx, self._t, self.p])
+        self._merit = bind(merit, [self.w, self.dx, self._t, self.p])
 
     def solve(self, w0: NDArray[np.float64], p: NDArray[np.float64],
               lam_g0: NDArray[np.float64] | float) -> SqpResult:
