@@ -445,6 +445,13 @@ class HydraulicTensioner:
         """(p_A, p_head_L, p_head_R, p_rod, p_supply) [Pa gauge] now."""
         return tuple(self._state[k.P:k.P + 5].tolist())
 
+    def pressure_view(self) -> np.ndarray:
+        """A read-only view (5,) of the pressures (p_A, p_head_L, p_head_R, p_rod, p_supply)
+        [Pa gauge] that always shows the current values."""
+        view = self._state[k.P:k.P + 5]
+        view.flags.writeable = False
+        return view
+
     @property
     def pump_displacement(self) -> float:
         """Variable pump's displacement x [-] (0..1) after the last completed step."""

@@ -142,3 +142,18 @@ def test_cache_root_is_trackmjs_cache_directory(monkeypatch: pytest.MonkeyPatch,
         for key, value in env.items():
             monkeypatch.setenv(key, value)
         assert compiled.cache_root() == cache_dir()
+
+
+@pytest.mark.parametrize("compile_", [True, False])
+def test_results_bound_to_inputs_see_the_inputs_before_the_step(
+        compile_: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A result bound to its own input (a state updated in place) is written only after
+    every input was read: swapping a vector's entries in place works."""
+    monkeypatch.setenv(compiled.DISABLE_ENV, "0" if compile_ else "1")
+    x = ca.SX.sym("x", 3)
+    fn = ca.Function("rotate", [x], [ca.vertcat(x[1], x[2], x[0] * x[1])])
+    state = np.array((2.0, 3.0, 5.0))
+    bound = bind(fn, [state], [state])
+    assert isinstance(bound, CompiledFunction if compile_ else compiled.AliasedBuffer)
+    bound.call()
+    assert state.tolist() == [3.0, 5.0, 6.0]

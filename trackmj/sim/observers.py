@@ -39,7 +39,15 @@ class Recorder:
     schedule, the reference ``tension_ref_N`` and the time grid ``t_s`` = (k + 1)·h (exact,
     where the plant's clock accumulates steps); the controller's solves (wall time [s],
     success) are kept in :attr:`solve_times_s` and :attr:`solve_success`.
+
+    A step's readout and command are kept as they are and written into :attr:`data`
+    :data:`CHUNK` steps at a time (one numpy conversion per chunk instead of one per step;
+    the same float64 values); :meth:`columns`, :meth:`table` and :attr:`rows` include the
+    steps not yet written.
     """
+
+    CHUNK = 1000
+    """Steps kept before they are written into :attr:`data` [-]."""
 
     def __init__(self, schedule: Schedule) -> None:
         self._n_readout = len(Readout._fields)
@@ -47,25 +55,47 @@ class Recorder:
         self.units: dict[str, str] = READOUT_UNITS | COMMAND_UNITS | REFERENCE_UNITS
         self._reference, self._time = schedule.reference_N, schedule.t_s
         self.data = np.full((schedule.steps, len(self.names)), np.nan)
-        self.rows = 0
+        self._start = 0        # step of the first kept (not yet written) step
+        self._kept: list[tuple[Readout, Command]] = []
         self.solve_times_s: list[float] = []
         self.solve_success: list[bool] = []
 
+    @property
+    def rows(self) -> int:
+        """Steps recorded so far [-]."""
+        return self._start + len(self._kept)
+
     def on_step(self, k: int, readout: Readout, command: Command) -> None:
-        row = self.data[k]
-        row[: self._n_readout] = readout
-        row[self._n_readout] = command.mode
-        row[self._n_readout + 1] = command.u
-        self.rows = k + 1
+        kept = self._kept
+        if k != self._start + len(kept):   # not the next step: write what is kept first
+            self._write()
+            self._start = k
+        kept.append((readout, command))
         if command.solved is not None:
             self.solve_times_s.append(command.solved.solve_time_s)
             self.solve_success.append(command.solved.success)
+        if len(kept) == self.CHUNK:
+            self._write()
+
+    def _write(self) -> None:
+        """Write the kept steps into :attr:`data`."""
+        kept, n = self._kept, self._n_readout
+        if not kept:
+            return
+        block = self.data[self._start:self._start + len(kept)]
+        block[:, :n] = [readout for readout, _ in kept]
+        block[:, n] = [command.mode for _, command in kept]
+        block[:, n + 1] = [command.u for _, command in kept]
+        self._start += len(kept)
+        kept.clear()
 
     def columns(self) -> dict[str, np.ndarray]:
         """Column name -> values of the steps recorded so far, shape (rows,)."""
-        cols = {name: self.data[: self.rows, i] for i, name in enumerate(self.names)}
-        cols["tension_ref_N"] = self._reference[: self.rows]
-        cols["t_s"] = self._time[: self.rows]
+        self._write()
+        rows = self.rows
+        cols = {name: self.data[:rows, i] for i, name in enumerate(self.names)}
+        cols["tension_ref_N"] = self._reference[:rows]
+        cols["t_s"] = self._time[:rows]
         return cols
 
     def table(self, metadata: Mapping[str, Any],
@@ -159,6 +189,7 @@ class PhysicsGuard:
         self.pressures = pressures
         self.pressure_names = tuple(pressure_names)
         self._lo, self._hi = limits.stroke_range_m
+        self._closure_max, self._vacuum = limits.closure_max_m, limits.vacuum_Pa
 
     def _fail(self, r: Readout, what: str) -> None:
         raise PhysicsError(f"t = {r.t_s:.3f} s: {what}; the run left physics and was stopped")
@@ -176,14 +207,14 @@ class PhysicsGuard:
             self._fail(r, f"stroke {r.stroke_m * 1e3:.1f} mm outside the travel "
                           f"[{self._lo * 1e3:.1f}, {self._hi * 1e3:.1f}] mm the end stops "
                           "must hold")
-        if r.closure_error_m > self.limits.closure_max_m:
+        if r.closure_error_m > self._closure_max:
             self._fail(r, f"track loop closure gap {r.closure_error_m * 1e3:.1f} mm exceeds "
                           f"{self.limits.closure_max_m * 1e3:.1f} mm")
         if self.pressures is not None:
             values, names = self.pressures(), self.pressure_names
         else:
             values, names = (r.p_head_Pa, r.p_rod_Pa, r.p_supply_Pa), ("head", "rod", "supply")
-        vacuum = self.limits.vacuum_Pa
+        vacuum = self._vacuum
         if values and min(values) < vacuum:   # NaN (no such node) never compares below
             name, value = min(zip(names, values, strict=True), key=lambda nv: nv[1])
             self._fail(r, f"{name} pressure {value / 1e6:.3f} MPa gauge below vacuum "
