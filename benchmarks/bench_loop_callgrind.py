@@ -119,16 +119,19 @@ def main() -> None:
     whole, step = _total(out), _inclusive(out, "mj_step")
     objects = dict(_by_object(out))
     mujoco_own = objects.pop("libmujoco.so.4.0.0", 0)
-    # what mj_step spends in libc/libm (memset, memcpy, sqrt, ...) is not MuJoCo's own
+    # what mj_step spends in libc/libm/ld-linux (memset, memcpy, sqrt, TLS lookups) is not
+    # MuJoCo's own
     inside_libc = step - mujoco_own
     print(f"{args.scenario} (tp, nmpc, ekf), {n} steps, callgrind of run_loop ({out}):")
     print(f"  whole loop      {whole / n / 1e3:8.1f}k instructions per step")
     print(f"  mj_step         {step / n / 1e3:8.1f}k")
     print(f"  outside mj_step {(whole - step) / n / 1e3:8.1f}k "
           f"(loop = {whole / step:.3f}x the bare step)")
-    print("  outside mj_step by object (exclusive; libc + libm less mj_step's share):")
-    libc = objects.pop("libc.so.6", 0) + objects.pop("libm.so.6", 0) - inside_libc
-    rows = sorted([*objects.items(), ("libc.so.6 + libm.so.6", libc)], key=lambda kv: -kv[1])
+    print("  outside mj_step by object (exclusive; libc, libm and the loader's TLS lookups less "
+          "mj_step's share):")
+    system = ("libc.so.6", "libm.so.6", "ld-linux-x86-64.so.2")
+    libc = sum(objects.pop(name, 0) for name in system) - inside_libc
+    rows = sorted([*objects.items(), ("libc + libm + ld-linux", libc)], key=lambda kv: -kv[1])
     for obj, count in rows[:12]:
         print(f"    {obj:44s} {count / n / 1e3:8.1f}k")
 
