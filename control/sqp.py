@@ -28,6 +28,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
+from trackmj.control import mpc_kernels
 from trackmj.control.compiled import bind
 from trackmj.control.fastcall import BufferedFunction
 from trackmj.control.ocp import Ocp
@@ -225,18 +226,20 @@ class CondensedSqp:
         sigma = 0.0
         it = 0
         step_inf = 0.0
+        qp_data, qp, step, merit = (self._qp_data.call, self._qp.call, self._step.call,
+                                    self._merit.call)
         while True:
-            if self._qp_data():
+            if qp_data():
                 return self._result(np.inf, it, False)
             f_k, l1_infeas, max_viol = self._scal.tolist()
             if max_viol < self.tol_pr:
-                self._du_inf()
+                self._du_inf.call()
                 if self._du_inf.res[0][0] < self.tol_du:
                     return self._result(max_viol, it, True)
             if it >= 1 and step_inf <= MIN_STEP:
                 return self._result(max_viol, it, False)
             it += 1
-            if self._qp() or self._step():
+            if qp() or step():
                 return self._result(max_viol, it, False)
             dlam_inf, slope, dx_inf, qp_viol = self._step_scal.tolist()
             if not (qp_viol <= QP_FEASIBILITY_TOL and math.isfinite(slope)):
@@ -246,23 +249,16 @@ class CondensedSqp:
             l1 = f_k + sigma * l1_infeas
             tl1 = slope - sigma * l1_infeas
             t = 1.0
+            merit_out = self._merit.res[0]
             for ls in range(1, MAX_ITER_LS + 1):
                 self._t[0] = t
-                self._merit()
-                f_c, viol_c, max_viol = self._merit.res[0].tolist()
+                merit()
+                f_c, viol_c, max_viol = merit_out.tolist()
                 if f_c + sigma * viol_c <= l1 + t * C1 * tl1 or ls == MAX_ITER_LS:
                     break
                 t *= BETA
-            if t == 1.0:  # full step: the blended multipliers are the QP's
-                lam_g[:] = self.dlam_g
-                lam_x[:] = self.dlam_x
-                w += self.dx
-            else:
-                lam_g *= 1.0 - t
-                lam_g += t * self.dlam_g
-                lam_x *= 1.0 - t
-                lam_x += t * self.dlam_x
-                w += t * self.dx
+            # w += t·dx, multipliers blended by t (the QP's at a full step)
+            mpc_kernels.update(w, lam_g, lam_x, self.dx, self.dlam_g, self.dlam_x, t)
             step_inf = t * dx_inf
             if it >= self.accept_iter and max_viol <= self.accept_violation:
                 # a truncated SQP whose plan is feasible enough is used as it is (real-time

@@ -157,3 +157,47 @@ def test_results_bound_to_inputs_see_the_inputs_before_the_step(
     assert isinstance(bound, CompiledFunction if compile_ else compiled.AliasedBuffer)
     bound.call()
     assert state.tolist() == [3.0, 5.0, 6.0]
+
+
+def test_nmpc_problem_and_update_kernels_equal_their_numpy_expressions() -> None:
+    """control/mpc_kernels.py against the numpy code it replaces: the parameter vector and
+    warm start (cold, warm, pressures below p_min, preview outside the governor's band),
+    the SQP's iterate update (full and shortened step) and the finite check with the plan."""
+    from trackmj.control import mpc_kernels
+
+    model = ReducedModel(PLANT)
+    ctrl = NonlinearMpc(model, CFG.controller, CFG.mpc)
+    n = CFG.mpc.horizon_steps
+    x = model.equilibrium(14e3)
+    cases = [(np.append(x, 0.01), np.linspace(9e3, 25e3, n + 1)),
+             (np.array((-1e5, -2e5, x[2], 0.01)), np.full(n + 1, 15e3))]
+    for warm in (False, True):
+        if warm:
+            ctrl(x, np.full(n + 1, 16e3), 0.0)
+        for estimate, preview in cases:
+            ctrl._compiled_problem = True
+            w_c, p_c = (a.copy() for a in ctrl._problem(estimate, preview))
+            ctrl._compiled_problem = False
+            w_n, p_n = ctrl._problem(estimate, preview)
+            assert _same(w_c, w_n) and _same(p_c, p_n)
+    rng = np.random.default_rng(5)
+    for t in (1.0, 0.8, 0.64):
+        w, lam_g, lam_x, dx, dlam_g, dlam_x = (rng.standard_normal(k) for k in
+                                               (80, 150, 80, 80, 150, 80))
+        ref = [w.copy(), lam_g.copy(), lam_x.copy()]
+        if t == 1.0:
+            ref = [ref[0] + dx, dlam_g.copy(), dlam_x.copy()]
+        else:
+            ref[1] *= 1.0 - t
+            ref[1] += t * dlam_g
+            ref[2] *= 1.0 - t
+            ref[2] += t * dlam_x
+            ref[0] += t * dx
+        mpc_kernels.update(w, lam_g, lam_x, dx, dlam_g, dlam_x, t)
+        assert all(_same(a, b) for a, b in zip((w, lam_g, lam_x), ref, strict=True))
+    w, lam = rng.standard_normal(80), rng.standard_normal(150)
+    plan = np.zeros(15)
+    assert mpc_kernels.finish(w, lam, 5, 3, plan, True)
+    assert _same(plan, np.repeat(w[:5], 3))
+    lam[7] = np.nan
+    assert not mpc_kernels.finish(w, lam, 5, 3, plan, True)
