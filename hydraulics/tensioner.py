@@ -19,7 +19,7 @@ from typing import Literal
 
 import numpy as np
 
-from trackmj.ports import ElementLog, ForceLaw
+from trackmj.ports import ElementLog, ForceLaw, make_force_law
 
 from . import kernels as k
 from .components import Solenoid, SolenoidBank, orifice_gain
@@ -369,7 +369,7 @@ class HydraulicTensioner:
             # |residual| ninefold against v* = v_k (measured)
             if k.strong_step_law(self._const, st, bank.sol, bank.pend, t, h, s, v) != k.OK:
                 self._not_converged()
-            self._law = ForceLaw(st.item(k.LAW), st.item(k.LAW + 1))
+            self._law = make_force_law(st.item(k.LAW), st.item(k.LAW + 1))
         else:
             st[k.BACKTRACKS] = 0.0
             if self.coupling == "weak" or (self._calls % self.exchange_steps == 0
@@ -377,7 +377,7 @@ class HydraulicTensioner:
                 if self.coupling == "multirate":
                     self._s_hyd, self._v_hold = stroke_m, velocity_m_s
                 k.held_force_law(self._const, st, stroke_m, velocity_m_s)
-                self._law = ForceLaw(st.item(k.LAW), st.item(k.LAW + 1))
+                self._law = make_force_law(st.item(k.LAW), st.item(k.LAW + 1))
         self._calls += 1
         return self._law
 
