@@ -24,8 +24,8 @@ variance. SI inside. The measurement is linear (H = [I3 0 0]), so both filters s
 exact linear update.
 
 The whole 1 kHz EKF step (predict + update) and the UKF's sigma-point step are SX
-functions evaluated on the filter's own arrays through
-:class:`~trackmj.control.fastcall.BufferedFunction`.
+functions evaluated on the filter's own arrays, compiled to machine code
+(:mod:`trackmj.control.compiled`, bit-identical to CasADi's virtual machine).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from trackmj.control.fastcall import BufferedFunction
+from trackmj.control.compiled import Bound, bind
 from trackmj.control.model import ReducedModel, _rhs_generic
 from trackmj.control.params import EstimatorParams, PlantParams
 
@@ -102,13 +102,15 @@ def _propagate_function(plant: PlantParams, dt: float) -> ca.Function:
 
 @functools.cache
 def _ekf_function(plant: PlantParams, dt: float) -> ca.Function:
-    """One EKF step (x, P, z, (u, p_s), Q, r) -> (x+, P+, innovation, S^-1)."""
+    """One EKF step (x, P, z, (u, p_s), Q, r, s) -> (x+, P+, innovation, S^-1, s + x+):
+    the last output accumulates the posteriors for :meth:`_KalmanBase.period_mean`."""
     x, P, z, r = _symbols()
     ups, Q = ca.SX.sym("u_ps", 2), ca.SX.sym("Q", N_STATE, N_STATE)
+    total = ca.SX.sym("sum", N_STATE)
     x_pred, F = _trapezoid_sx(plant, x, ups[0], ups[1], dt)
     P_pred = ca.mtimes([F, P, F.T]) + Q
-    outs = _update_sx(x_pred, P_pred, z, r)
-    return ca.Function("ekf_step", [x, P, z, ups, Q, r], [ca.densify(v) for v in outs])
+    outs = [ca.densify(v) for v in _update_sx(x_pred, P_pred, z, r)]
+    return ca.Function("ekf_step", [x, P, z, ups, Q, r, total], [*outs, total + outs[0]])
 
 
 class _KalmanBase:
@@ -153,7 +155,7 @@ class _KalmanBase:
         self._count = 0
         return mean
 
-    def _finish(self, step: BufferedFunction) -> None:
+    def _finish(self, step: Bound) -> None:
         """Evaluate ``step`` (writes x+, P+, innovation, S^-1), take x+ and P+, accumulate."""
         step()
         self.x[:] = self._x_out
@@ -194,15 +196,19 @@ class ExtendedKalmanFilter(_KalmanBase):
     ) -> None:
         super().__init__(model, params, dt, x0)
         self._u_ps = np.zeros(2)
-        self._step = BufferedFunction(
-            _ekf_function(model.p, dt), [self.x, self.P, self._z, self._u_ps, self.Q, self._r],
-            self._outputs)
+        # x, P and the period sum are updated in place by the one evaluation
+        self._step = bind(
+            _ekf_function(model.p, dt),
+            [self.x, self.P, self._z, self._u_ps, self.Q, self._r, self._sum],
+            [self.x, self.P, self.innovation, self._s_inv, self._sum]).call
 
     def step(self, z: NDArray[np.float64], u: float, p_s: float) -> NDArray[np.float64]:
         self._z[:] = z
-        self._u_ps[0] = u
-        self._u_ps[1] = p_s
-        self._finish(self._step)
+        u_ps = self._u_ps
+        u_ps[0] = u
+        u_ps[1] = p_s
+        self._step()
+        self._count += 1
         return self.x
 
 
@@ -239,9 +245,9 @@ class UnscentedKalmanFilter(_KalmanBase):
         self.wm[0] = lam / (n + lam)
         self.wc[0] = self.wm[0] + 1.0 - a * a + b
         self._point, self._u_ps, self._point_next = np.zeros(n), np.zeros(2), np.zeros(n)
-        self._propagate = BufferedFunction(_propagate_function(model.p, dt),
-                                           [self._point, self._u_ps], [self._point_next])
-        self._update = BufferedFunction(
+        self._propagate = bind(_propagate_function(model.p, dt),
+                               [self._point, self._u_ps], [self._point_next])
+        self._update = bind(
             _update_function(), [self.x, self.P, self._z, self._r], self._outputs)
 
     def step(self, z: NDArray[np.float64], u: float, p_s: float) -> NDArray[np.float64]:

@@ -32,6 +32,7 @@ class BufferedFunction:
             self._buf.set_arg(i, memoryview(a))
         for i, r in enumerate(self.res):
             self._buf.set_res(i, memoryview(r))
+        self.call = self.__call__
 
     def __call__(self) -> int:
         """Evaluate in place; returns CasADi's status flag (0 = success)."""

@@ -14,6 +14,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from trackmj.control import mpc_kernels
 from trackmj.control.governor import feasible_band, govern
 from trackmj.control.model import ReducedModel
 from trackmj.control.ocp import X_SCALE, Ocp, build_ocp, initial_guess, parameter_vector
@@ -46,6 +47,12 @@ class _MpcBase:
         self._lam_g: NDArray[np.float64] | None = None
         self._plan: NDArray[np.float64] = np.zeros(mpc.horizon_steps)
         self._plan_age = mpc.horizon_steps
+        self._plan_buffer = np.zeros(ocp.n_blocks * mpc.block_steps)
+        # the NMPC's problem is built by the compiled ``_problem`` into these (the LMPC
+        # appends its linearisation to p, so it keeps the numpy path)
+        self._compiled_problem = False
+        self._w0_buffer = np.zeros(ocp.w.numel())
+        self._p_buffer = np.zeros(ocp.n_param)
 
     def set_parameters(
         self,
@@ -114,33 +121,24 @@ class _MpcBase:
         the controller keeps acting; otherwise the previous plan is shifted on.
         """
         n, lb = self.mpc.horizon_steps, self.mpc.block_steps
-        x0 = np.array(estimate[:4], dtype=float)
         if len(estimate) > 4:
             self.theta[2] = float(estimate[4])
-        # gauge pressures below p_min are estimator noise; a hard bound at node 1 would make
-        # the problem locally infeasible, so the initial state is projected onto p >= p_min
-        p_min = self.ctrl.pressure_min_Pa
-        if x0[0] < p_min:
-            x0[0] = p_min
-        if x0[1] < p_min:
-            x0[1] = p_min
-        band = feasible_band(self.ctrl, self.model.p, float(self.theta[0]))
-        p = self._parameters(x0, govern(np.asarray(reference_preview, float), band))
-        w0 = self._shifted_guess(x0)
+        w0, p = self._problem(estimate, reference_preview)
         t0 = time.perf_counter()
         try:
             w, lam_g, ok, iters = self._solve(w0, p)
         except RuntimeError:
-            w, lam_g, ok, iters = w0, np.zeros(self.ocp.g.numel()), False, 0
+            w, lam_g, ok, iters = w0.copy(), np.zeros(self.ocp.g.numel()), False, 0
         dt = time.perf_counter() - t0
         self.solve_times.append(dt)
         overrun = dt > self.mpc.time_budget_s
-        finite = bool(np.isfinite(w).all() and np.isfinite(lam_g).all())
+        plan = self._plan_buffer
+        finite = mpc_kernels.finish(w, lam_g, self.ocp.n_blocks, lb, plan, not overrun)
         ok = ok and finite
         if finite:
             self._w, self._lam_g = w, lam_g   # the next solve continues from this iterate
         if finite and not overrun:
-            self._plan = np.repeat(w[: self.ocp.n_blocks], lb)
+            self._plan = plan    # w[:n_blocks], each value repeated block_steps times
             self._plan_age = 0
             u = min(max(float(w[0]), self.ctrl.u_min), self.ctrl.u_max)
         else:
@@ -152,6 +150,34 @@ class _MpcBase:
             self.fallbacks += 1
         self.u_prev = u
         return ControlOutput(u, ok and not overrun, dt, iters, not (ok and not overrun))
+
+    def _problem(self, estimate: NDArray[np.float64], reference_preview: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(initial guess w0, parameter vector p) of the solve from the estimate and the
+        preview: the numpy expressions below, or their compiled equal into the controller's
+        own buffers (the NMPC's OCP with every limit set and a preview of N + 1 values)."""
+        ctrl, n = self.ctrl, self.mpc.horizon_steps
+        band = feasible_band(ctrl, self.model.p, float(self.theta[0]))
+        lim = (ctrl.force_min_N, ctrl.force_max_N, ctrl.pressure_min_Pa, ctrl.pressure_max_Pa)
+        if (self._compiled_problem and len(reference_preview) == n + 1
+                and None not in lim):
+            w0, p = self._w0_buffer, self._p_buffer
+            mpc_kernels.prepare(
+                np.asarray(estimate, dtype=float), np.asarray(reference_preview, float),
+                band[0], band[1], self.u_prev, self.theta, lim, ctrl.pressure_min_Pa,
+                X_SCALE, self._w if self._w is not None else w0, self._w is not None, n,
+                self.mpc.collocation_degree, self.ocp.n_blocks, p, w0)
+            return w0, p
+        x0 = np.array(estimate[:4], dtype=float)
+        # gauge pressures below p_min are estimator noise; a hard bound at node 1 would make
+        # the problem locally infeasible, so the initial state is projected onto p >= p_min
+        p_min = ctrl.pressure_min_Pa
+        if x0[0] < p_min:
+            x0[0] = p_min
+        if x0[1] < p_min:
+            x0[1] = p_min
+        p = self._parameters(x0, govern(np.asarray(reference_preview, float), band))
+        return self._shifted_guess(x0), p
 
     def _shifted_guess(self, x0: NDArray[np.float64]) -> NDArray[np.float64]:
         n, d, nb = self.mpc.horizon_steps, self.mpc.collocation_degree, self.ocp.n_blocks
@@ -191,6 +217,7 @@ class NonlinearMpc(_MpcBase):
     ) -> None:
         ocp = build_ocp(model, ctrl, mpc)
         super().__init__(model, ctrl, mpc, ocp)
+        self._compiled_problem = True
         opts = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"]}} if jit else {}
         self.sqp = CondensedSqp(ocp, mpc.horizon_steps, mpc.collocation_degree, mpc.max_iter,
                                 tol_pr=1e-6, tol_du=1e-4, function_options=opts,

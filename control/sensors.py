@@ -50,13 +50,15 @@ class Sensors:
     def measure(self, x: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:
         """Noisy sample z (3,) of the true state x (its first three entries: p_head, p_rod,
         y); Python scalars per channel (cheaper than small-array numpy at 1 kHz)."""
-        if self._next == len(self._noise):
+        i = self._next
+        if i == len(self._noise):
             self._noise = self.rng.standard_normal((self.block, 3)).tolist()
-            self._next = 0
-        n0, n1, n2 = self._noise[self._next]
-        self._next += 1
+            i = 0
+        self._next = i + 1
+        n0, n1, n2 = self._noise[i]
         (b0, b1, b2), (s0, s1, s2) = self._bias, self._std
         z = [x[0] + b0 + s0 * n0, x[1] + b1 + s1 * n1, x[2] + b2 + s2 * n2]
-        for i, q in self._quanta:
-            z[i] = round(z[i] / q) * q  # half to even, like np.round
+        if self._quanta:
+            for i, q in self._quanta:
+                z[i] = round(z[i] / q) * q  # half to even, like np.round
         return np.array(z)

@@ -12,8 +12,9 @@ from [u, s, X] (80 variables, 60 equalities at N = 15, d = 1) to a dense QP in [
 transposed (backward) recursion, so the merit penalty is sqpmethod's too.
 
 All symbolic work (Jacobian blocks, E_i^-1, the recursion, the condensed matrices) happens in
-SX functions built once; they and the QP solver are called through
-:class:`~trackmj.control.fastcall.BufferedFunction` on preallocated numpy arrays. Measured
+SX functions built once, compiled to machine code (:mod:`trackmj.control.compiled`,
+bit-identical to CasADi's virtual machine); they and the QP solver (through
+:class:`~trackmj.control.fastcall.BufferedFunction`) run on preallocated numpy arrays. Measured
 on 3000 recorded closed-loop problems: iterates equal ``sqpmethod`` with an exact QP solver
 (qpOASES) to 1e-14.
 """
@@ -27,6 +28,8 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
+from trackmj.control import mpc_kernels
+from trackmj.control.compiled import bind
 from trackmj.control.fastcall import BufferedFunction
 from trackmj.control.ocp import Ocp
 
@@ -200,17 +203,17 @@ class CondensedSqp:
         self.w, self.p = np.zeros(nw), np.zeros(p.numel())
         self.lam_g, self.lam_x = np.zeros(ng), np.zeros(nw)
         self._t = np.zeros(1)
-        self._qp_data = BufferedFunction(qp_data, [self.w, self.p, self.lam_g, self.lam_x])
+        self._qp_data = bind(qp_data, [self.w, self.p, self.lam_g, self.lam_x])
         h, gq, aq, lba, uba, lbz, ubz, c_v, s_v, e_v, g_v, self._scal = self._qp_data.res
         zero_z, zero_a = np.zeros(nz), np.zeros(ineq.size)
         self._qp = BufferedFunction(qp, [h, gq, aq, lba, uba, lbz, ubz, zero_z.copy(), zero_z,
                                   zero_a, np.zeros(0), np.zeros(0)][: qp.n_in()])
         z_qp, _, lam_a, lam_z = self._qp.res
-        self._du_inf = BufferedFunction(du_fn, [self.w, self.p, self.lam_g, self.lam_x])
-        self._step = BufferedFunction(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v,
+        self._du_inf = bind(du_fn, [self.w, self.p, self.lam_g, self.lam_x])
+        self._step = bind(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v,
                                              lba, uba, lbz, ubz])
         self.dx, self.dlam_g, self.dlam_x, self._step_scal = self._step.res
-        self._merit = BufferedFunction(merit, [self.w, self.dx, self._t, self.p])
+        self._merit = bind(merit, [self.w, self.dx, self._t, self.p])
 
     def solve(self, w0: NDArray[np.float64], p: NDArray[np.float64],
               lam_g0: NDArray[np.float64] | float) -> SqpResult:
@@ -223,18 +226,20 @@ class CondensedSqp:
         sigma = 0.0
         it = 0
         step_inf = 0.0
+        qp_data, qp, step, merit = (self._qp_data.call, self._qp.call, self._step.call,
+                                    self._merit.call)
         while True:
-            if self._qp_data():
+            if qp_data():
                 return self._result(np.inf, it, False)
             f_k, l1_infeas, max_viol = self._scal.tolist()
             if max_viol < self.tol_pr:
-                self._du_inf()
+                self._du_inf.call()
                 if self._du_inf.res[0][0] < self.tol_du:
                     return self._result(max_viol, it, True)
             if it >= 1 and step_inf <= MIN_STEP:
                 return self._result(max_viol, it, False)
             it += 1
-            if self._qp() or self._step():
+            if qp() or step():
                 return self._result(max_viol, it, False)
             dlam_inf, slope, dx_inf, qp_viol = self._step_scal.tolist()
             if not (qp_viol <= QP_FEASIBILITY_TOL and math.isfinite(slope)):
@@ -244,23 +249,16 @@ class CondensedSqp:
             l1 = f_k + sigma * l1_infeas
             tl1 = slope - sigma * l1_infeas
             t = 1.0
+            merit_out = self._merit.res[0]
             for ls in range(1, MAX_ITER_LS + 1):
                 self._t[0] = t
-                self._merit()
-                f_c, viol_c, max_viol = self._merit.res[0].tolist()
+                merit()
+                f_c, viol_c, max_viol = merit_out.tolist()
                 if f_c + sigma * viol_c <= l1 + t * C1 * tl1 or ls == MAX_ITER_LS:
                     break
                 t *= BETA
-            if t == 1.0:  # full step: the blended multipliers are the QP's
-                lam_g[:] = self.dlam_g
-                lam_x[:] = self.dlam_x
-                w += self.dx
-            else:
-                lam_g *= 1.0 - t
-                lam_g += t * self.dlam_g
-                lam_x *= 1.0 - t
-                lam_x += t * self.dlam_x
-                w += t * self.dx
+            # w += t·dx, multipliers blended by t (the QP's at a full step)
+            mpc_kernels.update(w, lam_g, lam_x, self.dx, self.dlam_g, self.dlam_x, t)
             step_inf = t * dx_inf
             if it >= self.accept_iter and max_viol <= self.accept_violation:
                 # a truncated SQP whose plan is feasible enough is used as it is (real-time

@@ -39,7 +39,11 @@ class ValveLogic:
 
     def step(self, u: float) -> int:
         """Advance one step with command u in [-1, 1]; return the mode applied at the valves."""
-        u = min(1.0, max(-1.0, float(u)))
+        u = float(u)
+        if not u >= -1.0:   # min(1, max(-1, u)): NaN -> -1
+            u = -1.0
+        elif u > 1.0:
+            u = 1.0
         if abs(u) < self._dead_zone:
             u = 0.0
             self.error_integral = 0.0
@@ -62,11 +66,11 @@ class ValveLogic:
     def _choose(self, u: float) -> int:
         if not self._sigma_delta:
             return 0 if u == 0.0 else (1 if u > 0.0 else -1)
-        horizon = self._horizon
+        horizon, integral = self._horizon, self.error_integral
         best = self.mode
-        best_err = abs(self.error_integral + (u - self.mode) * horizon)
-        for m in MODES:
-            err = abs(self.error_integral + (u - m) * horizon)
+        best_err = abs(integral + (u - best) * horizon)
+        for m in MODES:   # -1, 0, +1: the first clearly better one wins ties
+            err = abs(integral + (u - m) * horizon)
             if err < best_err - 1e-12:
                 best, best_err = m, err
         return best

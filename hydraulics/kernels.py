@@ -54,6 +54,12 @@ C_ETA_V, C_ETA_HM     pump volumetric efficiency (fixed pump; 1 for the variable
                       leakage is explicit) and hydro-mechanical efficiency [-]
 C_P_UNLOADED          unloading model: pump outlet pressure while unloaded [Pa]
 C_CUT_IN_REL          unloading model: cut-in pressure / cut-out pressure [-]
+C_MV_OVERLAP, C_MV_LEAK, C_MV_OPEN  main valve edges: overlap [-], leak and open area [m^2]
+C_SV_OVERLAP, C_SV_LEAK, C_SV_OPEN  switching valves V_L, V_R: the same
+C_ROD_FEED, C_HEAD_BRANCH  restrictors in series: rod feed P->B, each head branch [m^2]
+C_CQ, C_SQRT_RHO      discharge coefficient [-], sqrt(density) [sqrt(kg/m^3)]
+C_TWO                 2.0, the loss-share exponent (read at run time, so the square is
+                      libm's pow(x, 2) as in Python, not folded into x·x)
 ====================  ===========================================================
 
 ``state`` layout (offset, length: content [unit]):
@@ -90,6 +96,25 @@ REC, 6                 last completed step: t [s], stroke [m], velocity [m/s], f
 LOG, 9                 ElementLog of the last completed step (``trackmj.ports.ElementLog``)
 STEP_LEDGER, 30        energy terms of the last step [J], LEDGER_FIELDS order
 LEDGER, 30             cumulative energy terms [J], LEDGER_FIELDS order
+AREAS, 4               edge areas the gains were computed for [m^2]: main at rest
+                       (P->A, B->T), main energised (P->B, A->T), V_L, V_R
+AREAS_SET, 1           1.0 once AREAS holds areas
+TWINS, 1               1.0 while V_L and V_R have had the same commands (they then move
+                       alike and V_R's position is V_L's)
+=====================  ==========================================================
+
+Solenoids (valve actuators: electromagnetic delay, then first-order opening; see
+``components.Solenoid``) live in a bank ``sol`` float64[n, N_SOL] (rows main, V_L, V_R in
+the tensioner) with a ring buffer of pending commands ``pend`` float64[n, capacity, 2]
+(time the command takes effect [s], command [-]):
+
+=====================  ==========================================================
+S_POS, S_CMD, S_EFF    position, last command, command in force [-] (0 closed, 1 open)
+S_MOVING               1.0 unless at rest (nothing pending, position = command in force)
+S_DELAY, S_TAU         delay [s], opening time constant [s]
+S_HEAD, S_COUNT        first pending slot, pending commands [-]
+S_AT_VALID, S_AT_T, S_AT_H, S_AT_X, S_AT_EFF  position and command in force at t + h found
+                       by ``valves_at`` (valid until committed or a new command) [s, s, -, -]
 =====================  ==========================================================
 
 Supply models (supply row of the residual, node S). ``prescribed``: p_S = p_set(t_{k+1}), an
@@ -121,8 +146,10 @@ from numba import njit
  C_LEAK, C_FLOOR, C_BAND, C_MU_OPEN, C_MU_WIDTH, C_K_MU, C_REL_CRACK, C_REL_WIDTH, C_K_REL,
  C_Q_PUMP, C_ACC_V0, C_ACC_P0, C_P_ATM, C_ACC_N, C_FRIC_C, C_FRIC_VS, C_FRIC_B, C_ES_K,
  C_ES_C, C_TOL, C_MAX_ITER, C_V_CORR, C_MAX_CORR, C_PRESCRIBED, C_MODEL, C_ACC, C_QG_MAX,
- C_DROOP, C_TAU, C_K_PUMP_LEAK, C_ETA_V, C_ETA_HM, C_P_UNLOADED, C_CUT_IN_REL) = range(45)
-N_CONST = 45
+ C_DROOP, C_TAU, C_K_PUMP_LEAK, C_ETA_V, C_ETA_HM, C_P_UNLOADED, C_CUT_IN_REL,
+ C_MV_OVERLAP, C_MV_LEAK, C_MV_OPEN, C_SV_OVERLAP, C_SV_LEAK, C_SV_OPEN, C_ROD_FEED,
+ C_HEAD_BRANCH, C_CQ, C_SQRT_RHO, C_TWO) = range(56)
+N_CONST = 56
 MODEL_PRESCRIBED, MODEL_FIXED_RELIEF, MODEL_COMPENSATED, MODEL_UNLOADING = 0.0, 1.0, 2.0, 3.0
 MODEL_CODES = {"prescribed": MODEL_PRESCRIBED, "fixed_relief": MODEL_FIXED_RELIEF,
                "compensated": MODEL_COMPENSATED, "unloading": MODEL_UNLOADING}
@@ -150,14 +177,19 @@ N_FLOW_TERMS = 24
 P, VOL, VOIL, GAIN, FRAC, SET_NEXT, PUMP_X, LOADED = 0, 5, 10, 11, 17, 20, 21, 22
 V_PREV, CARRY, LAW, CORRECTION, P_STAR, DPDV, V_STAR, JAC = 23, 24, 25, 27, 28, 33, 38, 39
 FLOWS, ITERS, BACKTRACKS, STEP_BACKTRACKS, BACKTRACKS_TOTAL, LAST_DP = 57, 70, 71, 72, 73, 74
-REC, LOG, STEP_LEDGER, LEDGER = 75, 81, 90, 120
-N_STATE = 150
+REC, LOG, STEP_LEDGER, LEDGER, AREAS, AREAS_SET, TWINS = 75, 81, 90, 120, 150, 154, 155
+N_STATE = 156
+(S_POS, S_CMD, S_EFF, S_MOVING, S_DELAY, S_TAU, S_HEAD, S_COUNT, S_AT_VALID, S_AT_T, S_AT_H,
+ S_AT_X, S_AT_EFF) = range(13)
+N_SOL = 13
+ARRIVED = 1e-9  # a solenoid this close to its command [normalised travel] has arrived
 N_FLOWS = 13
 
 OK, NOT_CONVERGED, LEFT_PHYSICS = 0, 1, 2
 MAX_BACKTRACKS = 12  # line-search halvings per Newton iteration (alpha >= 2^-12)
 _MIN_STEP = 2.0 ** -MAX_BACKTRACKS
 MAX_CHORD = 3  # chord corrections in a strong complete_step before full Newton
+SQRT2 = math.sqrt(2.0)
 
 
 # --------------------------------------------------------------- component laws
@@ -815,3 +847,157 @@ def multirate_substep(const: np.ndarray, state: np.ndarray, h: float, s1: float,
     _keep_solve(state, it, bt, F)
     _commit(const, state, p1, V1, flows, v, h, accumulate)
     return OK
+
+
+# --------------------------------------------------------------- valves
+@njit(cache=True)
+def solenoid_at(sol: np.ndarray, pend: np.ndarray, i: int, t: float,
+                h: float) -> tuple[float, float]:
+    """(position, command in force) of solenoid i at t + h without committing: the last
+    pending command due by then (1e-12 s slack) is in force, the position follows it
+    exactly over h, x = c + (x0 − c)·exp(−h/τ)."""
+    eff = sol[i, S_EFF]
+    if sol[i, S_MOVING] == 0.0:
+        return eff, eff
+    t_end = t + h
+    head, count, cap = int(sol[i, S_HEAD]), int(sol[i, S_COUNT]), pend.shape[1]
+    for j in range(count):
+        slot = (head + j) % cap
+        if pend[i, slot, 0] <= t_end + 1e-12:
+            eff = pend[i, slot, 1]
+        else:
+            break
+    return eff + (sol[i, S_POS] - eff) * math.exp(-h / sol[i, S_TAU]), eff
+
+
+@njit(cache=True)
+def solenoid_commit(sol: np.ndarray, pend: np.ndarray, i: int, t: float, h: float,
+                    x: float, eff: float) -> None:
+    """Move solenoid i to t + h at position x with command eff in force (what
+    ``solenoid_at(t, h)`` gave): drop the commands due, snap within ARRIVED."""
+    t_end = t + h
+    head, count, cap = int(sol[i, S_HEAD]), int(sol[i, S_COUNT]), pend.shape[1]
+    while count > 0 and pend[i, head, 0] <= t_end + 1e-12:
+        head = (head + 1) % cap
+        count -= 1
+    sol[i, S_HEAD], sol[i, S_COUNT] = head, count
+    if abs(x - eff) < ARRIVED:
+        x = eff
+    sol[i, S_POS], sol[i, S_EFF] = x, eff
+    sol[i, S_MOVING] = 1.0 if count > 0 or x != eff else 0.0
+    sol[i, S_AT_VALID] = 0.0
+
+
+@njit(cache=True)
+def valve_area(position: float, overlap: float, leak_m2: float, open_m2: float) -> float:
+    """Opening area [m^2] of a valve edge at normalised position (0 closed, 1 open):
+    linear from the leak area at ``overlap`` to the open area at 1."""
+    u = (position - overlap) / (1.0 - overlap)
+    u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else u)
+    return leak_m2 + (open_m2 - leak_m2) * u
+
+
+@njit(cache=True)
+def series_area(a1_m2: float, a2_m2: float) -> float:
+    """Equivalent area [m^2] of two turbulent orifices in series: (a1^-2 + a2^-2)^-1/2."""
+    if a1_m2 <= 0.0 or a2_m2 <= 0.0:
+        return 0.0
+    return a1_m2 * a2_m2 / math.sqrt(a1_m2 * a1_m2 + a2_m2 * a2_m2)
+
+
+@njit(cache=True)
+def _gain(const: np.ndarray, area_m2: float) -> float:
+    """Turbulent orifice gain K = Cq·A·sqrt(2)/sqrt(ρ) [m^3/s/sqrt(Pa)]."""
+    return const[C_CQ] * area_m2 * SQRT2 / const[C_SQRT_RHO]
+
+
+@njit(cache=True)
+def _share(const: np.ndarray, valve_m2: float, series_m2: float) -> float:
+    """Valve share of a valve + restrictor series path's loss, (A_eff/A_valve)²; 1 closed."""
+    if valve_m2 <= 0.0 or series_m2 <= 0.0:
+        return 1.0
+    return math.pow(series_m2 / valve_m2, const[C_TWO])
+
+
+@njit(cache=True)
+def valves_at(const: np.ndarray, state: np.ndarray, sol: np.ndarray, pend: np.ndarray,
+              t: float, h: float) -> None:
+    """Valve positions at t + h (kept in the bank for ``valves_advance``) -> the edge areas
+    and, for the edges whose area changed, the orifice gains state[GAIN] and the loss
+    shares state[FRAC]; nothing while every valve rests and the areas are known."""
+    if state[AREAS_SET] != 0.0 and (sol[0, S_MOVING] == 0.0 and sol[1, S_MOVING] == 0.0
+                                    and sol[2, S_MOVING] == 0.0):
+        return
+    twins = state[TWINS] != 0.0
+    xm, em = solenoid_at(sol, pend, 0, t, h)
+    xl, el = solenoid_at(sol, pend, 1, t, h)
+    xr, er = (xl, el) if twins else solenoid_at(sol, pend, 2, t, h)
+    for i, x, e in ((0, xm, em), (1, xl, el), (2, xr, er)):
+        sol[i, S_AT_VALID], sol[i, S_AT_T], sol[i, S_AT_H] = 1.0, t, h
+        sol[i, S_AT_X], sol[i, S_AT_EFF] = x, e
+    a_rest = valve_area(1.0 - xm, const[C_MV_OVERLAP], const[C_MV_LEAK], const[C_MV_OPEN])
+    a_ener = valve_area(xm, const[C_MV_OVERLAP], const[C_MV_LEAK], const[C_MV_OPEN])
+    a_l = valve_area(xl, const[C_SV_OVERLAP], const[C_SV_LEAK], const[C_SV_OPEN])
+    a_r = a_l if twins else valve_area(xr, const[C_SV_OVERLAP], const[C_SV_LEAK],
+                                       const[C_SV_OPEN])
+    known = state[AREAS_SET] != 0.0
+    if (known and a_rest == state[AREAS] and a_ener == state[AREAS + 1]
+            and a_l == state[AREAS + 2] and a_r == state[AREAS + 3]):
+        return
+    if not known or a_rest != state[AREAS] or a_ener != state[AREAS + 1]:
+        a_pb = series_area(a_ener, const[C_ROD_FEED])
+        g_rest = _gain(const, a_rest)
+        state[GAIN], state[GAIN + 1], state[GAIN + 2], state[GAIN + 3] = (
+            g_rest, _gain(const, a_ener), _gain(const, a_pb), g_rest)
+        state[FRAC] = _share(const, a_ener, a_pb)
+    if not known or a_l != state[AREAS + 2]:
+        a_vl = series_area(a_l, const[C_HEAD_BRANCH])
+        state[GAIN + 4], state[FRAC + 1] = _gain(const, a_vl), _share(const, a_l, a_vl)
+    if not known or a_r != state[AREAS + 3]:
+        if a_r == a_l:   # alike valves at the same opening: the same values
+            state[GAIN + 5], state[FRAC + 2] = state[GAIN + 4], state[FRAC + 1]
+        else:
+            a_vr = series_area(a_r, const[C_HEAD_BRANCH])
+            state[GAIN + 5], state[FRAC + 2] = _gain(const, a_vr), _share(const, a_r, a_vr)
+    state[AREAS], state[AREAS + 1], state[AREAS + 2], state[AREAS + 3] = (a_rest, a_ener,
+                                                                          a_l, a_r)
+    state[AREAS_SET] = 1.0
+
+
+@njit(cache=True)
+def valves_advance(state: np.ndarray, sol: np.ndarray, pend: np.ndarray, t: float,
+                   h: float) -> None:
+    """Commit the solenoids' motion over [t, t + h] (those at rest stay put), with the
+    positions ``valves_at`` found for the same (t, h) if it did; twins: V_R as V_L."""
+    for i in range(3):
+        if i == 2 and state[TWINS] != 0.0:
+            for j in range(N_SOL):
+                sol[2, j] = sol[1, j]
+            break
+        if sol[i, S_MOVING] == 0.0:
+            sol[i, S_AT_VALID] = 0.0
+            continue
+        if sol[i, S_AT_VALID] != 0.0 and sol[i, S_AT_T] == t and sol[i, S_AT_H] == h:
+            x, eff = sol[i, S_AT_X], sol[i, S_AT_EFF]
+        else:
+            x, eff = solenoid_at(sol, pend, i, t, h)
+        solenoid_commit(sol, pend, i, t, h, x, eff)
+
+
+@njit(cache=True)
+def strong_step_law(const: np.ndarray, state: np.ndarray, sol: np.ndarray, pend: np.ndarray,
+                    t: float, h: float, s: float, v: float) -> int:
+    """``valves_at(t, h)``, then ``strong_force_law``: a strong force_law in one call."""
+    valves_at(const, state, sol, pend, t, h)
+    return strong_force_law(const, state, h, s, v)
+
+
+@njit(cache=True)
+def strong_step_complete(const: np.ndarray, state: np.ndarray, sol: np.ndarray,
+                         pend: np.ndarray, t0: float, t1: float, s1: float, v1: float) -> int:
+    """``strong_complete`` over [t0, t1], then (if it converged) ``valves_advance``."""
+    h = t1 - t0
+    status = strong_complete(const, state, t1, h, s1, v1)
+    if status == OK:
+        valves_advance(state, sol, pend, t0, h)
+    return status

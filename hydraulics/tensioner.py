@@ -19,10 +19,10 @@ from typing import Literal
 
 import numpy as np
 
-from trackmj.ports import ElementLog, ForceLaw
+from trackmj.ports import ElementLog, ForceLaw, make_force_law
 
 from . import kernels as k
-from .components import Solenoid, orifice_gain, series_area, valve_area
+from .components import Solenoid, SolenoidBank, orifice_gain
 from .ledger import EnergyLedger
 from .params import SUPPLY_MODELS, HydraulicParams, SupplyModel, load_hydraulic_params
 
@@ -160,14 +160,16 @@ class HydraulicTensioner:
     ``ledger`` (cumulative) and ``step_ledger`` (last step) are EnergyLedger views of the
     state array, so a held reference always shows the current values.
 
-    Implementation: the numerics above run in compiled kernels (:mod:`.kernels`, numba), one
-    call per ``force_law`` and one per ``complete_step`` (one per sub-step in multi-rate).
-    ``_const`` (float64[kernels.N_CONST]: areas, volumes, fluid, valve, friction, end-stop
-    and Newton constants) and ``_state`` (float64[kernels.N_STATE]: pressures, volumes,
-    orifice gains, strong coupling's linearisation, flows, record and log values, both
-    ledgers) are laid out, with units, in the kernels module docstring. Python keeps the
-    solenoids, the set-point profile and the input checks, and turns a kernel's failure status
-    into a RuntimeError (Newton did not converge; strong and weak coupling).
+    Implementation: the numerics above, the solenoids' motion and the orifice gains run in
+    compiled kernels (:mod:`.kernels`, numba), one call per ``force_law`` and one per
+    ``complete_step`` with the strong coupling. ``_const`` (float64[kernels.N_CONST]: areas,
+    volumes, fluid, valve, friction, end-stop and Newton constants), ``_state``
+    (float64[kernels.N_STATE]: pressures, volumes, orifice gains, strong coupling's
+    linearisation, flows, record and log values, both ledgers, the valve areas) and the
+    solenoids' bank (``main.bank``, shared by ``main``, ``vl``, ``vr``) are laid out, with
+    units, in the kernels module docstring. Python keeps the solenoids' commands, the
+    set-point profile and the input checks, and turns a kernel's failure status into a
+    RuntimeError (Newton did not converge; strong and weak coupling).
 
     Parameters
     ----------
@@ -293,11 +295,22 @@ class HydraulicTensioner:
         c[k.C_ETA_HM] = vp.mechanical_efficiency if variable else fp.mechanical_efficiency
         c[k.C_P_UNLOADED] = uv.unloaded_pressure_Pa
         c[k.C_CUT_IN_REL] = 1.0 - uv.differential_rel
+        mv, sv = prm.main_valve, prm.switching_valves
+        c[k.C_MV_OVERLAP], c[k.C_MV_LEAK], c[k.C_MV_OPEN] = (mv.overlap, mv.leak_area_m2,
+                                                              mv.open_area_m2)
+        c[k.C_SV_OVERLAP], c[k.C_SV_LEAK], c[k.C_SV_OPEN] = (sv.overlap, sv.leak_area_m2,
+                                                              sv.open_area_m2)
+        c[k.C_ROD_FEED] = prm.metering.rod_feed_area_m2
+        c[k.C_HEAD_BRANCH] = prm.metering.head_branch_area_m2
+        c[k.C_CQ], c[k.C_SQRT_RHO], c[k.C_TWO] = cq, math.sqrt(rho), 2.0
         self._const = c
         self._state = st = np.zeros(k.N_STATE)  # layout: kernels module docstring
-        self.main = Solenoid(prm.main_valve)
-        self.vl = Solenoid(prm.switching_valves)
-        self.vr = Solenoid(prm.switching_valves)
+        bank = SolenoidBank((mv, sv, sv))   # rows main, V_L, V_R (the kernels' order)
+        self.main = Solenoid(mv, bank=bank, index=0)
+        self.vl = Solenoid(sv, bank=bank, index=1)
+        self.vr = Solenoid(sv, bank=bank, index=2)
+        st[k.TWINS] = 1.0   # alike and at rest: V_R moves as V_L while commanded alike
+        self._strong = coupling == "strong"
         self.t = float(t0_s)
         self.s = float(stroke_m)
         self.v = 0.0
@@ -315,7 +328,6 @@ class HydraulicTensioner:
         k.initialise(c, st, self.s)
         self.step_ledger = EnergyLedger.view(st[k.STEP_LEDGER:k.STEP_LEDGER + k.N_LEDGER])
         self.ledger = EnergyLedger.view(st[k.LEDGER:k.LEDGER + k.N_LEDGER])
-        self._areas: tuple[float, ...] = ()
         self.diverged = False  # multi-rate only: the lagged exchange left physics
         self.divergence_time_s = math.nan
         self._law = ForceLaw(st.item(k.LAW), 0.0)
@@ -336,21 +348,28 @@ class HydraulicTensioner:
         self.main.set(self.t, main)
         self.vl.set(self.t, v_l)
         self.vr.set(self.t, v_r)
+        if v_l != v_r:
+            self._state[k.TWINS] = 0.0
 
     def force_law(self, t_s: float, stroke_m: float, velocity_m_s: float) -> ForceLaw:
         """Affine force law F(v) = F0 + Z·v for the step starting at (t_k, s_k, v_k)."""
-        t_s, stroke_m, velocity_m_s = self._check_state(t_s, stroke_m, velocity_m_s)
-        self.t, self.s, self.v = t_s, stroke_m, velocity_m_s
+        t, s, v = float(t_s), float(stroke_m), float(velocity_m_s)
+        if not math.isfinite(t + s + v):
+            self._check_state(t, s, v)
+        self.t, self.s, self.v = t_s, stroke_m, velocity_m_s = t, s, v
         st = self._state
-        if self.coupling == "strong":
+        if self._strong:
             h = self.dt
-            self._set_gains(t_s, h)
-            # linearised about the extrapolated end-of-step velocity 2·v_k − v_{k−1}: the
-            # residual of the affine law is second order in (v_{k+1} − v*), so the
-            # predictor cut the summed |residual| ninefold against v* = v_k (measured)
-            if k.strong_force_law(self._const, st, h, stroke_m, velocity_m_s) != k.OK:
+            if self.setpoint is not None:
+                st[k.SET_NEXT] = self._setpoint_at(t + h)
+            bank = self.main.bank
+            # valve positions and gains at t + h, then the law linearised about the
+            # extrapolated end-of-step velocity 2·v_k − v_{k−1}: the residual of the affine
+            # law is second order in (v_{k+1} − v*), so the predictor cut the summed
+            # |residual| ninefold against v* = v_k (measured)
+            if k.strong_step_law(self._const, st, bank.sol, bank.pend, t, h, s, v) != k.OK:
                 self._not_converged()
-            self._law = ForceLaw(st.item(k.LAW), st.item(k.LAW + 1))
+            self._law = make_force_law(st.item(k.LAW), st.item(k.LAW + 1))
         else:
             st[k.BACKTRACKS] = 0.0
             if self.coupling == "weak" or (self._calls % self.exchange_steps == 0
@@ -358,29 +377,35 @@ class HydraulicTensioner:
                 if self.coupling == "multirate":
                     self._s_hyd, self._v_hold = stroke_m, velocity_m_s
                 k.held_force_law(self._const, st, stroke_m, velocity_m_s)
-                self._law = ForceLaw(st.item(k.LAW), st.item(k.LAW + 1))
+                self._law = make_force_law(st.item(k.LAW), st.item(k.LAW + 1))
         self._calls += 1
         return self._law
 
     def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
         """Finish the step with the end-of-step state (t_{k+1}, s_{k+1}, v_{k+1})."""
-        t_s, stroke_m, velocity_m_s = self._check_state(t_s, stroke_m, velocity_m_s)
+        t, s, v = float(t_s), float(stroke_m), float(velocity_m_s)
+        if not math.isfinite(t + s + v):
+            self._check_state(t, s, v)
+        t_s, stroke_m, velocity_m_s = t, s, v
         h = t_s - self.t
         if not h > 0.0:
             raise ValueError(f"t_s = {t_s!r} must exceed the step start time {self.t!r}")
         c, st = self._const, self._state
-        if self.coupling == "multirate":
+        if self._strong:   # from the linear predictor, with force_law's Jacobian
+            bank = self.main.bank
+            if k.strong_step_complete(c, st, bank.sol, bank.pend, self.t, t_s, stroke_m,
+                                      velocity_m_s) != k.OK:
+                self._not_converged()
+            self.s, self.v, self.t = stroke_m, velocity_m_s, t_s
+        elif self.coupling == "multirate":
             done = 0 if self.diverged else self._multirate_substeps(h)
             self.s, self.v, self.t = stroke_m, velocity_m_s, t_s
             if done == 0:  # diverged before this step: nothing to book
                 return
             k.book_step(c, st, t_s, h, stroke_m, velocity_m_s)
-        else:
-            if self.coupling == "weak":
-                self._set_gains(self.t, h)
-                status = k.weak_complete(c, st, t_s, h, stroke_m, velocity_m_s)
-            else:  # from the linear predictor, with force_law's Jacobian
-                status = k.strong_complete(c, st, t_s, h, stroke_m, velocity_m_s)
+        else:   # weak
+            self._set_gains(self.t, h)
+            status = k.weak_complete(c, st, t_s, h, stroke_m, velocity_m_s)
             if status != k.OK:
                 self._not_converged()
             self._advance_valves(self.t, h)
@@ -445,6 +470,13 @@ class HydraulicTensioner:
         """(p_A, p_head_L, p_head_R, p_rod, p_supply) [Pa gauge] now."""
         return tuple(self._state[k.P:k.P + 5].tolist())
 
+    def pressure_view(self) -> np.ndarray:
+        """A read-only view (5,) of the pressures (p_A, p_head_L, p_head_R, p_rod, p_supply)
+        [Pa gauge] that always shows the current values."""
+        view = self._state[k.P:k.P + 5]
+        view.flags.writeable = False
+        return view
+
     @property
     def pump_displacement(self) -> float:
         """Variable pump's displacement x [-] (0..1) after the last completed step."""
@@ -494,48 +526,16 @@ class HydraulicTensioner:
         return ps
 
     def _advance_valves(self, t_s: float, h: float) -> None:
-        """Commit the solenoids' motion over [t_s, t_s + h] (those at rest stay put)."""
-        main, vl, vr = self.main, self.vl, self.vr
-        if main.moving:
-            main.advance(t_s, h)
-        if vl.moving:
-            vl.advance(t_s, h)
-        if vr.moving:
-            vr.advance(t_s, h)
+        """Commit the solenoids' motion over [t_s, t_s + h] (:func:`.kernels.valves_advance`)."""
+        bank = self.main.bank
+        k.valves_advance(self._state, bank.sol, bank.pend, t_s, h)
 
     def _set_gains(self, t_s: float, h: float) -> None:
         """Valve positions at t_s + h (not committed) -> orifice gains of the step and the
-        valve shares of the series paths' losses; with a varying set-point also p_set(t_s + h).
-
-        The gains are recomputed only when one of the four edge areas changed (valves at
-        rest, or moving inside their overlap, keep the cached gains).
-        """
+        valve shares of the series paths' losses (:func:`.kernels.valves_at`: recomputed
+        only for the edges whose area changed); with a varying set-point also
+        p_set(t_s + h)."""
         if self.setpoint is not None:
             self._state[k.SET_NEXT] = self._setpoint_at(t_s + h)
-        if self._areas and not (self.main.moving or self.vl.moving or self.vr.moving):
-            return
-        prm = self.params
-        mv, sv = prm.main_valve, prm.switching_valves
-        xm = self.main.position_at(t_s, h)[0]
-        areas = (valve_area(1.0 - xm, mv), valve_area(xm, mv),
-                 valve_area(self.vl.position_at(t_s, h)[0], sv),
-                 valve_area(self.vr.position_at(t_s, h)[0], sv))
-        if areas != self._areas:
-            self._areas = areas
-            a_rest, a_ener, a_l, a_r = areas
-            met, g = prm.metering, self._gain
-            a_pb = series_area(a_ener, met.rod_feed_area_m2)
-            a_vl = series_area(a_l, met.head_branch_area_m2)
-            a_vr = series_area(a_r, met.head_branch_area_m2)
-            # GAIN and FRAC are adjacent in the state: one assignment for both
-            self._state[k.GAIN:k.FRAC + 3] = (
-                g(a_rest), g(a_ener), g(a_pb), g(a_rest), g(a_vl), g(a_vr),
-                _valve_share(a_ener, a_pb), _valve_share(a_l, a_vl), _valve_share(a_r, a_vr))
-
-
-def _valve_share(valve_area_m2: float, series_area_m2: float) -> float:
-    """Share of a valve + restrictor series path's throttling loss taken by the valve:
-    Δp_valve/Δp = (A_eff/A_valve)² for turbulent orifices in series; 1 when closed."""
-    if valve_area_m2 <= 0.0 or series_area_m2 <= 0.0:
-        return 1.0
-    return (series_area_m2 / valve_area_m2) ** 2
+        bank = self.main.bank
+        k.valves_at(self._const, self._state, bank.sol, bank.pend, t_s, h)

@@ -83,6 +83,7 @@ class HydraulicElement:
         self.log = tensioner.log
         self.stroke_range_m = cylinder_travel_m(tensioner.params)
         self._mode: int | None = None
+        self._pressures = tensioner.pressure_view()
 
     def set_valves(self, mode: int, u: float, supply_set_Pa: float) -> None:
         """Valve mode +1/0/−1 to the solenoids when it changes (u: the mode is the command;
@@ -91,9 +92,9 @@ class HydraulicElement:
             self.tensioner.set_mode(mode)
             self._mode = mode
 
-    def node_pressures(self) -> tuple[float, ...]:
+    def node_pressures(self) -> list[float]:
         """(line A, head L, head R, rod node, supply) [Pa gauge] now."""
-        return self.tensioner.pressures
+        return self._pressures.tolist()
 
     def channel_values(self) -> list[float]:
         rec = self.tensioner.record

@@ -75,6 +75,21 @@ class ForceLaw:
         return self.force_N + self.damping_N_s_m * velocity_m_s
 
 
+_new = object.__new__
+_set_force = ForceLaw.__dict__["force_N"].__set__
+_set_damping = ForceLaw.__dict__["damping_N_s_m"].__set__
+
+
+def make_force_law(force_N: float, damping_N_s_m: float) -> ForceLaw:
+    """``ForceLaw(force_N, damping_N_s_m)`` [N, N·s/m] without the frozen dataclass's
+    ``__init__`` (each field through ``object.__setattr__``): the same object, ~2.5x
+    cheaper, for elements that build a law every step."""
+    law = _new(ForceLaw)
+    _set_force(law, force_N)
+    _set_damping(law, damping_N_s_m)
+    return law
+
+
 @dataclass(frozen=True, slots=True)
 class ControlOutput:
     """Controller result: valve opening u in [-1, 1] [-], success flag, solve wall time [s],

@@ -2,8 +2,9 @@
 
 It pins the BLAS/OpenMP/numba thread pools to one thread (before numpy is imported, if it
 is not yet), imports the run code and every registered block, loads the packaged model,
-its identified idler and the compiled hydraulic kernels (numba's on-disk cache; compiled
-once if the cache is cold). :class:`trackmj.executor.Executor` has its local cluster's
+its identified idler, the compiled hydraulic kernels and the packaged scenario's controller
+and estimator with their compiled SX kernels (numba's on-disk cache; compiled once if the
+cache is cold). :class:`trackmj.executor.Executor` has its local cluster's
 forkserver import it first, so every worker forked from it starts warm and the start-up is
 paid once, not once per worker; workers of an existing cluster warm themselves with
 ``dask worker tcp://HOST:8786 --nthreads 1 --preload trackmj.worker``.
@@ -60,6 +61,18 @@ def warm() -> float:
             element.force_law(0.0, stroke, 0.0)
             element.complete_step(COUPLING_STEP_S, stroke, 0.0)
             element.log()
+    # the scenario's controller and estimator: their compiled SX kernels (generated modules
+    # and numba's cache, control/compiled.py) are loaded, or compiled once
+    from trackmj.control.model import ReducedModel
+    from trackmj.sim.config import reduced_plant_params
+    from trackmj.sim.registry import CONTROLLERS, ESTIMATORS
+
+    model = ReducedModel(reduced_plant_params(
+        setup.hydraulics, setup.idler, setup.control, supply_pressure_Pa=setup.supply0_Pa,
+        free_position_m=stroke))
+    CONTROLLERS[setup.controller].build(model, setup.control)
+    ESTIMATORS[setup.estimator].build(model, setup.control, COUPLING_STEP_S,
+                                      model.equilibrium(setup.force0_N))
     return time.perf_counter() - start
 
 

@@ -33,6 +33,9 @@ from trackmj.ports import (
     steps_per_period,
 )
 
+_command = tuple.__new__
+"""Command(...) without NamedTuple's keyword-capable __new__ (same tuple, cheaper)."""
+
 
 @dataclass(frozen=True)
 class Schedule:
@@ -66,16 +69,19 @@ def run_loop(schedule: Schedule, *, controller: Controller, valves: ValveLogic, 
     h = COUPLING_STEP_S
     ratio = steps_per_period(controller.period_s, h)
     u = 0.0
+    # bound once: this runs every 1 ms step
+    valve_step, plant_step, measure = valves.step, plant.step, sensors.measure
+    estimate, watchers = estimator.step, [observer.on_step for observer in observers]
     for k, inputs in enumerate(schedule.inputs):
         solved = None
         if k % ratio == 0:
             controller.set_parameters(supply_pressure_Pa=inputs.supply_set_Pa)
             solved = controller(estimator.period_mean(), schedule.previews[k // ratio], k * h)
             u = solved.u
-        mode = valves.step(u)
-        command = Command(mode, u, solved)
-        readout = plant.step(command, inputs)
-        z = sensors.measure((readout.p_head_Pa, readout.p_rod_Pa, readout.stroke_m))
-        estimator.step(z, float(mode), inputs.supply_set_Pa)
-        for observer in observers:
-            observer.on_step(k, readout, command)
+        mode = valve_step(u)
+        command = _command(Command, (mode, u, solved))
+        readout = plant_step(command, inputs)
+        z = measure((readout.p_head_Pa, readout.p_rod_Pa, readout.stroke_m))
+        estimate(z, float(mode), inputs.supply_set_Pa)
+        for on_step in watchers:
+            on_step(k, readout, command)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+from array import array
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -39,7 +40,15 @@ class Recorder:
     schedule, the reference ``tension_ref_N`` and the time grid ``t_s`` = (k + 1)·h (exact,
     where the plant's clock accumulates steps); the controller's solves (wall time [s],
     success) are kept in :attr:`solve_times_s` and :attr:`solve_success`.
+
+    A step's values are appended to a flat float64 buffer (``array('d')``, one C call per
+    readout) and copied into :attr:`data` :data:`CHUNK` steps at a time; the same float64
+    values as writing each row. :meth:`columns`, :meth:`table` and :attr:`rows` include the
+    steps not yet copied.
     """
+
+    CHUNK = 1000
+    """Steps kept before they are copied into :attr:`data` [-]."""
 
     def __init__(self, schedule: Schedule) -> None:
         self._n_readout = len(Readout._fields)
@@ -47,25 +56,51 @@ class Recorder:
         self.units: dict[str, str] = READOUT_UNITS | COMMAND_UNITS | REFERENCE_UNITS
         self._reference, self._time = schedule.reference_N, schedule.t_s
         self.data = np.full((schedule.steps, len(self.names)), np.nan)
-        self.rows = 0
+        self._start = 0        # step of the first kept (not yet copied) step
+        self._kept = 0         # steps kept
+        self._values = array("d")   # their values, row after row
         self.solve_times_s: list[float] = []
         self.solve_success: list[bool] = []
 
+    @property
+    def rows(self) -> int:
+        """Steps recorded so far [-]."""
+        return self._start + self._kept
+
     def on_step(self, k: int, readout: Readout, command: Command) -> None:
-        row = self.data[k]
-        row[: self._n_readout] = readout
-        row[self._n_readout] = command.mode
-        row[self._n_readout + 1] = command.u
-        self.rows = k + 1
+        if k != self._start + self._kept:   # not the next step: copy what is kept first
+            self._write()
+            self._start = k
+        values = self._values
+        values.extend(readout)
+        values.append(command.mode)
+        values.append(command.u)
         if command.solved is not None:
             self.solve_times_s.append(command.solved.solve_time_s)
             self.solve_success.append(command.solved.success)
+        self._kept += 1
+        if self._kept == self.CHUNK:
+            self._write()
+
+    def _write(self) -> None:
+        """Copy the kept steps into :attr:`data`."""
+        n = self._kept
+        if not n:
+            return
+        width = len(self.names)
+        self.data[self._start:self._start + n] = np.frombuffer(
+            self._values, dtype=np.float64).reshape(n, width)
+        self._start += n
+        self._kept = 0
+        del self._values[:]
 
     def columns(self) -> dict[str, np.ndarray]:
         """Column name -> values of the steps recorded so far, shape (rows,)."""
-        cols = {name: self.data[: self.rows, i] for i, name in enumerate(self.names)}
-        cols["tension_ref_N"] = self._reference[: self.rows]
-        cols["t_s"] = self._time[: self.rows]
+        self._write()
+        rows = self.rows
+        cols = {name: self.data[:rows, i] for i, name in enumerate(self.names)}
+        cols["tension_ref_N"] = self._reference[:rows]
+        cols["t_s"] = self._time[:rows]
         return cols
 
     def table(self, metadata: Mapping[str, Any],
@@ -159,6 +194,7 @@ class PhysicsGuard:
         self.pressures = pressures
         self.pressure_names = tuple(pressure_names)
         self._lo, self._hi = limits.stroke_range_m
+        self._closure_max, self._vacuum = limits.closure_max_m, limits.vacuum_Pa
 
     def _fail(self, r: Readout, what: str) -> None:
         raise PhysicsError(f"t = {r.t_s:.3f} s: {what}; the run left physics and was stopped")
@@ -166,24 +202,24 @@ class PhysicsGuard:
     def on_step(self, k: int, r: Readout, command: Command) -> None:
         if self.warnings:
             self._fail(r, f"MuJoCo warning: {self.warnings[0]}")
-        if not math.isfinite(r.tension_N + r.p_head_Pa + r.p_rod_Pa + r.stroke_m
-                             + r.stroke_velocity_m_s):
+        _, tension, p_head, p_rod, _, stroke, velocity, _, _, _, _, _, closure = r
+        if not math.isfinite(tension + p_head + p_rod + stroke + velocity):
             fields = r._asdict()
             bad = [f"{name} = {fields[name]!r}" for name in _STATE
                    if not math.isfinite(fields[name])]
             self._fail(r, "non-finite state (" + ", ".join(bad) + ")")
-        if not self._lo <= r.stroke_m <= self._hi:
-            self._fail(r, f"stroke {r.stroke_m * 1e3:.1f} mm outside the travel "
+        if not self._lo <= stroke <= self._hi:
+            self._fail(r, f"stroke {stroke * 1e3:.1f} mm outside the travel "
                           f"[{self._lo * 1e3:.1f}, {self._hi * 1e3:.1f}] mm the end stops "
                           "must hold")
-        if r.closure_error_m > self.limits.closure_max_m:
-            self._fail(r, f"track loop closure gap {r.closure_error_m * 1e3:.1f} mm exceeds "
+        if closure > self._closure_max:
+            self._fail(r, f"track loop closure gap {closure * 1e3:.1f} mm exceeds "
                           f"{self.limits.closure_max_m * 1e3:.1f} mm")
         if self.pressures is not None:
             values, names = self.pressures(), self.pressure_names
         else:
             values, names = (r.p_head_Pa, r.p_rod_Pa, r.p_supply_Pa), ("head", "rod", "supply")
-        vacuum = self.limits.vacuum_Pa
+        vacuum = self._vacuum
         if values and min(values) < vacuum:   # NaN (no such node) never compares below
             name, value = min(zip(names, values, strict=True), key=lambda nv: nv[1])
             self._fail(r, f"{name} pressure {value / 1e6:.3f} MPa gauge below vacuum "

@@ -30,6 +30,8 @@ from trackmj.ports import (
 )
 
 NAN = math.nan
+_readout = tuple.__new__
+"""Readout(...) without NamedTuple's keyword-capable __new__ (same tuple, cheaper)."""
 
 
 class CoupledPlant:
@@ -51,11 +53,11 @@ class CoupledPlant:
         element.set_valves(command.mode, command.u, inputs.supply_set_Pa)
         mech.apply(inputs)
         mech.step(element)
-        row = element.log()
-        return Readout(row.t_s, mech.idler_force_N, row.p_head_Pa, row.p_rod_Pa,
-                       row.p_supply_Pa, mech.stroke_m, mech.stroke_velocity_m_s,
-                       row.q_supply_m3_s, row.supply_J, row.piston_work_J, row.mech_work_J,
-                       mech.chassis_acc_z_m_s2, mech.closure_error_m)
+        t, p_head, p_rod, p_supply, q_supply, _, supply, piston, work = element.log()
+        return _readout(Readout, (t, mech.idler_force_N, p_head, p_rod, p_supply,
+                                  mech.stroke_m, mech.stroke_velocity_m_s, q_supply, supply,
+                                  piston, work, mech.chassis_acc_z_m_s2,
+                                  mech.closure_error_m))
 
 
 class EquivalentIdlerMechanics:
