@@ -162,8 +162,10 @@ W1_START_UP_FAILS = {"m113": (
     "front sprocket: W1's 1 s start ramp (1.5 m/s² on the 5.5 t side, ~8 kN of traction) "
     "loads the tight upper strand and the idler to 25 kN; the NMPC releases, and when the "
     "acceleration ends the 0.5 s mean falls to 10.8 kN, below F_min = 13.3 kN (in band, "
-    "14.8-20.4 kN, with a 3 s ramp)")}
+    "15.2-20.7 kN, with a 3 s ramp: test_w1_with_a_gentler_start_stays_in_the_band)")}
 """Machines whose W1 start-up leaves the band (a strict xfail: it reports when fixed)."""
+GENTLE_RAMP_S = 3.0
+"""Start ramp [s] under which those machines' W1 must stay in the band."""
 
 
 @pytest.fixture(scope="module")
@@ -180,6 +182,15 @@ def test_w1_closed_loop_stays_in_the_machines_band(w1, request) -> None:
     acc = metrics["acceptance"]
     low, high = 2.0 * nominal / 3.0, 4.0 * nominal / 3.0
     assert low <= acc["mean_min_N"] and acc["mean_max_N"] <= high, acc
+
+
+@pytest.mark.parametrize("machine", sorted(W1_START_UP_FAILS))
+def test_w1_with_a_gentler_start_stays_in_the_band(machine: str) -> None:
+    """What the xfail above claims: the band is lost to the start-up's traction alone."""
+    nominal = machines.mechanics(machines.resolve(machine)).nominal_tension_N
+    acc = simulate("W1", duration=W1_S, machine=machine,
+                   set={"scenario.track.ramp_s": GENTLE_RAMP_S}).metrics["acceptance"]
+    assert 2.0 * nominal / 3.0 <= acc["mean_min_N"] and acc["mean_max_N"] <= 4.0 * nominal / 3.0
 
 
 def test_w1_energy_table_closes(w1) -> None:
