@@ -30,6 +30,7 @@ import numba
 import numpy as np
 
 from trackmj.foundation import Foundation, FoundationLaw
+from trackmj.foundation import step as foundation_step
 from trackmj.model import (
     ModelParams,
     link_name,
@@ -584,13 +585,8 @@ class TrackPlant:
             raise ValueError(f"tensioner returned a non-finite force law {law}")
         self._ctrl[self._tensioner] = force
         self._biasprm[self._tensioner, 2] = damping
-        foundation = self.foundation
         for _ in range(self.substeps):
-            mujoco.mj_step1(m, d)
-            foundation.apply()
-            mujoco.mj_factorM(m, d)
-            mujoco.mj_step2(m, d)
-            foundation.finish()
+            foundation_step(m, d, self.foundation)
         stroke = self.stroke_m
         if self.substeps == 1:
             velocity = self.stroke_velocity_m_s
