@@ -353,10 +353,8 @@ class HydraulicTensioner:
 
     def force_law(self, t_s: float, stroke_m: float, velocity_m_s: float) -> ForceLaw:
         """Affine force law F(v) = F0 + Z·v for the step starting at (t_k, s_k, v_k)."""
-        t, s, v = float(t_s), float(stroke_m), float(velocity_m_s)
-        if not math.isfinite(t + s + v):
-            self._check_state(t, s, v)
-        self.t, self.s, self.v = t_s, stroke_m, velocity_m_s = t, s, v
+        t, s, v = self._check_state(t_s, stroke_m, velocity_m_s)
+        self.t, self.s, self.v = t, s, v
         st = self._state
         if self._strong:
             h = self.dt
@@ -375,18 +373,15 @@ class HydraulicTensioner:
             if self.coupling == "weak" or (self._calls % self.exchange_steps == 0
                                            and not self.diverged):
                 if self.coupling == "multirate":
-                    self._s_hyd, self._v_hold = stroke_m, velocity_m_s
-                k.held_force_law(self._const, st, stroke_m, velocity_m_s)
+                    self._s_hyd, self._v_hold = s, v
+                k.held_force_law(self._const, st, s, v)
                 self._law = make_force_law(st.item(k.LAW), st.item(k.LAW + 1))
         self._calls += 1
         return self._law
 
     def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
         """Finish the step with the end-of-step state (t_{k+1}, s_{k+1}, v_{k+1})."""
-        t, s, v = float(t_s), float(stroke_m), float(velocity_m_s)
-        if not math.isfinite(t + s + v):
-            self._check_state(t, s, v)
-        t_s, stroke_m, velocity_m_s = t, s, v
+        t_s, stroke_m, velocity_m_s = self._check_state(t_s, stroke_m, velocity_m_s)
         h = t_s - self.t
         if not h > 0.0:
             raise ValueError(f"t_s = {t_s!r} must exceed the step start time {self.t!r}")
