@@ -16,7 +16,7 @@ The code is emitted by a numba ``intrinsic`` inside a generated module with one
 result and constants arrays. Constants are read from that array, not embedded, so every
 function with the same instruction structure (e.g. another bulk modulus or horizon
 weights) shares one compiled kernel. The module is written once per structure into
-``<trackmj cache>/compiled/`` (:func:`cache_root`), named by the
+``<trackmj cache>/compiled/`` (:func:`trackmj.io.cache_dir`), named by the
 SHA-256 of the structure and of this file's source (an edit here makes a new name, so
 numba's cache, which checks only the generated file, is never stale); numba keeps the
 machine code beside it. First compile ~0.2-2.5 s per function (LLVM on up to ~13k
@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.fastcall import BufferedFunction
+from trackmj.io import cache_dir, write_text_atomic
 
 DISABLE_ENV = "TRACKMJ_NO_COMPILE"
 """Set to 1 to evaluate every SX function in CasADi's virtual machine instead."""
@@ -187,20 +188,9 @@ def _emitter_digest() -> str:
     return hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
 
 
-def cache_root() -> Path:
-    """trackmj's cache directory: ``$TRACKMJ_CACHE``, else ``$XDG_CACHE_HOME/trackmj``
-    (default ``~/.cache/trackmj``); the rule of :func:`trackmj.model.cache.cache_dir`,
-    repeated here because control/ imports only trackmj's leaves."""
-    explicit = os.environ.get("TRACKMJ_CACHE")
-    if explicit:
-        return Path(explicit)
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "trackmj"
-
-
 def _directory() -> Path:
     """Where the generated modules live (the trackmj cache, else a temporary directory)."""
-    for path in (cache_root() / "compiled",
+    for path in (cache_dir() / "compiled",
                  Path(tempfile.gettempdir()) / f"trackmj-compiled-{os.getuid()}"):
         try:
             path.mkdir(parents=True, exist_ok=True)
@@ -224,17 +214,9 @@ def _module(fn: ca.Function, rows: NDArray[np.int64], in_place: bool) -> ModuleT
         return _modules[name]
     path = _directory() / f"{name}.py"
     if not path.exists():   # written whole, then renamed: concurrent workers may race
-        text = _MODULE.format(name=fn.name(), count=len(rows), n_in=n_in, n_out=n_out,
-                              in_place=in_place,
-                              encoded=base64.b64encode(rows.tobytes()).decode())
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "w") as fh:
-                fh.write(text)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        write_text_atomic(path, _MODULE.format(
+            name=fn.name(), count=len(rows), n_in=n_in, n_out=n_out, in_place=in_place,
+            encoded=base64.b64encode(rows.tobytes()).decode()))
     spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
         raise ImportError(f"cannot import {path}")

@@ -132,18 +132,6 @@ def test_estimator_steps_are_bit_identical(cls: type,
     assert all(_same(a, b) for a, b in zip(ours, theirs, strict=True))
 
 
-def test_cache_root_is_trackmjs_cache_directory(monkeypatch: pytest.MonkeyPatch,
-                                               tmp_path) -> None:
-    from trackmj.model.cache import cache_dir
-
-    for env in ({"TRACKMJ_CACHE": str(tmp_path)}, {"XDG_CACHE_HOME": str(tmp_path)}, {}):
-        monkeypatch.delenv("TRACKMJ_CACHE", raising=False)
-        monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
-        for key, value in env.items():
-            monkeypatch.setenv(key, value)
-        assert compiled.cache_root() == cache_dir()
-
-
 @pytest.mark.parametrize("compile_", [True, False])
 def test_results_bound_to_inputs_see_the_inputs_before_the_step(
         compile_: bool, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -14,9 +14,10 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from trackmj.cli import main
+from trackmj.io import cache_dir
 from trackmj.machines import load_machine, model_mjcf, resolve, shipped
 from trackmj.model import compute_layout, generate_mjcf, load_model_params
-from trackmj.model.cache import cache_dir, cached_mjcf
+from trackmj.model.cache import cached_mjcf
 from trackmj.model.geometry import derive_geometry
 from trackmj.model.layout import chords_fitting, slide_axis
 from trackmj.params import ParameterError

@@ -13,7 +13,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = {"trackmj": ROOT / "trackmj", "trackmj.hydraulics": ROOT / "hydraulics",
             "trackmj.control": ROOT / "control"}
-LEAVES = {"trackmj", "trackmj.ports", "trackmj.params"}
+LEAVES = {"trackmj", "trackmj.ports", "trackmj.params", "trackmj.io"}
 """What hydraulics/ and control/ may import of trackmj's core (trackmj itself is the
 package that holds them; its __init__ imports nothing)."""
 

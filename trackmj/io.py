@@ -1,10 +1,23 @@
-"""Atomic file output: a file is either complete on disk or absent."""
+"""Atomic file output (a file is either complete on disk or absent) and trackmj's cache
+directory. A leaf: it imports nothing of trackmj, so hydraulics/ and control/ may use it."""
 
 from __future__ import annotations
 
 import os
 import tempfile
 from pathlib import Path
+
+CACHE_ENV = "TRACKMJ_CACHE"
+
+
+def cache_dir() -> Path:
+    """trackmj's cache directory, not created here: ``$TRACKMJ_CACHE`` if set, else
+    ``$XDG_CACHE_HOME/trackmj`` (default ``~/.cache/trackmj``)."""
+    explicit = os.environ.get(CACHE_ENV)
+    if explicit:
+        return Path(explicit)
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "trackmj"
 
 
 def current_umask() -> int:

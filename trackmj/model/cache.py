@@ -5,31 +5,20 @@ model.track.link_count=80``, a sweep point over geometry keys) costs a layout an
 settle (about 1–3 s of wall time). :func:`cached_mjcf` keys it by the SHA-256 of the
 validated parameters (their ``repr``: every value, in declaration order; ``source`` texts
 excluded), the generator's own source files and the MuJoCo version, and keeps it in the
-cache directory: ``$TRACKMJ_CACHE`` if set, else ``$XDG_CACHE_HOME/trackmj`` (default
-``~/.cache/trackmj``). Files are written atomically, so concurrent workers at worst
-generate the same model twice; a corrupt entry cannot be read half-written.
+cache directory (:func:`trackmj.io.cache_dir`: ``$TRACKMJ_CACHE`` if set, else
+``$XDG_CACHE_HOME/trackmj``, default ``~/.cache/trackmj``). Files are written atomically,
+so concurrent workers at worst generate the same model twice; a corrupt entry cannot be
+read half-written.
 """
 
 from __future__ import annotations
 
 import functools
 import hashlib
-import os
 from pathlib import Path
 
-from trackmj.io import write_text_atomic
+from trackmj.io import cache_dir, write_text_atomic
 from trackmj.model.params import MODEL_NAME, ModelParams
-
-CACHE_ENV = "TRACKMJ_CACHE"
-
-
-def cache_dir() -> Path:
-    """The cache directory (see the module docstring); not created here."""
-    explicit = os.environ.get(CACHE_ENV)
-    if explicit:
-        return Path(explicit)
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "trackmj"
 
 
 @functools.cache

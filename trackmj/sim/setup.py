@@ -23,10 +23,10 @@ from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig, load_config
 from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
 from trackmj.identify import EquivalentIdler, ModalTerm, identify_idler
-from trackmj.io import write_text_atomic
+from trackmj.io import cache_dir, write_text_atomic
 from trackmj.machines import DEFAULT_MACHINE, Machine, is_own, mechanics, model_mjcf, resolve
 from trackmj.model import ModelParams, load_model_params
-from trackmj.model.cache import cache_dir, model_key
+from trackmj.model.cache import model_key
 from trackmj.model.mjcf import with_heightfield
 from trackmj.params import FILE_KINDS, ParameterError, parse_overrides
 from trackmj.plant import TrackPlant
