@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from test_contacts import STATIC_TOLERANCE, _static_stiffness, span_under_tension
 from test_model import assert_sparse_matches_dense
 
-from trackmj.model import ModelParams, generate_mjcf
+from trackmj.model import ModelParams, generate_mjcf, load_model_params
 from trackmj.model.mjcf import link_name
 from trackmj.model.structure import chain_sizes, chain_starts, pin_series_count
 from trackmj.params import ParameterError
@@ -155,3 +155,11 @@ def test_chains_refuse_the_torsional_bushings(model_params: ModelParams) -> None
     with pytest.raises(ParameterError, match=r"structure = \"chains\" does not take the "
                                               r"\[bushings\] torsional"):
         generate_mjcf(p)
+
+
+def test_chains_longer_than_measured_are_refused_naming_the_key() -> None:
+    """A chain of 24 links (one connect lumping 24 pins) already trips the slack-strand check
+    on LF1352 at 2 m/s: the validator refuses it before any model is generated."""
+    assert load_model_params(overrides={"track.chain_links": 12}).track.chain_links == 12
+    with pytest.raises(ParameterError, match=r"chain_links.*\[2, 12\]"):
+        load_model_params(overrides={"track.chain_links": 24})
