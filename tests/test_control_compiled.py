@@ -4,6 +4,8 @@ zeros), the NMPC's closed-loop solves and the EKF's and UKF's steps."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -16,6 +18,7 @@ from trackmj.control.model import ReducedModel, ReducedPlant
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
+from trackmj.io import cache_dir
 from trackmj.sim.config import nominal_plant_params, packaged_control
 
 CFG = packaged_control()
@@ -130,6 +133,29 @@ def test_estimator_steps_are_bit_identical(cls: type,
     monkeypatch.setenv(compiled.DISABLE_ENV, "1")
     theirs = run()
     assert all(_same(a, b) for a, b in zip(ours, theirs, strict=True))
+
+
+def test_generated_modules_are_written_whole_into_trackmjs_cache(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """A new structure's module lands in ``$TRACKMJ_CACHE/compiled`` (else
+    ``$XDG_CACHE_HOME/trackmj/compiled``), complete, with no temporary file left."""
+    monkeypatch.setenv(compiled.DISABLE_ENV, "0")
+    for env, root in (("TRACKMJ_CACHE", tmp_path / "own"),
+                      ("XDG_CACHE_HOME", tmp_path / "xdg")):
+        monkeypatch.delenv("TRACKMJ_CACHE", raising=False)
+        monkeypatch.setenv(env, str(root))
+        expected = root if env == "TRACKMJ_CACHE" else root / "trackmj"
+        assert cache_dir() == expected
+        x = ca.SX.sym("x", 2)   # a structure no other test builds, new for each root
+        fn = ca.Function("probe", [x], [ca.vertcat(x[0] * x[1] * x[1] * x[0] - 7.0,
+                                                    x[1] / (x[0] + 3.0) * x[1])])
+        bound = bind(fn, [np.array((0.3, 2.0))], [np.zeros(2)])
+        assert isinstance(bound, CompiledFunction)
+        files = sorted(p.name for p in (expected / "compiled").iterdir()
+                       if p.suffix in (".py", ".tmp"))
+        assert len(files) == 1 and files[0].startswith("trackmj_sx_")
+        assert files[0].endswith(".py")
+        compiled._modules.pop(files[0][:-3])   # the next root writes its own
 
 
 @pytest.mark.parametrize("compile_", [True, False])
