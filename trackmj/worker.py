@@ -63,15 +63,12 @@ def warm() -> float:
             element.log()
     # the scenario's controller and estimator: their compiled SX kernels (generated modules
     # and numba's cache, control/compiled.py) are loaded, or compiled once
-    from trackmj.control.model import ReducedModel
-    from trackmj.sim.config import reduced_plant_params
+    from trackmj.sim.architectures import control_and_model
     from trackmj.sim.registry import CONTROLLERS, ESTIMATORS
 
-    model = ReducedModel(reduced_plant_params(
-        setup.hydraulics, setup.idler, setup.control, supply_pressure_Pa=setup.supply0_Pa,
-        free_position_m=stroke))
-    CONTROLLERS[setup.controller].build(model, setup.control)
-    ESTIMATORS[setup.estimator].build(model, setup.control, COUPLING_STEP_S,
+    cfg, model = control_and_model(setup, stroke)
+    CONTROLLERS[setup.controller].build(model, cfg)
+    ESTIMATORS[setup.estimator].build(model, cfg, COUPLING_STEP_S,
                                       model.equilibrium(setup.force0_N))
     return time.perf_counter() - start
 

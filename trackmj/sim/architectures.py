@@ -108,7 +108,7 @@ def assemble(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
     entry = MECHANICS[arch.mechanics]
     available = {"tp_result": tp_result}
     built = entry.build(setup, **{name: available[name] for name in entry.needs})
-    cfg, model = _control(setup, built.free_position_m)
+    cfg, model = control_and_model(setup, built.free_position_m)
     stroke = built.mechanics.stroke_m
     element = ELEMENTS[setup.element].build(
         ElementContext(setup, stroke, model, arch.coupling, setup.tensioner))
@@ -150,7 +150,8 @@ def settled_track(setup: RunSetup, force_N: float) -> TrackPlant:
     return plant
 
 
-def _control(setup: RunSetup, free_position_m: float) -> tuple[ControlConfig, ReducedModel]:
+def control_and_model(setup: RunSetup, free_position_m: float
+                      ) -> tuple[ControlConfig, ReducedModel]:
     """Control configuration with the reduced plant derived from the hydraulics and the
     identified idler, valve logic without its own solenoid delay (the plugin applies it),
     and no wall-clock budget (every finished solve is applied; overruns are counted)."""
