@@ -22,6 +22,7 @@ from .kernels import (
     endstop_force,
     friction_force,
     orifice_flow,
+    series_area,
     smoothstep,
 )
 from .params import Valve
@@ -38,21 +39,13 @@ def orifice_gain(cq: float, area_m2: float, density_kg_m3: float) -> float:
     return cq * area_m2 * SQRT2 / math.sqrt(density_kg_m3)
 
 
-def series_area(a1_m2: float, a2_m2: float) -> float:
-    """Equivalent area [m^2] of two turbulent orifices in series: (a1^-2 + a2^-2)^-1/2."""
-    if a1_m2 <= 0.0 or a2_m2 <= 0.0:
-        return 0.0
-    return a1_m2 * a2_m2 / math.sqrt(a1_m2 * a1_m2 + a2_m2 * a2_m2)
-
-
 def valve_area(position: float, valve: Valve) -> float:
     """Opening area [m^2] of a valve edge at normalised position (0 closed, 1 open).
 
-    Linear from the leak area at ``overlap`` to the open area at 1 (positive overlap).
+    Linear from the leak area at ``overlap`` to the open area at 1 (positive overlap); the
+    kernels' law (:func:`.kernels.valve_area`) with ``valve``'s edge.
     """
-    u = (position - valve.overlap) / (1.0 - valve.overlap)
-    u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else u)
-    return valve.leak_area_m2 + (valve.open_area_m2 - valve.leak_area_m2) * u
+    return k.valve_area(position, valve.overlap, valve.leak_area_m2, valve.open_area_m2)
 
 
 class SolenoidBank:

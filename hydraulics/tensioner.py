@@ -263,7 +263,6 @@ class HydraulicTensioner:
         fp, vp, uv = prm.fixed_pump, prm.variable_pump, prm.unloading_valve
         k_leak = vp.standby_flow_m3_s / prm.supply.setpoint_Pa
         cq, rho = prm.orifice.discharge_coefficient, prm.fluid.density_kg_m3
-        self._gain = lambda a: orifice_gain(cq, a, rho)
         c = np.zeros(k.N_CONST)  # layout: kernels module docstring
         c[k.C_AH], c[k.C_AR] = self.Ah, self.Ar
         c[k.C_VOL_A], c[k.C_VOL_S] = prm.lines.line_a_volume_m3, prm.supply.line_volume_m3
@@ -273,9 +272,9 @@ class HydraulicTensioner:
         c[k.C_PCR], c[k.C_LEAK] = prm.orifice.critical_pressure_Pa, cyl.leakage_m3_s_Pa
         c[k.C_FLOOR], c[k.C_BAND] = self.floor, cav.band_Pa
         c[k.C_MU_OPEN], c[k.C_MU_WIDTH] = self.mu_open, self.mu_width
-        c[k.C_K_MU] = self._gain(cav.makeup_area_m2)
+        c[k.C_K_MU] = orifice_gain(cq, cav.makeup_area_m2, rho)
         c[k.C_REL_CRACK] = (1.0 + rel.safety_margin_rel) * p_set0
-        c[k.C_REL_WIDTH], c[k.C_K_REL] = rel.band_Pa, self._gain(rel.full_area_m2)
+        c[k.C_REL_WIDTH], c[k.C_K_REL] = rel.band_Pa, orifice_gain(cq, rel.full_area_m2, rho)
         c[k.C_Q_PUMP] = fp.flow_m3_s
         c[k.C_ACC_V0], c[k.C_ACC_P0] = acc.gas_volume_m3, acc.precharge_Pa
         c[k.C_P_ATM], c[k.C_ACC_N] = self.p_atm, acc.polytropic_exponent
