@@ -1,9 +1,9 @@
 """Bare-model speed: wall time per 1 ms step driving at 1.5 m/s on flat ground.
 
 Reports, in one run: the bare step, MuJoCo with the ground foundation (tensioner as a fixed
-affine law set once), the
-plant's coupled step with the passive tensioner element (Python port exchange every step),
-their ratio, the real-time factor, and MuJoCo's timer split (collision vs constraint).
+affine law set once), the plant's coupled step with the passive tensioner element (Python
+port exchange every step), their ratio, the real-time factor, and MuJoCo's timer split
+(collision vs constraint).
 Run: ``python benchmarks/bench_model.py [--seconds 5]``.
 """
 
