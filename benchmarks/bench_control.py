@@ -25,7 +25,7 @@ from trackmj.control.lmpc import LinearMpc
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.pid import PidController
-from trackmj.sim.config import nominal_plant_params, packaged_control
+from trackmj.sim.control_plant import nominal_plant_params, packaged_control
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
 

@@ -16,9 +16,9 @@ import time
 
 from driving import DrivingSnapshot
 
+from trackmj.host import machine
 from trackmj.hydraulics import HydraulicTensioner
 from trackmj.hydraulics.params import SUPPLY_MODELS
-from trackmj.machine import machine
 
 
 class _TimedElement:

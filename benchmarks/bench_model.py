@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 from driving import DrivingSnapshot
 
-from trackmj.machine import machine
+from trackmj.host import machine
 
 
 def main() -> None:

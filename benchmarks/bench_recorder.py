@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 
-from trackmj.results import TimeseriesRecorder, _parquet_bytes, run_metadata
+from trackmj.results.store import TimeseriesRecorder, _parquet_bytes, run_metadata
 
 STEPS = 30_000
 
@@ -32,7 +32,7 @@ def bench(n_extra: int) -> tuple[float, float]:
 
 
 if __name__ == "__main__":
-    from trackmj.machine import machine
+    from trackmj.host import machine
 
     print(machine())
     for n_extra in (0, 4):

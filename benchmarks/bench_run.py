@@ -17,12 +17,12 @@ from collections import defaultdict
 from trackmj.control.estimators import ExtendedKalmanFilter
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.sensors import Sensors
+from trackmj.host import machine
 from trackmj.hydraulics import HydraulicTensioner
-from trackmj.machine import machine
-from trackmj.plant import TrackPlant
-from trackmj.sim.config import load_idler
+from trackmj.machines.idler import load_idler
 from trackmj.sim.observers import Recorder
 from trackmj.sim.run import simulate
+from trackmj.track.plant import TrackPlant
 
 SPENT: dict[str, float] = defaultdict(float)
 CALLS: dict[str, int] = defaultdict(int)

@@ -34,10 +34,10 @@ import tempfile
 import mujoco
 import numpy as np
 
-from trackmj.machine import machine
-from trackmj.machines import mechanics, model_mjcf, resolve
-from trackmj.model import load_model_params
-from trackmj.plant import PassiveTensioner, TrackPlant
+from trackmj.host import machine
+from trackmj.machines.assembly import mechanics, model_mjcf, resolve
+from trackmj.track.mechanics import load_model_params
+from trackmj.track.plant import PassiveTensioner, TrackPlant
 
 MACHINE = resolve(None)   # the default machine (LF1352)
 SETTLE_S, RAMP_S = 1.0, 1.0

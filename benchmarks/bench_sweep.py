@@ -7,7 +7,7 @@ Three parts, each in fresh Python processes so no part warms another:
   s each): the first run carries the process's one-off costs, the later ones only the
   per-run start-up; timing wrappers split a warm run into prepare, model compile, settle,
   hydraulic element, controller and estimator build, loop and metrics. Also the warm-up of
-  ``trackmj.worker`` (what the executor's forkserver does once for all workers).
+  ``trackmj.study.worker`` (what the executor's forkserver does once for all workers).
 * ``scaling``: for 1 and 2 workers, a new process starts an :class:`Executor` and maps
   ``--runs`` W1 runs of ``--duration`` s (seeds 0..N-1); reported: cluster start, time to
   the last result, runs per hour end to end (start included) and after the start.
@@ -33,7 +33,7 @@ t0 = time.perf_counter()
 import trackmj.sim.run as run_module
 t_import = time.perf_counter() - t0
 from collections import defaultdict
-import trackmj.elements as elements
+import trackmj.elements.hydraulic as hydraulic_element
 import trackmj.sim.architectures as arch
 import trackmj.sim.registry as registry
 import mujoco
@@ -62,7 +62,7 @@ class TimedMujoco:   # arch.mujoco with MjModel.from_xml_string timed
 arch.mujoco = TimedMujoco()
 wrap(run_module, "prepare", "prepare (files, validation)")
 wrap(arch.TrackPlant, "run", "settle (1 s standing, MuJoCo)")
-wrap(elements, "build_hydraulic", "hydraulic element (numba kernels)")
+wrap(hydraulic_element, "build", "hydraulic element (numba kernels)")
 wrap(arch, "_control", "reduced model")
 wrap(run_module, "run_loop", "closed loop")
 wrap(run_module, "compute_metrics", "metrics")
@@ -83,7 +83,7 @@ print(json.dumps({"import_s": t_import, "runs": runs}))
 WARM = r"""
 import json, time
 t0 = time.perf_counter()
-import trackmj.worker as w
+import trackmj.study.worker as w
 print(json.dumps({"import_and_warm_s": time.perf_counter() - t0, "warm_s": w.warm_time_s}))
 """
 
@@ -91,7 +91,7 @@ SCALING = r"""
 import json, time
 def main():
     t0 = time.perf_counter()
-    from trackmj.executor import Executor, RunSpec
+    from trackmj.study.executor import Executor, RunSpec
     specs = [RunSpec("W1", duration=DURATION, seed=s) for s in range(RUNS)]
     with Executor(workers=WORKERS) as ex:
         t_up = time.perf_counter()
@@ -151,9 +151,9 @@ def startup(duration: float, repeat: int) -> None:
     try:
         warmed = min((_python(WARM) for _ in range(repeat)), key=lambda r: r["warm_s"])
     except subprocess.CalledProcessError:   # a trackmj before the forkserver warm-up
-        print("no trackmj.worker: each worker pays the one-off cost at its first run")
+        print("no trackmj.study.worker: each worker pays the one-off cost at its first run")
         return
-    print(f"trackmj.worker import + warm-up (once per forkserver): "
+    print(f"trackmj.study.worker import + warm-up (once per forkserver): "
           f"{warmed['import_and_warm_s']:.2f} s (warm-up {warmed['warm_s']:.2f} s)")
 
 
@@ -186,7 +186,7 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=2, help="best of N")
     parser.add_argument("--part", choices=("all", "startup", "scaling"), default="all")
     args = parser.parse_args()
-    from trackmj.machine import machine
+    from trackmj.host import machine
 
     print(f"machine: {machine()}; {_load()}")
     start = time.perf_counter()

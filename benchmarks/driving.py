@@ -11,8 +11,8 @@ import time
 
 import mujoco
 
-from trackmj.foundation import step
-from trackmj.plant import PassiveTensioner, TrackPlant
+from trackmj.track.foundation import step
+from trackmj.track.plant import PassiveTensioner, TrackPlant
 
 SPEED_M_S = 1.5
 """Track speed of the benchmarks [m/s], reached by a 1 s ramp and held for 0.5 s."""
@@ -37,7 +37,7 @@ class DrivingSnapshot:
 
     def bare_step_s(self, steps: int) -> float:
         """Wall time per bare step [s] from the snapshot over ``steps`` steps: MuJoCo and the
-        ground foundation (:func:`trackmj.foundation.step`), with the passive law fixed once
+        ground foundation (:func:`trackmj.track.foundation.step`), with the passive law fixed once
         (preload + implicit damping) and no element port. MuJoCo's timers hold this block's
         totals afterwards."""
         self.restore()

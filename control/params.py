@@ -4,10 +4,10 @@
 (sensors, valve logic, estimator, controller limits, MPC, PID and the reduced model's
 numerical choices). The reduced model's physical parameters (:class:`PlantParams`) are not
 in that file: they derive from the hydraulic parameters and the identified idler
-(``trackmj.sim.config.reduced_plant_params``), so no value is entered twice.
+(``trackmj.sim.control_plant.reduced_plant_params``), so no value is entered twice.
 
 All values SI (pressures gauge [Pa]). The checks are the one validator of
-:mod:`trackmj.params`: types, ranges and cross-field checks run on construction, and the
+:mod:`trackmj.validator`: types, ranges and cross-field checks run on construction, and the
 loader refuses unknown, missing or mistyped keys naming the file, the table and the key.
 """
 
@@ -20,7 +20,7 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Any, ClassVar
 
-from trackmj.params import Location, ParameterError, Parameters, load_file, param, sources_field
+from trackmj.validator import Location, ParameterError, Parameters, load_file, param, sources_field
 
 DEFAULT_FILE = "lf1352_control.toml"
 
@@ -51,7 +51,7 @@ class PlantParams(Parameters):
     State X = [p_head Pa, p_rod Pa, y m, y_dot m/s]; y = stroke, grows outward (tensioning).
     Areas [m^2] are effective full-opening path areas: valve_area_head_m2 supply<->heads and
     heads->tank, valve_area_rod_m2 the release feed supply->rods, vent_area_rod_m2 rods->tank.
-    Built by ``trackmj.sim.config.reduced_plant_params`` (no defaults: every value derives
+    Built by ``trackmj.sim.control_plant.reduced_plant_params`` (no defaults: every value derives
     from the hydraulic, idler and control files).
     """
 
@@ -288,7 +288,7 @@ def load_config(path: str | Path | None = None,
         The file; default the packaged ``lf1352_control.toml``.
     overrides : mapping, optional
         ``{dotted key: value}``, the ``control`` entry of
-        :func:`trackmj.params.parse_overrides`.
+        :func:`trackmj.validator.parse_overrides`.
     nominal_tension_N : float, optional
         The machine's nominal working tension [N] (its mechanics file's
         ``[tensioner].nominal_tension_N``); needed when the file leaves a derived key out.

@@ -1,7 +1,7 @@
 """Calibrate W3's rear-hitch pulses to the hold-mode idler-load changes the scenario targets.
 
 For each ``[[load_pulses]]`` entry of the scenario, this finds the rear-hitch force whose
-hold-mode idler-load change equals ``delta_N`` (see :mod:`trackmj.calibration`). It prints
+hold-mode idler-load change equals ``delta_N`` (see :mod:`trackmj.study.w3_hitch`). It prints
 the values to copy into the file's ``hitch_N`` and the change each one achieves.
 Run: ``python experiments/calibrate_w3.py [scenario, default W3]``.
 """
@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import sys
 
-from trackmj.calibration import calibrate_hitch
-from trackmj.machine import machine
-from trackmj.scenarios import load_scenario
+from trackmj.host import machine
+from trackmj.scenarios.schema import load_scenario
+from trackmj.study.w3_hitch import calibrate_hitch
 
 
 def main() -> None:

@@ -1,7 +1,7 @@
 """Hydraulic parameters: frozen, validated dataclasses read from a TOML file.
 
 All values SI, pressures gauge [Pa] unless a name ends in ``_abs``. The checks are the one
-validator of :mod:`trackmj.params`: types, ranges and cross-field checks run on
+validator of :mod:`trackmj.validator`: types, ranges and cross-field checks run on
 construction, and :func:`load_hydraulic_params` refuses unknown keys, wrong types, missing
 keys and missing ``source`` strings naming the file, the table and the key.
 """
@@ -15,7 +15,7 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Any, ClassVar, Literal, get_args
 
-from trackmj.params import Location, Parameters, load_file, param, sources_field
+from trackmj.validator import Location, Parameters, load_file, param, sources_field
 
 DEFAULT_FILE = "lf1352_hydraulics.toml"
 
@@ -248,7 +248,7 @@ class Coupling(Parameters):
 @dataclass(frozen=True, slots=True)
 class PressureProfile(Parameters):
     """Piecewise-linear supply set-point p_set(t) [Pa gauge] over times [s]; held at the ends
-    (built from a scenario's set-point changes, see ``trackmj.scenarios``)."""
+    (built from a scenario's set-point changes, see ``trackmj.scenarios.schema``)."""
 
     times_s: tuple[float, ...] = param(0.0, None, doc="breakpoints, strictly increasing")
     pressures_Pa: tuple[float, ...] = param(0.0, None, doc="pressure at each breakpoint")
@@ -334,7 +334,7 @@ def load_hydraulic_params(path: str | Path | None = None,
         The file; default the packaged ``lf1352_hydraulics.toml``.
     overrides : mapping, optional
         ``{dotted key: value}``, the ``hydraulics`` entry of
-        :func:`trackmj.params.parse_overrides`.
+        :func:`trackmj.validator.parse_overrides`.
 
     Returns
     -------

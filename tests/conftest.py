@@ -21,7 +21,7 @@ def pytest_unconfigure(config) -> None:
 
 @pytest.fixture(scope="session")
 def model_params():
-    from trackmj.model import load_model_params
+    from trackmj.track.mechanics import load_model_params
 
     return load_model_params()
 
@@ -29,6 +29,6 @@ def model_params():
 @pytest.fixture
 def plant():
     """A fresh plant at the home keyframe (MuJoCo is imported only by tests that use it)."""
-    from trackmj.plant import TrackPlant
+    from trackmj.track.plant import TrackPlant
 
     return TrackPlant.load()

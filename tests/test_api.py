@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 import trackmj
-from trackmj.results import COLUMN_UNITS
+from trackmj.results.store import COLUMN_UNITS
 
 DURATION_S = 1.2
 BULK_MODULUS_PA = 1.2e9
@@ -40,7 +40,7 @@ def test_exports_are_the_functions_not_modules() -> None:
     import trackmj.sim.run
 
     assert trackmj.simulate is trackmj.sim.run.simulate and callable(trackmj.simulate)
-    assert trackmj.Result is trackmj.results.Result
+    assert trackmj.Result is trackmj.results.store.Result
     with pytest.raises(AttributeError, match="no attribute 'simulat'"):
         trackmj.simulat   # noqa: B018
 

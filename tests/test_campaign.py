@@ -10,12 +10,12 @@ import math
 import pytest
 from synthetic import energy_table, synthetic_result
 
-import trackmj.campaign as campaign
-from trackmj.cli import main
-from trackmj.executor import RunOutcome, RunSpec
-from trackmj.params import ParameterError
-from trackmj.results import ResultDirectoryError
-from trackmj.scenarios import check_duration, cut_events, load_scenario, moved_events
+import trackmj.study.campaign as campaign
+from trackmj.cli.main import main
+from trackmj.results.store import ResultDirectoryError
+from trackmj.scenarios.schema import check_duration, cut_events, load_scenario, moved_events
+from trackmj.study.executor import RunOutcome, RunSpec
+from trackmj.validator import ParameterError
 
 
 class _SyntheticExecutor:
@@ -155,9 +155,9 @@ def test_moved_events_keep_their_order_inside_the_run():
 def test_report_and_sweep_give_identical_numbers_for_the_same_runs(tmp_path):
     """The same W1 tp run (1.5 s, its step and ramp moved inside) planned by the report and
     by a sweep: one identity, and the same numbers in both results.parquet files."""
-    from trackmj import report
-    from trackmj.executor import Executor
-    from trackmj.sweeps import sweep
+    from trackmj.study import report
+    from trackmj.study.executor import Executor
+    from trackmj.study.sweep import sweep
 
     runs = report.plan(["W1"], [0], 1.5, archs=["tp"], baselines=())
     spec = {"sweep": {"scenario": "W1", "duration_s": 1.5}}

@@ -10,8 +10,8 @@ import sys
 import pytest
 
 import trackmj
-from trackmj.cli import main
-from trackmj.scenarios import BUILTIN, load_scenario
+from trackmj.cli.main import main
+from trackmj.scenarios.schema import BUILTIN, load_scenario
 
 
 def test_version_and_python_dash_m() -> None:
@@ -92,8 +92,8 @@ def test_view_exit_code_follows_the_viewer(tmp_path, monkeypatch, viewer, code) 
         started.append(subprocess.Popen([sys.executable, "-c", viewer]))
         return started[-1]
 
-    monkeypatch.setattr("trackmj.playback.open_viewer", fake_viewer)
-    monkeypatch.setattr("trackmj.cli.VIEWER_START_S", 1.0)
+    monkeypatch.setattr("trackmj.results.playback.open_viewer", fake_viewer)
+    monkeypatch.setattr("trackmj.cli.main.VIEWER_START_S", 1.0)
     try:
         assert main(["view", str(rrd)]) == code
     finally:
@@ -102,7 +102,7 @@ def test_view_exit_code_follows_the_viewer(tmp_path, monkeypatch, viewer, code) 
 
 
 def test_model_info_columns_are_aligned_and_the_mass_is_explained(capsys) -> None:
-    from trackmj.plant import TrackPlant
+    from trackmj.track.plant import TrackPlant
 
     assert main(["model", "info"]) == 0
     lines = capsys.readouterr().out.splitlines()

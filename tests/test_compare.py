@@ -8,11 +8,11 @@ import json
 import pytest
 from synthetic import energy_table, synthetic_result
 
-from trackmj.cli import main
-from trackmj.compare import CompareRun, check_compare_dir, write_compare
-from trackmj.results import read_result
-from trackmj.scenarios import load_scenario
+from trackmj.cli.main import main
+from trackmj.results.store import read_result
+from trackmj.scenarios.schema import load_scenario
 from trackmj.sim.registry import ARCHITECTURES
+from trackmj.study.compare import CompareRun, check_compare_dir, write_compare
 
 
 def test_quick_compare_writes_runs_prediction_errors_and_figures(tmp_path, capsys) -> None:

@@ -1,10 +1,10 @@
-"""Stated contact and pin parameters are the simulated ones (trackmj/model/soft.py and the
-ground foundation, trackmj/foundation.py).
+"""Stated contact and pin parameters are the simulated ones (trackmj/track/mjcf/soft.py and the
+ground foundation, trackmj/track/foundation.py).
 
 Static: force / penetration of every loaded contact of the standing track equals the
 stated stiffness of its kind, and the foundation carries the weight at its stated
 stiffness. Dynamic: the free vibration of a mass on a contact mapped by
-:func:`trackmj.model.soft.soft_constraint` decays with the stated damping and rings with the
+:func:`trackmj.track.mjcf.soft.soft_constraint` decays with the stated damping and rings with the
 stated stiffness on the documented mass m + m_a, as semi-implicit Euler integrates them.
 Pins: a free span of free links stretches as n pins in series, steel or rubber-bushed
 (the chained structure's spans: tests/test_track_chains.py).
@@ -19,11 +19,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from trackmj.elements import ConstantForce
-from trackmj.foundation import S_DELTA
-from trackmj.model import ModelParams, generate_mjcf
-from trackmj.model.soft import row_diag, soft_constraint
-from trackmj.plant import TrackPlant
+from trackmj.elements.prescribed import ConstantForce
+from trackmj.track.foundation import S_DELTA
+from trackmj.track.mechanics import ModelParams
+from trackmj.track.mjcf.generate import generate_mjcf
+from trackmj.track.mjcf.soft import row_diag, soft_constraint
+from trackmj.track.plant import TrackPlant
 
 STATIC_TOLERANCE = 0.10   # the issue's bound; measured within 3 %
 

@@ -19,7 +19,7 @@ from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.io import cache_dir
-from trackmj.sim.config import nominal_plant_params, packaged_control
+from trackmj.sim.control_plant import nominal_plant_params, packaged_control
 
 CFG = packaged_control()
 PLANT = nominal_plant_params(control_config=CFG)

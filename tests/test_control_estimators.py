@@ -11,7 +11,7 @@ from trackmj.control.model import ReducedModel, ReducedPlant
 from trackmj.control.params import EstimatorParams
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
-from trackmj.sim.config import nominal_plant_params, packaged_control
+from trackmj.sim.control_plant import nominal_plant_params, packaged_control
 
 RUNS, STEPS, DT = 30, 400, 1e-3
 CFG = packaged_control()

@@ -5,7 +5,7 @@ import pytest
 
 from trackmj.control.model import ReducedModel, ReducedPlant
 from trackmj.control.params import PlantParams, default_path, load_config
-from trackmj.sim.config import nominal_plant_params, packaged_control
+from trackmj.sim.control_plant import nominal_plant_params, packaged_control
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,7 @@
 
 from trackmj.control.model import ReducedModel
 from trackmj.control.pid import PidController
-from trackmj.sim.config import nominal_plant_params, packaged_control
+from trackmj.sim.control_plant import nominal_plant_params, packaged_control
 from trackmj.sim.reduced import run_closed_loop, step_metrics
 
 CFG = packaged_control()

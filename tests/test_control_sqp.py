@@ -14,7 +14,7 @@ from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.ocp import X_SCALE, initial_guess
 from trackmj.control.sqp import BETA, C1, MAX_ITER_LS, MIN_STEP, CondensedSqp
-from trackmj.sim.config import nominal_plant_params, packaged_control
+from trackmj.sim.control_plant import nominal_plant_params, packaged_control
 
 CFG = packaged_control()
 PLANT = nominal_plant_params(control_config=CFG)

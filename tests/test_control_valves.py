@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from trackmj.control.params import ValveParams
 from trackmj.control.valves import ValveLogic
-from trackmj.sim.config import packaged_control
+from trackmj.sim.control_plant import packaged_control
 
 
 def _run_lengths(modes: list[int]) -> list[int]:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from trackmj.hydraulics import HydraulicTensioner
-from trackmj.plant import TrackPlant
+from trackmj.track.plant import TrackPlant
 
 
 def _coupled(mode_schedule, duration_s: float, speed_m_s: float = 1.5):

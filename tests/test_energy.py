@@ -9,12 +9,12 @@ import math
 
 import pytest
 
-from trackmj.cli import _summary_table
-from trackmj.elements import IdealForceSource
-from trackmj.energy import accounted_J
+from trackmj.cli.main import _summary_table
+from trackmj.elements.energy_table import accounted_J
+from trackmj.elements.ideal import IdealForceSource
 from trackmj.hydraulics import load_hydraulic_params
 from trackmj.ports import COUPLING_STEP_S
-from trackmj.results import read_result, write_result
+from trackmj.results.store import read_result, write_result
 from trackmj.sim.run import simulate
 
 DURATION_S = 4.0

@@ -11,11 +11,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from trackmj.cli import main
+from trackmj.cli.main import main
+from trackmj.errors import PhysicsError
 from trackmj.ports import Command, ControlOutput, Readout
-from trackmj.scenarios import load_scenario
+from trackmj.scenarios.schema import load_scenario
 from trackmj.sim.observers import (
-    PhysicsError,
     PhysicsGuard,
     PhysicsLimits,
     capture_mujoco_warnings,
@@ -135,8 +135,8 @@ def test_a_judged_band_the_controller_does_not_enforce_is_refused() -> None:
     """The scenario's [limits] (what the metrics judge) and the control file's [controller]
     band (what the controllers enforce) are one F_min/F_max: a mismatch is refused before
     anything is built, naming both; changed together they run."""
-    from trackmj.params import ParameterError
     from trackmj.sim.setup import prepare
+    from trackmj.validator import ParameterError
 
     with pytest.raises(ParameterError, match=r"W1\.toml \[limits\] force_min_N, force_max_N = "
                        r"10000, 18000 N but the control file \(packaged\) \[controller\] has "

@@ -11,9 +11,9 @@ import pytest
 from matplotlib.colors import to_rgb
 from synthetic import energy_table, synthetic_result
 
-from trackmj import figures
-from trackmj.metrics import prediction_vs_tp
-from trackmj.scenarios import load_scenario
+from trackmj.results import figures
+from trackmj.results.metrics import prediction_vs_tp
+from trackmj.scenarios.schema import load_scenario
 
 
 @pytest.fixture

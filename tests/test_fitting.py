@@ -1,4 +1,4 @@
-"""Calibration against measured logs (trackmj.fitting) and the log reader (trackmj.measured).
+"""Calibration against measured logs (trackmj.study.calibrate) and the log reader (trackmj.results.measured).
 
 The log is made with trackmj itself: a closed-loop run of a short step-up/step-down
 condition with the head-branch restrictor area and the oil bulk modulus off nominal, plus
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trackmj.params import ParameterError
+from trackmj.validator import ParameterError
 
 DATA = Path(__file__).parent / "data"
 SCENARIO = DATA / "steps_short.toml"
@@ -28,8 +28,8 @@ NOMINAL = {AREA: 4.0e-8, BULK: 1.4e9}
 
 def lf1352_sensors():
     """The default machine's sensor noise (its control file read through the machine)."""
-    from trackmj import machines
     from trackmj.control.params import load_config
+    from trackmj.machines import assembly as machines
 
     nominal_N = machines.mechanics(machines.resolve("lf1352")).nominal_tension_N
     return load_config(nominal_tension_N=nominal_N).sensors
@@ -78,8 +78,8 @@ def spec_file(tmp: Path, **extra: object) -> Path:
 def test_replayed_valve_command_reproduces_the_run(truth_run):
     """The fit's open-loop plant under the run's own valve command is the run, bit for bit
     (what makes a fit at the true values leave the sensor noise alone)."""
-    from trackmj.fitting import replay
     from trackmj.sim.setup import prepare
+    from trackmj.study.calibrate import replay
 
     setup = prepare(SCENARIO, seed=0, overrides=TRUTH)
     mode = truth_run["valve_mode"].astype(float)
@@ -89,7 +89,7 @@ def test_replayed_valve_command_reproduces_the_run(truth_run):
 
 
 def test_calibration_recovers_off_nominal_values(noisy_log, tmp_path):
-    from trackmj.fitting import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
+    from trackmj.study.calibrate import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
 
     out = tmp_path / "cal"
     done = calibrate(spec_file(tmp_path), [noisy_log], out)
@@ -116,7 +116,7 @@ def test_calibration_recovers_off_nominal_values(noisy_log, tmp_path):
     ("t [ms]", "t_s", 1e-3), ("tension_N", "tension_N", 1.0), ("valve_mode", "valve_mode", 1.0),
     ("q_supply [L/min]", "q_supply_m3_s", 1e-3 / 60.0)])
 def test_headers_name_their_unit(header, name, scale):
-    from trackmj.measured import si_name
+    from trackmj.results.measured import si_name
 
     assert si_name(header) == (name, pytest.approx(scale))
 
@@ -129,7 +129,7 @@ def test_headers_name_their_unit(header, name, scale):
     (lambda c: c.update(t_s=c["t_s"] * 0.5), ["rig.csv column 't_s'", "too short"]),
 ])
 def test_bad_logs_are_refused_naming_file_and_column(tmp_path, mutate, words):
-    from trackmj.fitting import load_log
+    from trackmj.study.calibrate import load_log
 
     t = 1e-3 * np.arange(1, 2501)
     cols = {"t_s": t, "p_head [MPa]": np.full(t.shape, 5.0), "valve_mode": np.zeros(t.shape)}
@@ -142,7 +142,7 @@ def test_bad_logs_are_refused_naming_file_and_column(tmp_path, mutate, words):
 
 
 def test_a_log_without_a_fit_channel_or_command_is_refused(tmp_path):
-    from trackmj.fitting import load_log
+    from trackmj.study.calibrate import load_log
 
     t = 1e-3 * np.arange(1, 2501)
     path = write_csv(tmp_path / "rig.csv", {"t_s": t, "valve_mode": np.zeros(t.shape)})
@@ -154,7 +154,7 @@ def test_a_log_without_a_fit_channel_or_command_is_refused(tmp_path):
 
 
 def test_cli_refuses_a_bad_spec_before_any_run(tmp_path, capsys):
-    from trackmj.cli import main
+    from trackmj.cli.main import main
 
     spec = spec_file(tmp_path).read_text().replace("bounds = [0.6e9, 2.0e9]",
                                                    "bounds = [2.0e9, 0.6e9]")
@@ -173,7 +173,7 @@ def test_cli_refuses_a_bad_spec_before_any_run(tmp_path, capsys):
 # ---------------------------------------------------------------------- run --measured
 
 def test_lag_by_cross_correlation_finds_a_known_delay():
-    from trackmj.metrics import lag_s
+    from trackmj.results.metrics import lag_s
 
     t = 1e-3 * np.arange(1, 4001)
     ref = np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 1.9 * t)
@@ -183,7 +183,7 @@ def test_lag_by_cross_correlation_finds_a_known_delay():
 
 
 def test_trace_errors_of_a_constant_offset():
-    from trackmj.metrics import trace_errors
+    from trackmj.results.metrics import trace_errors
 
     t = 1e-3 * np.arange(1, 3001)
     y_ref = 12e3 + 3e3 * (t >= 1.0)
@@ -217,7 +217,7 @@ def test_a_run_compared_with_its_own_log_has_no_error(truth_run, tmp_path):
      ["bad.csv column 't_s'", "too short"]),
 ])
 def test_run_refuses_a_bad_measured_log_before_running(tmp_path, capsys, columns, words):
-    from trackmj.cli import main
+    from trackmj.cli.main import main
 
     log = write_csv(tmp_path / "bad.csv", columns)
     code = main(["run", str(SCENARIO), "--measured", str(log), "--out", str(tmp_path / "r")])

@@ -22,7 +22,7 @@ sys.path.insert(0, str(HERE / "fmus"))
 
 from build import build_gas_cylinder, gas_force_N  # noqa: E402
 
-from trackmj.cli import main  # noqa: E402
+from trackmj.cli.main import main  # noqa: E402
 from trackmj.sim.setup import prepare  # noqa: E402
 
 
@@ -133,7 +133,7 @@ def test_c_fmu_gas_cylinder_as_the_drive_tensioner(fmus, tmp_path, fmu, interfac
     """The gas cylinder compiled from C as the tensioner of trackmj drive (3 s at 1.5 m/s):
     the mean idler force matches the analytic law at the mean stroke within 1 %, in every
     coupling; the track's energy ledger closes."""
-    from trackmj.drive import drive
+    from trackmj.sim.drive import drive
 
     toml = _tensioner(fmus / f"{Path(fmu).stem}_{interface}.toml", fmu, **GAS_IO,
                       extra=f'interface = "{interface}"')
@@ -172,7 +172,7 @@ def test_fmpy_simulate_fmu_settles_the_track_where_drive_puts_it(exported, tmp_p
     puts it with the same force as a tensioner file's spring-damper (k = 0)."""
     from fmpy import simulate_fmu
 
-    from trackmj.drive import drive
+    from trackmj.sim.drive import drive
 
     result = simulate_fmu(str(exported["track"]), stop_time=2.0, step_size=1e-3,
                           output_interval=1e-3, output=["stroke_m", "tension_N"],

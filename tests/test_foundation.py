@@ -1,4 +1,4 @@
-"""The ground foundation force element (trackmj/foundation.py) on small hand-checkable models.
+"""The ground foundation force element (trackmj/track/foundation.py) on small hand-checkable models.
 
 Static sinkage is the load over the stated stiffness; a free vibration rings as the
 semi-implicit Euler step with the spring explicit and the damper implicit, from which the
@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from trackmj.foundation import (
+from trackmj.track.foundation import (
     S_DELTA,
     S_N,
     Foundation,

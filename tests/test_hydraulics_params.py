@@ -13,8 +13,8 @@ import pytest
 
 from trackmj.hydraulics import HydraulicTensioner, PressureProfile, load_hydraulic_params
 from trackmj.hydraulics.params import HydraulicParams
-from trackmj.params import ParameterError, build
 from trackmj.ports import TensionerElement
+from trackmj.validator import ParameterError, build
 
 
 def _doc() -> dict:

@@ -7,8 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from trackmj.identify import (
-    ModalTerm,
+from trackmj.machines.identify import (
     fit_modal,
     fit_single_dof,
     frequency_response,
@@ -16,7 +15,8 @@ from trackmj.identify import (
     multisine,
     r2,
 )
-from trackmj.plant import TrackPlant
+from trackmj.machines.idler import ModalTerm
+from trackmj.track.plant import TrackPlant
 
 
 def test_single_dof_fit_recovers_a_known_system() -> None:

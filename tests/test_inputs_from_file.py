@@ -1,5 +1,5 @@
 """Scenario inputs read from files: [reference], [supply], [track] from_file and [hitch]
-(trackmj.measured.input_signal through the one validator)."""
+(trackmj.results.measured.input_signal through the one validator)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trackmj.params import ParameterError
-from trackmj.scenarios import load_scenario
+from trackmj.scenarios.schema import load_scenario
+from trackmj.validator import ParameterError
 
 DATA = Path(__file__).parent / "data"
 SHORT = DATA / "steps_short.toml"
@@ -103,7 +103,7 @@ def test_bad_input_files_are_refused_naming_file_and_column(tmp_path, columns, w
 
 
 def test_from_file_excludes_the_built_in_keys_and_a_longer_run_is_refused(tmp_path, capsys):
-    from trackmj.cli import main
+    from trackmj.cli.main import main
 
     write_csv(tmp_path / "ref.csv", {"t_s": np.array([0.0, 2.5]), "F_ref_N": np.full(2, 12e3)})
     both = scenario_with(tmp_path, {REFERENCE_TABLE: '[reference]\nfrom_file = "ref.csv"\n'
@@ -147,8 +147,8 @@ def test_parquet_inputs_and_the_identity_follows_the_file_content(tmp_path):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from trackmj.campaign import run_key
     from trackmj.sim.setup import prepare
+    from trackmj.study.campaign import run_key
 
     t = 1e-3 * np.arange(0, 2501)
     path = scenario_with(tmp_path, {REFERENCE_TABLE: '[reference]\nfrom_file = "ref.parquet"\n'})

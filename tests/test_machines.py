@@ -13,15 +13,16 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from trackmj.cli import main
+from trackmj.cli.main import main
 from trackmj.io import cache_dir
-from trackmj.machines import load_machine, model_mjcf, resolve, shipped
-from trackmj.model import compute_layout, generate_mjcf, load_model_params
-from trackmj.model.cache import cached_mjcf
-from trackmj.model.geometry import derive_geometry
-from trackmj.model.layout import chords_fitting, slide_axis
-from trackmj.params import ParameterError
-from trackmj.plant import PassiveTensioner, TrackPlant
+from trackmj.machines.assembly import load_machine, model_mjcf, resolve, shipped
+from trackmj.track.mechanics import load_model_params
+from trackmj.track.mjcf.cache import cached_mjcf
+from trackmj.track.mjcf.generate import generate_mjcf
+from trackmj.track.mjcf.geometry import derive_geometry
+from trackmj.track.mjcf.layout import chords_fitting, compute_layout, slide_axis
+from trackmj.track.plant import PassiveTensioner, TrackPlant
+from trackmj.validator import ParameterError
 
 FRONT = {"sprocket.x_m": 1.10, "idler.x_m": -1.35, "chassis.hitch_x_m": 1.30}
 """LF1352 mirrored: sprocket at the front, idler and tensioner at the rear."""
@@ -147,7 +148,7 @@ def test_76_links_with_five_road_wheels_generate_and_close() -> None:
 
 @pytest.fixture(scope="module")
 def front_drive():
-    from trackmj.drive import drive
+    from trackmj.sim.drive import drive
 
     return drive(1.5, 3.0, overrides=FRONT)
 
@@ -305,7 +306,7 @@ def test_run_on_a_machine_file_of_another_layout(tmp_path) -> None:
 def test_link_and_pin_names_past_100_links() -> None:
     """123 links of 50 mm (pins and teeth scaled with the pitch): the plant finds every
     link, pin and connect by name on the generated layout (no settling needed)."""
-    from trackmj.model import build_mjcf
+    from trackmj.track.mjcf.builders import build_mjcf
 
     p = load_model_params(overrides={"track.pitch_m": 0.05, "track.link_count": 123,
                                      "track.link_mass_kg": 2.3, "track.pin_radius_m": 0.009,
@@ -321,7 +322,7 @@ def test_link_and_pin_names_past_100_links() -> None:
                                      ["sweep", "spec.toml"], ["drive"], ["model", "info"],
                                      ["model", "generate"]])
 def test_every_command_takes_a_machine(command) -> None:
-    from trackmj.cli import build_parser
+    from trackmj.cli.main import build_parser
 
     args = build_parser().parse_args([*command, "--machine", "my_machine.toml"])
     assert args.machine == "my_machine.toml"

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from trackmj import metrics as M
+from trackmj.results import metrics as M
 
 DT = 1e-3
 
@@ -229,7 +229,7 @@ def test_compute_metrics_standard_set() -> None:
     assert out["chassis_acc_body_mode_rms_m_s2"] == pytest.approx(1 / math.sqrt(2), rel=0.01)
     assert out["valve_switches"] == 2.0
     assert out["valve_switch_rate_Hz"] == pytest.approx(2 / 19.0)
-    assert "supply_energy_J" not in out    # the energy breakdown is trackmj.energy's
+    assert "supply_energy_J" not in out    # the energy breakdown is trackmj.elements.energy_table's
     assert out["interface_energy_residual_J"] == pytest.approx(0.02)
     assert out["constraint_violation_s"] == 0.0
     assert out["disturbance_peak_error_N"] == pytest.approx(200.0, rel=1e-3)

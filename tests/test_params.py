@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from trackmj.cli import main
-from trackmj.model import default_param_path, load_model_params
-from trackmj.params import ParameterError
+from trackmj.cli.main import main
+from trackmj.track.mechanics import default_param_path, load_model_params
+from trackmj.validator import ParameterError
 
 
 def _variant(tmp_path, old: str, new: str):

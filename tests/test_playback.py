@@ -12,8 +12,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from trackmj.plant import PassiveTensioner, TrackPlant
-from trackmj.playback import (
+from trackmj.results.playback import (
     FRAME_PERIOD_S,
     RUN_RRD,
     SERIES,
@@ -22,7 +21,8 @@ from trackmj.playback import (
     resolve_rrd,
     tension_colors,
 )
-from trackmj.results import COLUMN_UNITS, Result, make_table, run_metadata
+from trackmj.results.store import COLUMN_UNITS, Result, make_table, run_metadata
+from trackmj.track.plant import PassiveTensioner, TrackPlant
 
 DURATION_S = 0.2
 N_FRAMES = round(DURATION_S / FRAME_PERIOD_S)

@@ -8,9 +8,9 @@ import math
 import pytest
 from synthetic import energy_table, synthetic_result
 
-from trackmj import report as R
-from trackmj.cli import _summary_table, main
-from trackmj.results import read_result
+from trackmj.cli.main import _summary_table, main
+from trackmj.results.store import read_result
+from trackmj.study import report as R
 
 
 def test_verdict_on_reductions_follows_its_rules() -> None:
@@ -85,7 +85,7 @@ class _SyntheticExecutor:
         self.ran = []
 
     def as_completed(self, specs, progress=None):
-        from trackmj.executor import RunOutcome
+        from trackmj.study.executor import RunOutcome
 
         for spec in specs:
             self.ran.append(spec)

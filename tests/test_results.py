@@ -15,7 +15,7 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 import pytest
 
-import trackmj.results as R
+import trackmj.results.store as R
 
 META = R.run_metadata("W1", "tp", "nmpc", "ekf", 3, machine="test box")
 
@@ -122,7 +122,7 @@ def test_killed_writer_leaves_the_previous_result_and_is_cleaned_up(tmp_path) ->
     out = R.write_result(_result(50, rmse_N=1.0), tmp_path / "run")
     script = textwrap.dedent(f"""
         import time
-        import trackmj.results as R
+        import trackmj.results.store as R
         with R.ResultWriter({str(out)!r}) as w:
             (w.stage / "timeseries.parquet").write_bytes(b"half a file")
             print("staged", flush=True)

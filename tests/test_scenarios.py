@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from trackmj.params import ParameterError, parse_overrides
-from trackmj.scenarios import NOMINAL, load_scenario, scenario_path
-from trackmj.terrain import band_rms_m
+from trackmj.scenarios.schema import NOMINAL, load_scenario, scenario_path
+from trackmj.track.terrain import band_rms_m
+from trackmj.validator import ParameterError, parse_overrides
 
 
 @pytest.mark.parametrize("name", ["W1", "W2", "W3", "W4", "W5", "w3"])
@@ -379,7 +379,7 @@ def test_replace_runs_the_same_checks() -> None:
 
 def test_w4_windows_give_dip_and_recovery_from_compute_metrics() -> None:
     """A synthetic W4 run: a 900 N dip at the drop onset decaying with tau = 0.5 s."""
-    from trackmj.metrics import compute_metrics
+    from trackmj.results.metrics import compute_metrics
 
     s = load_scenario("W4")
     t = np.arange(30001) * 1e-3

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from test_contacts import _static_stiffness
 
-from trackmj import machines
-from trackmj.drive import drive
-from trackmj.elements import ConstantForce
-from trackmj.energy import accounted_J
-from trackmj.foundation import S_DELTA
-from trackmj.model.layout import slide_axis
-from trackmj.plant import TrackPlant
+from trackmj.elements.energy_table import accounted_J
+from trackmj.elements.prescribed import ConstantForce
+from trackmj.machines import assembly as machines
+from trackmj.sim.drive import drive
 from trackmj.sim.run import simulate
+from trackmj.track.foundation import S_DELTA
+from trackmj.track.mjcf.layout import slide_axis
+from trackmj.track.plant import TrackPlant
 
 NAMES = machines.names()
 SPEED_M_S, DRIVE_S, STEADY_FROM_S = 1.5, 10.0, 2.0

@@ -10,36 +10,43 @@ import pytest
 
 from trackmj.control.model import ReducedModel, ReducedPlant
 from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
-from trackmj.identify import EquivalentIdler
-from trackmj.model import default_xml_path
-from trackmj.params import ParameterError
-from trackmj.sim.config import (
+from trackmj.io import file_sha256
+from trackmj.machines.identify import identify_packaged_idler
+from trackmj.machines.idler import (
+    EquivalentIdler,
     default_idler_path,
-    file_sha256,
-    identify_packaged_idler,
     load_identification,
     load_idler,
-    nominal_plant_params,
-    packaged_control,
-    reduced_plant_params,
     write_idler_file,
 )
+from trackmj.sim.control_plant import nominal_plant_params, packaged_control, reduced_plant_params
+from trackmj.track.mechanics import default_xml_path
+from trackmj.validator import ParameterError
 
-REGENERATE = "models/lf1352_idler.toml is stale: regenerate with python -m trackmj.sim.config"
+REGENERATE = ("models/lf1352_idler.toml differs from a fresh identification by more than CPU "
+              "rounding: if you changed models/lf1352.xml or the identification, regenerate it "
+              "with `python -m trackmj.machines.identify` and commit it; if you changed "
+              "neither, the difference is real on your machine: report it with your CPU")
+IDENTIFICATION_RTOL = 1e-6
+"""The identification is deterministic on one machine; across CPUs MuJoCo's last bits differ
+(AVX-512 paths) and 8 s of contact dynamics and a nonlinear fit carry them to ~1e-9 relative
+(seen between an AMD EPYC and an Intel Xeon). A change of the track moves k, M, c by far more
+than 1e-6 (a pin stiffness 1 % off moves k by ~0.5 %)."""
 
 
 def test_committed_idler_file_equals_a_fresh_identification() -> None:
-    """The identification is deterministic: the committed file is what the committed track
-    gives (after a change of models/lf1352.xml this fails until the file is regenerated)."""
+    """The committed file is what the committed track gives, within CPU rounding (after a
+    change of models/lf1352.xml this fails until the file is regenerated)."""
     assert load_identification().model_sha256 == file_sha256(default_xml_path()), REGENERATE
     stored, fresh = load_idler(), identify_packaged_idler()
     for f in dataclasses.fields(EquivalentIdler):
         if f.name in ("modes", "response"):
             continue
-        assert getattr(stored, f.name) == pytest.approx(getattr(fresh, f.name), rel=1e-9,
-                                                        abs=1e-12), (f.name, REGENERATE)
+        assert getattr(stored, f.name) == pytest.approx(getattr(fresh, f.name),
+                                                        rel=IDENTIFICATION_RTOL, abs=1e-12), (f.name, REGENERATE)
     for a, b in zip(stored.modes, fresh.modes, strict=True):
-        assert dataclasses.astuple(a) == pytest.approx(dataclasses.astuple(b), rel=1e-9)
+        assert dataclasses.astuple(a) == pytest.approx(dataclasses.astuple(b),
+                                                       rel=IDENTIFICATION_RTOL), REGENERATE
 
 
 def test_reduced_plant_lumps_both_cylinders_and_puts_paths_in_series() -> None:

@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from trackmj.cli import main
-from trackmj.results import COLUMN_UNITS, read_result, write_result
-from trackmj.scenarios import load_scenario
+from trackmj.cli.main import main
+from trackmj.results.store import COLUMN_UNITS, read_result, write_result
+from trackmj.scenarios.schema import load_scenario
 from trackmj.sim.run import simulate
 
 DURATION_S = 2.0

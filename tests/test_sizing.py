@@ -1,4 +1,4 @@
-"""Sizing rules (trackmj/sizing.py, docs/sizing.md): hand checks on LF1352, the shipped
+"""Sizing rules (trackmj/machines/sizing.py, docs/sizing.md): hand checks on LF1352, the shipped
 machines' hydraulic files come from them, and the controller values follow each machine."""
 
 from __future__ import annotations
@@ -7,12 +7,14 @@ import math
 
 import pytest
 
-from trackmj import machines, sizing
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import BAND_REL, load_config
 from trackmj.hydraulics import load_hydraulic_params
 from trackmj.hydraulics.components import series_area
-from trackmj.sim.config import load_idler, nominal_plant_params
+from trackmj.machines import assembly as machines
+from trackmj.machines import sizing
+from trackmj.machines.idler import load_idler
+from trackmj.sim.control_plant import nominal_plant_params
 from trackmj.sim.setup import machine_weights
 
 SUPPLY_PA, TANK_PA, VALVE_DROP_PA, HOLD_S = 12e6, 0.2e6, 1e6, 0.030

@@ -10,17 +10,17 @@ import os
 import numpy as np
 import pytest
 
-from trackmj.campaign import flatten_metrics, write_table
-from trackmj.cli import main
-from trackmj.executor import Executor
-from trackmj.params import ParameterError
-from trackmj.sweeps import (
+from trackmj.cli.main import main
+from trackmj.study.campaign import flatten_metrics, write_table
+from trackmj.study.executor import Executor
+from trackmj.study.sweep import (
     load_sweep,
     parameter_points,
     plan,
     read_sweep,
     sweep,
 )
+from trackmj.validator import ParameterError
 
 DURATION_S = 1.5
 SPEED = "scenario.track.speed_m_s"
@@ -111,9 +111,9 @@ def test_spec_mistakes_are_named_before_any_run(tmp_path, table, message) -> Non
 
 def test_trackmj_sweep_is_the_function() -> None:
     import trackmj
-    import trackmj.sweeps
+    import trackmj.study.sweep
 
-    assert trackmj.sweep is trackmj.sweeps.sweep and trackmj.read_sweep is read_sweep
+    assert trackmj.sweep is trackmj.study.sweep.sweep and trackmj.read_sweep is read_sweep
 
 
 def test_nested_metric_tables_become_dotted_columns() -> None:
@@ -127,7 +127,7 @@ def test_scattered_samples_are_plotted_per_metric(tmp_path, monkeypatch) -> None
     """Rows of an LHS sweep (no two points share the other key's value), one failed: a
     figure per metric that varies across the runs that ran (not the constant wall time, not
     the metric that is NaN everywhere), the failed row left out; labels in plain words."""
-    from trackmj.sweeps import plot_sweep
+    from trackmj.study.sweep import plot_sweep
 
     rows = [{"run_key": f"k{i}", "point": i, "scenario": "W1", "architecture": "tp",
              "controller": "nmpc", "estimator": "ekf", "variant": "nominal", "seed": 0,
@@ -137,7 +137,7 @@ def test_scattered_samples_are_plotted_per_metric(tmp_path, monkeypatch) -> None
             for i in range(5)]
     rows[4] |= {"rmse_N": None, "error": "PhysicsError: ..."}
     write_table(rows, tmp_path / "results.parquet")
-    import trackmj.figures as figures_module
+    import trackmj.results.figures as figures_module
 
     drawn = []
     original = figures_module._metric_figure
@@ -158,7 +158,7 @@ def test_a_sweep_without_swept_keys_gets_bars_per_scenario_and_case(tmp_path,
                                                                     monkeypatch) -> None:
     """A controller comparison (no swept key): a figure per metric with a group of bars per
     scenario and a bar per controller at the mean over seeds."""
-    from trackmj.sweeps import plot_sweep
+    from trackmj.study.sweep import plot_sweep
 
     rows = [{"run_key": f"{sc}{c}{seed}", "point": 0, "scenario": sc, "architecture": "tp",
              "controller": c, "estimator": "ekf", "variant": "nominal", "seed": seed,
@@ -166,7 +166,7 @@ def test_a_sweep_without_swept_keys_gets_bars_per_scenario_and_case(tmp_path,
              "wall_time_s": 1.0 + seed, "error": None}
             for sc in ("NL1", "W1") for k, c in enumerate(("nmpc", "pid")) for seed in (0, 2)]
     write_table(rows, tmp_path / "results.parquet")
-    import trackmj.figures as figures
+    import trackmj.results.figures as figures
 
     captured, original = [], figures._case_figure
     monkeypatch.setattr(figures, "_case_figure",
@@ -182,7 +182,7 @@ def test_a_sweep_without_swept_keys_gets_bars_per_scenario_and_case(tmp_path,
 
 def test_results_are_rewritten_at_most_every_period_and_flushed(tmp_path, monkeypatch) -> None:
     """Rewriting grows with the rows, so it is throttled; what arrived is always flushed."""
-    import trackmj.campaign as campaign
+    import trackmj.study.campaign as campaign
 
     writes = []
     monkeypatch.setattr(campaign, "write_table", lambda rows, path: writes.append(len(rows)))
@@ -224,8 +224,8 @@ def test_workers_start_warm_with_one_thread(executor) -> None:
     def probe():
         import numba
 
-        import trackmj.worker
-        return (trackmj.worker.warm_time_s, os.environ.get("OMP_NUM_THREADS"),
+        import trackmj.study.worker
+        return (trackmj.study.worker.warm_time_s, os.environ.get("OMP_NUM_THREADS"),
                 numba.config.NUMBA_NUM_THREADS)
 
     reports = list(executor.client.run(probe).values())
@@ -311,7 +311,7 @@ def test_cli_sweep_refuses_a_bad_spec_naming_it(tmp_path, capsys) -> None:
 def test_a_run_that_kills_its_worker_is_an_outcome_with_the_error(executor, monkeypatch):
     """A run that takes its worker process down (here: os._exit, as a segfault would) is
     retried on restarted workers by Dask and then reported as failed; the batch goes on."""
-    from trackmj.executor import RunSpec
+    from trackmj.study.executor import RunSpec
 
     submit = executor.client.submit
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.signal import welch
 
-from trackmj.terrain import (
+from trackmj.track.terrain import (
     ISO8608_GD_N0_M3,
     band_rms_m,
     heightfield,

@@ -1,7 +1,7 @@
 """``[track] structure``: hinged sub-chains ("chains", the default) and free links keep the
 stated physics.
 
-Chains of at most ``chain_links`` links (trackmj/model/structure.py): each chain's links
+Chains of at most ``chain_links`` links (trackmj/track/mjcf/structure.py): each chain's links
 hinged in a row, one connect per chain carrying its pins' compliance in series; two fewer
 DOFs per hinged link, the contacts still at their stated stiffness, the hinged pins'
 tensions the forces they transmit, a span stretching as its connects' pins in series, the
@@ -22,12 +22,13 @@ from hypothesis import strategies as st
 from test_contacts import STATIC_TOLERANCE, _static_stiffness, span_under_tension
 from test_model import assert_sparse_matches_dense
 
-from trackmj.model import ModelParams, generate_mjcf, load_model_params
-from trackmj.model.mjcf import link_name
-from trackmj.model.structure import chain_sizes, chain_starts, pin_series_count
-from trackmj.params import ParameterError
-from trackmj.plant import PassiveTensioner, TrackPlant
-from trackmj.track_energy import TrackEnergyLedger
+from trackmj.track.energy import TrackEnergyLedger
+from trackmj.track.mechanics import ModelParams, load_model_params
+from trackmj.track.mjcf.generate import generate_mjcf
+from trackmj.track.mjcf.names import link_name
+from trackmj.track.mjcf.structure import chain_sizes, chain_starts, pin_series_count
+from trackmj.track.plant import PassiveTensioner, TrackPlant
+from trackmj.validator import ParameterError
 
 
 def _variant(model_params: ModelParams, **track) -> tuple[str, ModelParams]:

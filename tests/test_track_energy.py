@@ -1,4 +1,4 @@
-"""The track's mechanical energy ledger (trackmj/track_energy.py) and the drive run.
+"""The track's mechanical energy ledger (trackmj/track/energy.py) and the drive run.
 
 The ledger closes (its residual is what the booked forces miss of what MuJoCo integrated),
 contacts and pins only dissipate once the integrator's own terms are named apart, and a
@@ -14,9 +14,9 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from trackmj.drive import TIMESERIES_UNITS, drive
-from trackmj.plant import PassiveTensioner, TrackPlant
-from trackmj.track_energy import CONTACTS, TrackEnergyLedger
+from trackmj.sim.drive import TIMESERIES_UNITS, drive
+from trackmj.track.energy import CONTACTS, TrackEnergyLedger
+from trackmj.track.plant import PassiveTensioner, TrackPlant
 
 
 @pytest.fixture(scope="module")

@@ -18,8 +18,10 @@ from trackmj.control.params import ControlConfig, PlantParams, load_config
 from trackmj.control.params import default_path as control_path
 from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
 from trackmj.hydraulics.params import default_path as hydraulics_path
-from trackmj.model import ModelParams, default_param_path, load_model_params, models_dir
-from trackmj.params import (
+from trackmj.machines.idler import IdlerFile
+from trackmj.scenarios.schema import ScenarioFile, load_scenario, scenario_path
+from trackmj.track.mechanics import ModelParams, default_param_path, load_model_params, models_dir
+from trackmj.validator import (
     FILE_KINDS,
     ParameterError,
     Parameters,
@@ -32,8 +34,6 @@ from trackmj.params import (
     parse_overrides,
     unit_from_name,
 )
-from trackmj.scenarios import ScenarioFile, load_scenario, scenario_path
-from trackmj.sim.config import IdlerFile
 
 # kind -> (loader(path, overrides), packaged file, a table, a float key in it, a value
 # outside its range, the range text in the message)
@@ -247,7 +247,7 @@ def test_every_numeric_field_has_a_unit_and_every_field_a_doc() -> None:
             fields = file_fields(cls)
             missing_unit += [f"{cls.__name__}.{n}" for n in numeric_fields(cls)
                              if not fields[n].spec.unit]
-            if cls.__module__ != "trackmj.model.params":
+            if cls.__module__ != "trackmj.track.mechanics":
                 missing_doc += [f"{cls.__name__}.{n}" for n, f in fields.items()
                                 if not f.spec.doc and not _is_table(f.hint)]
     assert missing_unit == []

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from trackmj.calibration import calibration_pulse, idler_force_history, load_change_N
-from trackmj.scenarios import load_scenario
+from trackmj.scenarios.schema import load_scenario
+from trackmj.study.w3_hitch import calibration_pulse, idler_force_history, load_change_N
 
 
 @pytest.fixture(scope="module")

@@ -22,20 +22,20 @@ from __future__ import annotations
 import importlib
 
 TYPE_CHECKING = False   # type checkers take this name as True; importing typing costs ~3 ms
-__version__ = "0.1.0"
+from trackmj.version import __version__
 
 _EXPORTS: dict[str, str] = {
     "simulate": "trackmj.sim.run",
-    "sweep": "trackmj.sweeps",
-    "load_sweep": "trackmj.sweeps",
-    "read_sweep": "trackmj.sweeps",
-    "load_scenario": "trackmj.scenarios",
-    "read_result": "trackmj.results",
-    "write_result": "trackmj.results",
-    "Result": "trackmj.results",
-    "TrackPlant": "trackmj.plant",
-    "Executor": "trackmj.executor",
-    "RunSpec": "trackmj.executor",
+    "sweep": "trackmj.study.sweep",
+    "load_sweep": "trackmj.study.sweep",
+    "read_sweep": "trackmj.study.sweep",
+    "load_scenario": "trackmj.scenarios.schema",
+    "read_result": "trackmj.results.store",
+    "write_result": "trackmj.results.store",
+    "Result": "trackmj.results.store",
+    "TrackPlant": "trackmj.track.plant",
+    "Executor": "trackmj.study.executor",
+    "RunSpec": "trackmj.study.executor",
 }
 """Public name -> the module that defines it."""
 
@@ -43,12 +43,12 @@ __all__ = ["Executor", "Result", "RunSpec", "TrackPlant", "__version__", "load_s
            "load_sweep", "read_result", "read_sweep", "simulate", "sweep", "write_result"]
 
 if TYPE_CHECKING:
-    from trackmj.executor import Executor, RunSpec
-    from trackmj.plant import TrackPlant
-    from trackmj.results import Result, read_result, write_result
-    from trackmj.scenarios import load_scenario
+    from trackmj.results.store import Result, read_result, write_result
+    from trackmj.scenarios.schema import load_scenario
     from trackmj.sim.run import simulate
-    from trackmj.sweeps import load_sweep, read_sweep, sweep
+    from trackmj.study.executor import Executor, RunSpec
+    from trackmj.study.sweep import load_sweep, read_sweep, sweep
+    from trackmj.track.plant import TrackPlant
 
 
 def __getattr__(name: str) -> object:

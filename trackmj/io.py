@@ -3,6 +3,7 @@ directory. A leaf: it imports nothing of trackmj, so hydraulics/ and control/ ma
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 from pathlib import Path
@@ -57,3 +58,8 @@ def write_bytes_atomic(path: str | Path, payload: bytes) -> None:
 def write_text_atomic(path: str | Path, text: str) -> None:
     """UTF-8 text version of :func:`write_bytes_atomic`."""
     write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def file_sha256(path: str | Path) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()

@@ -257,7 +257,7 @@ class Element(TensionerElement, Protocol):
 
     def run_metrics(self, duration_s: float) -> dict[str, Any]:
         """The element's own metrics at the end of a run of ``duration_s`` [s], with its
-        energy table under ``energy_J`` (see :mod:`trackmj.energy`)."""
+        energy table under ``energy_J`` (see :mod:`trackmj.elements.energy_table`)."""
         ...
 
 

@@ -1,10 +1,10 @@
 """FMI both ways, through fmpy (import) and pythonfmu (export).
 
-* :mod:`trackmj.fmi.model`: opening and checking an FMU against a tensioner or controller
+* :mod:`trackmj.fmi.fmu`: opening and checking an FMU against a tensioner or controller
   file, and one FMU instance behind a version-neutral call surface (FMI 2.0 and 3.0,
   co-simulation and model exchange); every failing call becomes an :class:`FmuError` naming
   the FMU, the call and the time.
-* :mod:`trackmj.fmi.element`: an FMU as the tensioner element (``ports.Element``), coupled
+* :mod:`trackmj.elements.fmu`: an FMU as the tensioner element (``ports.Element``), coupled
   strongly (co-simulation with state roll-back, or model exchange integrated implicitly
   with the mechanics) or weakly (co-simulation without roll-back).
 * :mod:`trackmj.fmi.controller`: an FMU as the controller (``ports.Controller``).

@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from trackmj.params import Location, ParameterError, Parameters, load_file, param, sources_field
 from trackmj.ports import ControllerStatistics, ControlOutput, steps_per_period
+from trackmj.validator import Location, ParameterError, Parameters, load_file, param, sources_field
 
 CONTROLLER_INPUTS: dict[str, str] = {
     "p_head_Pa": "head pressure [Pa gauge] (the estimator's period mean)",
@@ -87,7 +87,7 @@ class ControllerFile(Parameters):
 def load_controller_file(path: str | Path) -> ControllerFile:
     """Read and validate a controller file and check its FMU (co-simulation; the mapped
     variables' causality and type) before any run."""
-    from trackmj.fmi.model import describe
+    from trackmj.fmi.fmu import describe
 
     path = Path(path)
     loaded = load_file(ControllerFile, path)
@@ -115,7 +115,7 @@ class FmuController:
     horizon_steps = 0   # it takes the current reference only
 
     def __init__(self, loaded: ControllerFile) -> None:
-        from trackmj.fmi.model import FmuInstance
+        from trackmj.fmi.fmu import FmuInstance
 
         self.period_s = loaded.controller.period_s
         self.description = d = loaded.description

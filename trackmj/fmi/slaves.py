@@ -44,9 +44,9 @@ PLANT_OUTPUTS = ("p_head_measured_Pa", "p_rod_measured_Pa", "stroke_measured_m",
 def machine_files(machine: str) -> dict[str, str | None]:
     """``prepare`` arguments for the FMU parameter ``machine``: a shipped machine's name
     ("" the default, lf1352) or a machine file (``*_machine.toml``) through the machine
-    registry (:func:`trackmj.machines.resolve`); any other TOML is a model parameter file
+    registry (:func:`trackmj.machines.assembly.resolve`); any other TOML is a model parameter file
     on the default machine. The one place the FMUs resolve a machine."""
-    from trackmj.machines import MACHINE_SUFFIX, names
+    from trackmj.machines.assembly import MACHINE_SUFFIX, names
 
     text = machine.strip()
     if not text or text.lower() in names() or text.endswith(MACHINE_SUFFIX):
@@ -138,7 +138,7 @@ class TrackSlave(_Base):
                                            variability=Fmi2Variability.discrete))
 
     def exit_initialization_mode(self):
-        from trackmj.elements import ConstantForce
+        from trackmj.elements.prescribed import ConstantForce
         from trackmj.sim.architectures import settled_track
 
         self.plant = settled_track(self._setup("W1"), self.force_N)
@@ -237,7 +237,7 @@ class PlantSlave(_Base):
                 {n: getattr(self, n) for n in PLANT_OUTPUTS})
 
     def _set_fmu_state(self, state):
-        from trackmj.elements import HydraulicElement
+        from trackmj.elements.hydraulic import HydraulicElement
 
         track, tensioner, sensors, mode, outputs = state
         self._restore_track(self.plant, track)

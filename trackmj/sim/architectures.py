@@ -8,7 +8,7 @@ Same controller, weights, horizons, steps and references in all:
 * ``tp``: MuJoCo track + hydraulic plugin, strong coupling (affine law, implicit dF/dv).
 * ``tp-weak``: the same with the weak coupling (force of the previous step held, no dF/dv).
 * ``dp-a``: hydraulics + control on the equivalent idler mass-spring-damper identified from
-  the track (:mod:`trackmj.identify`); the track's load is replayed from a ``tp`` run of the
+  the track (:mod:`trackmj.machines.identify`); the track's load is replayed from a ``tp`` run of the
   same condition and seed as the part of the tp tension the equivalent spring does not
   explain, d(t) = F_tp − k(y_tp − y0) − c·ẏ_tp. The coupling is one-way.
 * ``dp-b``: MuJoCo track + control; the hydraulics replaced by an ideal force source: the
@@ -21,7 +21,7 @@ runs without its own delay so the delay is not counted twice (dp-b has no soleno
 
 W3's load pulses enter physically: a load on the rear hitch (a towed or pushing load along a
 chain below the horizontal) while the sprocket servo holds the track speed, so the track
-sees sprocket drive/brake torque pulses and a pitch load (:mod:`trackmj.calibration`);
+sees sprocket drive/brake torque pulses and a pitch load (:mod:`trackmj.study.w3_hitch`);
 dp-a sees them through the replayed tp track load.
 """
 
@@ -39,17 +39,18 @@ from numpy.typing import NDArray
 
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig
-from trackmj.elements import ConstantForce
-from trackmj.plant import TrackPlant
+from trackmj.elements.context import ElementContext
+from trackmj.elements.prescribed import ConstantForce
 from trackmj.ports import Element, ForceLaw, Mechanics
-from trackmj.results import Result
-from trackmj.sim.config import reduced_plant_params
+from trackmj.results.store import Result
+from trackmj.sim.control_plant import reduced_plant_params
 from trackmj.sim.plants import CoupledPlant, EquivalentIdlerMechanics
 from trackmj.sim.registry import ARCHITECTURES, ELEMENTS, MECHANICS
 from trackmj.sim.setup import RunSetup
+from trackmj.track.plant import TrackPlant
 
 if TYPE_CHECKING:
-    from trackmj.tensioner import TensionerFile
+    pass
 
 SETTLE_S = 1.0
 """Standing settle under the initial reference force before t = 0 [s]."""
@@ -66,19 +67,6 @@ class BuiltMechanics:
     mechanics: Mechanics
     track: TrackPlant | None
     free_position_m: float
-
-
-@dataclass(frozen=True)
-class ElementContext:
-    """What an element builder gets: the run's setup, the mechanics' initial stroke [m], the
-    controller's reduced model, the architecture's coupling ("strong" or "weak") and the
-    run's tensioner file (None: the built-in element)."""
-
-    setup: RunSetup
-    stroke_m: float
-    model: ReducedModel
-    coupling: str
-    tensioner: TensionerFile | None
 
 
 @dataclass

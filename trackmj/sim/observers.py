@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 import pyarrow as pa
 
+from trackmj.errors import PhysicsError
 from trackmj.ports import (
     COMMAND_UNITS,
     COUPLING_STEP_S,
@@ -28,7 +29,7 @@ from trackmj.ports import (
     Element,
     Readout,
 )
-from trackmj.results import make_table
+from trackmj.results.store import make_table
 from trackmj.sim.loop import Schedule
 
 
@@ -154,10 +155,6 @@ class ChannelRecorder:
 
 _STATE = ("tension_N", "p_head_Pa", "p_rod_Pa", "stroke_m", "stroke_velocity_m_s")
 """Readout fields that must stay finite in every architecture."""
-
-
-class PhysicsError(RuntimeError):
-    """A run left physics; the message names the time, the quantity and its value."""
 
 
 @dataclass(frozen=True)

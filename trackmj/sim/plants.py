@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from trackmj.control.model import ReducedPlant
 from trackmj.control.params import PlantParams
-from trackmj.identify import EquivalentIdler
+from trackmj.machines.idler import EquivalentIdler
 from trackmj.ports import (
     COUPLING_STEP_S,
     Command,

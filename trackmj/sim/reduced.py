@@ -14,7 +14,6 @@ from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig, PlantParams
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
-from trackmj.metrics import overshoot, settling_time
 from trackmj.ports import (
     COUPLING_STEP_S,
     Command,
@@ -24,6 +23,7 @@ from trackmj.ports import (
     StepInputs,
     steps_per_period,
 )
+from trackmj.results.metrics import overshoot, settling_time
 from trackmj.sim.loop import Schedule, run_loop
 from trackmj.sim.observers import Recorder
 from trackmj.sim.plants import ReducedLoopPlant
@@ -105,7 +105,7 @@ def run_closed_loop(cfg: ControlConfig, plant_params: PlantParams, controller: C
 def step_metrics(res: LoopResult, t_step: float, f_final: float,
                  band: float = 0.02) -> dict[str, float]:
     """Step response figures after a step at ``t_step`` [s] to ``f_final`` [N]: settling
-    time to ±band·f_final [s] (:func:`trackmj.metrics.settling_time`, NaN if not settled),
+    time to ±band·f_final [s] (:func:`trackmj.results.metrics.settling_time`, NaN if not settled),
     overshoot beyond f_final as a fraction of it [-] (the study's definition), RMSE over
     the last second [N], and the estimator's tension RMSE over the run [N]."""
     settle = settling_time(res.t, res.force, f_final, t_step, band_rel=band)

@@ -17,13 +17,16 @@ from typing import Any
 
 @dataclass(frozen=True)
 class Entry:
-    """One registered block: a one-line description, its builder, and the names of the run
+    """One registered block: a one-line description, its builder, the names of the run
     products its builder needs besides the setup (mechanics: ``"tp_result"``, the tp run of
-    the same case whose track load dp-a replays)."""
+    the same case whose track load dp-a replays), and for a controller whether it is a
+    baseline (``trackmj report`` runs the baselines beside each scenario's own controller
+    for the controller claims)."""
 
     description: str
     build: Callable[..., Any]
     needs: tuple[str, ...] = ()
+    baseline: bool = False
 
 
 @dataclass(frozen=True)
@@ -89,8 +92,8 @@ def _ukf(model: Any, cfg: Any, dt_s: float, x0: Any) -> Any:
 
 CONTROLLERS: dict[str, Entry] = {
     "nmpc": Entry("nonlinear MPC (Gauss-Newton SQP, condensed QPs by DAQP)", _nmpc),
-    "lmpc": Entry("linear MPC on the model linearised at hold (OSQP)", _lmpc),
-    "pid": Entry("PID with SIMC tuning and back-calculation anti-windup", _pid),
+    "lmpc": Entry("linear MPC on the model linearised at hold (OSQP)", _lmpc, baseline=True),
+    "pid": Entry("PID with SIMC tuning and back-calculation anti-windup", _pid, baseline=True),
     "fmu": Entry("a controller FMU, --controller fmu:FILE.toml (e.g. exported from Simulink)",
                  _lazy("trackmj.fmi.controller", "build_fmu_controller"),
                  needs=("controller_file",)),
@@ -114,16 +117,15 @@ MECHANICS: dict[str, Entry] = {
 """Mechanics builders ``build(setup, **needs) -> BuiltMechanics`` (see
 :mod:`trackmj.sim.architectures`)."""
 
-_ELEMENTS = "trackmj.elements"
 ELEMENTS: dict[str, Entry] = {
     "hydraulic": Entry("the hydraulic plugin (trackmj.hydraulics)",
-                       _lazy(_ELEMENTS, "build_hydraulic")),
+                       _lazy("trackmj.elements.hydraulic", "build")),
     "ideal": Entry("an ideal force source at the hydraulic tension rate (dp-b)",
-                   _lazy(_ELEMENTS, "build_ideal")),
+                   _lazy("trackmj.elements.ideal", "build")),
     "passive": Entry("a preload spring-damper, valves ignored (a tensioner file's [passive])",
-                     _lazy(_ELEMENTS, "build_passive")),
+                     _lazy("trackmj.elements.passive", "build")),
     "fmu": Entry("an FMU, FMI 2.0/3.0, co-simulation or model exchange (a tensioner file's "
-                 "[fmu])", _lazy("trackmj.fmi.element", "build_fmu")),
+                 "[fmu])", _lazy("trackmj.elements.fmu", "build")),
 }
 """Tensioner element builders ``build(ElementContext) -> ports.Element``."""
 
@@ -142,6 +144,11 @@ ARCHITECTURES: dict[str, Architecture] = {
 }
 """Coupling architectures, mechanics × element (see :mod:`trackmj.sim.architectures`)."""
 
+REFERENCE_ARCHITECTURE = "tp"
+"""The architecture the others are judged against: the full track with the hydraulic plugin,
+strongly coupled. dp-a replays its track load; compare and report measure each reduced
+architecture's prediction error against it."""
+
 
 def choices(registry: dict[str, Any]) -> tuple[str, ...]:
     """The registered names, in registration order."""
@@ -152,3 +159,8 @@ def by_name(registry: dict[str, Entry]) -> tuple[str, ...]:
     """The names a file or option may give alone: entries whose builder needs nothing
     besides the run (the FMU controller needs its file: ``fmu:FILE.toml``)."""
     return tuple(name for name, entry in registry.items() if not entry.needs)
+
+
+def baselines() -> tuple[str, ...]:
+    """The controllers registered as baselines, in registration order."""
+    return tuple(name for name, entry in CONTROLLERS.items() if entry.baseline)

@@ -21,12 +21,11 @@ import numpy as np
 
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
-from trackmj.machine import machine as host_machine
-from trackmj.metrics import compute_metrics, prediction_vs_measured
-from trackmj.params import ParameterError
+from trackmj.host import machine as host_machine
 from trackmj.ports import COUPLING_STEP_S, StepInputs, steps_per_period
-from trackmj.results import Result, run_metadata
-from trackmj.scenarios import Scenario
+from trackmj.results.metrics import compute_metrics, prediction_vs_measured
+from trackmj.results.store import Result, run_metadata
+from trackmj.scenarios.schema import Scenario
 from trackmj.sim.architectures import assemble
 from trackmj.sim.loop import Schedule, run_loop
 from trackmj.sim.observers import (
@@ -41,6 +40,7 @@ from trackmj.sim.observers import (
 )
 from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS
 from trackmj.sim.setup import Overrides, RunSetup, prepare
+from trackmj.validator import ParameterError
 
 FRAME_EVERY_STEPS = 20
 """Rerun scene frames every 20 ms of simulated time."""
@@ -110,15 +110,15 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     tp_result : Result, optional
         For ``dp-a``: the tp run whose track load is replayed (run here if None).
     tensioner : str or Path, optional
-        A tensioner file (:mod:`trackmj.tensioner`: an FMU or a passive spring-damper)
+        A tensioner file (:mod:`trackmj.elements.tensioner_file`: an FMU or a passive spring-damper)
         replacing the hydraulic plugin of tp, tp-weak and dp-a.
     machine : str or Path, optional
         A shipped machine's name (``trackmj machines``) or a machine file
-        (``*_machine.toml``, see :mod:`trackmj.machines`); default ``"lf1352"``.
+        (``*_machine.toml``, see :mod:`trackmj.machines.assembly`); default ``"lf1352"``.
     measured : str or Path, optional
-        A measured log (:mod:`trackmj.measured`: CSV or Parquet, ``t_s`` and any of the
+        A measured log (:mod:`trackmj.results.measured`: CSV or Parquet, ``t_s`` and any of the
         run's columns, e.g. ``tension_N``, ``p_head [MPa]``); the metrics get
-        ``prediction_vs_measured`` (:func:`trackmj.metrics.prediction_vs_measured`).
+        ``prediction_vs_measured`` (:func:`trackmj.results.metrics.prediction_vs_measured`).
     channels : str
         ``"default"``: the contract columns; ``"all"``: also per-cylinder pressures, valve
         flows, strand tensions and the hitch load, with units
@@ -127,13 +127,13 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     Returns
     -------
     Result
-        The 1 kHz timeseries (see :mod:`trackmj.results`) and the metrics.
+        The 1 kHz timeseries (see :mod:`trackmj.results.store`) and the metrics.
 
     Raises
     ------
-    trackmj.params.ParameterError
+    trackmj.validator.ParameterError
         An input is invalid (raised before anything is built).
-    trackmj.sim.observers.PhysicsError
+    trackmj.errors.PhysicsError
         The run left physics (MuJoCo warning, non-finite state, pressure below vacuum,
         stroke outside the travel, loop closure broken; an FMU's force beyond its limit).
     trackmj.fmi.FmuError
@@ -160,8 +160,8 @@ def measured_log(setup: RunSetup, path: str | Path,
     records with ``channels`` and its duration before the run (ParameterError naming the
     file and column)."""
     from trackmj.hydraulics.tensioner import FLOW_NAMES
-    from trackmj.measured import load_measured
-    from trackmj.results import COLUMN_UNITS
+    from trackmj.results.measured import load_measured
+    from trackmj.results.store import COLUMN_UNITS
 
     names = list(COLUMN_UNITS)
     if channels == "all":
@@ -209,7 +209,7 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
             observers.append(bar)
         playback = None
         if rrd is not None and asm.track is not None:
-            from trackmj.playback import PlaybackRecorder
+            from trackmj.results.playback import PlaybackRecorder
 
             playback = PlaybackRecorder(asm.track, rrd)
             observers.append(PlaybackFrames(playback, FRAME_EVERY_STEPS))

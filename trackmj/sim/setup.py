@@ -21,18 +21,29 @@ import mujoco
 
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig, load_config
+from trackmj.elements.tensioner_file import TensionerFile, load_tensioner
 from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
-from trackmj.identify import EquivalentIdler, ModalTerm, identify_idler
 from trackmj.io import cache_dir, write_text_atomic
-from trackmj.machines import DEFAULT_MACHINE, Machine, is_own, mechanics, model_mjcf, resolve
-from trackmj.model import ModelParams, load_model_params
-from trackmj.model.cache import model_key
-from trackmj.model.mjcf import with_heightfield
-from trackmj.params import FILE_KINDS, ParameterError, parse_overrides
-from trackmj.plant import TrackPlant
+from trackmj.machines.assembly import (
+    DEFAULT_MACHINE,
+    Machine,
+    is_own,
+    mechanics,
+    model_mjcf,
+    resolve,
+)
+from trackmj.machines.identify import identify_idler
+from trackmj.machines.idler import (
+    SCALARS,
+    EquivalentIdler,
+    ModalTerm,
+    identification_for,
+    load_idler,
+)
+from trackmj.machines.sizing import input_weight_scale
 from trackmj.ports import COUPLING_STEP_S
-from trackmj.scenarios import Scenario, Variant, load_scenario
-from trackmj.sim.config import SCALARS, identification_for, load_idler, nominal_plant_params
+from trackmj.scenarios.schema import Scenario, Variant, load_scenario
+from trackmj.sim.control_plant import nominal_plant_params
 from trackmj.sim.registry import (
     ARCHITECTURES,
     CONTROLLERS,
@@ -40,9 +51,12 @@ from trackmj.sim.registry import (
     REPLACEABLE_ELEMENT,
     by_name,
 )
-from trackmj.sizing import input_weight_scale
-from trackmj.tensioner import TensionerFile, load_tensioner
-from trackmj.terrain import RoadProfile
+from trackmj.track.mechanics import ModelParams, load_model_params
+from trackmj.track.mjcf.builders import with_heightfield
+from trackmj.track.mjcf.cache import model_key
+from trackmj.track.plant import TrackPlant
+from trackmj.track.terrain import RoadProfile
+from trackmj.validator import FILE_KINDS, ParameterError, parse_overrides
 
 MAX_DURATION_S = 3600.0
 
@@ -51,7 +65,7 @@ MAX_DURATION_S = 3600.0
 def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
     """The machine's identified idler for its own mechanics, or an identification on another
     model (cached by content hash beside its generated MJCF) at force levels relative to its
-    nominal tension (:func:`trackmj.sim.config.identification_for`: 0.8 and 1.0 x nominal,
+    nominal tension (:func:`trackmj.machines.idler.identification_for`: 0.8 and 1.0 x nominal,
     the LF1352's 12 and 15 kN), the fitted mass floored at the idler and carrier's."""
     if machine.idler is not None and is_own(params, machine):
         return load_idler(machine.idler)
@@ -247,9 +261,9 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
 
     ``overrides`` (see :data:`Overrides`) change keys of the scenario and parameter files;
     they pass the same validation as the files. ``tensioner``: a tensioner file
-    (:mod:`trackmj.tensioner`) replacing the architecture's hydraulic element, its FMU
+    (:mod:`trackmj.elements.tensioner_file`) replacing the architecture's hydraulic element, its FMU
     checked here. ``controller`` may be ``"fmu:FILE.toml"`` (:mod:`trackmj.fmi.controller`).
-    ``machine``: a shipped machine's name or a machine file (:mod:`trackmj.machines`;
+    ``machine``: a shipped machine's name or a machine file (:mod:`trackmj.machines.assembly`;
     default lf1352) whose mechanics, hydraulics and control files the run takes unless
     ``model``, ``hydraulics`` or ``control`` override them.
     """

@@ -1,0 +1,1 @@
+"""The ``trackmj`` command line (also ``python -m trackmj``): :func:`trackmj.cli.main.main`."""

@@ -1,0 +1,10 @@
+"""Machines: a machine is its files (``models/<name>_machine.toml`` naming its mechanics,
+hydraulic, control and idler files).
+
+* :mod:`.assembly`: finding a machine (shipped name or file), loading and generating its
+  parts;
+* :mod:`.idler`: the identified equivalent idler and its file;
+* :mod:`.sizing`: the sizing rules of a machine's tensioner and controller.
+
+A new machine is its files in ``models/``: the shipped ones are found by name there.
+"""

@@ -1,0 +1,162 @@
+"""Machines: a machine is its files, assembled by one small machine file.
+
+``models/<name>_machine.toml`` names the machine's subsystem files by path relative to
+itself (Project Chrono::Vehicle's JSON habit: a file per subsystem, assembled by reference,
+no value entered twice)::
+
+    [machine]
+    name = "lf1352"
+    description = "the study's forestry crawler, one track side (82 links, rear sprocket)"
+    mechanics = "lf1352.toml"               # the track model's parameters (ModelParams)
+    hydraulics = "lf1352_hydraulics.toml"   # the hydraulic plugin
+    control = "lf1352_control.toml"         # controllers, estimators, sensors
+    idler = "lf1352_idler.toml"             # optional: the equivalent idler identified on
+                                            # the reference model (else identified on demand)
+    reference_mjcf = "lf1352_scene.xml"     # optional: the generator's committed output, a
+                                            # scene (ground, light) including lf1352.xml
+
+:data:`MACHINES` is the registry of the shipped machines (every ``*_machine.toml`` in the
+packaged ``models/``); :func:`resolve` takes a registered name or a machine file path.
+Every other module asks here which files a machine is made of.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+from trackmj.track.mechanics import ModelParams, load_model_params, models_dir
+from trackmj.track.mjcf.builders import read_mjcf
+from trackmj.track.mjcf.cache import cached_mjcf
+from trackmj.validator import ParameterError, Parameters, build, param, read_toml
+
+DEFAULT_MACHINE = "lf1352"
+MACHINE_SUFFIX = "_machine.toml"
+_NAME = r"[a-z0-9][a-z0-9_-]*"
+_FILE = r".*\S.*"
+
+
+@dataclass(frozen=True)
+class MachineTable(Parameters):
+    """``[machine]``: a name and the machine's files, relative to the machine file."""
+
+    name: str = param(pattern=_NAME, max_len=40, doc="short name (lower case), e.g. lf1352")
+    description: str = param(max_len=200, doc="one line: what machine this is")
+    mechanics: str = param(pattern=_FILE, max_len=400, doc="model parameter file (.toml)")
+    hydraulics: str = param(pattern=_FILE, max_len=400, doc="hydraulic parameter file (.toml)")
+    control: str = param(pattern=_FILE, max_len=400, doc="control parameter file (.toml)")
+    idler: str = param(max_len=400, default="",
+                       doc="identified equivalent idler file (optional: identified on "
+                           "demand when absent)")
+    reference_mjcf: str = param(max_len=400, default="",
+                                doc="the generator's committed output for the mechanics "
+                                    "file: the scene MJCF, which includes the machine's "
+                                    "(optional: generated and cached when absent)")
+
+
+@dataclass(frozen=True)
+class MachineFile(Parameters):
+    """A machine file: one table ``[machine]``."""
+
+    machine: MachineTable
+
+
+@dataclass(frozen=True)
+class Machine:
+    """A resolved machine: its name, description and absolute file paths.
+
+    ``idler`` and ``reference_mjcf`` are None when the machine file names none.
+    """
+
+    name: str
+    description: str
+    file: Path
+    mechanics: Path
+    hydraulics: Path
+    control: Path
+    idler: Path | None = None
+    reference_mjcf: Path | None = None
+
+
+def load_machine(path: str | Path) -> Machine:
+    """Read a machine file; every file it names must exist (ParameterError naming the key)."""
+    path = Path(path).resolve()
+    if not path.is_file():
+        raise ParameterError(f"machine file not found: {path}")
+    data = read_toml(path)
+    if "machine" not in data and "track" in data:
+        raise ParameterError(f"{path.name} is a model parameter file, not a machine file: "
+                             "give it as --model (run, compare) or --params (drive, model), "
+                             f"or write a machine file (*{MACHINE_SUFFIX}) naming it")
+    table = build(MachineFile, data, file=path.name, require_source=False).machine
+    paths: dict[str, Path | None] = {}
+    for key in ("mechanics", "hydraulics", "control", "idler", "reference_mjcf"):
+        rel = getattr(table, key)
+        if not rel:
+            paths[key] = None
+            continue
+        full = (path.parent / rel).resolve()
+        if not full.is_file():
+            raise ParameterError(f"{path.name} [machine].{key} = {rel!r}: no such file "
+                                 f"{full}")
+        paths[key] = full
+    return Machine(name=table.name, description=table.description, file=path, **paths)
+
+
+@functools.cache
+def shipped() -> dict[str, Machine]:
+    """The machines shipped in the packaged ``models/``, by name, sorted."""
+    found = {}
+    for path in sorted(models_dir().glob(f"*{MACHINE_SUFFIX}")):
+        m = load_machine(path)
+        if m.name in found:
+            raise ParameterError(f"{path.name}: machine name {m.name!r} is also "
+                                 f"{found[m.name].file.name}'s")
+        found[m.name] = m
+    return found
+
+
+def names() -> list[str]:
+    """Names of the shipped machines."""
+    return list(shipped())
+
+
+def resolve(machine: str | Path | Machine | None = None) -> Machine:
+    """The machine named ``machine`` (a shipped name, or a machine file path); None: the
+    default machine (lf1352). A name that is neither is a ParameterError listing the
+    shipped ones."""
+    if isinstance(machine, Machine):
+        return machine
+    if machine is None or str(machine).strip() == "":
+        machine = DEFAULT_MACHINE
+    text = str(machine).strip()
+    registry = shipped()
+    if text.lower() in registry:
+        return registry[text.lower()]
+    path = Path(text)
+    if path.suffix == ".toml" or path.exists():
+        return load_machine(path)
+    raise ParameterError(f"machine {text!r}: not a shipped machine ({', '.join(registry)}) "
+                         f"nor a machine file (*{MACHINE_SUFFIX})")
+
+
+@functools.cache
+def mechanics(machine: Machine) -> ModelParams:
+    """The validated mechanics file of ``machine`` (once per process)."""
+    return load_model_params(machine.mechanics)
+
+
+def is_own(params: ModelParams, machine: Machine) -> bool:
+    """Whether ``params`` are exactly the machine's own mechanics (no override)."""
+    return params == mechanics(machine)
+
+
+def model_mjcf(params: ModelParams, machine: Machine | None = None) -> str:
+    """MJCF text of the track model of ``params``: the machine's committed reference file
+    when ``params`` are its own mechanics, else generated and cached by content hash
+    (:func:`trackmj.track.mjcf.cache.cached_mjcf`)."""
+    machine = resolve(machine)
+    if machine.reference_mjcf is not None and is_own(params, machine):
+        return read_mjcf(machine.reference_mjcf)
+    return cached_mjcf(params, machine.name)

@@ -1,0 +1,584 @@
+"""Calibration of parameter-file keys against measured logs: :func:`calibrate`.
+
+The fit replays each log's **valve command** (its ``valve_mode`` column, and ``u`` if
+given) through the plant of the spec's conditions (scenario, seed, duration; the track
+speed, hitch load and supply of the scenario) in open loop, and compares the simulated
+channels with the logged ones. Open loop because the closed loop is not a smooth function
+of the parameters: measured on W1 (4 s, tp), changing the head-branch restrictor area by
+1e-4 of its value changes the controller's valve decisions at 549 of 4000 steps, so the
+whole trajectory jumps; with the logged command replayed, the same change moves the
+trajectory smoothly, and the nominal values reproduce the logged run bit for bit. What
+remains is the MuJoCo track's own roughness (contacts): a relative change of 1e-4 moves
+the 2 Hz low-pass of F_ten by ~3 N beyond the linear trend, so the finite-difference step
+is relative and large (``fd_step_rel``, default 3 %), where the trend dominates (measured
+on a 3 s log of the same kind, 1 ms residuals, one-sided differences: with 0.3 % the
+roughness inflates JᵀJ and the standard errors shrink 4-fold against 3 %; from 1 % to 3 %
+they grow by half, from 3 % to 10 % by a quarter as the trend bends).
+
+Residuals are the channels of the log that the run records (:data:`FIT_CHANNELS`), each
+divided by its sensor's noise σ (the control file's ``[sensors]``: pressure and stroke;
+F_ten by the head-pressure σ times the two head areas, assumed: no load cell in the
+study), as block means over ``block_s`` (10 ms: white noise stays white with σ/√m; the
+contact events below are not averaged out by it, 50 ms halves them) on the samples from
+``start_s`` to the end. The parameters are scaled to θ ∈ [0, 1] over their
+bounds (log-uniform for positive bounds); :func:`scipy.optimize.least_squares` (trust
+region reflective, forward differences) fits them, optionally from the best of a
+Latin-hypercube sample of ``start_points`` points evaluated in parallel on the Dask
+executor (:class:`trackmj.study.executor.Executor`).
+
+The 95 % intervals are x ± (t(0.975, n − p) + sqrt(4a/s²))·σ_x, with σ_x² the diagonal of
+s²·(JᵀJ)⁻¹, J the Jacobian of the weighted residuals at the estimate (central
+differences), s² = Σr²/(n − p), and a the cost's roughness near the estimate (half the
+range of the cost at a few points 1e-3 away, :func:`_roughness`). The first term is the
+sensor noise's; the second bounds how far a minimum of the rough cost can sit from the
+minimum of its smooth part (½δᵀJᵀJδ <= 2a). Measured on the test's fit (2.5 s, two
+keys): a ≈ 1-1.6 cost units, the second term 2.0-2.6 σ_x, so the intervals are about twice
+the noise-only ones; without it the true values fell outside in one of two noise draws.
+Both terms assume the model is the plant: a model error leaves correlated residuals and
+the intervals are then too narrow.
+
+Spec file (read by the one validator, :mod:`trackmj.validator`)::
+
+    [calibrate]
+    scenario = "W1"            # the conditions the log was taken in (name or file)
+    duration_s = 10.0
+    seed = 0
+    [[calibrate.parameters]]
+    key = "hydraulics.metering.head_branch_area_m2"
+    bounds = [1.6e-8, 8.0e-8]
+
+optional: ``[calibrate]`` architecture, start_s, start_points, fd_step_rel,
+max_evaluations, set; per parameter ``start`` (default: its value in the files).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from trackmj.ports import COUPLING_STEP_S, Command
+from trackmj.results.measured import Trace, read_trace, run_grid
+from trackmj.validator import FILE_KINDS, Location, ParameterError, Parameters, load_file, param
+
+FIT_CHANNELS = ("tension_N", "p_head_Pa", "p_rod_Pa", "stroke_m")
+"""Log columns the fit compares with the replayed run (any subset, at least one)."""
+CALIBRATION_JSON = "calibration.json"
+CALIBRATION_PNG = "calibration.png"
+CONFIDENCE = 0.95
+
+
+@dataclass(frozen=True)
+class FitParameter(Parameters):
+    """One key fitted within its bounds."""
+
+    key: str = param(pattern=r"[a-z]+(\.[A-Za-z0-9_]+)+",
+                     doc="a --set key KIND.TABLE.KEY (trackmj keys lists them)")
+    bounds: tuple[float, float] = param(unit="unit of the key",
+                                        doc="[low, high] the fit stays within")
+    start: float | None = param(unit="unit of the key", default=None,
+                                doc="optional start value; default: the files' value")
+
+    def cross_check(self, at: Location) -> None:
+        if self.key.partition(".")[0] not in FILE_KINDS:
+            raise at.error("key", self.key, f"must start with one of {', '.join(FILE_KINDS)}")
+        low, high = self.bounds
+        if not high > low:
+            raise at.error("bounds", list(self.bounds), "must be [low, high] with high > low")
+        if self.start is not None and not low <= self.start <= high:
+            raise at.error("start", self.start, f"lies outside bounds [{low:g}, {high:g}]")
+
+
+@dataclass(frozen=True)
+class CalibrateTable(Parameters):
+    """The ``[calibrate]`` table: the conditions of the logs and how to fit."""
+
+    scenario: str = param(doc="the conditions the logs were taken in: a built-in name or a "
+                          "scenario file (relative to the spec)")
+    duration_s: float = param(0.01, 3600.0, doc="replayed time from t = 0")
+    seed: int = param(0, 2**32 - 1, unit="1", doc="terrain seed of the conditions")
+    parameters: tuple[FitParameter, ...] = param(doc="the keys fitted")
+    architecture: str = param(choices=("tp", "tp-weak"), default="tp",
+                              doc="plant replayed (mechanics and element)")
+    start_s: float = param(0.0, 3600.0, default=0.0,
+                           doc="residuals from here to the end (skip a start-up)")
+    start_points: int = param(0, 1000, unit="1", default=0,
+                              doc="Latin-hypercube start points evaluated before the local "
+                              "fit (0: start at the start values)")
+    fd_step_rel: float = param(1e-3, 0.1, default=3e-2,
+                               unit="1", doc="relative finite-difference step")
+    block_s: float = param(0.001, 1.0, default=0.01,
+                           doc="residuals are block means over this long (white sensor "
+                           "noise stays white, σ/√m; fewer, equally informative residuals)")
+    max_evaluations: int = param(1, 1000, unit="1", default=40,
+                                 doc="most residual evaluations of the local fit")
+    set: tuple[str, ...] | None = param(default=None,
+                                        doc="optional fixed --set overrides of every run")
+
+    def cross_check(self, at: Location) -> None:
+        if not self.parameters:
+            raise at.error("parameters", [], "lists no parameter to fit")
+        keys = [p.key for p in self.parameters]
+        for i, key in enumerate(keys):
+            if key in keys[:i]:
+                raise at.error(("parameters", i, "key"), key, "is fitted twice")
+        if self.start_s >= self.duration_s:
+            raise at.error("start_s", self.start_s,
+                           f"must be < duration_s = {self.duration_s!r}")
+
+
+@dataclass(frozen=True)
+class CalibrationSpec(Parameters):
+    """A calibration spec file."""
+
+    calibrate: CalibrateTable
+    file_kind: ClassVar[str] = "calibration spec"
+
+
+def load_spec(path: str | Path) -> tuple[CalibrateTable, str]:
+    """The validated ``[calibrate]`` table and its scenario (a file path resolved against
+    the spec's directory, or a built-in name)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ParameterError(f"calibration spec not found: {path}")
+    spec = load_file(CalibrationSpec, path, require_source=False).calibrate
+    scenario = spec.scenario
+    local = path.parent / scenario
+    if scenario.endswith(".toml") and local.is_file():
+        scenario = str(local)
+    return spec, scenario
+
+
+@dataclass(frozen=True)
+class Log:
+    """One measured log on the run's grid: the valve command replayed and the channels
+    compared, shape (steps,) each."""
+
+    file: str
+    mode: np.ndarray
+    u: np.ndarray
+    channels: dict[str, np.ndarray]
+
+
+def load_log(path: str | Path, duration_s: float) -> Log:
+    """Read a log for a fit of ``duration_s`` [s]: it needs ``valve_mode`` and at least one
+    of :data:`FIT_CHANNELS`; ParameterError naming the file and column otherwise."""
+    trace = read_trace(path)
+    trace.require(["valve_mode"])
+    channels = [c for c in FIT_CHANNELS if c in trace.columns]
+    if not channels:
+        raise ParameterError(f"{trace.file}: no channel to fit; give one or more of "
+                             f"{', '.join(FIT_CHANNELS)} (or with units, e.g. p_head [MPa])")
+    trace.check_covers(duration_s, "the calibration")
+    mode = held(trace, "valve_mode", duration_s)
+    bad = ~np.isin(mode, (-1.0, 0.0, 1.0))
+    if bad.any():
+        raise ParameterError(f"{trace.where('valve_mode')}: value {mode[np.argmax(bad)]!r} "
+                             "at t = {:g} s; a valve mode is -1, 0 or +1".format(
+                                 run_grid(duration_s)[np.argmax(bad)]))
+    u = held(trace, "u", duration_s) if "u" in trace.columns else mode.copy()
+    t = run_grid(duration_s)
+    return Log(trace.file, mode.astype(int), u,
+               {c: trace.resample(c, t) for c in channels})
+
+
+def held(trace: Trace, name: str, duration_s: float) -> np.ndarray:
+    """A command column sampled and held (zero-order) at each step's end time."""
+    t = run_grid(duration_s)
+    i = np.searchsorted(trace.t_s, t + 1e-9, side="right") - 1
+    return trace.columns[name][np.clip(i, 0, len(trace.t_s) - 1)]
+
+
+def replay(setup: Any, mode: np.ndarray, u: np.ndarray,
+           names: Sequence[str] = FIT_CHANNELS) -> dict[str, np.ndarray]:
+    """Run ``setup``'s plant in open loop under the given valve command.
+
+    Parameters
+    ----------
+    setup : trackmj.sim.setup.RunSetup
+        The conditions and parameters.
+    mode, u : ndarray, shape (steps,)
+        Valve mode (−1/0/+1) and opening u [-] applied at each step.
+    names : sequence of str
+        Readout fields returned.
+
+    Returns
+    -------
+    dict
+        Field name -> values at the end of each step, shape (steps,). The physics guard
+        watches every step (:class:`trackmj.errors.PhysicsError`).
+    """
+    from trackmj.ports import Readout
+    from trackmj.sim.architectures import assemble
+    from trackmj.sim.observers import PhysicsGuard, capture_mujoco_warnings
+    from trackmj.sim.run import physics_limits, schedule
+
+    with capture_mujoco_warnings() as warnings:
+        asm = assemble(setup)
+        sched = schedule(setup, 0, 0.01)
+        guard = PhysicsGuard(physics_limits(setup, asm.element.stroke_range_m), warnings,
+                             asm.element.node_pressures, asm.element.pressure_nodes)
+        index = [Readout._fields.index(n) for n in names]
+        out = np.empty((setup.steps, len(names)))
+        plant = asm.plant
+        for k, (inputs, m, v) in enumerate(zip(sched.inputs, mode.tolist(), u.tolist(),
+                                               strict=True)):
+            command = Command(int(m), float(v), None)
+            readout = plant.step(command, inputs)
+            guard.on_step(k, readout, command)
+            out[k] = [readout[i] for i in index]
+    return {n: out[:, j] for j, n in enumerate(names)}
+
+
+def channel_sigma(setup: Any) -> dict[str, float]:
+    """Noise σ of each fitted channel (SI): the control file's sensors; F_ten: the pressure
+    σ times the two head areas (assumed: the study names no load cell)."""
+    s = setup.control.sensors
+    area = 2.0 * setup.hydraulics.cylinder.area_head_m2
+    return {"tension_N": s.pressure_noise_std_Pa * area, "p_head_Pa": s.pressure_noise_std_Pa,
+            "p_rod_Pa": s.pressure_noise_std_Pa, "stroke_m": s.stroke_noise_std_m}
+
+
+def _files_value(setup: Any, key: str) -> float | None:
+    """The value of ``KIND.TABLE.KEY`` in the run's files, if it is a plain attribute path."""
+    kind, _, dotted = key.partition(".")
+    node = {"hydraulics": setup.hydraulics, "model": setup.model,
+            "control": setup.control}.get(kind)
+    for part in dotted.split("."):
+        if node is None or not hasattr(node, part):
+            return None
+        node = getattr(node, part)
+    return float(node) if isinstance(node, int | float) else None
+
+
+@dataclass
+class Problem:
+    """The fit: parameters scaled to θ ∈ [0, 1]^p over their bounds, the logs and the
+    conditions; :meth:`residuals` runs the plant once per log and records every run."""
+
+    spec: CalibrateTable
+    scenario: str
+    logs: list[Log]
+    runs: list[dict[str, Any]]
+
+    @property
+    def keys(self) -> list[str]:
+        return [p.key for p in self.spec.parameters]
+
+    @property
+    def low(self) -> np.ndarray:
+        return np.array([p.bounds[0] for p in self.spec.parameters])
+
+    @property
+    def high(self) -> np.ndarray:
+        return np.array([p.bounds[1] for p in self.spec.parameters])
+
+    @property
+    def logarithmic(self) -> np.ndarray:
+        """Which parameters are scaled logarithmically (positive bounds), shape (p,)."""
+        return self.low > 0.0
+
+    def x(self, theta: np.ndarray) -> np.ndarray:
+        """Parameter values of scaled θ ∈ [0, 1]^p: log-uniform over positive bounds (a
+        rate ∝ B·A is then linear in θ), linear otherwise."""
+        theta = np.clip(np.asarray(theta, dtype=float), 0.0, 1.0)
+        lin = self.low + theta * (self.high - self.low)
+        log = np.exp(np.log(np.where(self.logarithmic, self.low, 1.0))
+                     + theta * np.log(np.where(self.logarithmic, self.high / self.low, 1.0)))
+        return np.where(self.logarithmic, log, lin)
+
+    def dx_dtheta(self, theta: np.ndarray) -> np.ndarray:
+        """d x / d θ at θ, shape (p,)."""
+        ratio = np.where(self.logarithmic, self.high / self.low, 1.0)
+        return np.where(self.logarithmic, self.x(theta) * np.log(ratio),
+                        self.high - self.low)
+
+    def theta(self, values: Mapping[str, float]) -> np.ndarray:
+        x = np.array([values[k] for k in self.keys])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log = np.log(x / self.low) / np.log(self.high / self.low)
+        return np.where(self.logarithmic, log, (x - self.low) / (self.high - self.low))
+
+    def values(self, theta: np.ndarray) -> dict[str, float]:
+        return dict(zip(self.keys, self.x(theta).tolist(), strict=True))
+
+    def setup(self, values: Mapping[str, float]) -> Any:
+        from trackmj.sim.setup import overrides_by_kind, prepare
+
+        fixed = overrides_by_kind(list(self.spec.set or ()))
+        merged = {f"{kind}.{k}": v for kind, keys in fixed.items() for k, v in keys.items()}
+        return prepare(self.scenario, architecture=self.spec.architecture,
+                       seed=self.spec.seed, duration=self.spec.duration_s,
+                       overrides=merged | dict(values))
+
+    def simulate(self, values: Mapping[str, float]) -> list[dict[str, np.ndarray]]:
+        """The replayed channels of every log at ``values``."""
+        setup = self.setup(values)
+        return [replay(setup, log.mode, log.u, list(log.channels)) for log in self.logs]
+
+    def weighted(self, values: Mapping[str, float], purpose: str) -> np.ndarray:
+        """Stacked residuals (simulated − measured)/σ on the fitted samples, recorded as a
+        run with its purpose and residual RMS per channel [SI]."""
+        setup = self.setup(values)
+        sigma = channel_sigma(setup)
+        keep = run_grid(self.spec.duration_s) >= self.spec.start_s
+        parts, rms = [], {}
+        wall = time.perf_counter()
+        for log, sim in zip(self.logs, self.simulate(values), strict=True):
+            for name, measured in log.channels.items():
+                e = sim[name][keep] - measured[keep]
+                m = max(1, round(self.spec.block_s / COUPLING_STEP_S))
+                blocks = e[: len(e) // m * m].reshape(-1, m).mean(axis=1)
+                parts.append(blocks * math.sqrt(m) / sigma[name])
+                rms.setdefault(name, []).append(float(np.mean(e * e)))
+        r = np.concatenate(parts)
+        self.runs.append({"purpose": purpose, "values": dict(values),
+                          "cost": float(0.5 * r @ r),
+                          "residual_rms": {n: math.sqrt(float(np.mean(v)))
+                                           for n, v in rms.items()},
+                          "wall_time_s": time.perf_counter() - wall})
+        return r
+
+
+def _lhs_cost(problem: Problem, values: dict[str, float]) -> tuple[float, dict[str, Any]]:
+    """Cost of one start point (in a worker): (0.5 Σr², its run record); a point whose run
+    leaves physics costs inf and its record says why."""
+    from trackmj.errors import PhysicsError
+
+    problem = Problem(problem.spec, problem.scenario, problem.logs, [])
+    try:
+        r = problem.weighted(values, "start")
+    except PhysicsError as exc:
+        return math.inf, {"purpose": "start", "values": dict(values), "cost": None,
+                          "error": str(exc)}
+    return float(0.5 * r @ r), problem.runs[0]
+
+
+def _starts(problem: Problem) -> list[dict[str, float]]:
+    """The Latin-hypercube start points (seeded by the spec's seed)."""
+    from scipy.stats import qmc
+
+    n = problem.spec.start_points
+    theta = qmc.LatinHypercube(d=len(problem.keys), seed=problem.spec.seed).random(n)
+    return [problem.values(th) for th in theta]
+
+
+def _best_start(problem: Problem, workers: int | None) -> dict[str, float]:
+    """Evaluate the start points on the Dask executor; the lowest cost wins."""
+    from trackmj.study.executor import Executor
+
+    points = _starts(problem)
+    with Executor(workers=workers) as ex:
+        futures = ex.client.map(_lhs_cost, [problem] * len(points), points, pure=False)
+        outcomes = ex.client.gather(futures)
+    problem.runs.extend(run for _, run in outcomes)
+    costs = [cost for cost, _ in outcomes]
+    if not np.isfinite(costs).any():
+        raise ParameterError(f"every one of the {len(points)} start points left physics "
+                             f"(first: {outcomes[0][1]['error']}); narrow the bounds")
+    return points[int(np.argmin(costs))]
+
+
+def _fd_steps(problem: Problem, theta: np.ndarray, step: float) -> np.ndarray:
+    """The θ step of a relative change ``step`` of each parameter, shape (p,)."""
+    x = problem.x(theta)
+    dx = step * np.maximum(np.abs(x), 1e-3 * (problem.high - problem.low))
+    return dx / problem.dx_dtheta(theta)
+
+
+def _central_jacobian(problem: Problem, theta: np.ndarray, step: float) -> np.ndarray:
+    """d r / d θ by central differences of ± step·|x| (inside the bounds): the interval's
+    Jacobian, where the one-sided one of the fit would count the track's roughness twice."""
+    cols = []
+    for i, h in enumerate(_fd_steps(problem, theta, step)):
+        lo, hi = max(theta[i] - h, 0.0), min(theta[i] + h, 1.0)
+        pair = []
+        for value in (lo, hi):
+            th = theta.copy()
+            th[i] = value
+            pair.append(problem.weighted(problem.values(th), "interval"))
+        cols.append((pair[1] - pair[0]) / (hi - lo))
+    return np.stack(cols, axis=1)
+
+
+ROUGHNESS_POINTS = 4
+ROUGHNESS_REL = 1e-3
+"""The cost's roughness is probed at ROUGHNESS_POINTS points a relative ROUGHNESS_REL
+(normal, seeded) from the estimate: far too close for the smooth part to change the cost
+(by ~1e-3 of a unit), far enough for the track's contact events to flip."""
+
+
+def _roughness(problem: Problem, theta: np.ndarray, cost: float) -> float:
+    """Half the range of the cost over the probe points and the estimate: a, the bound
+    |ε| <= a on the non-smooth part of the cost near the estimate [cost units]."""
+    rng = np.random.default_rng([problem.spec.seed, 1])
+    x = problem.x(theta)
+    costs = [cost]
+    for _ in range(ROUGHNESS_POINTS):
+        values = x * (1.0 + ROUGHNESS_REL * rng.standard_normal(len(x)))
+        r = problem.weighted(dict(zip(problem.keys, np.clip(values, problem.low,
+                                                            problem.high).tolist(),
+                                      strict=True)), "roughness")
+        costs.append(float(0.5 * r @ r))
+    return 0.5 * (max(costs) - min(costs))
+
+
+def fit(problem: Problem, start: Mapping[str, float]) -> dict[str, Any]:
+    """Least-squares fit from ``start``; estimates, 95 % intervals, residual RMS."""
+    from scipy.optimize import least_squares
+    from scipy.stats import t as student_t
+
+    cache: dict[bytes, np.ndarray] = {}
+    step = problem.spec.fd_step_rel
+
+    def fun(theta: np.ndarray) -> np.ndarray:
+        key = np.asarray(theta, float).tobytes()
+        if key not in cache:
+            cache[key] = problem.weighted(problem.values(theta), "fit")
+        return cache[key]
+
+    jacobians: dict[bytes, np.ndarray] = {}
+
+    def jac(theta: np.ndarray) -> np.ndarray:
+        key = np.asarray(theta, float).tobytes()
+        if key in jacobians:
+            return jacobians[key]
+        r0 = fun(theta)
+        cols = []
+        for i, h in enumerate(_fd_steps(problem, theta, step)):
+            h = h if theta[i] + h <= 1.0 else -h        # step back inside the upper bound
+            th = theta.copy()
+            th[i] += h
+            cols.append((problem.weighted(problem.values(th), "jacobian") - r0) / h)
+        jacobians[key] = np.stack(cols, axis=1)
+        return jacobians[key]
+
+    theta0 = np.clip(problem.theta(start), 0.0, 1.0)
+    sol = least_squares(fun, theta0, jac=jac, bounds=(0.0, 1.0), method="trf",
+                        x_scale=1.0, max_nfev=problem.spec.max_evaluations,
+                        ftol=1e-4, xtol=1e-3)
+    r, j = fun(sol.x), _central_jacobian(problem, sol.x, step)   # d r / d theta
+    n, p = len(r), len(sol.x)
+    dof = max(n - p, 1)
+    s2 = float(r @ r) / dof
+    scale = problem.dx_dtheta(sol.x)
+    cov = s2 * np.outer(scale, scale) * np.linalg.inv(j.T @ j)     # of x, physical units
+    rough = _roughness(problem, sol.x, float(0.5 * r @ r))
+    sd = np.sqrt(np.diag(cov))
+    half = (student_t.ppf(0.5 + 0.5 * CONFIDENCE, dof) + math.sqrt(4.0 * rough / s2)) * sd
+    x = problem.x(sol.x)
+    fitted = problem.values(sol.x)
+    final = next(run for run in reversed(problem.runs)
+                 if run["values"] == fitted and run["purpose"] == "fit")
+    return {
+        "estimates": fitted,
+        "intervals": {k: [float(x[i] - half[i]), float(x[i] + half[i])]
+                      for i, k in enumerate(problem.keys)},
+        "standard_errors": {k: float(math.sqrt(cov[i, i])) for i, k in enumerate(problem.keys)},
+        "correlation": (cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))).tolist(),
+        "at_bound": {k: bool(sol.x[i] <= 1e-6 or sol.x[i] >= 1 - 1e-6)
+                     for i, k in enumerate(problem.keys)},
+        "residual_rms": final["residual_rms"],
+        "residual_variance_rel": s2,
+        "cost_roughness": rough,
+        "samples": n,
+        "optimizer": {"status": int(sol.status), "message": str(sol.message),
+                      "evaluations": int(sol.nfev)},
+    }
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """What :func:`calibrate` wrote: the output directory and the calibration document."""
+
+    out: Path
+    document: dict[str, Any]
+
+
+def calibrate(spec_path: str | Path, logs: Sequence[str | Path], out: str | Path, *,
+              workers: int | None = None,
+              progress: Callable[[str], None] | None = None) -> Calibration:
+    """Fit the spec's keys to measured logs and write ``out`` whole (atomic).
+
+    Parameters
+    ----------
+    spec_path : str or Path
+        Calibration spec (module docstring).
+    logs : sequence of str or Path
+        Measured logs (:mod:`trackmj.results.measured`): ``t_s``, ``valve_mode`` (``u``
+        optional) and any of :data:`FIT_CHANNELS`.
+    out : str or Path
+        Output directory: ``calibration.json`` (estimates, 95 % intervals, residual RMS
+        per channel [SI], every run made) and ``calibration.png`` (measured vs fitted).
+    workers : int, optional
+        Dask workers for the Latin-hypercube start (default one per core).
+
+    Returns
+    -------
+    Calibration
+    """
+    from trackmj.results.store import ResultWriter
+
+    spec, scenario = load_spec(spec_path)
+    if not logs:
+        raise ParameterError("calibrate needs one or more --measured LOG files")
+    loaded = [load_log(path, spec.duration_s) for path in logs]
+    problem = Problem(spec, scenario, loaded, [])
+    for i, p in enumerate(spec.parameters):   # every key and bound checked before any run
+        for value in p.bounds:
+            try:
+                problem.setup({p.key: value})
+            except ParameterError as exc:
+                raise ParameterError(f"{Path(spec_path).name} [[calibrate.parameters]][{i}] "
+                                     f"key = {p.key!r} at bound {value:g}: {exc}") from None
+    nominal = problem.setup({})
+    start = {}
+    for p in spec.parameters:
+        value = p.start if p.start is not None else _files_value(nominal, p.key)
+        low, high = p.bounds
+        start[p.key] = value if value is not None and low <= value <= high else math.sqrt(
+            low * high) if low > 0 else 0.5 * (low + high)
+    with ResultWriter(out, marker=CALIBRATION_JSON) as writer:
+        wall = time.perf_counter()
+        if spec.start_points:
+            start = _best_start(problem, workers)
+        result = fit(problem, start)
+        start_sim = problem.simulate(start)
+        fitted_sim = problem.simulate(result["estimates"])
+        doc = {"spec": str(spec_path), "scenario": scenario, "duration_s": spec.duration_s,
+               "seed": spec.seed, "architecture": spec.architecture, "start_s": spec.start_s,
+               "logs": [str(p) for p in logs], "start": start,
+               "confidence": CONFIDENCE, **result,
+               "units": {"residual_rms": {c: _unit(c) for c in FIT_CHANNELS}},
+               "runs": problem.runs, "wall_time_s": time.perf_counter() - wall}
+        writer.commit_files(
+            {CALIBRATION_JSON: (json.dumps(doc, indent=2, sort_keys=True) + "\n").encode()},
+            extras={CALIBRATION_PNG: lambda path: _figure(loaded, start_sim, fitted_sim,
+                                                          doc, path)})
+    return Calibration(Path(out), doc)
+
+
+def _unit(column: str) -> str:
+    from trackmj.results.store import COLUMN_UNITS
+
+    return COLUMN_UNITS[column]
+
+
+def _figure(logs: Sequence[Log], start: Sequence[Mapping[str, np.ndarray]],
+            fitted: Sequence[Mapping[str, np.ndarray]], doc: Mapping[str, Any],
+            path: Path) -> Path:
+    from trackmj.results.figures import calibration_figure
+
+    est = "\n".join(f"{k} = {v:.4g}, 95 % [{lo:.4g}, {hi:.4g}]"
+                     for (k, v), (lo, hi) in zip(doc["estimates"].items(),
+                                                 doc["intervals"].values(), strict=True))
+    title = f"calibration on {Path(str(doc['scenario'])).name}, {doc['duration_s']:g} s\n{est}"
+    panels = [(log.file, log.channels, s, f) for log, s, f in zip(logs, start, fitted,
+                                                                   strict=True)]
+    return calibration_figure(run_grid(float(doc["duration_s"])), panels, title, path)

@@ -1,0 +1,442 @@
+"""Kelvin–Voigt foundation under the track's pins: a force element outside MuJoCo's
+constraint solver (issue 21).
+
+The study models the terrain as an equivalent Kelvin–Voigt foundation, its stiffness and
+damping identified from sinkage–load tests, with Coulomb friction at the track–terrain
+contact (Ding et al., *Actuators* 2025, 14(12), 615). Here every pin sphere (centre c,
+radius r) meets the ground line of the model's ``ground`` geom (:func:`ground_line`: a plane
+at its height, or the heightfield's profile, piecewise linear in x and held at its end
+heights beyond it). With g the point of the line closest to c, n the unit normal out of the
+ground (from g towards c) and t = (n_z, −n_x) the tangent (+x on flat ground), per pin:
+
+    δ   = r − d                        penetration [m], d the signed distance of c above
+                                       the line (negative below it)
+    p   = c − r·n                      contact point on the pin; v = J_p·q̇ its velocity,
+                                       v_n = n·v, v_t = t·v [m/s]
+    N   = max(0, K·δ − B·v_n)          normal force [N]: the foundation pushes, never pulls
+    F_t = −μ·K·δ·v_t / sqrt(v_t² + s²) regularised Coulomb friction [N] while N > 0
+
+(K, B = ``[ground]`` stiffness and damping, μ = ``[track].ground_friction``, s =
+``[ground].friction_slip_m_s``), applied at p as the force N·n + F_t·t through the pin
+body's row of ``xfrc_applied`` (a wrench at its centre of mass). The stated K and B are
+thus the simulated ones by construction, for any terrain, and a soft-soil law would
+replace the two lines above.
+
+Integration. MuJoCo's ``implicitfast`` step is semi-implicit Euler: the spring K·δ is
+explicit, as it is for MuJoCo's own soft contacts (stable while h²·K/4 stays below the
+mass at the pin; the model file's validator refuses K above 4·m/h² with m a third of a
+link, the mass at one end of a link pivoting about the other). The two velocity
+derivatives, C_n = B along n and C_t = μ·K·δ·s²/(v_t² + s²)^{3/2} along t (while N > 0), are
+implicit: :meth:`Foundation.apply` runs between ``mj_step1`` and ``mj_step2`` and adds
+h·(C_n·J_nᵀJ_n + C_t·J_tᵀJ_t) = h·D to MuJoCo's mass matrix, which ``mj_factorM`` then
+refactors, so that the constraint solver and the integrator both use M + h·D:
+
+    M·(v₁ − v₀) = h·(f + J_pᵀ·F(v₀)) − h·D·(v₁ − v₀),
+
+the force law linearised at the end-of-step velocity (as the tensioner's F0 + Z·v).
+:meth:`Foundation.finish` puts the true mass matrix back after ``mj_step2`` (its factor
+``qLD`` stays that of M + h·D until the next step) and adds the implicit part −C·J·Δv to
+the pins' wrenches, so that ``xfrc_applied`` then holds what the foundation applied over
+the step (``mj_rnePostConstraint``, hence the hinged pins' tensions, sees it). The solver
+must see D: MuJoCo's own velocity-derivative route (tendon damping in ``qDeriv``) leaves
+it out of the constraint solve, which then passes the explicit −B·v₀ through the stiff pin
+connects to links the damper does not slow (measured on the LF1352: divergence within
+60 ms even at B = 200 N·s/m).
+
+Friction is bounded by the elastic part K·δ of the normal force, not by N: the damping
+part's dependence on v_n would pass into F_t explicitly (∂F_t/∂v_n = μ·B·sign(v_t), 1.6e4
+N·s/m on the LF1352, against 3.5 kg links; M + h·D must stay symmetric for MuJoCo's
+factorisation, so it cannot carry that term), and a hard start (1.5 m/s commanded from
+rest) diverged within 0.23 s with it. The two agree in a steady contact (v_n = 0); below
+the Coulomb limit friction creeps at v_t ≈ s·F_t/(μ·K·δ).
+
+State per pin after :meth:`Foundation.apply` (columns of :attr:`Foundation.state`, SI):
+penetration δ [m], normal (n_x, n_z) [-], v_n, v_t [m/s], N, F_t [N], C_n, C_t [N·s/m],
+contact point (p_x, p_z) [m]; :attr:`Foundation.jac` holds J_n·, J_t· over each pin's dofs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import mujoco
+import numpy as np
+from numba import njit
+
+if TYPE_CHECKING:
+    from trackmj.track.mechanics import ModelParams
+
+# columns of Foundation.state
+S_DELTA, S_NX, S_NZ, S_VN, S_VT, S_N, S_FT, S_CN, S_CT, S_PX, S_PZ = range(11)
+N_STATE = 11
+# entries of the law array
+L_H, L_K, L_B, L_MU, L_SLIP = range(5)
+
+
+@dataclass(frozen=True)
+class FoundationLaw:
+    """Kelvin–Voigt foundation with regularised Coulomb friction (module docstring).
+
+    stiffness_N_m K and damping_N_s_m B per pin contact; friction μ [-]; slip_m_s s [m/s].
+    """
+
+    stiffness_N_m: float
+    damping_N_s_m: float
+    friction: float
+    slip_m_s: float
+
+    @classmethod
+    def from_params(cls, params: ModelParams) -> FoundationLaw:
+        """The law of a model's ``[ground]`` table and ``[track].ground_friction``."""
+        g = params.ground
+        return cls(g.stiffness_N_m, g.damping_N_s_m, params.track.ground_friction,
+                   g.friction_slip_m_s)
+
+
+def ground_line(model: mujoco.MjModel, geom: str = "ground") -> np.ndarray:
+    """World (x, z) points [m] of the ground line under the track, shape (n, 2), x ascending:
+    a plane gives the two ends of its extent at its height, the ``terrain`` heightfield its
+    first row (the road is constant across y). The line is taken as held at its end heights
+    beyond its first and last points. ValueError for a tilted or rotated ground."""
+    g = model.geom(geom).id
+    if not np.allclose(model.geom_quat[g], (1.0, 0.0, 0.0, 0.0)):
+        raise ValueError(f"geom {geom!r}: a rotated ground is not supported (quat "
+                         f"{model.geom_quat[g].tolist()})")
+    cx, cz = float(model.geom_pos[g, 0]), float(model.geom_pos[g, 2])
+    if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_HFIELD:
+        h = model.geom_dataid[g]
+        ncol, adr = int(model.hfield_ncol[h]), int(model.hfield_adr[h])
+        size = model.hfield_size[h]
+        x = cx + np.linspace(-size[0], size[0], ncol)
+        return np.column_stack([x, cz + size[2] * model.hfield_data[adr:adr + ncol]])
+    if model.geom_type[g] != mujoco.mjtGeom.mjGEOM_PLANE:
+        raise ValueError(f"geom {geom!r}: the ground must be a plane or a heightfield")
+    half = float(model.geom_size[g, 0]) or 1e3   # size 0: an infinite plane
+    return np.array([[cx - half, cz], [cx + half, cz]])
+
+
+@njit(cache=True)
+def _segment(line: np.ndarray, x: float) -> int:
+    """Index i of the ground ``line`` segment (i, i + 1) holding x, within [0, n − 2]."""
+    lo, hi = 0, line.shape[0] - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if line[mid, 0] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
+def _closest(line: np.ndarray, cx: float, cz: float, radius: float) -> tuple[float, float,
+                                                                          float]:
+    """Signed distance [m] of (cx, cz) above the ground ``line`` (n, 2), negative below it,
+    and the unit normal (n_x, n_z) out of the ground, from the closest point of the line
+    (end heights held beyond its ends) within ``radius`` [m] of x = cx."""
+    n = line.shape[0]
+    lo = _segment(line, cx)
+    x0, z0, x1, z1 = line[0, 0], line[0, 1], line[n - 1, 0], line[n - 1, 1]
+    if cx <= x0:
+        height = z0
+    elif cx >= x1:
+        height = z1
+    else:
+        ax, az, bx, bz = line[lo, 0], line[lo, 1], line[lo + 1, 0], line[lo + 1, 1]
+        height = az + (cx - ax) / (bx - ax) * (bz - az) if bx > ax else az
+    best, gx, gz = np.inf, cx, height
+    if cx - radius <= x0:   # the half-line x <= x0 at the first height
+        px = min(cx, x0)
+        d2 = (cx - px) ** 2 + (cz - z0) ** 2
+        if d2 < best:
+            best, gx, gz = d2, px, z0
+    if cx + radius >= x1:   # the half-line x >= x1 at the last height
+        px = max(cx, x1)
+        d2 = (cx - px) ** 2 + (cz - z1) ** 2
+        if d2 < best:
+            best, gx, gz = d2, px, z1
+    first, last = lo, lo
+    while first > 0 and line[first, 0] > cx - radius:
+        first -= 1
+    while last < n - 2 and line[last + 1, 0] < cx + radius:
+        last += 1
+    for i in range(first, last + 1):
+        ax, az, bx, bz = line[i, 0], line[i, 1], line[i + 1, 0], line[i + 1, 1]
+        ex, ez = bx - ax, bz - az
+        length2 = ex * ex + ez * ez
+        s = 0.0 if length2 == 0.0 else ((cx - ax) * ex + (cz - az) * ez) / length2
+        s = min(1.0, max(0.0, s))
+        px, pz = ax + s * ex, az + s * ez
+        d2 = (cx - px) ** 2 + (cz - pz) ** 2
+        if d2 < best:
+            best, gx, gz = d2, px, pz
+    dist = math.sqrt(best)
+    sign = -1.0 if cz < height else 1.0
+    if dist > 1e-12:
+        return sign * dist, sign * (cx - gx) / dist, sign * (cz - gz) / dist
+    ex, ez = line[lo + 1, 0] - line[lo, 0], line[lo + 1, 1] - line[lo, 1]
+    norm = math.sqrt(ex * ex + ez * ez)   # on the line: the normal of its segment
+    return 0.0, -ez / norm, ex / norm
+
+
+@njit(cache=True)
+def _add_wrench(xfrc: np.ndarray, xipos: np.ndarray, body: int, px: float, pz: float,
+                fx: float, fz: float) -> None:
+    """Add the in-plane force (fx, fz) [N] acting at (px, pz) [m] to ``body``'s wrench at
+    its centre of mass (``xfrc_applied`` layout: force, then torque about ``xipos``)."""
+    xfrc[body, 0] += fx
+    xfrc[body, 2] += fz
+    xfrc[body, 4] += (pz - xipos[body, 2]) * fx - (px - xipos[body, 0]) * fz
+
+
+@njit(cache=True)
+def foundation_apply(geom_xpos: np.ndarray, xipos: np.ndarray, cdof: np.ndarray,
+                     subtree_com: np.ndarray, qvel: np.ndarray, mass: np.ndarray,
+                     xfrc: np.ndarray, pins: np.ndarray, dofs: np.ndarray,
+                     mass_index: np.ndarray, radius: np.ndarray, law: np.ndarray,
+                     line: np.ndarray, state: np.ndarray, jac: np.ndarray,
+                     saved_mass: np.ndarray, saved_qvel: np.ndarray) -> int:
+    """Foundation forces of every pin at the start of the step into its body's row of
+    ``xfrc`` (MuJoCo's ``xfrc_applied``; the pins' rows overwritten) and h·D into ``mass``
+    (MuJoCo's sparse M); M and qvel are saved first. Returns the pins in contact.
+
+    pins: (n, 4) int: geom id, body id, root body id, dof count; dofs: (n, D) int, the
+    pin body's dof chain; mass_index: (n, D, D) int, address in ``mass`` of (row dof a,
+    column dof b) for b <= a, else −1; radius: (n,) [m]; law: (h, K, B, μ, s); line: ground
+    (x, z) (m, 2); state (n, N_STATE) and jac (n, 2, D) are written (module docstring).
+    """
+    h, k, b, mu, slip = law[L_H], law[L_K], law[L_B], law[L_MU], law[L_SLIP]
+    saved_mass[:] = mass
+    saved_qvel[:] = qvel
+    for i in range(pins.shape[0]):
+        xfrc[pins[i, 1], :] = 0.0
+    active = 0
+    for i in range(pins.shape[0]):
+        geom, body, root, count = pins[i, 0], pins[i, 1], pins[i, 2], pins[i, 3]
+        cx, cz = geom_xpos[geom, 0], geom_xpos[geom, 2]
+        r = radius[i]
+        dist, nx, nz = _closest(line, cx, cz, r)
+        delta = r - dist
+        st = state[i]
+        st[S_DELTA], st[S_NX], st[S_NZ] = delta, nx, nz
+        st[S_VN] = st[S_VT] = st[S_N] = st[S_FT] = st[S_CN] = st[S_CT] = 0.0
+        if delta <= 0.0:
+            continue
+        px, pz = cx - r * nx, cz - r * nz
+        st[S_PX], st[S_PZ] = px, pz
+        ox = px - subtree_com[root, 0]
+        oy = geom_xpos[geom, 1] - subtree_com[root, 1]
+        oz = pz - subtree_com[root, 2]
+        tx, tz = nz, -nx
+        vn = 0.0
+        vt = 0.0
+        for c in range(count):
+            j = dofs[i, c]
+            # point Jacobian column: cdof_lin + cdof_ang × (p − subtree_com of the root)
+            jx = cdof[j, 3] + cdof[j, 1] * oz - cdof[j, 2] * oy
+            jz = cdof[j, 5] + cdof[j, 0] * oy - cdof[j, 1] * ox
+            jn, jt = nx * jx + nz * jz, tx * jx + tz * jz
+            jac[i, 0, c], jac[i, 1, c] = jn, jt
+            vn += jn * qvel[j]
+            vt += jt * qvel[j]
+        normal = k * delta - b * vn
+        st[S_VN], st[S_VT] = vn, vt
+        if normal <= 0.0:
+            continue
+        root_s = math.sqrt(vt * vt + slip * slip)
+        elastic = k * delta
+        friction = -mu * elastic * vt / root_s
+        cn, ct = b, mu * elastic * slip * slip / (root_s * root_s * root_s)
+        st[S_N], st[S_FT], st[S_CN], st[S_CT] = normal, friction, cn, ct
+        active += 1
+        _add_wrench(xfrc, xipos, body, px, pz, normal * nx + friction * tx,
+                    normal * nz + friction * tz)
+        for c in range(count):
+            for c2 in range(count):
+                adr = mass_index[i, c, c2]
+                if adr >= 0:
+                    mass[adr] += h * (cn * jac[i, 0, c] * jac[i, 0, c2]
+                                      + ct * jac[i, 1, c] * jac[i, 1, c2])
+    return active
+
+
+@njit(cache=True)
+def foundation_finish(qvel: np.ndarray, mass: np.ndarray, xipos: np.ndarray,
+                      xfrc: np.ndarray, pins: np.ndarray, dofs: np.ndarray,
+                      state: np.ndarray, jac: np.ndarray, saved_mass: np.ndarray,
+                      saved_qvel: np.ndarray) -> None:
+    """After the step: the true M back into ``mass``, and each pin's implicit force
+    −C·J·(v₁ − v₀) added to its body's row of ``xfrc``, which then holds the force the
+    foundation applied over the step (what ``mj_rnePostConstraint`` and readers see)."""
+    mass[:] = saved_mass
+    for i in range(pins.shape[0]):
+        st = state[i]
+        if st[S_N] <= 0.0:
+            continue
+        jn_dv = jt_dv = 0.0
+        for c in range(pins[i, 3]):
+            j = dofs[i, c]
+            dv = qvel[j] - saved_qvel[j]
+            jn_dv += jac[i, 0, c] * dv
+            jt_dv += jac[i, 1, c] * dv
+        fn, ft = -st[S_CN] * jn_dv, -st[S_CT] * jt_dv
+        nx, nz = st[S_NX], st[S_NZ]
+        _add_wrench(xfrc, xipos, pins[i, 1], st[S_PX], st[S_PZ], fn * nx + ft * nz,
+                    fn * nz - ft * nx)
+
+
+@njit(cache=True)
+def foundation_work(state: np.ndarray, jac: np.ndarray, pins: np.ndarray, dofs: np.ndarray,
+                    qvel0: np.ndarray, qvel1: np.ndarray, h: float,
+                    out: np.ndarray) -> None:
+    """Work [J] the foundation did over the step as integrated, added to ``out`` =
+    (normal, friction): Σ (F(v₀) − C·J·Δv)·(J·Δq) with Δv = v₁ − v₀, Δq = h·v₁ (module
+    docstring), per direction."""
+    for i in range(pins.shape[0]):
+        st = state[i]
+        if st[S_N] <= 0.0:
+            continue
+        jn_dv = jn_dq = jt_dv = jt_dq = 0.0
+        for c in range(pins[i, 3]):
+            j = dofs[i, c]
+            dv = qvel1[j] - qvel0[j]
+            jn_dv += jac[i, 0, c] * dv
+            jt_dv += jac[i, 1, c] * dv
+            jn_dq += jac[i, 0, c] * h * qvel1[j]
+            jt_dq += jac[i, 1, c] * h * qvel1[j]
+        out[0] += (st[S_N] - st[S_CN] * jn_dv) * jn_dq
+        out[1] += (st[S_FT] - st[S_CT] * jt_dv) * jt_dq
+
+
+@njit(cache=True)
+def foundation_penetration(geom_xpos: np.ndarray, pins: np.ndarray, radius: np.ndarray,
+                           line: np.ndarray, out: np.ndarray) -> None:
+    """Penetration δ [m] of every pin into the ground ``line`` at the state of
+    ``geom_xpos`` (after kinematics), into ``out`` (n,)."""
+    for i in range(pins.shape[0]):
+        g = pins[i, 0]
+        out[i] = radius[i] - _closest(line, geom_xpos[g, 0], geom_xpos[g, 2], radius[i])[0]
+
+
+class Foundation:
+    """The foundation of every pin of a compiled track model (module docstring).
+
+    Bound to one ``data``. Call :meth:`apply` between ``mj_step1`` and ``mj_step2``, then
+    ``mj_factorM``, and :meth:`finish` after ``mj_step2`` (:func:`step` does it all);
+    :attr:`state` and :attr:`jac` then hold
+    the step's contact state (columns ``S_*``, SI). The ``ground`` geom of the model keeps
+    its MJCF contact for MuJoCo's own viewer; the foundation switches it off.
+
+    Parameters
+    ----------
+    model : mujoco.MjModel
+        The compiled track model; its ``ground`` geom gives the line (:func:`ground_line`).
+    data : mujoco.MjData
+        The data the foundation acts on.
+    pin_geoms : sequence of int
+        The pin spheres, one per link, in pin order.
+    law : FoundationLaw
+        Stiffness, damping, friction and slip speed.
+    """
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, pin_geoms: np.ndarray,
+                 law: FoundationLaw) -> None:
+        self.law = law
+        self.line = ground_line(model)
+        ground = model.geom("ground").id
+        model.geom_contype[ground] = model.geom_conaffinity[ground] = 0
+        world = model.geom_bodyid[ground]
+        geoms = range(model.body_geomadr[world],
+                      model.body_geomadr[world] + model.body_geomnum[world])
+        model.body_contype[world] = np.bitwise_or.reduce(
+            [int(model.geom_contype[g]) for g in geoms], initial=0)
+        model.body_conaffinity[world] = np.bitwise_or.reduce(
+            [int(model.geom_conaffinity[g]) for g in geoms], initial=0)
+        n = len(pin_geoms)
+        chains = []
+        for g in pin_geoms:
+            body = model.geom_bodyid[g]
+            chain, dof = [], model.body_dofadr[body] + model.body_dofnum[body] - 1
+            while dof >= 0:
+                chain.append(int(dof))
+                dof = model.dof_parentid[dof]
+            chains.append(chain[::-1])
+        width = max(len(c) for c in chains)
+        self.pins = np.zeros((n, 4), dtype=np.int64)
+        self.dofs = np.zeros((n, width), dtype=np.int64)
+        self.mass_index = np.full((n, width, width), -1, dtype=np.int64)
+        for i, (g, chain) in enumerate(zip(pin_geoms, chains, strict=True)):
+            body = model.geom_bodyid[g]
+            self.pins[i] = (g, body, model.body_rootid[body], len(chain))
+            self.dofs[i, :len(chain)] = chain
+            for c, a in enumerate(chain):
+                row = model.M_colind[model.M_rowadr[a]:model.M_rowadr[a] + model.M_rownnz[a]]
+                for c2, col in enumerate(chain):
+                    if col > a:
+                        continue
+                    at = np.nonzero(row == col)[0]
+                    if not len(at):
+                        raise ValueError(
+                            f"pin geom {model.geom(g).name!r}: MuJoCo's sparse mass matrix "
+                            f"has no entry coupling dofs {a} and {col} of its body (a body "
+                            "of slide joints only is 'simple', its rows diagonal); the "
+                            "foundation's damping couples them: give the body a hinge")
+                    self.mass_index[i, c, c2] = model.M_rowadr[a] + int(at[0])
+        self.radius = model.geom_size[np.asarray(pin_geoms), 0].copy()
+        self.law_array = np.array([model.opt.timestep, law.stiffness_N_m, law.damping_N_s_m,
+                                   law.friction, law.slip_m_s])
+        self.state = np.zeros((n, N_STATE))
+        self.jac = np.zeros((n, 2, width))
+        self.active = 0
+        saved_mass, saved_qvel = np.zeros(model.nM), np.zeros(model.nv)
+        # views into data's buffers (they live as long as data): the kernels' arguments
+        self._apply_args = (data.geom_xpos, data.xipos, data.cdof, data.subtree_com,
+                            data.qvel, data.M, data.xfrc_applied, self.pins, self.dofs,
+                            self.mass_index, self.radius, self.law_array, self.line,
+                            self.state, self.jac, saved_mass, saved_qvel)
+        self._finish_args = (data.qvel, data.M, data.xipos, data.xfrc_applied, self.pins,
+                             self.dofs, self.state, self.jac, saved_mass, saved_qvel)
+
+    def scale_stiffness(self, scale: float) -> None:
+        """Multiply the foundation stiffness K by ``scale`` [-] (W5's perturbation)."""
+        self.law_array[L_K] *= scale
+
+    @property
+    def stiffness_N_m(self) -> float:
+        """The foundation stiffness in force [N/m] (the stated one times any scale)."""
+        return float(self.law_array[L_K])
+
+    def apply(self) -> None:
+        """Forces and implicit terms of the step (after ``mj_step1``, before ``mj_step2``)."""
+        self.active = foundation_apply(*self._apply_args)
+
+    def finish(self) -> None:
+        """After ``mj_step2``: the true mass matrix back into the data's ``M``, and the
+        force applied over the step into ``xfrc_applied``."""
+        foundation_finish(*self._finish_args)
+
+    @property
+    def normal_forces_N(self) -> np.ndarray:
+        """Normal force N of every pin over the last step [N], shape (n,)."""
+        return self.state[:, S_N]
+
+    @property
+    def friction_forces_N(self) -> np.ndarray:
+        """Friction force F_t of every pin over the last step [N], shape (n,), along the
+        ground's tangent (+x on flat ground)."""
+        return self.state[:, S_FT]
+
+
+def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation) -> None:
+    """One MuJoCo step with the foundation bound to ``data`` (see :class:`Foundation`)."""
+    mujoco.mj_step1(model, data)
+    foundation.apply()
+    mujoco.mj_factorM(model, data)
+    mujoco.mj_step2(model, data)
+    foundation.finish()
+
+
+__all__ = ["Foundation", "FoundationLaw", "foundation_apply", "foundation_finish",
+           "foundation_penetration", "foundation_work", "ground_line", "step"]

@@ -1,0 +1,85 @@
+"""Generation of a machine's MJCF (``models/lf1352.xml`` for the study's): layout, a check
+of the initial state, and the ``home`` keyframe found by settling under gravity with the
+passive tensioner preload.
+
+Settling uses MuJoCo and the ground foundation (:mod:`trackmj.track.foundation`, as the plant
+steps them), no plant: the passive spring-damper F = preload − k·(s − s_layout) − c·v is
+the tensioner actuator's affine bias (``ctrl = preload``, ``biasprm = (0, −k, −c)``; the
+slide position is s − s_layout), which ``implicitfast`` integrates with the damping
+implicit.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from trackmj.io import write_text_atomic
+from trackmj.track.foundation import Foundation, FoundationLaw, step
+from trackmj.track.mechanics import MODEL_NAME, ModelParams, default_xml_path, load_model_params
+from trackmj.track.mjcf.builders import build_mjcf, split_mjcf
+from trackmj.track.mjcf.layout import compute_layout
+from trackmj.track.mjcf.names import link_name
+from trackmj.track.mjcf.structure import equalise_link_weights
+from trackmj.validator import ParameterError
+
+SETTLE_DURATION_S = 3.0
+MAX_INITIAL_PENETRATION_M = 1e-3
+
+
+def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> mujoco.MjData:
+    """State after ``duration_s`` [s] from the layout, standing (sprocket servo at 0 rad/s),
+    under the passive tensioner of ``params``; RuntimeError on MuJoCo warnings."""
+    equalise_link_weights(model)
+    data = mujoco.MjData(model)
+    pins = [model.geom(link_name(k) + "_pin").id for k in range(params.track.link_count)]
+    foundation = Foundation(model, data, pins, FoundationLaw.from_params(params))
+    tensioner = model.actuator("tensioner").id
+    t = params.tensioner
+    model.actuator_biasprm[tensioner, :3] = (0.0, -t.stiffness_N_m, -t.damping_N_s_m)
+    data.ctrl[tensioner] = t.preload_N
+    mujoco.mj_forward(model, data)
+    worst = min((c.dist for c in data.contact[: data.ncon]), default=0.0)
+    if worst < -MAX_INITIAL_PENETRATION_M:
+        raise ParameterError(f"initial layout penetrates by {-worst * 1e3:.2f} mm "
+                             f"(limit {MAX_INITIAL_PENETRATION_M * 1e3:.1f} mm): check radii "
+                             "and positions in the model file")
+    steps = round(duration_s / model.opt.timestep)
+    for _ in range(steps):
+        step(model, data, foundation)
+    if sum(w.number for w in data.warning):
+        raise RuntimeError("MuJoCo warnings while settling the home keyframe")
+    return data
+
+
+def generate_mjcf(params: ModelParams | None = None, name: str = MODEL_NAME) -> str:
+    """Full MJCF of the model with the settled ``home`` keyframe (``name``: the machine's).
+
+    Keyframe values are rounded to 1e-6 so the committed file does not depend on the
+    last bits of floating-point arithmetic.
+    """
+    params = params or load_model_params()
+    layout = compute_layout(params)
+    model = mujoco.MjModel.from_xml_string(build_mjcf(params, layout))
+    data = settle(model, params, SETTLE_DURATION_S)
+    return build_mjcf(params, layout, home_qpos=np.round(data.qpos, 6), name=name)
+
+
+def scene_path(path: str | Path) -> Path:
+    """The scene file beside a machine's MJCF ``NAME.xml``: ``NAME_scene.xml``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}_scene.xml")
+
+
+def write_model(path: str | Path | None = None, params: ModelParams | None = None,
+                name: str = MODEL_NAME) -> Path:
+    """Generate the model and write its two parts atomically (Menagerie habit): the machine
+    to ``path`` (default: packaged lf1352.xml) and the scene that includes it (ground,
+    light) to :func:`scene_path`. Returns the scene's path, the file to load."""
+    path = Path(path) if path is not None else default_xml_path()
+    machine, scene = split_mjcf(generate_mjcf(params, name), path.name)
+    write_text_atomic(path, machine)
+    write_text_atomic(scene_path(path), scene)
+    return scene_path(path)

@@ -1,0 +1,128 @@
+"""Track structure "chains": short hinged sub-chains joined by pin connects (issue 21).
+
+Applied to the generated MJCF tree after the free links and their pin connects exist
+(:func:`chain_links`), so the generator's link code stays one. The loop of n links is cut,
+from link_00 on, into c = ceil(n / L) consecutive chains of at most L links
+(``[track] chain_links``), their sizes as equal as possible (:func:`chain_sizes`). In each
+chain every link but the first becomes a child of the link before it, hinged about +y at
+their shared pin (the child's origin), and that pin's ``connect`` is removed; the first link
+of a chain stays a free planar body (3 DOF) and the connect at its pin closes the loop. For
+the LF1352 (82 links, L = 4: 19 chains of 4 and 2 of 3) this gives nv 257 -> 135 and 63
+instead of 246 pin-connect rows (``benchmarks/README.md``, track structure candidates).
+``chain_links = 2`` are the two-link pairs measured before.
+
+Physics kept (measured there): every connect carries the compliance of its chain's pins in
+series (K/m, B/m for a chain of m links, :func:`pin_series_count`), so a span stretches as
+before while the hinged pins are rigid (the study's revolute pins). MuJoCo computes each
+link's ``body_invweight0`` at qpos0 and it differs with the link's place in its chain;
+:func:`equalise_link_weights` gives every link link_00's after compiling (the plant and the
+generator's settle call it), so one solref per partner geom keeps every contact at its
+stated stiffness (:mod:`trackmj.track.mjcf.soft`). The revolution component of the idler force
+stays ≤ 4 % of the link-passing one at 1.0/1.5/2.0 m/s and the connect gaps ≤ 0.32 mm.
+The pins' torsional spring-damper (bushings) needs free links: their tendons join the links'
+pitch hinges, which chained links do not have.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+
+import mujoco
+import numpy as np
+
+from trackmj.track.mechanics import ModelParams
+from trackmj.track.mjcf.names import link_name, pin_name
+from trackmj.validator import ParameterError
+
+
+def chain_sizes(link_count: int, max_links: int) -> list[int]:
+    """Links per chain, in loop order from link_00: ceil(n / L) chains of at most L links,
+    sizes differing by at most one, the longer ones spread evenly round the loop."""
+    count = math.ceil(link_count / max_links)
+    base, longer = divmod(link_count, count)
+    return [base + ((i + 1) * longer // count - i * longer // count) for i in range(count)]
+
+
+def chain_starts(p: ModelParams) -> list[int]:
+    """Index of the first link of every chain (its pin is a connect), ascending; every
+    link for ``structure = "free"``."""
+    n = p.track.link_count
+    if p.track.structure == "free":
+        return list(range(n))
+    sizes = chain_sizes(n, p.track.chain_links)
+    return [sum(sizes[:i]) for i in range(len(sizes))]
+
+
+def structure_text(p: ModelParams) -> str:
+    """One line on the loop's structure, e.g. "chains: 19 of 4 links, 2 of 3" or "free
+    links"."""
+    if p.track.structure == "free":
+        return "free links, every pin a connect"
+    sizes = chain_sizes(p.track.link_count, p.track.chain_links)
+    counts = sorted({size: sizes.count(size) for size in sizes}.items(), reverse=True)
+    return "chains: " + ", ".join(f"{count} of {size}" for size, count in counts) + " links"
+
+
+def pin_series_count(p: ModelParams) -> dict[int, int]:
+    """Pins whose compliance each pin ``connect`` carries, by its pin index: the size of the
+    chain it begins (1 for every pin of free links)."""
+    starts = chain_starts(p)
+    ends = [*starts[1:], p.track.link_count]
+    return {s: e - s for s, e in zip(starts, ends, strict=True)}
+
+
+def hinged_pins(p: ModelParams) -> list[int]:
+    """Pins that are hinges (every pin inside a chain; none for free links)."""
+    starts = set(chain_starts(p))
+    return [k for k in range(p.track.link_count) if k not in starts]
+
+
+def _floats(text: str) -> np.ndarray:
+    return np.array([float(v) for v in text.split()])
+
+
+def chain_links(root: ET.Element, p: ModelParams) -> None:
+    """Hinge every link inside a chain to the link before it (see the module docstring);
+    refuses the torsional spring-damper of bushings (its tendons join pitch hinges that the
+    chained links no longer have)."""
+    joint = p.pin_joint
+    if joint.torsional_stiffness_N_m_rad > 0.0 or joint.torsional_damping_N_m_s_rad > 0.0:
+        raise ParameterError(f"[track] structure = \"chains\" does not take the "
+                             f"[{p.pin_joint_table}] torsional spring-damper; use "
+                             "structure = \"free\" with it")
+
+    world = root.find("worldbody")
+    bodies = {b.get("name"): b for b in world.findall("body")}
+    # world pose of every link at the layout, before any is re-parented
+    pose = {link_name(k): (_floats(bodies[link_name(k)].get("pos")),
+                           _floats(bodies[link_name(k)].get("quat")))
+            for k in range(p.track.link_count)}
+    rot, conj, rel_quat = np.empty(9), np.empty(4), np.empty(4)
+    for k in hinged_pins(p):
+        child, parent = bodies[link_name(k)], bodies[link_name(k - 1)]
+        (pp, qp), (pc, qc) = pose[link_name(k - 1)], pose[link_name(k)]
+        mujoco.mju_quat2Mat(rot, qp)
+        rel_pos = rot.reshape(3, 3).T @ (pc - pp)
+        mujoco.mju_negQuat(conj, qp)
+        mujoco.mju_mulQuat(rel_quat, conj, qc)
+        child.set("pos", " ".join(f"{v:.9g}" for v in rel_pos))
+        child.set("quat", " ".join(f"{v:.9g}" for v in rel_quat))
+        for j in child.findall("joint"):
+            child.remove(j)
+        child.insert(0, ET.Element("joint", name=link_name(k) + "_pin", type="hinge",
+                                   axis="0 1 0", pos="0 0 0"))
+        world.remove(child)
+        parent.append(child)
+    equality = root.find("equality")
+    for k in hinged_pins(p):
+        equality.remove(equality.find(f"connect[@name='{pin_name(k)}']"))
+
+
+def equalise_link_weights(model: mujoco.MjModel) -> None:
+    """Give every link of a chained model link_00's ``body_invweight0`` (see the module
+    docstring); a free-link model is left as it is (all its links alike)."""
+    links = [b for b in range(model.nbody) if model.body(b).name.startswith("link_")]
+    links.sort(key=lambda b: int(model.body(b).name.split("_")[1]))   # link_00 first
+    if any(model.body_parentid[b] != 0 for b in links):
+        model.body_invweight0[links] = model.body_invweight0[links[0]]

@@ -1,0 +1,605 @@
+"""Plant interface over the MuJoCo track model: named accessors and the 1 ms stepping loop.
+
+Sign conventions (see also :mod:`trackmj.ports`):
+
+* stroke s [m] = ``stroke_at_layout_m`` + position of ``idler_slide``; grows outward
+  (tensioning). Stroke velocity v = ds/dt [m/s].
+* tensioner force [N] > 0 pushes the idler carrier outward.
+* pin tension [N] > 0 pulls the two links of a pin apart along the track (tension);
+  pin k joins link_{k-1} and link_k; array index k, shape (link_count,). With ``[track]
+  structure = "chains"`` (the default) the pins inside a chain are hinges and the pin
+  starting a chain is a compliant ``connect`` carrying the chain's pins in series; with
+  ``"free"`` every pin is a connect with the stated stiffness (``[pins]``). A pin's tension
+  is the force it transmits, along the bisector of the two links.
+* ground: the Kelvin–Voigt foundation under every pin (:mod:`trackmj.track.foundation`) replaces
+  the MJCF ground's contact; its forces act along the ground normal (N > 0 pushes the pin
+  out) and tangent (+x on flat ground).
+* chassis pose (x [m] forward, z [m] up, pitch [rad] about +y, nose-down positive).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numba
+import numpy as np
+
+from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElement
+from trackmj.track.foundation import Foundation, FoundationLaw
+from trackmj.track.foundation import step as foundation_step
+from trackmj.track.mechanics import ModelParams, load_model_params
+from trackmj.track.mjcf.builders import read_mjcf, with_heightfield
+from trackmj.track.mjcf.names import link_name, pin_name
+from trackmj.track.mjcf.structure import equalise_link_weights
+from trackmj.track.terrain import RoadProfile
+
+
+@numba.njit(cache=True)
+def _largest_pin_gap_m(efc_pos: np.ndarray, pins_per_connect: np.ndarray) -> float:
+    """Largest deflection of one pin [m]: each pin connect's gap (the Euclidean norm of its
+    3 rows, efc_pos[3c:3c+3], summed x² + y² + z² in that order) over the pins whose
+    compliance it carries in series (``pins_per_connect``, one per connect)."""
+    largest = 0.0
+    for c in range(len(pins_per_connect)):
+        a, b, d = efc_pos[3 * c], efc_pos[3 * c + 1], efc_pos[3 * c + 2]
+        gap = math.sqrt(a * a + b * b + d * d) / pins_per_connect[c]
+        if gap > largest:
+            largest = gap
+    return largest
+
+
+@numba.njit(cache=True)
+def _pin_tensions(efc_force: np.ndarray, cfrc_int: np.ndarray, xmat: np.ndarray,
+                  link_body: np.ndarray, connect_of_pin: np.ndarray,
+                  out: np.ndarray) -> None:
+    """Tension of every pin [N] into ``out`` (see :meth:`TrackPlant.pin_tensions_N`): the
+    force a pin transmits, from its connect's rows (``connect_of_pin`` >= 0) or, for a
+    hinged pin (−1), the translational part of its child link's ``cfrc_int`` reversed,
+    projected on the bisector of the two links' x axes (xmat columns 0, 3, 6)."""
+    n = len(link_body)
+    for k in range(n):
+        c = connect_of_pin[k]
+        if c >= 0:
+            fx, fy, fz = efc_force[3 * c], efc_force[3 * c + 1], efc_force[3 * c + 2]
+        else:
+            body = link_body[k]
+            fx, fy, fz = -cfrc_int[body, 3], -cfrc_int[body, 4], -cfrc_int[body, 5]
+        a, b = link_body[k], link_body[k - 1]   # links k and k−1 (k−1 = n−1 for k = 0)
+        bx = xmat[a, 0] + xmat[b, 0]
+        by = xmat[a, 3] + xmat[b, 3]
+        bz = xmat[a, 6] + xmat[b, 6]
+        norm = math.sqrt(bx * bx + by * by + bz * bz)
+        out[k] = (fx * bx + fy * by + fz * bz) / norm
+
+
+@numba.njit(cache=True)
+def _strands(geom_xpos: np.ndarray, pin_geom: np.ndarray, qpos: np.ndarray,
+             chassis_q: np.ndarray, bounds: np.ndarray, tension: np.ndarray,
+             upper: np.ndarray, lower: np.ndarray) -> tuple[float, float]:
+    """Upper-strand and lower-run masks of the pins (written into ``upper``, ``lower``) and
+    the mean ``tension`` over each [N] (NaN for an empty strand). Pins are taken in the
+    chassis frame: world (x, z) less the chassis origin (x, ride + z), turned back by its
+    pitch; ``bounds``: (ride height, upper level, lower run x from, x to, lower level) [m],
+    see :meth:`TrackPlant.upper_strand_pins`, :meth:`TrackPlant.lower_strand_pins`."""
+    x0, z0 = qpos[chassis_q[0]], bounds[0] + qpos[chassis_q[1]]
+    c, s = math.cos(qpos[chassis_q[2]]), math.sin(qpos[chassis_q[2]])
+    sum_u = sum_l = 0.0
+    n_u = n_l = 0
+    for k in range(len(pin_geom)):
+        rx, rz = geom_xpos[pin_geom[k], 0] - x0, geom_xpos[pin_geom[k], 2] - z0
+        px, pz = c * rx - s * rz, s * rx + c * rz   # undo the rotation about +y by pitch
+        upper[k] = pz > bounds[1]
+        lower[k] = bounds[2] < px < bounds[3] and pz < bounds[4]
+        if upper[k]:
+            sum_u += tension[k]
+            n_u += 1
+        if lower[k]:
+            sum_l += tension[k]
+            n_l += 1
+    return (sum_u / n_u if n_u else math.nan), (sum_l / n_l if n_l else math.nan)
+
+
+@dataclass
+class PassiveTensioner:
+    """Preload spring-damper acting on the idler carrier (like Chrono's M113 idler).
+
+    F = preload_N - stiffness_N_m·(s - stroke_ref_m) - damping_N_s_m·v_{k+1}
+    The spring term is evaluated at the start of the step, the damping implicitly.
+    """
+
+    preload_N: float
+    stiffness_N_m: float
+    damping_N_s_m: float
+    stroke_ref_m: float
+
+    def force_law(self, t_s: float, stroke_m: float, velocity_m_s: float) -> ForceLaw:
+        return ForceLaw(self.preload_N - self.stiffness_N_m * (stroke_m - self.stroke_ref_m),
+                        -self.damping_N_s_m)
+
+    def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
+        """Nothing to finish: the element has no state."""
+
+    @classmethod
+    def from_params(cls, params: ModelParams) -> PassiveTensioner:
+        t = params.tensioner
+        return cls(t.preload_N, t.stiffness_N_m, t.damping_N_s_m,
+                   params.idler.stroke_at_layout_m)
+
+
+@dataclass(frozen=True)
+class DerailmentStatus:
+    """Indicators that the track is losing its guidance (all False when healthy)."""
+
+    sprocket_disengaged: bool   # fewer than 2 pins seated on the sprocket pitch circle
+    links_off_envelope: bool    # a pin is further than the threshold outside its home envelope
+    slack_strand: bool          # upper-strand tension fell to what its own weight causes
+    max_envelope_excursion_m: float
+    min_upper_strand_tension_N: float
+
+    @property
+    def any(self) -> bool:
+        return self.sprocket_disengaged or self.links_off_envelope or self.slack_strand
+
+
+@dataclass(frozen=True)
+class StrandTension:
+    """Mean pin tension [N] of the upper strand and of the sprocket's lower run (between
+    the sprocket and its nearest road wheel). Driving forward with the sprocket at the rear
+    the lower run is the tight side (it carries the traction) and the upper strand the
+    slack side set by the tensioner; with the sprocket at the front the upper strand is
+    the tight side."""
+
+    upper_N: float
+    lower_N: float
+
+
+class TrackPlant:
+    """One track side in MuJoCo with named accessors (any machine's generated model).
+
+    State layout: ``data.qpos`` holds chassis (x, z, pitch), sprocket angle, idler slide,
+    the suspension slides, then (x, z, pitch) of each free link link_00.. (chains: of
+    each chain's first link, followed by the pin hinges of the links it carries); use the
+    accessors rather than raw indices. The coupling step is 1 ms; the MuJoCo timestep
+    must divide it (``substeps`` MuJoCo steps per coupling step). Sign conventions: see the
+    module docstring (stroke outward positive, tensioner force > 0 pushes the idler out).
+
+    Ports: ``apply(StepInputs)`` (track speed command, rear-hitch load) and
+    ``step(element)`` (one coupling step through the tensioner port); readouts as
+    properties (``stroke_m``, ``stroke_velocity_m_s``, ``idler_force_N``,
+    ``chassis_acc_z_m_s2``, ``closure_error_m``, ``warning_count``).
+
+    Parameters
+    ----------
+    model : mujoco.MjModel
+        The compiled track model (``models/lf1352.xml`` or a generated variant).
+    params : ModelParams
+        The parameters the model was generated from (geometry, contacts, pins).
+    """
+
+    ENVELOPE_THRESHOLD_M = 0.10
+    SEAT_TOLERANCE_M = 0.012
+    MIN_SEATED_PINS = 2
+    SLACK_TENSION_N = 1000.0
+    """Below this the upper strand hangs on its own weight (rigid links never reach zero:
+    one metre of track weighs ~460 N and a hanging span keeps a few hundred newtons)."""
+
+    def __init__(self, model: mujoco.MjModel, params: ModelParams) -> None:
+        self.model = model
+        self.params = params
+        self.model_path: Path | None = None
+        self.data = mujoco.MjData(model)
+        ratio = COUPLING_STEP_S / model.opt.timestep
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError(f"MuJoCo timestep {model.opt.timestep} s must divide the "
+                             f"{COUPLING_STEP_S} s coupling step")
+        self.substeps = round(ratio)
+        m = model
+        # views into the MjData/MjModel buffers, kept to spare the bindings' attribute
+        # look-ups in the 1 kHz loop (the buffers live as long as data and model)
+        self._qpos, self._qvel, self._ctrl = self.data.qpos, self.data.qvel, self.data.ctrl
+        self._qacc = self.data.qacc
+        self._biasprm = m.actuator_biasprm
+        self._stroke_offset_m = params.idler.stroke_at_layout_m
+        self._slide_q = int(m.jnt_qposadr[m.joint("idler_slide").id])
+        self._slide_v = int(m.jnt_dofadr[m.joint("idler_slide").id])
+        self._sprocket_v = int(m.jnt_dofadr[m.joint("sprocket_hinge").id])
+        self._chassis_q = np.array([m.jnt_qposadr[m.joint(n).id]
+                                    for n in ("chassis_x", "chassis_z", "chassis_pitch")])
+        self._chassis_v = np.array([m.jnt_dofadr[m.joint(n).id]
+                                    for n in ("chassis_x", "chassis_z", "chassis_pitch")])
+        self._tensioner = m.actuator("tensioner").id
+        self._drive = m.actuator("sprocket_drive").id
+        n = params.track.link_count
+        self.link_count = n
+        self._link_body = np.array([m.body(link_name(k)).id for k in range(n)])
+        self._pin_geom = np.array([m.geom(link_name(k) + "_pin").id for k in range(n)])
+        # the pin connects are the model's only equalities, in pin order: 3 rows each; the
+        # other pins are hinges (structure "chains": link k hinged to link k-1 at pin k)
+        hinged = [k for k in range(n) if m.body(link_name(k)).parentid != 0]
+        connected = [k for k in range(n) if k not in hinged]
+        pin_eq = [m.equality(pin_name(k)).id for k in connected]
+        if m.neq != len(connected) or pin_eq != list(range(m.neq)) or any(
+                m.body(link_name(k)).parentid != self._link_body[k - 1] for k in hinged):
+            raise ValueError(f"{m.neq} equalities: expected one pin connect per pin that "
+                             "is not a hinge, in pin order, only (regenerate the model)")
+        self._pin_rows = 3 * m.neq
+        self._connect_of_pin = np.full(n, -1, dtype=np.int64)
+        self._connect_of_pin[connected] = np.arange(len(connected))
+        self._tension = np.zeros(n)
+        # pins each connect carries in series: the links up to the next connect
+        self._pins_per_connect = np.diff([*connected, n]).astype(float)
+        self._has_hinged_pins = bool(hinged)
+        equalise_link_weights(m)   # chains: every link link_00's row weight
+        self.foundation = Foundation(m, self.data, self._pin_geom,
+                                     FoundationLaw.from_params(params))
+        self._chassis_body = m.body("chassis").id
+        # strands in the chassis frame (ride height, upper level; the sprocket's lower run:
+        # x from, to, level): 5 cm above the higher of sprocket and idler centres; between
+        # the sprocket and its nearest road wheel, 5 cm below the sprocket centre
+        ride, spr = params.chassis.ride_height_m, params.sprocket
+        wheels = params.road_wheels.x_m
+        lo, hi = (spr.x_m, min(wheels)) if spr.x_m < params.idler.x_m else (max(wheels), spr.x_m)
+        self._strand_bounds = np.array([ride, max(spr.z_m, params.idler.z_m) - ride + 0.05,
+                                        lo, hi, spr.z_m - ride - 0.05])
+        self._upper, self._lower = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+        self._hitch_site = m.site("rear_hitch").id
+        self._sprocket_body = m.body("sprocket").id
+        self._carrier_body = m.body("idler_carrier").id
+        self._group_of_body = self._contact_groups()
+        self.time_s = 0.0
+        self.last_law: ForceLaw | None = None
+        self.reset("home" if model.nkey else None)
+        self._envelope = self._home_envelope()
+        _ = self.closure_error_m   # load (or compile) the kernel here, not in the first step
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def load(cls, xml_path: str | Path | None = None,
+             param_path: str | Path | None = None,
+             terrain: RoadProfile | None = None, *, machine: str | Path | None = None,
+             overrides: Mapping[str, Any] | None = None) -> TrackPlant:
+        """Load a machine's track (default the packaged LF1352).
+
+        machine: a shipped machine's name or a machine file (:mod:`trackmj.machines.assembly`);
+        param_path: a model parameter file replacing the machine's mechanics; overrides:
+        ``{dotted key: value}`` of the model file (``--set model.KEY=VALUE``); xml_path: an
+        MJCF file to load instead of the model of those parameters (the machine's committed
+        reference for its own parameters, else generated and cached; a scene that includes
+        its machine part is joined with it). terrain: optional
+        road profile replacing the flat ground by a heightfield (see
+        :func:`trackmj.track.mjcf.builders.with_heightfield`).
+        """
+        from trackmj.machines.assembly import is_own, mechanics, model_mjcf, resolve
+
+        mach = resolve(machine)
+        params = (load_model_params(param_path or mach.mechanics, overrides=overrides)
+                  if param_path is not None or overrides else mechanics(mach))
+        if xml_path is not None:
+            path: Path | None = Path(xml_path)
+            if not path.is_file():
+                raise FileNotFoundError(f"model file not found: {path}")
+            text = read_mjcf(path)
+        else:
+            path = mach.reference_mjcf if is_own(params, mach) else None
+            text = model_mjcf(params, mach)
+        try:
+            if terrain is not None:
+                text = with_heightfield(text, terrain)
+            model = mujoco.MjModel.from_xml_string(text)
+        except ValueError as exc:
+            raise ValueError(f"{path or 'generated model'}: MuJoCo could not load the model: "
+                             f"{exc}") from None
+        plant = cls(model, params)
+        plant.model_path = path
+        return plant
+
+    def reset(self, keyframe: str | None = "home") -> None:
+        """Reset to a keyframe (default the pretensioned ``home``) or to the layout."""
+        mujoco.mj_resetData(self.model, self.data)
+        if keyframe is not None:
+            mujoco.mj_resetDataKeyframe(self.model, self.data, self.model.key(keyframe).id)
+        self.data.ctrl[self._drive] = 0.0
+        self.time_s = 0.0
+        self.last_law = None
+        self._speed_command = 0.0
+        self._hitch_loaded = False
+        mujoco.mj_forward(self.model, self.data)
+        # the ground acting at this state as in a step (the foundation's wrenches), then
+        # everything derived again with it
+        self.foundation.apply()
+        self.foundation.finish()
+        mujoco.mj_forward(self.model, self.data)
+
+    def _contact_groups(self) -> dict[int, str]:
+        groups = {self._sprocket_body: "sprocket", 0: "ground"}
+        for i in range(self.model.nbody):
+            name = self.model.body(i).name
+            if name.startswith("road_wheel_"):
+                groups[i] = "road_wheels"
+            elif name in ("idler", "idler_carrier"):
+                groups[i] = "idler"
+            elif name.startswith("return_roller_"):
+                groups[i] = "return_rollers"
+        return groups
+
+    # ------------------------------------------------------------------ accessors
+    @property
+    def stroke_m(self) -> float:
+        """Cylinder stroke [m] (outward positive)."""
+        return self._stroke_offset_m + float(self._qpos[self._slide_q])
+
+    @property
+    def stroke_velocity_m_s(self) -> float:
+        """Cylinder stroke velocity [m/s]."""
+        return float(self._qvel[self._slide_v])
+
+    @property
+    def idler_force_N(self) -> float:
+        """Tensioner force applied to the idler carrier over the last step [N]: the force
+        law at the end-of-step velocity (what ``implicitfast`` integrates), not MuJoCo's
+        ``actuator_force``, which is evaluated at the start-of-step velocity."""
+        if self.last_law is None:
+            return float(self.data.actuator_force[self._tensioner])
+        return self.last_law.at(self.stroke_velocity_m_s)
+
+    @property
+    def sprocket_speed_rad_s(self) -> float:
+        return float(self.data.qvel[self._sprocket_v])
+
+    @property
+    def track_speed_m_s(self) -> float:
+        """Sprocket pitch-line speed [m/s] (positive drives the vehicle forward)."""
+        return self.sprocket_speed_rad_s * self.params.sprocket_pitch_radius_m
+
+    def set_track_speed(self, speed_m_s: float) -> None:
+        """Command the sprocket velocity servo to a pitch-line speed [m/s]."""
+        if not math.isfinite(speed_m_s):
+            raise ValueError(f"track speed must be finite, got {speed_m_s!r}")
+        self._ctrl[self._drive] = speed_m_s / self.params.sprocket_pitch_radius_m
+
+    def set_hitch_force(self, pull_N: float, down_N: float) -> None:
+        """Load on the rear hitch (site ``rear_hitch``) in the chassis frame: ``pull_N`` [N]
+        rearward along the chassis x axis, ``down_N`` [N] downward along its z axis.
+
+        A towed load (pull_N > 0) makes the speed-servoed sprocket drive harder; a pushing
+        load (pull_N < 0) makes it brake. Applied as a force and a moment about the chassis
+        centre of mass (``xfrc_applied``).
+        """
+        if not (math.isfinite(pull_N) and math.isfinite(down_N)):
+            raise ValueError(f"hitch force ({pull_N!r}, {down_N!r}) N must be finite")
+        d, body = self.data, self._chassis_body
+        force = d.xmat[body].reshape(3, 3) @ np.array((-pull_N, 0.0, -down_N))
+        arm = d.site_xpos[self._hitch_site] - d.xipos[body]
+        d.xfrc_applied[body, :3] = force
+        d.xfrc_applied[body, 3:] = np.cross(arm, force)
+
+    def apply(self, inputs: StepInputs) -> None:
+        """Set one step's scenario inputs: the sprocket speed command (only when it changes:
+        the servo keeps it) and the rear-hitch load (re-evaluated every step while it is not
+        zero, because it acts in the rotating chassis frame)."""
+        if inputs.track_speed_m_s != self._speed_command:
+            self.set_track_speed(inputs.track_speed_m_s)
+            self._speed_command = inputs.track_speed_m_s
+        hitch = (inputs.hitch_pull_N, inputs.hitch_down_N)
+        if hitch != (0.0, 0.0) or self._hitch_loaded:
+            self.set_hitch_force(*hitch)
+            self._hitch_loaded = hitch != (0.0, 0.0)
+
+    def scale_contact_stiffness(self, scale: float) -> None:
+        """Multiply the physical stiffness of every track contact by ``scale`` [-] (W5
+        perturbation): the foundation's K, and the partner geoms' (hub, idler, wheels,
+        rollers, teeth), which decide every contact (priority) and carry a direct solref
+        (−k, −b) with K = n·k/((1−d)·A) (:mod:`trackmj.track.mjcf.soft`), so k scales
+        linearly; damping and impedance stay."""
+        if not (math.isfinite(scale) and scale > 0.0):
+            raise ValueError(f"contact stiffness scale must be > 0, got {scale!r}")
+        m = self.model
+        direct = m.geom_solref[:, 0] < 0.0
+        if not np.any(direct):
+            raise ValueError("no contact with a direct (physical) solref in this model")
+        m.geom_solref[direct, 0] *= scale
+        self.foundation.scale_stiffness(scale)
+
+    @property
+    def chassis_acc_z_m_s2(self) -> float:
+        """Vertical chassis acceleration over the last step [m/s²] (``qacc`` of chassis_z)."""
+        return float(self._qacc[self._chassis_v[1]])
+
+    @property
+    def chassis_pose(self) -> np.ndarray:
+        """(x [m], z [m], pitch [rad]) of the chassis frame relative to its layout pose."""
+        return self.data.qpos[self._chassis_q].copy()
+
+    @property
+    def chassis_velocity(self) -> np.ndarray:
+        """(vx [m/s], vz [m/s], pitch rate [rad/s])."""
+        return self.data.qvel[self._chassis_v].copy()
+
+    @property
+    def chassis_acceleration(self) -> np.ndarray:
+        """(ax [m/s²], az [m/s²], pitch acc [rad/s²]) from the last step."""
+        return self.data.qacc[self._chassis_v].copy()
+
+    @property
+    def contact_count(self) -> int:
+        return int(self.data.ncon)
+
+    @property
+    def closure_error_m(self) -> float:
+        """Largest pin gap of the loop [m]: the deflection of the most loaded pin compliance
+        (tension / stated pin stiffness, plus its damping share), at the start of the
+        last step; a connect carrying m pins in series (structure "chains") stretches m
+        times that. Evaluated every step (the physics guard reads it), so in a compiled
+        kernel (~1 µs)."""
+        return _largest_pin_gap_m(self.data.efc_pos, self._pins_per_connect)
+
+    @property
+    def pin_rows(self) -> int:
+        """Constraint rows of the pin connects, the first rows of every step (3 per connect)."""
+        return self._pin_rows
+
+    @property
+    def warning_count(self) -> int:
+        """Total MuJoCo warnings raised since the last reset."""
+        return int(sum(w.number for w in self.data.warning))
+
+    def pin_positions(self) -> np.ndarray:
+        """World (x, z) of every pin [m], shape (link_count, 2)."""
+        return self.data.geom_xpos[self._pin_geom][:, [0, 2]].copy()
+
+    def pin_tensions_N(self) -> np.ndarray:
+        """Tension in every pin [N], shape (link_count,), positive pulling the links apart.
+
+        The force the pin's ``connect`` transmits (MuJoCo's ``efc_force``, the force the
+        last step applied; its residual is anchor(link_{k-1}) − anchor(link_k), the force
+        acting on link_{k-1}, forwards under tension), or for a hinged pin the force of
+        link_{k-1} on its child link_k (the translational part of ``cfrc_int`` after
+        ``mj_rnePostConstraint``, reversed), projected on the bisector of the two links'
+        axes. It is the pin compliance's elastic and viscous force K·gap + B·gap rate plus
+        the constraint's apparent-mass term (:mod:`trackmj.track.mjcf.soft`), which carries the
+        pins' own stretch mode; no filtering.
+        """
+        d = self.data
+        if self._has_hinged_pins:
+            mujoco.mj_rnePostConstraint(self.model, d)
+        _pin_tensions(d.efc_force, d.cfrc_int, d.xmat, self._link_body, self._connect_of_pin,
+                      self._tension)
+        return self._tension.copy()
+
+    def strand_tensions_N(self) -> StrandTension:
+        """Mean pin tension of the upper strand and of the rear lower run [N] (see
+        :meth:`upper_strand_pins`, :meth:`lower_strand_pins`)."""
+        return StrandTension(*self._strands(self.pin_tensions_N()))
+
+    def _strands(self, tension: np.ndarray) -> tuple[float, float]:
+        """Mean ``tension`` [N] over the upper strand and the lower run (the masks left in
+        ``_upper``, ``_lower``)."""
+        return _strands(self.data.geom_xpos, self._pin_geom, self._qpos, self._chassis_q,
+                        self._strand_bounds, tension, self._upper, self._lower)
+
+    def contact_forces_N(self) -> dict[str, float]:
+        """Sum of contact normal forces on the track by partner [N]:
+        sprocket, road_wheels, idler, return_rollers, ground (the foundation's)."""
+        m, d = self.model, self.data
+        totals = dict.fromkeys(("sprocket", "road_wheels", "idler", "return_rollers"), 0.0)
+        totals["ground"] = float(self.foundation.normal_forces_N.sum())
+        wrench = np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
+            group = self._group_of_body.get(b1) or self._group_of_body.get(b2)
+            if group is None:
+                continue
+            mujoco.mj_contactForce(m, d, i, wrench)
+            totals[group] += float(wrench[0])
+        return totals
+
+    def seated_sprocket_pins(self) -> int:
+        """Pins within ``SEAT_TOLERANCE_M`` of the sprocket pitch circle; a pin riding on a
+        tooth tip sits about 40 mm further out."""
+        centre = self.data.xpos[self._sprocket_body][[0, 2]]
+        radius = np.linalg.norm(self.pin_positions() - centre, axis=1)
+        off = np.abs(radius - self.params.sprocket_pitch_radius_m)
+        return int(np.count_nonzero(off < self.SEAT_TOLERANCE_M))
+
+    # ------------------------------------------------------------------ derailment
+    def _chassis_frame_pins(self) -> np.ndarray:
+        x, z, pitch = self.chassis_pose
+        ride = self.params.chassis.ride_height_m
+        rel = self.pin_positions() - np.array([x, ride + z])
+        c, s = math.cos(pitch), math.sin(pitch)
+        # undo the rotation about +y by `pitch`: x' = c x - s z, z' = s x + c z
+        return np.column_stack([c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]])
+
+    def pins_layout_frame(self) -> np.ndarray:
+        """(x, z) of every pin [m] in the chassis frame, placed as the chassis was at the
+        layout (origin at ride height): comparable with the layout's coordinates,
+        (link_count, 2)."""
+        return self._chassis_frame_pins() + np.array([0.0, self.params.chassis.ride_height_m])
+
+    def _home_envelope(self) -> np.ndarray:
+        from scipy.spatial import ConvexHull
+
+        pts = self._chassis_frame_pins()
+        return pts[ConvexHull(pts).vertices]  # counter-clockwise
+
+    def envelope_excursion_m(self) -> np.ndarray:
+        """Distance of each pin outside its home envelope (chassis frame) [m], (link_count,)."""
+        pts = self._chassis_frame_pins()
+        hull = self._envelope
+        edges = np.roll(hull, -1, axis=0) - hull
+        normals = np.column_stack([edges[:, 1], -edges[:, 0]])
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        offsets = np.einsum("ij,ij->i", normals, hull)
+        return np.maximum((pts @ normals.T - offsets).max(axis=1), 0.0)
+
+    def upper_strand_pins(self) -> np.ndarray:
+        """Indices of pins in the upper strand (5 cm above the higher of the sprocket and
+        idler centres, chassis frame)."""
+        self._strands(self._tension)
+        return np.nonzero(self._upper)[0]
+
+    def lower_strand_pins(self) -> np.ndarray:
+        """Indices of pins in the sprocket's lower run: between the sprocket and its
+        nearest road wheel, 5 cm below the sprocket centre. With the sprocket at the rear
+        it is the tight side driving forward; at the front the upper strand is."""
+        self._strands(self._tension)
+        return np.nonzero(self._lower)[0]
+
+    def derailment(self) -> DerailmentStatus:
+        excursion = float(self.envelope_excursion_m().max())
+        upper = self.upper_strand_pins()
+        tension = self.pin_tensions_N()
+        min_upper = float(tension[upper].min()) if len(upper) else 0.0
+        return DerailmentStatus(
+            sprocket_disengaged=self.seated_sprocket_pins() < self.MIN_SEATED_PINS,
+            links_off_envelope=excursion > self.ENVELOPE_THRESHOLD_M,
+            slack_strand=min_upper < self.SLACK_TENSION_N,
+            max_envelope_excursion_m=excursion,
+            min_upper_strand_tension_N=min_upper,
+        )
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, element: TensionerElement) -> ForceLaw:
+        """Advance one 1 ms coupling step with ``element`` acting on the idler carrier.
+
+        With several MuJoCo substeps the law is held and the element is completed with
+        the mean velocity over the step (displacement / step), which keeps the work
+        exchanged consistent with the stroke change.
+        """
+        m, d = self.model, self.data
+        stroke0 = self.stroke_m
+        law = element.force_law(self.time_s, stroke0, self.stroke_velocity_m_s)
+        force, damping = law.force_N, law.damping_N_s_m
+        if not (math.isfinite(force) and math.isfinite(damping)):
+            raise ValueError(f"tensioner returned a non-finite force law {law}")
+        self._ctrl[self._tensioner] = force
+        self._biasprm[self._tensioner, 2] = damping
+        for _ in range(self.substeps):
+            foundation_step(m, d, self.foundation)
+        stroke = self.stroke_m
+        if self.substeps == 1:
+            velocity = self.stroke_velocity_m_s
+        else:
+            velocity = (stroke - stroke0) / COUPLING_STEP_S
+        self.time_s += COUPLING_STEP_S
+        self.last_law = law
+        element.complete_step(self.time_s, stroke, velocity)
+        return law
+
+    def run(self, element: TensionerElement, duration_s: float,
+            track_speed: Callable[[float], float] | float = 0.0,
+            on_step: Callable[[TrackPlant], None] | None = None) -> None:
+        """Step for ``duration_s`` with a track-speed command [m/s] (constant or f(t))."""
+        steps = round(duration_s / COUPLING_STEP_S)
+        speed = track_speed if callable(track_speed) else (lambda _t: track_speed)
+        for _ in range(steps):
+            self.set_track_speed(speed(self.time_s))
+            self.step(element)
+            if on_step is not None:
+                on_step(self)
