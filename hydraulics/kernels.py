@@ -93,7 +93,8 @@ LAST_DP, 1             |dp|∞ of the last Newton iteration of a failed solve [P
 REC, 6                 last completed step: t [s], stroke [m], velocity [m/s], friction
                        [N] (opposes motion), end-stop force [N] (> 0 outward), piston
                        force A_h(p_HL + p_HR) − 2·A_r·p_B [N]
-LOG, 9                 ElementLog of the last completed step (``trackmj.ports.ElementLog``)
+LOG, 9                 ElementLog of the last completed step, LOG_FIELDS order
+                       (``trackmj.ports.ElementLog``)
 STEP_LEDGER, 30        energy terms of the last step [J], LEDGER_FIELDS order
 LEDGER, 30             cumulative energy terms [J], LEDGER_FIELDS order
 AREAS, 4               edge areas the gains were computed for [m^2]: main at rest
@@ -178,6 +179,9 @@ P, VOL, VOIL, GAIN, FRAC, SET_NEXT, PUMP_X, LOADED = 0, 5, 10, 11, 17, 20, 21, 2
 V_PREV, CARRY, LAW, CORRECTION, P_STAR, DPDV, V_STAR, JAC = 23, 24, 25, 27, 28, 33, 38, 39
 FLOWS, ITERS, BACKTRACKS, STEP_BACKTRACKS, BACKTRACKS_TOTAL, LAST_DP = 57, 70, 71, 72, 73, 74
 REC, LOG, STEP_LEDGER, LEDGER, AREAS, AREAS_SET, TWINS = 75, 81, 90, 120, 150, 154, 155
+LOG_FIELDS = ("t_s", "p_head_Pa", "p_rod_Pa", "p_supply_Pa", "q_supply_m3_s", "force_N",
+              "supply_J", "piston_work_J", "mech_work_J")
+"""What ``state[LOG + i]`` holds, i = 0..8 (the kernel writes them in this order)."""
 N_STATE = 156
 (S_POS, S_CMD, S_EFF, S_MOVING, S_DELAY, S_TAU, S_HEAD, S_COUNT, S_AT_VALID, S_AT_T, S_AT_H,
  S_AT_X, S_AT_EFF) = range(13)

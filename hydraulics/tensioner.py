@@ -6,8 +6,9 @@ variable pump, fixed pump + accumulator + unloading valve, or a prescribed press
 4/2 (rest P->A, B->T; energised P->B, A->T) -> line A -> V_L / V_R (NC 2/2, each with a
 head-branch restrictor in series) -> heads; line B feeds both rod chambers,
 with a 5.5e-8 m^2 restrictor in the release feed P->B only (the rods vent B->T freely). The
-restrictors make a 3 kN tension change against the identified track stiffness (~9.4e6 N/m)
-take ~0.3 s at 12 MPa supply, i.e. 1.2e-6 m^3 of oil at ~4.2e-6 m^3/s.
+restrictors set how fast the tension moves: a 3 kN change against the identified track
+(4.40e6 N/m, ``models/lf1352_idler.toml``) in series with the head oil and hoses takes
+~0.8 s at 12 MPa supply (the sizing in ``models/lf1352_hydraulics.toml``, [metering]).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from typing import Literal
 
 import numpy as np
 
-from trackmj.ports import ElementLog, ForceLaw, make_force_law
+from trackmj.ports import ElementLog, ForceLaw, make_force_law, positional
 
 from . import kernels as k
 from .components import Solenoid, SolenoidBank, orifice_gain
@@ -32,7 +33,8 @@ MODES: dict[int, tuple[float, float, float]] = {
     0: (0.0, 0.0, 0.0),    # hold: main at rest, V_L and V_R closed
     -1: (1.0, 1.0, 1.0),   # release: main energised (P->B, A->T), V_L and V_R open
 }
-_tuple_new = tuple.__new__  # ElementLog(...) without NamedTuple's keyword-capable __new__
+_element_log = positional(ElementLog, k.LOG_FIELDS)
+"""ElementLog from the kernel's LOG slots, checked against its fields at import."""
 NODE_NAMES = ("line A", "head L", "head R", "rod node", "supply")
 """Names of the pressure nodes in ``HydraulicTensioner.pressures`` order."""
 FLOW_NAMES = ("main_PA", "main_AT", "main_PB", "main_BT", "V_L", "V_R", "relief",
@@ -457,7 +459,7 @@ class HydraulicTensioner:
         """The handful of values logged every step, without building a StepRecord."""
         if not self._completed:
             raise RuntimeError("no step completed yet")
-        return _tuple_new(ElementLog, self._state[k.LOG:k.LOG + 9].tolist())
+        return _element_log(self._state[k.LOG:k.LOG + len(k.LOG_FIELDS)].tolist())
 
     @property
     def pressures(self) -> tuple[float, float, float, float, float]:

@@ -36,9 +36,10 @@ physics guard, ``stroke_range_m`` (the travel the guard allows) and, at the end,
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import functools
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple, Protocol, runtime_checkable
+from typing import Any, NamedTuple, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -57,6 +58,23 @@ def steps_per_period(period_s: float, dt_s: float = COUPLING_STEP_S) -> int:
     if k < 1 or abs(ratio - k) > 1e-9 * max(1.0, ratio):
         raise ValueError(f"period {period_s} s must be an integer multiple of the step {dt_s} s")
     return k
+
+
+TupleT = TypeVar("TupleT", bound=tuple)
+
+
+def positional(cls: type[TupleT], order: Sequence[str]) -> Callable[[Iterable[Any]], TupleT]:
+    """A constructor of the NamedTuple ``cls`` from values written in ``order`` (its field
+    names): ``tuple.__new__`` bound to ``cls``, the same object as ``cls(*values)`` without
+    NamedTuple's keyword handling, for the few per-step call sites that build records at
+    1 kHz. Each such call site names the order it writes its values in, and this checks it
+    against the declared fields when the module loads: a reordered or renamed field fails
+    loudly at import, never as silently swapped values. Cold code builds by keyword."""
+    declared: tuple[str, ...] = cls._fields  # type: ignore[attr-defined]  # a NamedTuple's
+    if tuple(order) != declared:
+        raise TypeError(f"{cls.__name__} declares the fields {declared} but a call site "
+                        f"writes {tuple(order)}")
+    return functools.partial(tuple.__new__, cls)
 
 
 @dataclass(frozen=True, slots=True)
@@ -231,12 +249,18 @@ class Element(TensionerElement, Protocol):
     element without pressures); stroke_range_m: (lowest, highest) stroke [m] the element's
     travel (with its end stops' allowance) admits, checked by the physics guard;
     channels: the extra columns ``channel_values()`` returns, name -> unit, recorded with
-    ``--channels all`` (empty for an element with none).
+    ``--channels all`` (empty for an element with none). The three are read-only to the loop
+    (an element may hold them as class or instance attributes).
     """
 
-    pressure_nodes: tuple[str, ...]
-    stroke_range_m: tuple[float, float]
-    channels: Mapping[str, str]
+    @property
+    def pressure_nodes(self) -> tuple[str, ...]: ...
+
+    @property
+    def stroke_range_m(self) -> tuple[float, float]: ...
+
+    @property
+    def channels(self) -> Mapping[str, str]: ...
 
     def channel_values(self) -> Sequence[float]:
         """The ``channels`` after the last completed step, in their order (SI)."""

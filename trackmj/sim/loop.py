@@ -30,11 +30,12 @@ from trackmj.ports import (
     Sensors,
     StepInputs,
     ValveLogic,
+    positional,
     steps_per_period,
 )
 
-_command = tuple.__new__
-"""Command(...) without NamedTuple's keyword-capable __new__ (same tuple, cheaper)."""
+_command = positional(Command, ("mode", "u", "solved"))
+"""Command from (mode, u, solved), checked against its fields at import."""
 
 
 @dataclass(frozen=True)
@@ -79,7 +80,7 @@ def run_loop(schedule: Schedule, *, controller: Controller, valves: ValveLogic, 
             solved = controller(estimator.period_mean(), schedule.previews[k // ratio], k * h)
             u = solved.u
         mode = valve_step(u)
-        command = _command(Command, (mode, u, solved))
+        command = _command((mode, u, solved))
         readout = plant_step(command, inputs)
         z = measure((readout.p_head_Pa, readout.p_rod_Pa, readout.stroke_m))
         estimate(z, float(mode), inputs.supply_set_Pa)

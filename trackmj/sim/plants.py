@@ -27,11 +27,15 @@ from trackmj.ports import (
     Readout,
     StepInputs,
     TensionerElement,
+    positional,
 )
 
 NAN = math.nan
-_readout = tuple.__new__
-"""Readout(...) without NamedTuple's keyword-capable __new__ (same tuple, cheaper)."""
+_readout = positional(Readout, (
+    "t_s", "tension_N", "p_head_Pa", "p_rod_Pa", "p_supply_Pa", "stroke_m",
+    "stroke_velocity_m_s", "q_supply_m3_s", "e_supply_J", "p_work_J", "mech_work_J",
+    "chassis_acc_z_m_s2", "closure_error_m"))
+"""Readout from its values in field order, checked against its fields at import."""
 
 
 class CoupledPlant:
@@ -53,11 +57,11 @@ class CoupledPlant:
         element.set_valves(command.mode, command.u, inputs.supply_set_Pa)
         mech.apply(inputs)
         mech.step(element)
-        t, p_head, p_rod, p_supply, q_supply, _, supply, piston, work = element.log()
-        return _readout(Readout, (t, mech.idler_force_N, p_head, p_rod, p_supply,
-                                  mech.stroke_m, mech.stroke_velocity_m_s, q_supply, supply,
-                                  piston, work, mech.chassis_acc_z_m_s2,
-                                  mech.closure_error_m))
+        log = element.log()
+        return _readout((log.t_s, mech.idler_force_N, log.p_head_Pa, log.p_rod_Pa,
+                         log.p_supply_Pa, mech.stroke_m, mech.stroke_velocity_m_s,
+                         log.q_supply_m3_s, log.supply_J, log.piston_work_J, log.mech_work_J,
+                         mech.chassis_acc_z_m_s2, mech.closure_error_m))
 
 
 class EquivalentIdlerMechanics:
@@ -119,6 +123,8 @@ class ReducedLoopPlant:
 
     def step(self, command: Command, inputs: StepInputs) -> Readout:
         x = self.plant.step(float(command.mode), inputs.supply_set_Pa)
-        return Readout(self.plant.t, self.plant.force, float(x[0]), float(x[1]),
-                       inputs.supply_set_Pa, float(x[2]), float(x[3]), NAN, NAN, NAN, NAN,
-                       NAN, NAN)
+        return Readout(t_s=self.plant.t, tension_N=self.plant.force, p_head_Pa=float(x[0]),
+                       p_rod_Pa=float(x[1]), p_supply_Pa=inputs.supply_set_Pa,
+                       stroke_m=float(x[2]), stroke_velocity_m_s=float(x[3]),
+                       q_supply_m3_s=NAN, e_supply_J=NAN, p_work_J=NAN, mech_work_J=NAN,
+                       chassis_acc_z_m_s2=NAN, closure_error_m=NAN)
