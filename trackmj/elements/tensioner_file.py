@@ -22,12 +22,13 @@ outward, velocity v = ds/dt [m/s], force F [N] > 0 pushes the idler outward; the
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from trackmj.fmi.fmu import FmuDescription, describe
+from trackmj.io import file_sha256
 from trackmj.validator import Location, ParameterError, Parameters, load_file, param, sources_field
 
 FMU_INPUTS: dict[str, str] = {
@@ -125,6 +126,39 @@ class FmuTable(Parameters):
         return {q: name for name, q in getattr(self, table).items()}
 
 
+def check_fmu(table: FmuTable, base: Path, at: Location) -> FmuDescription:
+    """Check a tensioner file's ``[fmu]`` table against its FMU (``path`` relative to
+    ``base``, the file's folder): the mapped variables exist with the port's kinds."""
+    real = ("real",)
+    input_kinds = {q: real for q in FMU_INPUTS} | {"valve_mode": ("real", "int")}
+    output_kinds = {q: real for q in FMU_OUTPUTS}
+    return describe((base / table.path).resolve(), table.interface, at, table.inputs,
+                    table.outputs, table.parameters, input_kinds, output_kinds)
+
+
+@dataclass(frozen=True)
+class TensionerKind:
+    """One table a tensioner file may hold: the element it makes (a key of
+    :data:`trackmj.sim.registry.ELEMENTS`), the check run when the file is loaded
+    (``check(table, folder, at)``, its result kept as the file's ``description``), and the
+    files besides the tensioner file that the element reads (``files(table, folder)``),
+    whose content belongs to a run's identity."""
+
+    element: str
+    check: Callable[[Any, Path, Location], Any] | None = None
+    files: Callable[[Any, Path], tuple[Path, ...]] = lambda table, folder: ()
+
+
+TENSIONER_KINDS: dict[str, TensionerKind] = {
+    "passive": TensionerKind(element="passive"),
+    "fmu": TensionerKind(element="fmu", check=check_fmu,
+                         files=lambda table, folder: ((folder / table.path).resolve(),)),
+}
+"""Tensioner kinds by their table's name in the file. A new kind is its table class, its
+field in :class:`TensionerFile` and one line here (its element is one line in
+:data:`trackmj.sim.registry.ELEMENTS`)."""
+
+
 @dataclass(frozen=True)
 class TensionerFile(Parameters):
     """A tensioner file: exactly one of ``[passive]`` and ``[fmu]``.
@@ -144,14 +178,32 @@ class TensionerFile(Parameters):
                                          metadata={"loader": "fmu"})
 
     def cross_check(self, at: Location) -> None:
-        if (self.passive is None) == (self.fmu is None):
-            raise ParameterError(f"{at.table()}: give exactly one of the tables [passive] "
-                                 "and [fmu]")
+        given = [kind for kind in TENSIONER_KINDS if getattr(self, kind) is not None]
+        if len(given) != 1:
+            tables = " and ".join(f"[{kind}]" for kind in TENSIONER_KINDS)
+            raise ParameterError(f"{at.table()}: give exactly one of the tables {tables}")
+
+    @property
+    def kind(self) -> str:
+        """The key of :data:`TENSIONER_KINDS` whose table this file holds."""
+        return next(kind for kind in TENSIONER_KINDS if getattr(self, kind) is not None)
 
     @property
     def element(self) -> str:
         """The key of :data:`trackmj.sim.registry.ELEMENTS` this file makes."""
-        return "fmu" if self.fmu is not None else "passive"
+        return TENSIONER_KINDS[self.kind].element
+
+    def identity(self) -> str:
+        """What determines a run with this file: every validated table (all kinds, so a
+        new kind cannot drop out) and the SHA-256 of each file its kind reads."""
+        tables = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.compare
+                  and f.name != "sources"}
+        text = repr(tables)
+        if self.file is not None:
+            folder = self.file.parent
+            for path in TENSIONER_KINDS[self.kind].files(getattr(self, self.kind), folder):
+                text += file_sha256(path)
+        return text
 
     @property
     def name(self) -> str:
@@ -167,18 +219,9 @@ def load_tensioner(path: str | Path) -> TensionerFile:
     path = Path(path)
     tensioner = load_file(TensionerFile, path, require_source=True)
     object.__setattr__(tensioner, "file", path)
-    if tensioner.fmu is not None:
-        description = check_fmu(tensioner.fmu, path.parent,
-                                Location(file=path.name, path=("fmu",)))
+    kind = TENSIONER_KINDS[tensioner.kind]
+    if kind.check is not None:
+        description = kind.check(getattr(tensioner, tensioner.kind), path.parent,
+                                 Location(file=path.name, path=(tensioner.kind,)))
         object.__setattr__(tensioner, "description", description)
     return tensioner
-
-
-def check_fmu(table: FmuTable, base: Path, at: Location) -> FmuDescription:
-    """Check a tensioner file's ``[fmu]`` table against its FMU (``path`` relative to
-    ``base``, the file's folder): the mapped variables exist with the port's kinds."""
-    real = ("real",)
-    input_kinds = {q: real for q in FMU_INPUTS} | {"valve_mode": ("real", "int")}
-    output_kinds = {q: real for q in FMU_OUTPUTS}
-    return describe((base / table.path).resolve(), table.interface, at, table.inputs,
-                    table.outputs, table.parameters, input_kinds, output_kinds)

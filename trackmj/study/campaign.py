@@ -117,14 +117,6 @@ def _file_hash(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def tensioner_identity(tensioner: Any) -> str:
-    """A tensioner file's validated content and, for an FMU, the SHA-256 of the FMU file."""
-    text = repr((tensioner.passive, tensioner.fmu))
-    if tensioner.description is not None:
-        text += _file_hash(tensioner.description.path)
-    return text
-
-
 def identity(setup: Any) -> dict[str, Any]:
     """Everything that determines the run of ``setup`` (a :class:`trackmj.sim.setup.RunSetup`)
     as a JSON-ready mapping; see the module docstring. ``source`` is :func:`source_hash`."""
@@ -137,7 +129,7 @@ def identity(setup: Any) -> dict[str, Any]:
         "hydraulics": repr(setup.hydraulics), "control": repr(setup.control),
         "scenario": scenario, "machine_files": machine_files_hash(), "source": source_hash()}
     if setup.tensioner is not None:
-        ident["tensioner"] = tensioner_identity(setup.tensioner)
+        ident["tensioner"] = setup.tensioner.identity()
     from trackmj.machines.assembly import DEFAULT_MACHINE
 
     machine = getattr(setup, "machine", None)
