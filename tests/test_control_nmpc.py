@@ -80,9 +80,10 @@ def test_controller_period_must_be_multiple_of_step() -> None:
 
 
 def test_online_stiffness_update_is_used_by_the_prediction() -> None:
-    """An NMPC built on k = 1e6 N/m and told the identified 9.4e6 online must, at the 9.4e6
-    rest state for 15 kN, plan hold and predict the stroke staying put (with k = 1e6 the
-    spring would be ~13 kN short there and the predicted idler would run out by mm)."""
+    """An NMPC built on k = 1e6 N/m and told the identified stiffness (4.40e6 N/m) online
+    must, at its rest state for 15 kN, plan hold and predict the stroke staying put (with
+    k = 1e6 the spring would be ~12 kN short there and the predicted idler would run out by
+    mm)."""
     soft = PLANT.replace(stiffness_N_m=1e6)
     x = ReducedModel(PLANT).equilibrium(15e3)
     ref = np.full(CFG.mpc.horizon_steps + 1, 15e3)

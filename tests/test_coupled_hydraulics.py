@@ -1,4 +1,4 @@
-"""Hydraulic plugin strongly coupled to the MuJoCo track (issue 3's coupled checks)."""
+"""Hydraulic plugin strongly coupled to the MuJoCo track (the coupled checks)."""
 
 from __future__ import annotations
 

@@ -61,7 +61,7 @@ architecture, controller, estimator, seed, duration, tensioner and FMU file hash
 hash of trackmj's source); a changed file or a changed code changes it. Rows of runs the
 current spec does not ask for are kept. A ``duration_s`` that would cut off a scenario's
 step, ramp, pulse or drop moves the events the spec does not set itself inside the run
-(:func:`trackmj.scenarios.schema.moved_events`). Figures are drawn for the metrics that vary
+(:func:`trackmj.scenarios.events.moved_events`). Figures are drawn for the metrics that vary
 across the runs, once: a resumed sweep that makes no run keeps the figures there are.
 """
 
@@ -152,7 +152,7 @@ class SweepTable(Parameters):
     """The ``[sweep]`` table (see the module docstring)."""
 
     scenario: str | None = param(max_len=4096, default=None,
-                                 doc="a built-in scenario (W1..W5) or a scenario file")
+                                 doc="a built-in scenario (W1-W5, NL1) or a scenario file")
     scenarios: tuple[str, ...] | None = param(max_len=4096, default=None,
                                               doc="several scenarios (instead of scenario)")
     duration_s: float | None = param(1e-3, 3600.0, default=None,
@@ -250,7 +250,7 @@ class SweepSpec:
 
 
 def _builtin_scenarios() -> tuple[str, ...]:
-    from trackmj.scenarios.schema import BUILTIN
+    from trackmj.scenarios.load import BUILTIN
 
     return BUILTIN
 
@@ -379,8 +379,9 @@ def plan(spec: SweepSpec) -> list[PlannedRun]:
     :func:`trackmj.sim.setup.prepare` (the same checks as ``trackmj run``); ParameterError
     naming the spec and the run if one is invalid, before anything runs. A duration that
     would cut off one of a scenario's events moves the events inside the run
-    (:func:`trackmj.scenarios.schema.moved_events`); the moves are fixed overrides of the run."""
-    from trackmj.scenarios.schema import load_scenario, moved_events
+    (:func:`trackmj.scenarios.events.moved_events`); the moves are fixed overrides of the run."""
+    from trackmj.scenarios.events import moved_events
+    from trackmj.scenarios.load import load_scenario
     from trackmj.sim.setup import prepare
     from trackmj.study.executor import RunSpec, overrides_tuple
 
