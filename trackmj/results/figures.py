@@ -32,13 +32,10 @@ import numpy as np
 from matplotlib.axes import Axes
 
 from trackmj.io import write_bytes_atomic
-from trackmj.results.metrics import (
-    ENERGY_TOTALS,
-    METRIC_DISPLAY,
-    MetricWindows,
-    energy_terms,
-    lowpass,
-)
+from trackmj.results.energy_terms import ENERGY_TOTALS, energy_terms
+from trackmj.results.metric_windows import MetricWindows
+from trackmj.results.metrics import METRIC_DISPLAY
+from trackmj.results.signals import lowpass
 from trackmj.results.store import Result
 from trackmj.study.campaign import column_unit, mean_std
 
@@ -692,7 +689,7 @@ def _save_figure(fig: Any, path: Path) -> Path:
 
 def scenario_order(name: str) -> tuple[int, str]:
     """Built-in scenarios in their order (W1-W5, NL1), then the others by name."""
-    from trackmj.scenarios.schema import BUILTIN
+    from trackmj.scenarios.load import BUILTIN
 
     return (BUILTIN.index(name), "") if name in BUILTIN else (len(BUILTIN), name)
 
