@@ -8,32 +8,38 @@ import math
 import pytest
 from synthetic import energy_table, synthetic_result
 
-from trackmj.cli.main import _summary_table, main
+from trackmj.cli.main import main
+from trackmj.cli.summary import summary_table
 from trackmj.results.store import read_result
+from trackmj.scenarios.load import load_scenario
 from trackmj.study import report as R
+from trackmj.study import report_markdown as M
+from trackmj.study import report_stats as S
+from trackmj.study import report_verdicts as V
+from trackmj.study.campaign import RUNS
 
 
 def test_verdict_on_reductions_follows_its_rules() -> None:
-    assert R.verdict_reduction([14.0, 15.0, 16.0], 12.0, 17.0)[0] == "supported"
-    assert R.verdict_reduction([3.0, 4.0, 5.0], 12.0, 17.0)[0] == "direction only"
-    assert R.verdict_reduction([8.0], 12.0, 17.0)[0] == "supported"   # within 5 points
-    assert R.verdict_reduction([-20.0, -30.0], 12.0, 17.0)[0] == "contradicted"
-    assert R.verdict_reduction([-20.0, 30.0], 12.0, 17.0)[0] == "inconclusive"
-    assert R.verdict_reduction([0.2, -0.4], 12.0, 17.0)[0] == "no difference"
-    assert R.verdict_reduction([math.nan], 12.0, 17.0)[0] == "not measured"
+    assert V.verdict_reduction([14.0, 15.0, 16.0], 12.0, 17.0)[0] == "supported"
+    assert V.verdict_reduction([3.0, 4.0, 5.0], 12.0, 17.0)[0] == "direction only"
+    assert V.verdict_reduction([8.0], 12.0, 17.0)[0] == "supported"   # within 5 points
+    assert V.verdict_reduction([-20.0, -30.0], 12.0, 17.0)[0] == "contradicted"
+    assert V.verdict_reduction([-20.0, 30.0], 12.0, 17.0)[0] == "inconclusive"
+    assert V.verdict_reduction([0.2, -0.4], 12.0, 17.0)[0] == "no difference"
+    assert V.verdict_reduction([math.nan], 12.0, 17.0)[0] == "not measured"
     # a wide spread widens the tolerance: mean 30 +- 10, range 50 within 2 std
-    assert R.verdict_reduction([20.0, 40.0], 50.0, 50.0)[0] == "supported"
+    assert V.verdict_reduction([20.0, 40.0], 50.0, 50.0)[0] == "supported"
 
 
 def test_verdict_on_magnitudes_and_paired_reductions() -> None:
-    assert R.verdict_magnitude([420.0, 500.0], 420.0, 1e-3, "kN")[0] == "agrees"
-    verdict, text = R.verdict_magnitude([900.0, 940.0], 420.0, 1e-3, "kN")
+    assert V.verdict_magnitude([420.0, 500.0], 420.0, 1e-3, "kN")[0] == "agrees"
+    verdict, text = V.verdict_magnitude([900.0, 940.0], 420.0, 1e-3, "kN")
     assert verdict == "differs" and "×2.19" in text
-    assert R.verdict_magnitude([math.nan], 420.0, 1e-3, "kN")[0] == "not measured"
-    assert R.reductions({0: 50.0, 1: 80.0, 2: 1.0}, {0: 100.0, 1: 100.0}) == pytest.approx(
+    assert V.verdict_magnitude([math.nan], 420.0, 1e-3, "kN")[0] == "not measured"
+    assert S.reductions({0: 50.0, 1: 80.0, 2: 1.0}, {0: 100.0, 1: 100.0}) == pytest.approx(
         [50.0, 20.0])
-    assert R.lower_by([-50.0]) == "TP higher by 50 %" and R.lower_by([5.0]) == "TP lower by 5.0 %"
-    assert R.mean_std([1.0, 3.0, math.nan]) == "2 ± 1 (1 of 3 undefined)"
+    assert S.lower_by([-50.0]) == "TP higher by 50 %" and S.lower_by([5.0]) == "TP lower by 5.0 %"
+    assert S.mean_std([1.0, 3.0, math.nan]) == "2 ± 1 (1 of 3 undefined)"
 
 
 def _w1_runs(seeds=(0, 1)) -> list:
@@ -103,7 +109,7 @@ def test_report_resumes_done_runs_and_reruns_others(tmp_path) -> None:
     ex = _SyntheticExecutor()
     first = R.run_matrix(runs, tmp_path, progress=False, executor=ex)
     assert (first.resumed, len(first.results), len(ex.ran)) == (0, 3, 3)
-    assert sorted(p.name for p in (tmp_path / R.RUNS).iterdir() if not p.name.startswith(".")) \
+    assert sorted(p.name for p in (tmp_path / RUNS).iterdir() if not p.name.startswith(".")) \
         == ["W1-dp-a-nmpc-nominal-s0", "W1-dp-b-nmpc-nominal-s0", "W1-tp-nmpc-nominal-s0"]
     done = R.run_matrix(runs, tmp_path, progress=False, executor=ex)
     assert (done.resumed, len(done.results), len(ex.ran)) == (3, 3, 3)
@@ -112,10 +118,24 @@ def test_report_resumes_done_runs_and_reruns_others(tmp_path) -> None:
     assert (longer.resumed, len(ex.ran)) == (0, 4)
 
 
+def test_a_registered_baseline_controller_joins_the_report_plan(monkeypatch) -> None:
+    """A new baseline is its registry entry alone: registered with ``baseline=True``, the
+    report's default plan runs it on the reference architecture in W1 beside lmpc and pid."""
+    from trackmj.sim import controllers, registry
+    from trackmj.sim.entries import Entry
+
+    monkeypatch.setitem(controllers.CONTROLLERS, "bang", Entry(
+        "a bang-bang test controller", lambda model, cfg: None, baseline=True))
+    runs = R.plan(["W1"], [0], 6.0, archs=(registry.REFERENCE_ARCHITECTURE,))
+    assert [(r.spec.architecture, r.spec.controller) for r in runs] == [
+        (registry.REFERENCE_ARCHITECTURE, c) for c in ("nmpc", "lmpc", "pid", "bang")]
+    assert runs[-1].name == f"W1-{registry.REFERENCE_ARCHITECTURE}-bang-nominal-s0"
+
+
 def test_summary_table_names_views_and_says_when_nothing_settled() -> None:
     settled = synthetic_result("W1", "tp", ripple_N=100.0)
     ringing = synthetic_result("W1", "tp", ripple_N=100.0, offset_N=2000.0)
-    table = _summary_table([settled, ringing], "{r.architecture}")
+    table = summary_table([settled, ringing], "{r.architecture}")
     rows = {line.split(" | ")[0].strip("| "): line for line in table.splitlines()}
     assert "tension RMSE, low-pass [kN]" in rows and "tension RMSE, raw [kN]" in rows
     settle = rows["settling time, low-pass [s]"].split(" | ")
@@ -154,14 +174,14 @@ def test_every_claim_is_answered_on_a_synthetic_matrix(tmp_path, monkeypatch) ->
     with a verdict, W2's body acceleration is compared with dp-b only (dp-a has no chassis),
     and a condition with no recovery says why. Figures are drawn by test_figures."""
     for name in ("overlay_figure", "psd_figure", "run_figure"):
-        monkeypatch.setattr(R, name, lambda results, path, **kw: path)
+        monkeypatch.setattr(M, name, lambda results, path, **kw: path)
     drawn = {}
-    monkeypatch.setattr(R, "variants_figure",
+    monkeypatch.setattr(M, "variants_figure",
                         lambda variants, series, path, **kw: drawn.update(series) or path)
     runs = _w1_runs(seeds=(0,))
     durations = {"W2": 6.0, "W3": 22.0, "W4": 22.0, "W5": 6.0}
     for scenario, duration in durations.items():
-        variants = [v.name for v in R.load_scenario(scenario).variants]
+        variants = [v.name for v in load_scenario(scenario).variants]
         for variant in variants:
             runs += [synthetic_result(scenario, "tp", variant=variant, duration_s=duration,
                                       energy=energy_table()),

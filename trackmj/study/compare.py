@@ -13,13 +13,17 @@ from typing import Any
 
 from trackmj.host import machine
 from trackmj.io import write_text_atomic
+from trackmj.results.comparison import prediction_vs_tp
 from trackmj.results.figures import overlay_figure, psd_figure, run_figure, windows_of
-from trackmj.results.metrics import METRIC_DISPLAY, lookup, prediction_vs_tp
+from trackmj.results.metrics import METRIC_DISPLAY, lookup
 from trackmj.results.store import Result
 from trackmj.results.store import _json_ready as jsonable  # the one JSON form of metrics
+from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 from trackmj.study.campaign import Store, check_campaign_dir, plan_run, run_campaign
 from trackmj.study.executor import RunSpec
-from trackmj.study.report import PREDICTION_METRICS, mean_std, tensioner_for
+from trackmj.study.report_cases import tensioner_for
+from trackmj.study.report_markdown import PREDICTION_METRICS
+from trackmj.study.report_stats import mean_std
 
 COMPARE = "compare.json"
 SCALAR_SKIP = ("psd", "evaluation")
@@ -47,8 +51,6 @@ def compare(base: Mapping[str, Any], controllers: Sequence[str], out_dir: str | 
     architecture, controller and seed), a campaign of kind ``compare``
     (:mod:`trackmj.study.campaign`): each run is written to ``OUT/<arch>-<controller>/`` (the run
     contract plus its figure) as it finishes; a run already done there is read back."""
-    from trackmj.sim.registry import ARCHITECTURES
-
     fields = {k: v for k, v in base.items() if k != "tensioner"}
     specs = [RunSpec(**fields, architecture=a, controller=c, seed=seed,
                      tensioner=tensioner_for(a, base.get("tensioner")))
@@ -62,7 +64,8 @@ def compare(base: Mapping[str, Any], controllers: Sequence[str], out_dir: str | 
     failed = [(o.spec, o.error or "failed") for o in made.failed]
     predictions: dict[str, dict[str, dict[str, Any]]] = {}
     for c in controllers:
-        tp = next((r for r in results if r.controller == c and r.architecture == "tp"), None)
+        tp = next((r for r in results if r.controller == c
+                   and r.architecture == REFERENCE_ARCHITECTURE), None)
         if tp is None:
             continue
         predictions[c] = {r.architecture: prediction_vs_tp(r.columns(), r.metrics, tp.columns(),
@@ -115,8 +118,8 @@ def write_compare(run: CompareRun, out_dir: str | Path, scenario: Any,
     lines = [f"# {scenario.name}: {scenario.title}", "",
              f"seed {doc['seed']}, duration {duration_s:g} s, {machine()}", ""]
     for c, preds in run.predictions.items():
-        reduced = [a for a in preds if a != "tp"]
-        lines += [f"Prediction error against tp ({c}, same seed):", "",
+        reduced = [a for a in preds if a != REFERENCE_ARCHITECTURE]
+        lines += [f"Prediction error against {REFERENCE_ARCHITECTURE} ({c}, same seed):", "",
                   "| metric | " + " | ".join(reduced) + " |", "|---|" + "---|" * len(reduced)]
         for key in PREDICTION_METRICS:
             label, scale, unit = METRIC_DISPLAY[key]
