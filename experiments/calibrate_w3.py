@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 
 from trackmj.host import machine
-from trackmj.scenarios.schema import load_scenario
+from trackmj.scenarios.load import load_scenario
 from trackmj.study.w3_hitch import calibrate_hitch
 
 

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import shutil
 
 import numpy as np
 import pytest
 
-from trackmj.scenarios.schema import NOMINAL, load_scenario, scenario_path
+from trackmj.scenarios import load
+from trackmj.scenarios.load import BUILTIN, builtin_names, load_scenario, scenario_path
+from trackmj.scenarios.schema import NOMINAL
 from trackmj.track.terrain import band_rms_m
 from trackmj.validator import ParameterError, parse_overrides
 
@@ -20,6 +23,29 @@ def test_builtin_scenarios_load_with_defaults(name: str) -> None:
     assert (s.controller, s.estimator) == ("nmpc", "ekf")
     assert (s.limits.force_min_N, s.limits.force_max_N) == (10e3, 20e3)
     assert s.supply.model is None    # the hydraulic file's default supply model
+
+
+def test_builtin_scenarios_are_the_scenario_files_of_the_experiments_folder() -> None:
+    """Found by glob: the study's conditions in number order, then NL1; controllers.toml
+    (a sweep spec, no [scenario] table) is not one."""
+    assert BUILTIN == builtin_names() == ("W1", "W2", "W3", "W4", "W5", "NL1")
+    assert (load.BUILTIN_FOLDER / "controllers.toml").is_file()
+    with pytest.raises(ParameterError, match="built-in scenarios: W1, W2, W3, W4, W5, NL1"):
+        scenario_path("controllers")
+
+
+def test_a_scenario_file_dropped_into_the_folder_is_found_by_name(tmp_path, monkeypatch) -> None:
+    """Adding a built-in scenario is adding its file: no list to edit."""
+    folder = tmp_path / "experiments"
+    shutil.copytree(load.BUILTIN_FOLDER, folder, ignore=shutil.ignore_patterns("__pycache__"))
+    text = (folder / "W1.toml").read_text()
+    for name in ("X7", "W10", "NL2"):
+        (folder / f"{name}.toml").write_text(text.replace('name = "W1"', f'name = "{name}"'))
+    monkeypatch.setattr(load, "BUILTIN_FOLDER", folder)
+    assert builtin_names() == ("W1", "W2", "W3", "W4", "W5", "W10", "NL1", "NL2", "X7")
+    s = load_scenario("x7")
+    assert (s.name, s.source) == ("X7", folder / "X7.toml")
+    assert s.reference_N(5.0) == load_scenario("W1").reference_N(5.0)
 
 
 def test_w1_reference_step_and_ramp() -> None:

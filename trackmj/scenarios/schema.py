@@ -1,11 +1,7 @@
-"""Operating conditions as frozen dataclasses loaded from TOML: the study's W1-W5 and NL1
-(added: large tension steps at a reduced supply, where the nonlinearity binds).
-
-``load_scenario("W1")`` reads ``experiments/W1.toml`` from the installed package
-``trackmj.experiments``; any other argument is a path to a custom file. The file is read by
-the one validator (:mod:`trackmj.validator`) into :class:`ScenarioFile`, whose tables mirror
-the file; invalid files raise :class:`~trackmj.validator.ParameterError` naming the file, the
-table, the key, the value and the allowed range or choices, before anything is built.
+"""The scenario file's tables: frozen dataclasses read by the one validator
+(:mod:`trackmj.validator`) into :class:`ScenarioFile`, whose tables mirror the file. Invalid
+files raise :class:`~trackmj.validator.ParameterError` naming the file, the table, the key,
+the value and the allowed range or choices, before anything is built.
 The supply hardware and its nominal set-point are the hydraulic file's
 (``models/lf1352_hydraulics.toml`` [supply]); a scenario chooses the supply model and
 prescribes set-point changes (docs/sizing.md says what a drop means for each model).
@@ -31,14 +27,13 @@ them)::
                   pretension_scale (each scale optional, default 1: a variant names only
                   what it changes; if variants are listed one must be "nominal")
     [limits]      force_min_N, force_max_N (each optional: the machine's band)
+    [evaluation]  start_s, steady_start_s, settle_band_rel, min_hold_s, lowpass_cutoff_Hz,
+                  tooth_band_rel, body_mode_band_Hz, psd_resolution_Hz, psd_max_Hz
 
 A force is absolute (``*_N``) or relative to the machine's nominal tension (``*_rel``, the
 mechanics file's ``[tensioner].nominal_tension_N``, else its preload); a drop pressure
-absolute or relative to the hydraulic file's set-point; exactly one of each pair.
-:func:`load_scenario` resolves them for the machine it is given (default the packaged one),
-so a :class:`Scenario` holds absolute values only.
-    [evaluation]  start_s, steady_start_s, settle_band_rel, min_hold_s, lowpass_cutoff_Hz,
-                  tooth_band_rel, body_mode_band_Hz, psd_resolution_Hz, psd_max_Hz
+absolute or relative to the hydraulic file's set-point; exactly one of each pair
+(:mod:`trackmj.scenarios.resolve` makes them absolute for a machine).
 
 Time windows must lie in the run: steps, ramp, drop and pulse starts and the evaluation
 starts before ``duration_s``; each drop's and pulse's edges fit inside its window; drops do
@@ -49,52 +44,24 @@ characters). Tables may carry a ``source`` string; unlike parameter files they n
 
 from __future__ import annotations
 
-import dataclasses
-import functools
 import itertools
 import math
-from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from importlib.resources import files
-from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from trackmj.hydraulics.params import PressureProfile, SupplyModel
+from trackmj.hydraulics.params import SupplyModel
 from trackmj.ports import COUPLING_STEP_S
-from trackmj.results.measured import InputSignal, input_signal
-from trackmj.results.metrics import MetricWindows
-from trackmj.sim.registry import CONTROLLERS, ESTIMATORS, by_name, choices
-from trackmj.track.terrain import ISO8608_GD_N0_M3, RoadProfile, road_profile, taper_start
-from trackmj.validator import (
-    Location,
-    ParameterError,
-    Parameters,
-    build,
-    construct,
-    missing_key,
-    param,
-    read_toml,
-)
+from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
+from trackmj.sim.entries import by_name, choices
+from trackmj.track.terrain import ISO8608_GD_N0_M3
+from trackmj.validator import Location, ParameterError, Parameters, missing_key, param
 
-BUILTIN = ("W1", "W2", "W3", "W4", "W5", "NL1")
-TERRAIN_SEED_SALT = 8608
-"""Terrain RNG = default_rng([seed, 8608]): independent of the noise stream of the same seed."""
 NAME_PATTERN = r"[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 """Scenario and variant names: they become parts of run directory names."""
 REFERENCE_MAX_N = 50e3
 """F_ref must stay within [0, REFERENCE_MAX_N] over the run [N]."""
-ZERO_TRANSITION_S = 1e-6
-"""A set-point drop with transition_s = 0 reaches the HydraulicTensioner as a ramp this long
-ending at the edge [s] (a profile's times are strictly increasing; steps are 1 ms)."""
-
-
-def _edge(t: np.ndarray, t0: float, rise_s: float) -> np.ndarray:
-    """0 before t0, 1 after t0 + rise_s, linear between (a step at t >= t0 if rise_s = 0)."""
-    if rise_s <= 0.0:
-        return (t >= t0).astype(float)
-    return np.clip((t - t0) / rise_s, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -403,8 +370,8 @@ class Limits(Parameters):
 
 @dataclass(frozen=True)
 class Evaluation(Parameters):
-    """How the metrics are measured (:class:`~trackmj.results.metrics.MetricWindows`): tracking
-    metrics from start_s, steady-state metrics and spectra from steady_start_s [s]; the
+    """How the metrics are measured (:class:`~trackmj.results.metric_windows.MetricWindows`):
+    tracking metrics from start_s, steady-state metrics and spectra from steady_start_s [s]; the
     settling band relative to the final value and the minimum hold [s]; the low-pass of the
     ``_lp`` metrics; the named ripple bands; the resolution and extent of the spectra."""
 
@@ -497,14 +464,15 @@ class ScenarioFile(Parameters):
 
 def _check_reference_range(ref: Reference, duration_s: float, at: Location) -> None:
     """F_ref is piecewise linear: its extremes over [0, duration] lie at the breakpoints.
-    A reference relative to the nominal tension is checked once resolved (:class:`Scenario`)."""
+    A reference relative to the nominal tension is checked once resolved
+    (:class:`~trackmj.scenarios.scenario.Scenario`)."""
     if not _is_absolute(ref):
         return
     times = {0.0, duration_s, *(s.time_s for s in ref.steps)}
     times |= {r.start_s for r in ref.ramps} | {r.end_s for r in ref.ramps if r.end_s is not None}
     t = np.array(sorted(x for x in times if x <= duration_s))
     t = np.concatenate([t, t[t > 0.0] - 1e-9])     # just before each step too
-    f = _reference(ref, t)
+    f = reference_signal(ref, t)
     for bad in (f < 0.0, f > REFERENCE_MAX_N):
         if bad.any():
             k = int(np.argmax(bad))
@@ -518,7 +486,9 @@ def _is_absolute(ref: Reference) -> bool:
             and all(r.rate_N_s is not None for r in ref.ramps))
 
 
-def _reference(ref: Reference, t: np.ndarray) -> np.ndarray:
+def reference_signal(ref: Reference, t: np.ndarray) -> np.ndarray:
+    """F_ref(t) [N] of an absolute [reference] table (initial_N + steps + ramps), shape of
+    ``t`` [s]."""
     f = np.full(t.shape, ref.initial_N)
     for s in ref.steps:
         f = f + np.where(t >= s.time_s, s.delta_N, 0.0)
@@ -527,460 +497,3 @@ def _reference(ref: Reference, t: np.ndarray) -> np.ndarray:
         f = f + r.rate_N_s * np.clip(t - r.start_s, 0.0, end - r.start_s)
     return f
 
-
-@dataclass(frozen=True)
-class Scenario:
-    """One operating condition (see the module docstring for the file layout); built by
-    :func:`load_scenario`, checked again on construction (``dataclasses.replace``) by the
-    same checks as the file. ``source`` is the file it was read from."""
-
-    name: str
-    title: str
-    source: Path
-    duration_s: float
-    seeds: tuple[int, ...]
-    controller: str
-    estimator: str
-    track: Track
-    reference: Reference
-    supply: Supply
-    terrain: Terrain
-    load_pulses: tuple[LoadPulse, ...]
-    variants: tuple[Variant, ...]
-    limits: Limits
-    evaluation: Evaluation
-    machines: tuple[str, ...] | None = None
-    machines_reason: str = ""
-    nominal_tension_N: float | None = None
-    """The nominal tension the relative values were resolved with [N] (None: all absolute)."""
-    hitch: Hitch | None = None
-    signals: Mapping[str, InputSignal] = dataclasses.field(init=False, compare=False,
-                                                           repr=False)
-    """The from_file inputs ("reference", "supply", "track", "hitch"), read on construction."""
-
-    def __post_init__(self) -> None:
-        header = construct(Header, Location(label=f"Scenario {self.name!r}", path=("scenario",)),
-                           name=self.name, title=self.title, duration_s=self.duration_s,
-                           seeds=self.seeds, controller=self.controller,
-                           estimator=self.estimator, machines=self.machines,
-                           machines_reason=self.machines_reason)
-        construct(ScenarioFile, Location(label=f"Scenario {self.name!r}"), scenario=header,
-                  track=self.track, reference=self.reference, supply=self.supply,
-                  terrain=self.terrain, limits=self.limits, evaluation=self.evaluation,
-                  load_pulses=self.load_pulses, variants=self.variants, hitch=self.hitch)
-        signals = {}
-        for what, table, suffix in (("reference", self.reference, "N"),
-                                    ("supply", self.supply, "Pa"),
-                                    ("track", self.track, "m_s"), ("hitch", self.hitch, "N")):
-            if table is not None and table.from_file is not None:
-                signals[what] = _input_signal(self.source.parent / table.from_file,
-                                              table.column, suffix, INPUT_NAMES[what])
-        object.__setattr__(self, "signals", signals)
-        self.check_inputs(self.duration_s)
-
-    def check_inputs(self, duration_s: float) -> None:
-        """ParameterError naming the file and column if a from_file input does not cover a
-        run of ``duration_s`` [s] or F_ref from a file leaves [0, 50 kN]."""
-        for what, signal in self.signals.items():
-            signal.check_covers(duration_s, INPUT_NAMES[what])
-        ref = self.signals.get("reference")
-        if ref is not None:
-            keep = ref.t_s <= duration_s + COUPLING_STEP_S
-            bad = (ref.values < 0.0) | (ref.values > REFERENCE_MAX_N)
-            if (bad & keep).any():
-                k = int(np.argmax(bad & keep))
-                raise ParameterError(f"{ref.file} column {ref.column!r} (reference F_ref): "
-                                     f"{ref.values[k]:.6g} N at t = {ref.t_s[k]:.6g} s; it "
-                                     f"must stay in [0, {REFERENCE_MAX_N:g}] N over the run")
-
-    def check_machine(self, machine: str) -> None:
-        """ParameterError (one line, the reason) if the condition does not apply to
-        ``machine`` (a shipped machine's name)."""
-        if self.machines and machine not in self.machines:
-            raise ParameterError(f"{self.source.name}: scenario {self.name} applies to "
-                                 f"{', '.join(self.machines)} only, not {machine}: "
-                                 f"{self.machines_reason}")
-
-    # ------------------------------------------------------------------ signals
-    def reference_N(self, t_s: np.ndarray | float) -> np.ndarray:
-        """F_ref(t) [N], same shape as ``t_s`` (vectorised)."""
-        if "reference" in self.signals:
-            return self.signals["reference"](t_s)
-        return _reference(self.reference, np.asarray(t_s, dtype=float))
-
-    def reference_preview(self, t0_s: float, n: int, dt_s: float) -> np.ndarray:
-        """F_ref at t0 + k·dt for k = 0..n−1 [N], shape (n,) (the controller's preview)."""
-        return self.reference_N(t0_s + dt_s * np.arange(n))
-
-    def supply_setpoint_Pa(self, t_s: np.ndarray | float, nominal_Pa: float) -> np.ndarray:
-        """Supply set-point p_set(t) [Pa]: ``nominal_Pa`` (the hydraulic file's
-        [supply].setpoint_Pa) with the drops applied, shape of t_s (vectorised)."""
-        if "supply" in self.signals:
-            return self.signals["supply"](t_s)
-        t = np.asarray(t_s, dtype=float)
-        p = np.full(t.shape, float(nominal_Pa))
-        for d in self.supply.drops:
-            on = _edge(t, d.start_s, d.transition_s) - _edge(t, d.end_s, d.transition_s)
-            p = p + (d.pressure_Pa - nominal_Pa) * on
-        return p
-
-    def supply_setpoint_profile(self, nominal_Pa: float) -> Callable[[float], float] | None:
-        """:meth:`supply_setpoint_Pa` as a piecewise-linear profile with breakpoints at the
-        drops' edges (a zero transition becomes a 1 µs ramp ending at the edge), the file's
-        signal of a from_file supply, or None without drops (constant ``nominal_Pa``)."""
-        if "supply" in self.signals:
-            signal = self.signals["supply"]
-            return lambda t_s: float(signal(t_s))
-        if not self.supply.drops:
-            return None
-        times = {0.0}
-        for d in self.supply.drops:
-            for edge in (d.start_s, d.end_s):
-                times |= {edge, edge + d.transition_s if d.transition_s > 0.0
-                          else max(edge - ZERO_TRANSITION_S, 0.0)}
-        t = np.array(sorted(times))
-        return PressureProfile(tuple(t.tolist()),
-                               tuple(self.supply_setpoint_Pa(t, nominal_Pa).tolist()))
-
-    def track_speed_m_s(self, t_s: np.ndarray | float) -> np.ndarray:
-        """Commanded track speed [m/s]: linear ramp from 0 over ramp_s, then constant."""
-        if "track" in self.signals:
-            return self.signals["track"](t_s)
-        t = np.asarray(t_s, dtype=float)
-        return self.track.speed_m_s * _edge(t, 0.0, self.track.ramp_s)
-
-    def distance_m(self, duration_s: float) -> float:
-        """Track distance driven in ``duration_s`` [s] [m]."""
-        if "track" in self.signals:
-            t = np.linspace(0.0, duration_s, max(2, round(duration_s / COUPLING_STEP_S) + 1))
-            return float(np.trapezoid(self.track_speed_m_s(t), t))
-        return self.track.speed_m_s * max(duration_s - 0.5 * self.track.ramp_s, 0.0)
-
-    def steady_speed_m_s(self, duration_s: float) -> float:
-        """Mean commanded track speed over the steady window [steady_start_s, duration] [m/s]
-        (the speed of a file's trace there; the constant speed otherwise)."""
-        if "track" not in self.signals:
-            return self.track.speed_m_s
-        t = np.arange(self.evaluation.steady_start_s, duration_s, COUPLING_STEP_S)
-        return float(np.mean(self.track_speed_m_s(t))) if len(t) else 0.0
-
-    def hitch_force_N(self, t_s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-        """Rear-hitch load (pull rearward [N], push down [N]) in the chassis frame that
-        applies the load pulses; each of shape of t_s."""
-        pull = self._pulses(t_s, lambda p: p.hitch_N * math.cos(math.radians(p.pull_angle_deg)))
-        down = self._pulses(t_s, lambda p: p.hitch_N * math.sin(math.radians(p.pull_angle_deg)))
-        if "hitch" in self.signals:
-            load, angle = self.signals["hitch"](t_s), math.radians(self.hitch.pull_angle_deg)
-            pull, down = pull + load * math.cos(angle), down + load * math.sin(angle)
-        return pull, down
-
-    def _pulses(self, t_s: np.ndarray | float,
-                amplitude: Callable[[LoadPulse], float]) -> np.ndarray:
-        t = np.asarray(t_s, dtype=float)
-        f = np.zeros(t.shape)
-        for p in self.load_pulses:
-            f = f + amplitude(p) * (_edge(t, p.start_s, p.rise_s) - _edge(t, p.end_s, p.rise_s))
-        return f
-
-    def terrain_profile(self, seed: int, duration_s: float | None = None) -> RoadProfile | None:
-        """Road profile for ``seed`` (None for flat ground), long enough for the distance
-        driven in ``duration_s`` (default: the scenario's) plus the margin."""
-        tr = self.terrain
-        if tr.kind == "flat":
-            return None
-        duration = self.duration_s if duration_s is None else duration_s
-        distance = self.distance_m(duration)
-        length = distance + tr.margin_m - tr.x_start_m
-        rng = np.random.default_rng([seed, TERRAIN_SEED_SALT])
-        prof = road_profile(length, tr.dx_m, tr.road_class, rng, n_min=tr.n_min_cycles_m,
-                            n_max=tr.n_max_cycles_m, x_start_m=tr.x_start_m)
-        return taper_start(prof, tr.flat_until_m, tr.taper_m)
-
-    def variant(self, name: str) -> Variant:
-        """The variant called ``name``; KeyError listing the available ones."""
-        for v in self.variants:
-            if v.name == name:
-                return v
-        raise KeyError(f"{self.name}: no variant {name!r}; available: "
-                       f"{[v.name for v in self.variants]}")
-
-    def metric_windows(self, duration_s: float | None = None, *,
-                       link_pitch_m: float | None = None) -> MetricWindows:
-        """Windows for :func:`trackmj.results.metrics.compute_metrics`: the first reference step
-        (evaluated until the next step or ramp start), load pulses and supply drops as
-        disturbances, the steady window from steady_start_s to the end, and the
-        ``[evaluation]`` settings. With the track's ``link_pitch_m`` [m] the tooth-passing
-        band v/pitch·(1 ± tooth_band_rel) at the scenario's track speed (a link passes the
-        sprocket every pitch); without it (or standing still) there is none. On an iso8608
-        road the band it excites, speed × [n_min, n_max] cycles/m, is recorded too."""
-        duration = self.duration_s if duration_s is None else duration_s
-        step = None
-        if self.reference.steps:
-            s0 = min(self.reference.steps, key=lambda s: s.time_s)
-            later = [s.time_s for s in self.reference.steps if s.time_s > s0.time_s]
-            later += [r.start_s for r in self.reference.ramps if r.start_s > s0.time_s]
-            t_stop = min([*later, duration])
-            before = float(self.reference_N(s0.time_s - 1e-9))
-            step = (s0.time_s, before, before + s0.delta_N, t_stop)
-        dist = tuple((p.start_s, p.end_s) for p in self.load_pulses)
-        dist += tuple((d.start_s, d.end_s) for d in self.supply.drops)
-        labels = tuple(f"load pulse {p.delta_N / 1e3:+g} kN" for p in self.load_pulses)
-        labels += tuple(f"supply drop to {d.pressure_Pa / 1e6:g} MPa" for d in self.supply.drops)
-        ev, speed = self.evaluation, self.steady_speed_m_s(duration)
-        tooth = None
-        if link_pitch_m is not None and speed > 0.0:
-            f_tooth = speed / link_pitch_m
-            tooth = (f_tooth * (1.0 - ev.tooth_band_rel), f_tooth * (1.0 + ev.tooth_band_rel))
-        road = None
-        if self.terrain.kind == "iso8608":
-            road = (speed * self.terrain.n_min_cycles_m, speed * self.terrain.n_max_cycles_m)
-        return MetricWindows(
-            force_min_N=self.limits.force_min_N, force_max_N=self.limits.force_max_N,
-            evaluation_start_s=ev.start_s, step=step, disturbances=dist,
-            disturbance_labels=labels,
-            steady=(ev.steady_start_s, duration), settle_band_rel=ev.settle_band_rel,
-            min_hold_s=ev.min_hold_s, lowpass_cutoff_Hz=ev.lowpass_cutoff_Hz,
-            body_mode_band_Hz=ev.body_mode_band_Hz, tooth_passing_band_Hz=tooth,
-            road_band_Hz=road, psd_resolution_Hz=ev.psd_resolution_Hz,
-            psd_max_Hz=ev.psd_max_Hz, mean_window_s=ev.mean_window_s,
-            recovery_band_rel=ev.recovery_band_rel, steady_window_s=ev.steady_window_s,
-            reference_events_s=tuple(sorted({*(s.time_s for s in self.reference.steps),
-                                             *(r.start_s for r in self.reference.ramps)})))
-
-
-# ---------------------------------------------------------------------- loading
-
-INPUT_NAMES = {"reference": "reference F_ref", "supply": "supply set-point p_set",
-               "track": "track speed", "hitch": "hitch load"}
-"""What each from_file input is called in messages."""
-
-
-@functools.lru_cache(maxsize=16)
-def _cached_signal(path: Path, mtime_ns: int, column: str | None, suffix: str,
-                   what: str) -> InputSignal:
-    return input_signal(path, column, suffix, what)
-
-
-def _input_signal(path: Path, column: str | None, suffix: str, what: str) -> InputSignal:
-    """The file's input signal, read once per file version."""
-    if not path.is_file():
-        raise ParameterError(f"{what}: from_file {path} not found")
-    return _cached_signal(path.resolve(), path.stat().st_mtime_ns, column, suffix, what)
-
-
-def scenario_path(name_or_path: str | Path) -> Path:
-    """Path of a built-in scenario (``W1``..``W5``, case-insensitive) or of a custom file."""
-    if isinstance(name_or_path, str) and name_or_path.upper() in BUILTIN:
-        return Path(str(files("trackmj.experiments").joinpath(f"{name_or_path.upper()}.toml")))
-    path = Path(name_or_path)
-    if not path.exists():
-        raise ParameterError(f"scenario file not found: {path} (built-in scenarios: "
-                             f"{', '.join(BUILTIN)})")
-    return path
-
-
-TWINS = {"initial_N": "initial_rel", "delta_N": "delta_rel", "rate_N_s": "rate_rel_s",
-         "pressure_Pa": "pressure_rel"}
-"""Absolute keys and their relative twins (exactly one of a pair is given)."""
-
-
-def _drop_twin(data: dict[str, Any], dotted: str) -> None:
-    """An override of one key of a twin pair replaces the other one of the file."""
-    *parents, key = dotted.split(".")
-    twin = TWINS.get(key) or next((a for a, r in TWINS.items() if r == key), None)
-    node: Any = data
-    for part in parents:
-        try:
-            node = node[int(part)] if isinstance(node, list) else node[part]
-        except (KeyError, IndexError, ValueError, TypeError):
-            return
-    if twin is not None and isinstance(node, dict):
-        node.pop(twin, None)
-
-
-def _packaged_nominal() -> tuple[float, float]:
-    """Nominal tension [N] and supply set-point [Pa] of the packaged machine."""
-    from trackmj.hydraulics import load_hydraulic_params
-    from trackmj.track.mechanics import load_model_params
-
-    return (load_model_params().nominal_tension_N,
-            load_hydraulic_params().supply.setpoint_Pa)
-
-
-def _resolve(f: ScenarioFile, nominal_N: float, setpoint_Pa: float) -> ScenarioFile:
-    """``f`` with every relative value made absolute: forces x ``nominal_N``, drop pressures
-    x ``setpoint_Pa``, the [limits] the file leaves out the machine's band."""
-    from trackmj.control.params import BAND_REL
-
-    rep = dataclasses.replace
-
-    def absolute(x: float | None, rel: float | None, scale: float) -> float:
-        return x if rel is None else scale * rel
-
-    ref = f.reference
-    reference = rep(
-        ref, initial_N=absolute(ref.initial_N, ref.initial_rel, nominal_N), initial_rel=None,
-        steps=tuple(rep(s, delta_N=absolute(s.delta_N, s.delta_rel, nominal_N), delta_rel=None)
-                    for s in ref.steps),
-        ramps=tuple(rep(r, rate_N_s=absolute(r.rate_N_s, r.rate_rel_s, nominal_N),
-                        rate_rel_s=None) for r in ref.ramps))
-    supply = rep(f.supply, drops=tuple(
-        rep(d, pressure_Pa=absolute(d.pressure_Pa, d.pressure_rel, setpoint_Pa),
-            pressure_rel=None) for d in f.supply.drops))
-    pulses = tuple(rep(p, delta_N=absolute(p.delta_N, p.delta_rel, nominal_N), delta_rel=None)
-                   for p in f.load_pulses)
-    lim = f.limits
-    limits = Limits(nominal_N * BAND_REL[0] if lim.force_min_N is None else lim.force_min_N,
-                    nominal_N * BAND_REL[1] if lim.force_max_N is None else lim.force_max_N)
-    return rep(f, reference=reference, supply=supply, load_pulses=pulses, limits=limits)
-
-
-def load_scenario(name_or_path: str | Path,
-                  overrides: Mapping[str, Any] | None = None, *,
-                  nominal_tension_N: float | None = None,
-                  supply_setpoint_Pa: float | None = None) -> Scenario:
-    """Load and validate a scenario.
-
-    Parameters
-    ----------
-    name_or_path : str or Path
-        A built-in name (``W1``..``W5``) or a TOML file.
-    overrides : mapping, optional
-        ``{dotted key: value}``, the ``scenario`` entry of
-        :func:`trackmj.validator.parse_overrides` (e.g. ``{"track.speed_m_s": 2.0}``).
-    nominal_tension_N, supply_setpoint_Pa : float, optional
-        The machine's nominal tension [N] and its hydraulic file's supply set-point [Pa]
-        that the relative values (``*_rel`` keys, the [limits] left out) are taken over;
-        default the packaged machine's (lf1352).
-
-    Returns
-    -------
-    Scenario
-        Every value absolute.
-    """
-    path = scenario_path(name_or_path)
-    data = read_toml(path)
-    for key in overrides or {}:
-        _drop_twin(data, str(key))
-    f = build(ScenarioFile, data, file=path.name, overrides=overrides, require_source=False)
-    if nominal_tension_N is None or supply_setpoint_Pa is None:
-        packaged = _packaged_nominal()
-        nominal_tension_N = packaged[0] if nominal_tension_N is None else nominal_tension_N
-        supply_setpoint_Pa = packaged[1] if supply_setpoint_Pa is None else supply_setpoint_Pa
-    try:
-        f = _resolve(f, nominal_tension_N, supply_setpoint_Pa)
-    except ParameterError as exc:   # a resolved value's check names the file
-        raise ParameterError(f"{path.name} (relative values at a nominal tension of "
-                             f"{nominal_tension_N:g} N): {exc}") from None
-    h = f.scenario
-    return Scenario(name=h.name, title=h.title, source=path, duration_s=h.duration_s,
-                    seeds=h.seeds, controller=h.controller, estimator=h.estimator,
-                    track=f.track, reference=f.reference, supply=f.supply, terrain=f.terrain,
-                    load_pulses=f.load_pulses, variants=f.variants or (NOMINAL,),
-                    limits=f.limits, evaluation=f.evaluation, machines=h.machines,
-                    machines_reason=h.machines_reason, nominal_tension_N=nominal_tension_N,
-                    hitch=f.hitch)
-
-
-
-# ----------------------------------------------------------------------------- events
-
-@dataclass(frozen=True)
-class Event:
-    """A scheduled event of a scenario: ``what`` it is (for messages), its keys in the
-    scenario file (``(key, time [s])`` of each of its times, e.g. ``("supply.drops.0.start_s",
-    12.0)``), and the time it needs the run to last to be whole, ``needs_s`` [s] (a step's or
-    ramp's start must lie inside the run; a pulse's or drop's end edge must be over)."""
-
-    what: str
-    times: tuple[tuple[str, float], ...]
-    needs_s: float
-    edge_s: float = 0.0
-
-    def fits(self, duration_s: float) -> bool:
-        """Whether a run of ``duration_s`` [s] holds the whole event."""
-        start = self.times[0][1]
-        return start < duration_s and self.needs_s <= duration_s
-
-
-def events(sc: Scenario) -> list[Event]:
-    """The reference steps and ramps, supply drops and load pulses of ``sc``."""
-    out = [Event(f"[[reference.steps]][{i}] (reference step at {s.time_s:g} s)",
-                 ((f"reference.steps.{i}.time_s", s.time_s),), s.time_s)
-           for i, s in enumerate(sc.reference.steps)]
-    for i, r in enumerate(sc.reference.ramps):
-        times = ((f"reference.ramps.{i}.start_s", r.start_s),)
-        if r.end_s is not None:
-            times += ((f"reference.ramps.{i}.end_s", r.end_s),)
-        out.append(Event(f"[[reference.ramps]][{i}] (reference ramp from {r.start_s:g} s)",
-                         times, r.start_s if r.end_s is None else r.end_s))
-    for i, d in enumerate(sc.supply.drops):
-        out.append(Event(f"[[supply.drops]][{i}] (supply drop {d.start_s:g}-{d.end_s:g} s)",
-                         ((f"supply.drops.{i}.start_s", d.start_s),
-                          (f"supply.drops.{i}.end_s", d.end_s)),
-                         d.end_s + d.transition_s, d.transition_s))
-    for i, p in enumerate(sc.load_pulses):
-        out.append(Event(f"[[load_pulses]][{i}] (load pulse {p.start_s:g}-{p.end_s:g} s)",
-                         ((f"load_pulses.{i}.start_s", p.start_s),
-                          (f"load_pulses.{i}.end_s", p.end_s)), p.end_s + p.rise_s, p.rise_s))
-    return out
-
-
-def cut_events(sc: Scenario, duration_s: float) -> list[Event]:
-    """The events of ``sc`` that its own duration holds whole and a run of ``duration_s``
-    [s] would cut off (start after the end, or end edge not over)."""
-    return [e for e in events(sc) if e.fits(sc.duration_s) and not e.fits(duration_s)]
-
-
-def check_duration(sc: Scenario, duration_s: float) -> None:
-    """ParameterError (one line naming the first event cut off) if a run of ``duration_s``
-    [s] would cut off one of ``sc``'s events; the same rule as the scenario file's, where an
-    event after ``duration_s`` is refused."""
-    cut = cut_events(sc, duration_s)
-    if cut:
-        e = cut[0]
-        more = f" (and {len(cut) - 1} more)" if len(cut) > 1 else ""
-        starts_inside = e.times[0][1] >= e.needs_s     # a step or open ramp: start < duration
-        least = f"more than {e.needs_s:g}" if starts_inside else f"{e.needs_s:g} or more"
-        raise ParameterError(
-            f"--duration {duration_s:g} s cuts off {sc.source.name} {e.what}{more}: it needs "
-            f"the run to last {least} s; give --duration {least}, or move "
-            f"the event with --set scenario.{e.times[0][0]}=...")
-
-
-def moved_events(sc: Scenario, duration_s: float) -> dict[str, float]:
-    """Scenario overrides (``{"reference.steps.0.time_s": t, ...}``) that move every event
-    of ``sc`` into a run of ``duration_s`` [s] if the run would cut one off; {} otherwise.
-
-    The schedule after the evaluation start ``s`` is compressed linearly: a time t >= s
-    becomes s + (t − s)·(duration_s − s)/(D − s), D the scenario's duration, so the events
-    keep their order and their share of the run; earlier times stay. Edges (a pulse's rise,
-    a drop's transition) keep their length where the window holds it, else shrink by the
-    same factor. Moved times are rounded to the 1 ms coupling step."""
-    if not cut_events(sc, duration_s):
-        return {}
-    s = sc.evaluation.start_s
-    factor = (duration_s - s) / (sc.duration_s - s)
-
-    def move(t: float) -> float:
-        return t if t < s else s + (t - s) * factor
-
-    out: dict[str, float] = {}
-    for e in events(sc):
-        moved = [(key, move(t)) for key, t in e.times]
-        out |= {key: round(t, 3) for key, t in moved}   # on the 1 ms coupling grid
-        if e.edge_s and len(moved) == 2:
-            if e.edge_s > moved[1][1] - moved[0][1]:   # the window's own check
-                kind = "transition_s" if "drops" in moved[0][0] else "rise_s"
-                out[moved[0][0].rsplit(".", 1)[0] + "." + kind] = round(e.edge_s * factor, 3)
-    return out
-
-
-def describe_moves(sc: Scenario, moves: Mapping[str, float]) -> str:
-    """One line saying where ``moves`` (from :func:`moved_events`) put the events of ``sc``."""
-    parts = []
-    for e in events(sc):
-        new = [f"{moves[k]:.3g}" for k, _ in e.times if k in moves]
-        if new:
-            parts.append(f"{e.what.split('(', 1)[1].rstrip(')')} -> {'-'.join(new)} s")
-    return "; ".join(parts)

@@ -1,0 +1,293 @@
+"""The resolved operating condition :class:`Scenario` (absolute values only, built by
+:func:`~trackmj.scenarios.load.load_scenario`) and its evaluation: the time signals F_ref,
+supply set-point, track speed and hitch load, the road profile of a seed and the windows
+the metrics are measured in. Units are SI: s, N, Pa, m/s."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from trackmj.hydraulics.params import PressureProfile
+from trackmj.ports import COUPLING_STEP_S
+from trackmj.results.measured import InputSignal
+from trackmj.results.metric_windows import MetricWindows
+from trackmj.scenarios.inputs import INPUT_NAMES, read_inputs
+from trackmj.scenarios.schema import (
+    REFERENCE_MAX_N,
+    Evaluation,
+    Header,
+    Hitch,
+    Limits,
+    LoadPulse,
+    Reference,
+    ScenarioFile,
+    Supply,
+    Terrain,
+    Track,
+    Variant,
+    reference_signal,
+)
+from trackmj.track.terrain import RoadProfile, road_profile, taper_start
+from trackmj.validator import Location, ParameterError, construct
+
+TERRAIN_SEED_SALT = 8608
+"""Terrain RNG = default_rng([seed, 8608]): independent of the noise stream of the same seed."""
+ZERO_TRANSITION_S = 1e-6
+"""A set-point drop with transition_s = 0 reaches the HydraulicTensioner as a ramp this long
+ending at the edge [s] (a profile's times are strictly increasing; steps are 1 ms)."""
+
+
+def _edge(t: np.ndarray, t0: float, rise_s: float) -> np.ndarray:
+    """0 before t0, 1 after t0 + rise_s, linear between (a step at t >= t0 if rise_s = 0)."""
+    if rise_s <= 0.0:
+        return (t >= t0).astype(float)
+    return np.clip((t - t0) / rise_s, 0.0, 1.0)
+
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One operating condition (the file layout: :mod:`trackmj.scenarios.schema`); built by
+    :func:`~trackmj.scenarios.load.load_scenario`, checked again on construction
+    (``dataclasses.replace``) by the same checks as the file. ``source`` is the file it was
+    read from."""
+
+    name: str
+    title: str
+    source: Path
+    duration_s: float
+    seeds: tuple[int, ...]
+    controller: str
+    estimator: str
+    track: Track
+    reference: Reference
+    supply: Supply
+    terrain: Terrain
+    load_pulses: tuple[LoadPulse, ...]
+    variants: tuple[Variant, ...]
+    limits: Limits
+    evaluation: Evaluation
+    machines: tuple[str, ...] | None = None
+    machines_reason: str = ""
+    nominal_tension_N: float | None = None
+    """The nominal tension the relative values were resolved with [N] (None: all absolute)."""
+    hitch: Hitch | None = None
+    signals: Mapping[str, InputSignal] = dataclasses.field(init=False, compare=False,
+                                                           repr=False)
+    """The from_file inputs ("reference", "supply", "track", "hitch"), read on construction."""
+
+    def __post_init__(self) -> None:
+        self._check_tables()
+        object.__setattr__(self, "signals", read_inputs(self.source.parent, {
+            "reference": self.reference, "supply": self.supply, "track": self.track,
+            "hitch": self.hitch}))
+        self.check_inputs(self.duration_s)
+
+    def _check_tables(self) -> None:
+        """The file's checks on the tables as held (ParameterError naming the scenario)."""
+        header = construct(Header, Location(label=f"Scenario {self.name!r}", path=("scenario",)),
+                           name=self.name, title=self.title, duration_s=self.duration_s,
+                           seeds=self.seeds, controller=self.controller,
+                           estimator=self.estimator, machines=self.machines,
+                           machines_reason=self.machines_reason)
+        construct(ScenarioFile, Location(label=f"Scenario {self.name!r}"), scenario=header,
+                  track=self.track, reference=self.reference, supply=self.supply,
+                  terrain=self.terrain, limits=self.limits, evaluation=self.evaluation,
+                  load_pulses=self.load_pulses, variants=self.variants, hitch=self.hitch)
+
+    def check_inputs(self, duration_s: float) -> None:
+        """ParameterError naming the file and column if a from_file input does not cover a
+        run of ``duration_s`` [s] or F_ref from a file leaves [0, 50 kN]."""
+        for what, signal in self.signals.items():
+            signal.check_covers(duration_s, INPUT_NAMES[what])
+        ref = self.signals.get("reference")
+        if ref is not None:
+            keep = ref.t_s <= duration_s + COUPLING_STEP_S
+            bad = (ref.values < 0.0) | (ref.values > REFERENCE_MAX_N)
+            if (bad & keep).any():
+                k = int(np.argmax(bad & keep))
+                raise ParameterError(f"{ref.file} column {ref.column!r} (reference F_ref): "
+                                     f"{ref.values[k]:.6g} N at t = {ref.t_s[k]:.6g} s; it "
+                                     f"must stay in [0, {REFERENCE_MAX_N:g}] N over the run")
+
+    def check_machine(self, machine: str) -> None:
+        """ParameterError (one line, the reason) if the condition does not apply to
+        ``machine`` (a shipped machine's name)."""
+        if self.machines and machine not in self.machines:
+            raise ParameterError(f"{self.source.name}: scenario {self.name} applies to "
+                                 f"{', '.join(self.machines)} only, not {machine}: "
+                                 f"{self.machines_reason}")
+
+    # ------------------------------------------------------------------ signals
+    def reference_N(self, t_s: np.ndarray | float) -> np.ndarray:
+        """F_ref(t) [N], same shape as ``t_s`` (vectorised)."""
+        if "reference" in self.signals:
+            return self.signals["reference"](t_s)
+        return reference_signal(self.reference, np.asarray(t_s, dtype=float))
+
+    def reference_preview(self, t0_s: float, n: int, dt_s: float) -> np.ndarray:
+        """F_ref at t0 + k·dt for k = 0..n−1 [N], shape (n,) (the controller's preview)."""
+        return self.reference_N(t0_s + dt_s * np.arange(n))
+
+    def supply_setpoint_Pa(self, t_s: np.ndarray | float, nominal_Pa: float) -> np.ndarray:
+        """Supply set-point p_set(t) [Pa]: ``nominal_Pa`` (the hydraulic file's
+        [supply].setpoint_Pa) with the drops applied, shape of t_s (vectorised)."""
+        if "supply" in self.signals:
+            return self.signals["supply"](t_s)
+        t = np.asarray(t_s, dtype=float)
+        p = np.full(t.shape, float(nominal_Pa))
+        for d in self.supply.drops:
+            on = _edge(t, d.start_s, d.transition_s) - _edge(t, d.end_s, d.transition_s)
+            p = p + (d.pressure_Pa - nominal_Pa) * on
+        return p
+
+    def supply_setpoint_profile(self, nominal_Pa: float) -> Callable[[float], float] | None:
+        """:meth:`supply_setpoint_Pa` as a piecewise-linear profile with breakpoints at the
+        drops' edges (a zero transition becomes a 1 µs ramp ending at the edge), the file's
+        signal of a from_file supply, or None without drops (constant ``nominal_Pa``)."""
+        if "supply" in self.signals:
+            signal = self.signals["supply"]
+            return lambda t_s: float(signal(t_s))
+        if not self.supply.drops:
+            return None
+        times = {0.0}
+        for d in self.supply.drops:
+            for edge in (d.start_s, d.end_s):
+                times |= {edge, edge + d.transition_s if d.transition_s > 0.0
+                          else max(edge - ZERO_TRANSITION_S, 0.0)}
+        t = np.array(sorted(times))
+        return PressureProfile(tuple(t.tolist()),
+                               tuple(self.supply_setpoint_Pa(t, nominal_Pa).tolist()))
+
+    def track_speed_m_s(self, t_s: np.ndarray | float) -> np.ndarray:
+        """Commanded track speed [m/s]: linear ramp from 0 over ramp_s, then constant."""
+        if "track" in self.signals:
+            return self.signals["track"](t_s)
+        t = np.asarray(t_s, dtype=float)
+        return self.track.speed_m_s * _edge(t, 0.0, self.track.ramp_s)
+
+    def distance_m(self, duration_s: float) -> float:
+        """Track distance driven in ``duration_s`` [s] [m]."""
+        if "track" in self.signals:
+            t = np.linspace(0.0, duration_s, max(2, round(duration_s / COUPLING_STEP_S) + 1))
+            return float(np.trapezoid(self.track_speed_m_s(t), t))
+        return self.track.speed_m_s * max(duration_s - 0.5 * self.track.ramp_s, 0.0)
+
+    def steady_speed_m_s(self, duration_s: float) -> float:
+        """Mean commanded track speed over the steady window [steady_start_s, duration] [m/s]
+        (the speed of a file's trace there; the constant speed otherwise)."""
+        if "track" not in self.signals:
+            return self.track.speed_m_s
+        t = np.arange(self.evaluation.steady_start_s, duration_s, COUPLING_STEP_S)
+        return float(np.mean(self.track_speed_m_s(t))) if len(t) else 0.0
+
+    def hitch_force_N(self, t_s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """Rear-hitch load (pull rearward [N], push down [N]) in the chassis frame that
+        applies the load pulses; each of shape of t_s."""
+        pull = self._pulses(t_s, lambda p: p.hitch_N * math.cos(math.radians(p.pull_angle_deg)))
+        down = self._pulses(t_s, lambda p: p.hitch_N * math.sin(math.radians(p.pull_angle_deg)))
+        if "hitch" in self.signals:
+            load, angle = self.signals["hitch"](t_s), math.radians(self.hitch.pull_angle_deg)
+            pull, down = pull + load * math.cos(angle), down + load * math.sin(angle)
+        return pull, down
+
+    def _pulses(self, t_s: np.ndarray | float,
+                amplitude: Callable[[LoadPulse], float]) -> np.ndarray:
+        t = np.asarray(t_s, dtype=float)
+        f = np.zeros(t.shape)
+        for p in self.load_pulses:
+            f = f + amplitude(p) * (_edge(t, p.start_s, p.rise_s) - _edge(t, p.end_s, p.rise_s))
+        return f
+
+    def terrain_profile(self, seed: int, duration_s: float | None = None) -> RoadProfile | None:
+        """Road profile for ``seed`` (None for flat ground), long enough for the distance
+        driven in ``duration_s`` (default: the scenario's) plus the margin."""
+        tr = self.terrain
+        if tr.kind == "flat":
+            return None
+        duration = self.duration_s if duration_s is None else duration_s
+        distance = self.distance_m(duration)
+        length = distance + tr.margin_m - tr.x_start_m
+        rng = np.random.default_rng([seed, TERRAIN_SEED_SALT])
+        prof = road_profile(length, tr.dx_m, tr.road_class, rng, n_min=tr.n_min_cycles_m,
+                            n_max=tr.n_max_cycles_m, x_start_m=tr.x_start_m)
+        return taper_start(prof, tr.flat_until_m, tr.taper_m)
+
+    def variant(self, name: str) -> Variant:
+        """The variant called ``name``; KeyError listing the available ones."""
+        for v in self.variants:
+            if v.name == name:
+                return v
+        raise KeyError(f"{self.name}: no variant {name!r}; available: "
+                       f"{[v.name for v in self.variants]}")
+
+    def metric_windows(self, duration_s: float | None = None, *,
+                       link_pitch_m: float | None = None) -> MetricWindows:
+        """Windows for :func:`trackmj.results.metrics.compute_metrics`: the first reference step
+        (evaluated until the next step or ramp start), load pulses and supply drops as
+        disturbances, the steady window from steady_start_s to the end, and the
+        ``[evaluation]`` settings. With the track's ``link_pitch_m`` [m] the tooth-passing
+        band v/pitch·(1 ± tooth_band_rel) at the scenario's track speed (a link passes the
+        sprocket every pitch); without it (or standing still) there is none. On an iso8608
+        road the band it excites, speed × [n_min, n_max] cycles/m, is recorded too."""
+        duration = self.duration_s if duration_s is None else duration_s
+        dist, labels = self._disturbances()
+        ev, speed = self.evaluation, self.steady_speed_m_s(duration)
+        return MetricWindows(
+            force_min_N=self.limits.force_min_N, force_max_N=self.limits.force_max_N,
+            evaluation_start_s=ev.start_s, step=self._first_step(duration), disturbances=dist,
+            disturbance_labels=labels,
+            steady=(ev.steady_start_s, duration), settle_band_rel=ev.settle_band_rel,
+            min_hold_s=ev.min_hold_s, lowpass_cutoff_Hz=ev.lowpass_cutoff_Hz,
+            body_mode_band_Hz=ev.body_mode_band_Hz,
+            tooth_passing_band_Hz=self._tooth_band_Hz(speed, link_pitch_m),
+            road_band_Hz=self._road_band_Hz(speed), psd_resolution_Hz=ev.psd_resolution_Hz,
+            psd_max_Hz=ev.psd_max_Hz, mean_window_s=ev.mean_window_s,
+            recovery_band_rel=ev.recovery_band_rel, steady_window_s=ev.steady_window_s,
+            reference_events_s=tuple(sorted({*(s.time_s for s in self.reference.steps),
+                                             *(r.start_s for r in self.reference.ramps)})))
+
+    def _first_step(self, duration_s: float) -> tuple[float, float, float, float] | None:
+        """The first reference step as (time [s], F_ref before [N], F_ref after [N], end of
+        its evaluation [s]: the next step or ramp start, else ``duration_s``); None without
+        steps."""
+        if not self.reference.steps:
+            return None
+        s0 = min(self.reference.steps, key=lambda s: s.time_s)
+        later = [s.time_s for s in self.reference.steps if s.time_s > s0.time_s]
+        later += [r.start_s for r in self.reference.ramps if r.start_s > s0.time_s]
+        t_stop = min([*later, duration_s])
+        before = float(self.reference_N(s0.time_s - 1e-9))
+        return (s0.time_s, before, before + s0.delta_N, t_stop)
+
+    def _disturbances(self) -> tuple[tuple[tuple[float, float], ...], tuple[str, ...]]:
+        """The load pulses' then the supply drops' windows (start, end) [s] and their
+        labels."""
+        dist = tuple((p.start_s, p.end_s) for p in self.load_pulses)
+        dist += tuple((d.start_s, d.end_s) for d in self.supply.drops)
+        labels = tuple(f"load pulse {p.delta_N / 1e3:+g} kN" for p in self.load_pulses)
+        labels += tuple(f"supply drop to {d.pressure_Pa / 1e6:g} MPa" for d in self.supply.drops)
+        return dist, labels
+
+    def _tooth_band_Hz(self, speed_m_s: float,
+                       link_pitch_m: float | None) -> tuple[float, float] | None:
+        """Tooth-passing band v/pitch·(1 ± tooth_band_rel) [Hz]; None without a pitch or
+        standing still."""
+        if link_pitch_m is not None and speed_m_s > 0.0:
+            f_tooth = speed_m_s / link_pitch_m
+            rel = self.evaluation.tooth_band_rel
+            return (f_tooth * (1.0 - rel), f_tooth * (1.0 + rel))
+        return None
+
+    def _road_band_Hz(self, speed_m_s: float) -> tuple[float, float] | None:
+        """The band an iso8608 road excites, speed × [n_min, n_max] cycles/m [Hz]; None on
+        flat ground."""
+        if self.terrain.kind != "iso8608":
+            return None
+        return (speed_m_s * self.terrain.n_min_cycles_m, speed_m_s * self.terrain.n_max_cycles_m)
