@@ -1,5 +1,7 @@
 """The command line explains itself: version, scenarios, keys, named option errors, help
-with defaults and choices, view's exit code, model info."""
+with defaults and choices, view's exit code, model info; a controller registered in
+:mod:`trackmj.sim.controllers` is offered with no other edit; help and argument errors start
+without the heavy modules."""
 
 from __future__ import annotations
 
@@ -11,7 +13,10 @@ import pytest
 
 import trackmj
 from trackmj.cli.main import main
-from trackmj.scenarios.schema import BUILTIN, load_scenario
+from trackmj.cli.parser import build_parser
+from trackmj.scenarios.load import BUILTIN, load_scenario
+from trackmj.sim import controllers
+from trackmj.sim.entries import Entry
 
 
 def test_version_and_python_dash_m() -> None:
@@ -93,7 +98,7 @@ def test_view_exit_code_follows_the_viewer(tmp_path, monkeypatch, viewer, code) 
         return started[-1]
 
     monkeypatch.setattr("trackmj.results.playback.open_viewer", fake_viewer)
-    monkeypatch.setattr("trackmj.cli.main.VIEWER_START_S", 1.0)
+    monkeypatch.setattr("trackmj.cli.info_commands.VIEWER_START_S", 1.0)
     try:
         assert main(["view", str(rrd)]) == code
     finally:
@@ -112,3 +117,34 @@ def test_model_info_columns_are_aligned_and_the_mass_is_explained(capsys) -> Non
     (mass,) = [ln for ln in lines if ln.startswith("mass ")]
     plant = TrackPlant.load()
     assert f"{plant.model.body_mass.sum():.0f} kg: one track side" in mass
+
+
+def test_a_registered_controller_is_offered_with_no_other_edit(monkeypatch, capsys) -> None:
+    """One more entry in CONTROLLERS: ``run --controller`` accepts it (the run goes on to
+    the next check, the duration), help and ``compare --controllers`` name it, and as a
+    baseline it joins ``report --baselines``' default."""
+    assert main(["run", "W1", "--controller", "bang", "--duration", "0.1"]) == 2
+    assert "controller = 'bang'" in capsys.readouterr().err
+    monkeypatch.setitem(controllers.CONTROLLERS, "bang", Entry(
+        "bang-bang on the tension error", lambda model, cfg: None, baseline=True))
+    assert main(["run", "W1", "--controller", "bang", "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert "controller" not in err and "ends before the evaluation starts" in err
+    for command in (["run", "-h"], ["compare", "-h"]):
+        with pytest.raises(SystemExit):
+            main(command)
+        assert "bang" in capsys.readouterr().out
+    assert build_parser().parse_args(["report"]).baselines.split(",")[-1] == "bang"
+
+
+HEAVY = ("mujoco", "numba", "scipy", "casadi", "matplotlib", "rerun", "dask")
+"""Modules whose import takes seconds: ``--help`` and argument errors must not need them."""
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["run", "W1", "--seed", "-1"]])
+def test_help_and_argument_errors_import_no_heavy_module(argv) -> None:
+    probe = (f"import sys\nfrom trackmj.cli.main import main\ntry:\n    main({argv!r})\n"
+             f"except SystemExit:\n    pass\nprint(sorted(set({HEAVY!r}) & set(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.splitlines()[-1] == "[]"

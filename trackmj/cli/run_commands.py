@@ -1,0 +1,198 @@
+"""Commands that run closed-loop simulations: ``run`` (one run), ``compare`` (every
+architecture on one scenario), ``report`` (the study), ``sweep`` (a parameter study) and
+``calibrate`` (fit keys to measured logs).
+
+The modules that load MuJoCo, CasADi or Matplotlib are imported inside the handlers:
+``trackmj --help`` and argument errors import this module and must stay fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from trackmj.cli.run_folder import refuse_other_inputs, run_folder
+from trackmj.cli.summary import measured_table, summary_table, tensioner_line
+from trackmj.elements.tensioner_file import load_tensioner
+from trackmj.results.store import ResultWriter
+from trackmj.sim.controllers import CONTROLLERS
+from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
+from trackmj.study.calibrate import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
+from trackmj.study.campaign import inputs_key, run_key, stamped
+from trackmj.study.executor import as_path, overrides_tuple
+
+
+def _files(args: argparse.Namespace) -> dict:
+    """The parameter files, tensioner file and ``--set`` overrides given on the command
+    line."""
+    return dict(model=args.model, hydraulics=args.hydraulics, control=args.control,
+                overrides=args.set, tensioner=args.tensioner, machine=args.machine)
+
+
+def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
+    """RunSpec fields shared by every run of a compare command."""
+    return dict(scenario=scenario, estimator=getattr(args, "estimator", None),
+                duration=args.duration, overrides=overrides_tuple(args.set),
+                model=as_path(args.model), hydraulics=as_path(args.hydraulics),
+                control=as_path(args.control), tensioner=as_path(args.tensioner),
+                machine=_machine_spec(args.machine))
+
+
+def _machine_spec(machine: str | None) -> str | None:
+    """A machine for a RunSpec: a shipped name as given, a machine file as an absolute
+    path (workers may run elsewhere)."""
+    # start-up: --help and argument errors must not import MuJoCo
+    from trackmj.machines.assembly import names
+
+    if machine is None or machine.strip().lower() in names():
+        return machine
+    return str(Path(machine).resolve())
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """``trackmj run``: one closed-loop run written to its folder, with its summary."""
+    # start-up: --help and argument errors must not import MuJoCo or Matplotlib
+    from trackmj.results.figures import run_figure
+    from trackmj.results.playback import RUN_RRD
+    from trackmj.scenarios.events import check_duration
+    from trackmj.sim.run import measured_log, run
+    from trackmj.sim.setup import prepare
+
+    setup = prepare(args.scenario, architecture=args.arch, controller=args.controller,
+                    estimator=args.estimator, seed=args.seed, duration=args.duration,
+                    variant=args.variant, **_files(args))
+    check_duration(setup.scenario, setup.duration_s)
+    measured = (None if args.measured is None
+                else measured_log(setup, args.measured, args.channels))
+    key = inputs_key(setup)
+    defaults = not (args.estimator or args.duration is not None or args.set or args.model
+                    or args.hydraulics or args.control or args.tensioner)
+    out = Path(args.out) if args.out else run_folder(setup, key, defaults=defaults)
+    refuse_other_inputs(out, key, overwrite=args.overwrite)
+    with ResultWriter(out) as writer:
+        result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True,
+                     measured=measured, channels=args.channels)
+        result = stamped(result, inputs_key=key, run_key=run_key(setup))
+        writer.commit(result, csv=args.csv,
+                      extras={"timeseries.png": lambda path: run_figure(result, path,
+                                                                        measured)})
+    print(f"{setup.scenario.name} ({setup.scenario.title}), {result.architecture}, "
+          f"{result.controller}/{result.estimator}, seed {result.seed} -> {out}")
+    if result.metrics.get("tensioner", {}).get("element") == "fmu":
+        print(tensioner_line(result.metrics["tensioner"]))
+    print(summary_table([result], "{r.architecture}"))
+    if measured is not None:
+        print(measured_table(result.metrics["prediction_vs_measured"], args.measured))
+    return 0
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    """``trackmj compare``: every architecture (× ``--controllers``) on one scenario;
+    exit code 1 if a run failed."""
+    # start-up: --help and argument errors must not import MuJoCo
+    from trackmj.scenarios.events import check_duration
+    from trackmj.sim.setup import prepare
+    from trackmj.study.compare import compare, write_compare
+
+    controllers = args.controllers.split(",") if args.controllers else [None]
+    setups = [prepare(args.scenario, controller=c, estimator=args.estimator, seed=args.seed,
+                      duration=args.duration, **_files(args)) for c in controllers]
+    controllers = [str(c) if c else s.controller for c, s in zip(controllers, setups,
+                                                                 strict=True)]
+    scenario = setups[0].scenario
+    check_duration(scenario, setups[0].duration_s)
+    out = Path(args.out or f"runs/compare-{scenario.name}")
+    base = _specs_base(args, str(args.scenario))
+    outcome = compare(base, controllers, out, seed=args.seed,
+                      workers=args.workers, scheduler=args.scheduler)
+    for spec, error in outcome.failed:
+        print(f"trackmj: {spec.architecture} {spec.controller}: {error}", file=sys.stderr)
+    doc = write_compare(outcome, out, scenario, setups[0].duration_s)
+    print(summary_table(outcome.results, "{r.architecture} {r.controller}"))
+    print(f"-> {doc}")
+    return 1 if outcome.failed else 0
+
+
+def _report_choices(args: argparse.Namespace, study_archs: tuple[str, ...]
+                    ) -> tuple[list[str], list[str]]:
+    """The architectures (``study_archs`` unless ``--archs``) and baseline controllers of a
+    report, each checked against its registry, after ``--seeds``; ValueError naming the
+    option otherwise."""
+    if args.seeds < 1 or args.seeds > 50:
+        raise ValueError(f"--seeds = {args.seeds}: allowed 1..50")
+    archs = (list(study_archs) if args.archs is None
+             else [a for a in args.archs.split(",") if a])
+    baselines = [c for c in args.baselines.split(",") if c]
+    for name, given, known in (("--archs", archs, ARCHITECTURES),
+                               ("--baselines", baselines, CONTROLLERS)):
+        unknown = [x for x in given if x not in known]
+        if unknown:
+            raise ValueError(f"{name}: unknown {unknown}; allowed {sorted(known)}")
+    if REFERENCE_ARCHITECTURE not in archs:
+        raise ValueError(f"--archs must include {REFERENCE_ARCHITECTURE}: every claim and "
+                         "prediction error is against it")
+    return archs, baselines
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """``trackmj report``: the study's matrix of runs, resumed, and report.md; exit code 1
+    if a run failed."""
+    # start-up: --help and argument errors must not import MuJoCo
+    from trackmj.machines.assembly import resolve
+    from trackmj.study.report import REPORT_ARCHS, check_report_dir, plan, run_matrix, write_report
+
+    archs, baselines = _report_choices(args, REPORT_ARCHS)
+    out = check_report_dir(Path(args.out))
+    if args.tensioner is not None:
+        load_tensioner(args.tensioner)   # refused here, before any run, if it is bad
+    if args.machine is not None:
+        resolve(args.machine)   # refused here, before any run, if it is bad
+    specs = plan(args.scenarios.split(","), list(range(args.seeds)), args.duration, archs,
+                 baselines, tensioner=args.tensioner, machine=_machine_spec(args.machine))
+    matrix = run_matrix(specs, out, workers=args.workers, scheduler=args.scheduler)
+    path = write_report(matrix.results, out, matrix)
+    print(f"{len(matrix.results)} runs ({matrix.resumed} resumed, {len(matrix.failed)} failed) "
+          f"in {matrix.wall_time_s:.0f} s -> {path}")
+    return 1 if matrix.failed else 0
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    """``trackmj sweep``: every point of a sweep spec, resumed, or ``--plot`` to redraw its
+    figures; exit code 1 if a run failed."""
+    # start-up: --help and argument errors must not import MuJoCo
+    from trackmj.study.sweep import plot_sweep, sweep
+
+    if args.plot is not None:
+        if args.spec is not None:
+            raise ValueError("give a sweep spec to run, or --plot DIR to redraw, not both")
+        figures = plot_sweep(args.plot)
+        print(f"{len(figures)} figures -> {Path(args.plot) / 'figures'}")
+        return 0
+    if args.spec is None:
+        raise ValueError("sweep needs a spec file (or --plot DIR); see 'trackmj sweep -h'")
+    out = Path(args.out or f"runs/sweep-{Path(args.spec).stem}")
+    summary = sweep(args.spec, out, workers=args.workers, scheduler=args.scheduler,
+                    keep_runs=args.keep_runs, retry_failed=args.retry_failed,
+                    tensioner=args.tensioner, machine=_machine_spec(args.machine))
+    print(summary)
+    print(f"{len(summary.figures)} figures -> {out / 'figures'}")
+    return 1 if summary.failed else 0
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """``trackmj calibrate``: fit a spec's keys to measured logs, with 95 % intervals."""
+    out = Path(args.out)
+    done = calibrate(args.spec, args.measured, out, workers=args.workers)
+    doc = done.document
+    runs = len(doc["runs"])
+    print(f"calibrated {len(doc['estimates'])} keys on {len(args.measured)} log(s), {runs} "
+          f"runs in {doc['wall_time_s']:.0f} s ({doc['optimizer']['message']})")
+    for key, value in doc["estimates"].items():
+        low, high = doc["intervals"][key]
+        bound = "  (at a bound)" if doc["at_bound"][key] else ""
+        print(f"  {key} = {value:.5g}   95 % [{low:.5g}, {high:.5g}]{bound}")
+    rms = ", ".join(f"{name} {value:.4g}" for name, value in doc["residual_rms"].items())
+    print(f"  residual RMS (SI): {rms}")
+    print(f"-> {out / CALIBRATION_JSON}, {out / CALIBRATION_PNG}")
+    return 0

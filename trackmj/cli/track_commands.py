@@ -1,0 +1,186 @@
+"""Commands on the bare track and the machines: ``model info``, ``model generate``,
+``machines`` and ``drive`` (the track driven with the passive tensioner).
+
+The modules that load MuJoCo are imported inside the handlers: ``trackmj --help`` and
+argument errors import this module and must stay fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from trackmj.cli.summary import tensioner_line
+from trackmj.validator import ParameterError, parse_overrides
+
+
+def model_overrides(items: list[str]) -> dict:
+    """The ``model`` entries of ``--set`` items (commands on the bare track take no
+    others)."""
+    sets = parse_overrides(items)
+    other = [kind for kind, keys in sets.items() if keys and kind != "model"]
+    if other:
+        raise ParameterError(f"--set {other[0]}.*: this command takes only model.* keys "
+                             "(the bare track has no hydraulics, control or scenario)")
+    return sets["model"]
+
+
+def cmd_model_info(args: argparse.Namespace) -> int:
+    """``trackmj model info``: the model's bodies, DOF, links, masses, contacts and derived
+    geometry, one aligned row each."""
+    # start-up: --help and argument errors must not import MuJoCo
+    import mujoco
+
+    from trackmj.track.mjcf.structure import structure_text
+    from trackmj.track.plant import TrackPlant
+
+    plant = TrackPlant.load(args.model, args.params, machine=args.machine,
+                            overrides=model_overrides(args.set))
+    m, d = plant.model, plant.data
+    p = plant.params
+    link_mass = p.track.link_mass_kg * plant.link_count
+    total_mass = float(m.body_subtreemass[0])
+    contact_pairs = sum(1 for i in range(m.ngeom) for j in range(i + 1, m.ngeom)
+                        if (m.geom_contype[i] & m.geom_conaffinity[j])
+                        or (m.geom_contype[j] & m.geom_conaffinity[i]))
+    tension = plant.pin_tensions_N()
+    rows = [
+        ("model", f"{m.names[:m.names.index(0)].decode()} "
+                  f"({plant.model_path or 'generated, cached'})"),
+        ("bodies", f"{m.nbody - 1} (+ world)"),
+        ("degrees of freedom", f"{m.nv} (generalised coordinates {m.nq})"),
+        ("links", f"{plant.link_count}, pitch {p.track.pitch_m * 1e3:.1f} mm, "
+                  f"loop {plant.link_count * p.track.pitch_m:.2f} m"),
+        ("road wheels", f"{p.road_wheels.count}, sprocket teeth {p.sprocket.tooth_count} "
+                        f"(pitch radius {p.sprocket_pitch_radius_m * 1e3:.1f} mm)"),
+        ("mass", f"{total_mass:.0f} kg: one track side with its share of the chassis "
+                 "(x2 for the vehicle)"),
+        ("", f"chassis share {p.chassis.mass_kg:.0f} kg, track {link_mass:.0f} kg, wheels "
+             f"and carrier {total_mass - p.chassis.mass_kg - link_mass:.0f} kg"),
+        ("geoms", f"{m.ngeom} ({contact_pairs} geom pairs can collide)"),
+        ("equalities", f"{m.neq} pin connects ({structure_text(p)})"),
+        ("actuators", f"{m.nu}: {', '.join(m.actuator(i).name for i in range(m.nu))}"),
+        ("timestep", f"{m.opt.timestep * 1e3:.3f} ms, integrator "
+                     f"{mujoco.mjtIntegrator(m.opt.integrator).name}"),
+        ("home keyframe", f"contacts {d.ncon}, closure error "
+                          f"{plant.closure_error_m * 1e3:.3f} mm, stroke "
+                          f"{plant.stroke_m * 1e3:.1f} mm"),
+        ("pin tension", f"{tension.min() / 1e3:.2f} .. {tension.max() / 1e3:.2f} kN (mean "
+                        f"upper strand {tension[plant.upper_strand_pins()].mean() / 1e3:.2f} "
+                        "kN)"),
+    ]
+    rows += _geometry_rows(plant)
+    width = max(len(label) for label, _ in rows) + 2
+    for label, text in rows:
+        print(f"{label:<{width}}{text}")
+    return 0
+
+
+def _geometry_rows(plant: object) -> list[tuple[str, str]]:
+    """The derived geometry of the plant's layout and what its home keyframe measures."""
+    # start-up: --help and argument errors must not import SciPy
+    from trackmj.track.mjcf.geometry import catenary_sag_m, derive_geometry, measured_sag_m
+    from trackmj.track.mjcf.layout import compute_layout
+
+    p = plant.params
+    layout = compute_layout(p)
+    g = derive_geometry(p, layout)
+    weight = float(plant.model.body_subtreemass[0]) * p.simulation.gravity_m_s2
+    ground = plant.contact_forces_N()["ground"]
+    end = "front" if p.sprocket.x_m > p.idler.x_m else "rear"
+    rows = [
+        ("layout", f"sprocket at the {end}, idler slide "
+                   f"{math.degrees(p.idler.slide_angle_rad):.1f}° above horizontal, idler "
+                   f"centre x {layout.idler_x_m:.4f} m (guess {p.idler.x_m:g} m)"),
+        ("perimeter", f"loop {g.loop_m:.4f} m ({p.track.link_count} × "
+                      f"{p.track.pitch_m * 1e3:.1f} mm), path round the pin circles "
+                      f"{g.path_m:.4f} m, layout closure {g.closure_m * 1e3:.2g} mm"),
+        ("wraps", ", ".join(f"{name} {math.degrees(a):.1f}°"
+                            for name, a in g.wraps_rad.items() if a > 1e-6)),
+    ]
+    pins = plant.pins_layout_frame()
+    upper_N = float(plant.pin_tensions_N()[plant.upper_strand_pins()].mean())
+    for s in g.spans:
+        text = f"{s.start} -> {s.end}: {s.length_m * 1e3:.0f} mm"
+        sag, chord = measured_sag_m(s, pins, p.track.pitch_m) if s.upper else (0.0, 0.0)
+        if chord > 0.0:
+            text += (f", sag at home {sag * 1e3:.1f} mm over {chord * 1e3:.0f} mm (shallow "
+                     f"catenary at the home tension "
+                     f"{catenary_sag_m(p, s, upper_N, chord) * 1e3:.1f} mm)")
+        rows.append(("upper span" if s.upper else "lower span", text))
+    rows += [
+        ("weight this side", f"{weight / 1e3:.2f} kN (Σ ground normal force at home "
+                             f"{ground / 1e3:.2f} kN)"),
+        ("static strand tension", f"{g.strand_tension_N / 1e3:.2f} kN at the preload "
+                                  f"{p.tensioner.preload_N / 1e3:.1f} kN (idler geometry "
+                                  f"factor {g.idler_factor:.4f}; frictionless idler)"),
+    ]
+    return rows
+
+
+def cmd_model_generate(args: argparse.Namespace) -> int:
+    """``trackmj model generate``: write a machine's reference MJCF from its files."""
+    # start-up: --help and argument errors must not import MuJoCo
+    from trackmj.machines.assembly import resolve
+    from trackmj.track.mechanics import load_model_params
+    from trackmj.track.mjcf.generate import write_model
+
+    machine = resolve(args.machine)
+    out = args.out or (machine.reference_mjcf and machine.reference_mjcf.with_name(
+        machine.reference_mjcf.name.removesuffix("_scene.xml") + ".xml"))
+    if out is None:
+        raise ValueError(f"machine {machine.name} has no reference_mjcf in "
+                         f"{machine.file.name}: give --out FILE.xml")
+    params = load_model_params(args.params or machine.mechanics,
+                               overrides=model_overrides(args.set))
+    path = write_model(out, params, machine.name)
+    print(f"wrote {path}")
+    return 0
+
+
+def cmd_machines(args: argparse.Namespace) -> int:
+    """``trackmj machines``: the shipped machines, one a line."""
+    # start-up: --help and argument errors must not import MuJoCo
+    from trackmj.machines.assembly import DEFAULT_MACHINE, shipped
+
+    machines = shipped()
+    width = max(len(name) for name in machines) + 2
+    for name, m in machines.items():
+        default = " (default)" if name == DEFAULT_MACHINE else ""
+        print(f"{name:<{width}}{m.description}{default}")
+    print("or any machine file (*_machine.toml naming its mechanics, hydraulics and control "
+          "files; see README, Your machine)")
+    return 0
+
+
+def cmd_drive(args: argparse.Namespace) -> int:
+    """``trackmj drive``: the track driven with the passive tensioner; exit code 1 if MuJoCo
+    warned or a derailment check failed."""
+    # start-up: --help and argument errors must not import MuJoCo
+    from trackmj.sim.drive import drive
+
+    result = drive(args.speed, args.duration, model=args.model, params=args.params,
+                   preload_N=args.preload, out_dir=args.out, tensioner=args.tensioner,
+                   machine=args.machine, overrides=model_overrides(args.set))
+    m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
+    print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s: {m['real_time_factor']:.2f}x "
+          f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
+    if m["tensioner"]["element"] == "fmu":
+        print(tensioner_line(m["tensioner"]))
+    print(f"idler force        mean {s['idler_force_mean_N'] / 1e3:7.2f} kN   "
+          f"min {s['idler_force_min_N'] / 1e3:7.2f}  max {s['idler_force_max_N'] / 1e3:7.2f}")
+    print(f"strand tension     upper {s['upper_strand_tension_mean_N'] / 1e3:5.2f} kN, "
+          f"sprocket lower run {s['lower_strand_tension_mean_N'] / 1e3:5.2f} kN")
+    print(f"vehicle speed      {s['vehicle_speed_mean_m_s']:.3f} m/s "
+          f"(sprocket pitch speed {s['track_speed_mean_m_s']:.3f} m/s)")
+    contacts = sum(e["contact_work_J"].values())
+    print(f"energy [kJ]        drive {e['drive_work_J'] / 1e3:.3f}, tensioner "
+          f"{e['tensioner_work_J'] / 1e3:.3f}, suspension {e['suspension_loss_J'] / 1e3:.3f}, "
+          f"constraints {contacts / 1e3:.3f}, numerical {e['numerical_J'] / 1e3:.3f}"
+          f"; dKE {e['kinetic_change_J'] / 1e3:.3f}, dPE {e['potential_change_J'] / 1e3:.3f}, "
+          f"residual {e['residual_J']:.2e} J")
+    print(f"max pin gap        {m['max_pin_gap_m'] * 1e3:.3f} mm   MuJoCo warnings "
+          f"{m['mujoco_warnings']}   derailment checks failed {m['derailment_checks_failed']}")
+    if result.out_dir is not None:
+        print(f"wrote {result.out_dir}")
+    return 0 if m["mujoco_warnings"] == 0 and m["derailment_checks_failed"] == 0 else 1
