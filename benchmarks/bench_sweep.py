@@ -35,7 +35,8 @@ t_import = time.perf_counter() - t0
 from collections import defaultdict
 import trackmj.elements.hydraulic as hydraulic_element
 import trackmj.sim.architectures as arch
-import trackmj.sim.registry as registry
+import trackmj.sim.controllers as controllers
+from trackmj.sim.entries import Entry
 import mujoco
 
 SPENT = defaultdict(float)
@@ -66,10 +67,10 @@ wrap(hydraulic_element, "build", "hydraulic element (numba kernels)")
 wrap(arch, "_control", "reduced model")
 wrap(run_module, "run_loop", "closed loop")
 wrap(run_module, "compute_metrics", "metrics")
-for registry_dict, bucket in ((registry.CONTROLLERS, "controller build (NMPC)"),
-                              (registry.ESTIMATORS, "estimator build")):
+for registry_dict, bucket in ((controllers.CONTROLLERS, "controller build (NMPC)"),
+                              (controllers.ESTIMATORS, "estimator build")):
     for name, e in list(registry_dict.items()):
-        registry_dict[name] = registry.Entry(e.description, timed(e.build, bucket), e.needs)
+        registry_dict[name] = Entry(e.description, timed(e.build, bucket), e.needs)
 runs = []
 for seed in range(3):
     SPENT.clear()

@@ -12,9 +12,10 @@ import math
 
 import numpy as np
 
-from trackmj.results.metrics import compute_metrics, cumulative_energy
+from trackmj.results.metrics import compute_metrics
+from trackmj.results.signals import cumulative_energy
 from trackmj.results.store import COLUMN_UNITS, Result, make_table, run_metadata
-from trackmj.scenarios.schema import load_scenario
+from trackmj.scenarios.load import load_scenario
 
 PITCH_M = 0.075
 AREA_HEAD_M2 = 2.5e-3

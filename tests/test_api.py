@@ -126,17 +126,17 @@ def test_read_result_names_what_is_missing(result, tmp_path) -> None:
 def test_a_repeated_track_restores_its_settled_state_bit_for_bit(monkeypatch) -> None:
     """Runs on the same track (here: another bulk modulus) reuse the settled state of the
     first instead of settling again; the result is the one a fresh settle gives."""
-    from trackmj.sim import architectures
+    from trackmj.sim import mechanics
 
-    monkeypatch.setattr(architectures, "_settled", {})
+    monkeypatch.setattr(mechanics, "_settled", {})
     settles = []
-    original = architectures.TrackPlant.run
+    original = mechanics.TrackPlant.run
 
     def counted(plant, *args, **kwargs):
         settles.append(args)
         return original(plant, *args, **kwargs)
 
-    monkeypatch.setattr(architectures.TrackPlant, "run", counted)
+    monkeypatch.setattr(mechanics.TrackPlant, "run", counted)
     first = trackmj.simulate("W1", duration=DURATION_S, seed=1)
     stiffer = trackmj.simulate("W1", duration=DURATION_S, seed=1,
                                set={"hydraulics.fluid.bulk_modulus_Pa": 2.0e9})

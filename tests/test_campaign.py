@@ -13,7 +13,8 @@ from synthetic import energy_table, synthetic_result
 import trackmj.study.campaign as campaign
 from trackmj.cli.main import main
 from trackmj.results.store import ResultDirectoryError
-from trackmj.scenarios.schema import check_duration, cut_events, load_scenario, moved_events
+from trackmj.scenarios.events import check_duration, cut_events, moved_events
+from trackmj.scenarios.load import load_scenario
 from trackmj.study.executor import RunOutcome, RunSpec
 from trackmj.validator import ParameterError
 

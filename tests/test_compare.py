@@ -10,7 +10,7 @@ from synthetic import energy_table, synthetic_result
 
 from trackmj.cli.main import main
 from trackmj.results.store import read_result
-from trackmj.scenarios.schema import load_scenario
+from trackmj.scenarios.load import load_scenario
 from trackmj.sim.registry import ARCHITECTURES
 from trackmj.study.compare import CompareRun, check_compare_dir, write_compare
 

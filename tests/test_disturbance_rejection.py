@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from trackmj.results.metrics import trailing_mean
+from trackmj.results.signals import trailing_mean
 from trackmj.sim.run import simulate
 
 F_MIN, F_MAX = 10e3, 20e3

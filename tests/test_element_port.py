@@ -99,8 +99,9 @@ def test_a_new_element_is_its_module_and_one_registry_line(monkeypatch) -> None:
     result."""
     from trackmj import simulate
     from trackmj.sim import registry
+    from trackmj.sim.entries import Entry
 
-    monkeypatch.setitem(registry.ELEMENTS, "constant", registry.Entry(
+    monkeypatch.setitem(registry.ELEMENTS, "constant", Entry(
         "a constant force", lambda ctx: _ConstantElement(ctx.setup.force0_N)))
     monkeypatch.setitem(registry.ARCHITECTURES, "tp-constant", registry.Architecture(
         "track with a constant force", "track", "constant"))

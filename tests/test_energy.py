@@ -9,7 +9,7 @@ import math
 
 import pytest
 
-from trackmj.cli.main import _summary_table
+from trackmj.cli.summary import summary_table
 from trackmj.elements.energy_table import accounted_J
 from trackmj.elements.ideal import IdealForceSource
 from trackmj.hydraulics import load_hydraulic_params
@@ -100,7 +100,7 @@ def test_energy_table_is_written_to_metrics_json_and_summarised(runs, tmp_path) 
     result = runs["default", "nmpc"]
     back = read_result(write_result(result, tmp_path / "run"))
     assert back.metrics["energy_J"] == result.metrics["energy_J"]
-    table = _summary_table([result], "{r.architecture}")
+    table = summary_table([result], "{r.architecture}")
     pump_row = next(line for line in table.splitlines() if line.startswith("| pump energy"))
     assert f"{result.metrics['energy_J']['pump'] * 1e-3:.3g}" in pump_row
 

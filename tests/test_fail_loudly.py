@@ -14,7 +14,7 @@ import pytest
 from trackmj.cli.main import main
 from trackmj.errors import PhysicsError
 from trackmj.ports import Command, ControlOutput, Readout
-from trackmj.scenarios.schema import load_scenario
+from trackmj.scenarios.load import load_scenario
 from trackmj.sim.observers import (
     PhysicsGuard,
     PhysicsLimits,

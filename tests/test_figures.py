@@ -12,8 +12,8 @@ from matplotlib.colors import to_rgb
 from synthetic import energy_table, synthetic_result
 
 from trackmj.results import figures
-from trackmj.results.metrics import prediction_vs_tp
-from trackmj.scenarios.schema import load_scenario
+from trackmj.results.comparison import prediction_vs_tp
+from trackmj.scenarios.load import load_scenario
 
 
 @pytest.fixture

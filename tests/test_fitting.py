@@ -173,7 +173,7 @@ def test_cli_refuses_a_bad_spec_before_any_run(tmp_path, capsys):
 # ---------------------------------------------------------------------- run --measured
 
 def test_lag_by_cross_correlation_finds_a_known_delay():
-    from trackmj.results.metrics import lag_s
+    from trackmj.results.comparison import lag_s
 
     t = 1e-3 * np.arange(1, 4001)
     ref = np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 1.9 * t)
@@ -183,7 +183,7 @@ def test_lag_by_cross_correlation_finds_a_known_delay():
 
 
 def test_trace_errors_of_a_constant_offset():
-    from trackmj.results.metrics import trace_errors
+    from trackmj.results.comparison import trace_errors
 
     t = 1e-3 * np.arange(1, 3001)
     y_ref = 12e3 + 3e3 * (t >= 1.0)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trackmj.scenarios.schema import load_scenario
+from trackmj.scenarios.load import load_scenario
 from trackmj.validator import ParameterError
 
 DATA = Path(__file__).parent / "data"

@@ -322,7 +322,7 @@ def test_link_and_pin_names_past_100_links() -> None:
                                      ["sweep", "spec.toml"], ["drive"], ["model", "info"],
                                      ["model", "generate"]])
 def test_every_command_takes_a_machine(command) -> None:
-    from trackmj.cli.main import build_parser
+    from trackmj.cli.parser import build_parser
 
     args = build_parser().parse_args([*command, "--machine", "my_machine.toml"])
     assert args.machine == "my_machine.toml"

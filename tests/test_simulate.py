@@ -9,7 +9,7 @@ import pytest
 
 from trackmj.cli.main import main
 from trackmj.results.store import COLUMN_UNITS, read_result, write_result
-from trackmj.scenarios.schema import load_scenario
+from trackmj.scenarios.load import load_scenario
 from trackmj.sim.run import simulate
 
 DURATION_S = 2.0

@@ -55,13 +55,21 @@ def _import_nodes(tree: ast.Module, *, annotations: bool) -> list[ast.AST]:
     return found
 
 
+def _named_modules(tree: ast.Module) -> set[str]:
+    """Modules named by a string constant (a registry's lazy builder, the package's lazy
+    exports): imports that run by name, so they count."""
+    return {node.value for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str)
+            and "." in node.value and node.value in MODULES}
+
+
 def _imports(name: str, path: Path, *, annotations: bool = False) -> set[str]:
     """trackmj modules imported by module ``name`` (resolved to modules that exist): the
-    imports that run, at module level or in a function, or with ``annotations`` those under
-    ``if TYPE_CHECKING:``."""
+    imports that run, at module level, in a function or by name (:func:`_named_modules`),
+    or with ``annotations`` those under ``if TYPE_CHECKING:``."""
     tree = ast.parse(path.read_text())
     package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
-    found = set()
+    found = set() if annotations else _named_modules(tree) - {name}
     for node in _import_nodes(tree, annotations=annotations):
         targets = []
         if isinstance(node, ast.Import):

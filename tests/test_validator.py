@@ -19,7 +19,8 @@ from trackmj.control.params import default_path as control_path
 from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
 from trackmj.hydraulics.params import default_path as hydraulics_path
 from trackmj.machines.idler import IdlerFile
-from trackmj.scenarios.schema import ScenarioFile, load_scenario, scenario_path
+from trackmj.scenarios.load import load_scenario, scenario_path
+from trackmj.scenarios.schema import ScenarioFile
 from trackmj.track.mechanics import ModelParams, default_param_path, load_model_params, models_dir
 from trackmj.validator import (
     FILE_KINDS,

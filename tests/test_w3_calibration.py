@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from trackmj.scenarios.schema import load_scenario
+from trackmj.scenarios.load import load_scenario
 from trackmj.study.w3_hitch import calibration_pulse, idler_force_history, load_change_N
 
 

@@ -8,9 +8,9 @@ Same controller, weights, horizons, steps and references in all:
 * ``tp``: MuJoCo track + hydraulic plugin, strong coupling (affine law, implicit dF/dv).
 * ``tp-weak``: the same with the weak coupling (force of the previous step held, no dF/dv).
 * ``dp-a``: hydraulics + control on the equivalent idler mass-spring-damper identified from
-  the track (:mod:`trackmj.machines.identify`); the track's load is replayed from a ``tp`` run of the
-  same condition and seed as the part of the tp tension the equivalent spring does not
-  explain, d(t) = F_tp − k(y_tp − y0) − c·ẏ_tp. The coupling is one-way.
+  the track (:mod:`trackmj.machines.identify`); the track's load is replayed from a ``tp``
+  run of the same condition and seed as the part of the tp tension the equivalent spring
+  does not explain, d(t) = F_tp − k(y_tp − y0) − c·ẏ_tp. The coupling is one-way.
 * ``dp-b``: MuJoCo track + control; the hydraulics replaced by an ideal force source: the
   valve mode integrates a force command at the hydraulic tension-rate gain, applied through
   a first-order lag (a quarter period of the oil column) with the cylinders' viscous
@@ -27,46 +27,30 @@ dp-a sees them through the replayed tp track load.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
-import hashlib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig
 from trackmj.elements.context import ElementContext
-from trackmj.elements.prescribed import ConstantForce
-from trackmj.ports import Element, ForceLaw, Mechanics
+from trackmj.ports import Element, Mechanics
 from trackmj.results.store import Result
 from trackmj.sim.control_plant import reduced_plant_params
-from trackmj.sim.plants import CoupledPlant, EquivalentIdlerMechanics
+from trackmj.sim.plants import CoupledPlant
 from trackmj.sim.registry import ARCHITECTURES, ELEMENTS, MECHANICS
 from trackmj.sim.setup import RunSetup
 from trackmj.track.plant import TrackPlant
 
 if TYPE_CHECKING:
-    pass
+    from trackmj.sim.mechanics import MechanicsSetup
 
-SETTLE_S = 1.0
-"""Standing settle under the initial reference force before t = 0 [s]."""
-SETTLE_DAMPING_N_S_M = 2e4
-"""Implicit damping of the settling load [N·s/m]: brings the track to rest in the settle."""
-
-
-@dataclass(frozen=True)
-class BuiltMechanics:
-    """What a mechanics builder returns: the ``ports.Mechanics``, the MuJoCo track (None
-    without one) and the free position y0 [m] of the equivalent idler spring (where the
-    controller's reduced model puts zero force)."""
-
-    mechanics: Mechanics
-    track: TrackPlant | None
-    free_position_m: float
+    # A run's setup is what mechanics builders read (their registry entries are untyped
+    # callables, so the type checker checks the protocol here).
+    _SETUP_BUILDS_MECHANICS: type[MechanicsSetup] = RunSetup
 
 
 @dataclass
@@ -104,40 +88,6 @@ def assemble(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
                     built.track, cfg, model, _estimate0(setup, stroke))
 
 
-SETTLED_KEPT = 4
-"""Settled track states kept per process (see :func:`settled_track`)."""
-_settled: dict[tuple, tuple[mujoco.MjData, np.ndarray, ForceLaw | None]] = {}
-
-
-def settled_track(setup: RunSetup, force_N: float) -> TrackPlant:
-    """The track of the run (terrain of the seed, W5 contact scale), settled standing under
-    ``force_N`` [N] on the idler for SETTLE_S, with its clock reset to 0.
-
-    The settled state is kept per process for the same MJCF, contact scale, force and model
-    parameters (runs that differ only in hydraulics, control, controller, or the seed on
-    flat ground): a later run restores it (every MjData buffer, the tensioner's bias
-    parameters, the last force law) instead of settling again, bit for bit the same."""
-    text = setup.mjcf(setup.scenario.terrain_profile(setup.seed, setup.duration_s))
-    plant = TrackPlant(mujoco.MjModel.from_xml_string(text), setup.model)
-    scale = setup.variant.contact_stiffness_scale
-    if scale != 1.0:
-        plant.scale_contact_stiffness(scale)
-    key = (hashlib.sha256(text.encode()).digest(), scale, force_N, setup.model)
-    kept = _settled.get(key)
-    if kept is None:
-        plant.run(ConstantForce(force_N, SETTLE_DAMPING_N_S_M), SETTLE_S)
-        if len(_settled) >= SETTLED_KEPT:
-            del _settled[next(iter(_settled))]
-        _settled[key] = (copy.copy(plant.data), plant.model.actuator_biasprm.copy(),
-                         plant.last_law)
-    else:
-        data, biasprm, plant.last_law = kept
-        mujoco.mj_copyData(plant.data, plant.model, data)
-        plant.model.actuator_biasprm[:] = biasprm
-    plant.time_s = 0.0
-    return plant
-
-
 def control_and_model(setup: RunSetup, free_position_m: float
                       ) -> tuple[ControlConfig, ReducedModel]:
     """Control configuration with the reduced plant derived from the hydraulics and the
@@ -157,27 +107,3 @@ def _estimate0(setup: RunSetup, stroke_m: float) -> NDArray[np.float64]:
     """Initial estimate: at rest, heads at the pressure of the initial force, rods at tank
     (the state both the plugin and the ideal force source start from)."""
     return np.array((setup.head_pressure0_Pa, setup.hydraulics.tank_pressure_Pa, stroke_m, 0.0))
-
-
-def build_track(setup: RunSetup) -> BuiltMechanics:
-    """The MuJoCo track of the run, settled under the initial force; its equivalent spring is
-    free at the settled stroke less force0 / k."""
-    track = settled_track(setup, setup.force0_N)
-    return BuiltMechanics(track, track,
-                          track.stroke_m - setup.force0_N / setup.idler.stiffness_N_m)
-
-
-def build_equivalent_idler(setup: RunSetup, tp_result: Result) -> BuiltMechanics:
-    """dp-a's mechanics: the equivalent idler loaded by ``tp_result``'s track load."""
-    idler = setup.idler
-    cols = tp_result.columns()
-    if len(cols["t_s"]) < setup.steps:
-        raise ValueError(f"dp-a needs a tp run at least {setup.duration_s:g} s long, got "
-                         f"{cols['t_s'][-1]:g} s")
-    stroke_tp = cols["stroke_m"]
-    y0 = float(stroke_tp[0] - cols["tension_N"][0] / idler.stiffness_N_m)
-    # the load acting over step k is the one the tp run had at the end of step k
-    load = (cols["tension_N"] - idler.stiffness_N_m * (stroke_tp - y0)
-            - idler.damping_N_s_m * cols["stroke_velocity_m_s"])
-    return BuiltMechanics(EquivalentIdlerMechanics(idler, y0, float(stroke_tp[0]), load),
-                          None, y0)

@@ -52,10 +52,11 @@ class DriveResult:
     out_dir: Path | None
 
 
-def _file_tensioner(path: str | Path, stroke_m: float) -> tuple[TensionerElement,
-                                                                 dict[str, Any]]:
-    """The tensioner of a tensioner file on the track at ``stroke_m`` [m], and what
-    metrics.json says about it (an FMU: strongest coupling it offers)."""
+def _file_tensioner(path: str | Path, stroke_m: float
+                    ) -> tuple[TensionerElement, dict[str, Any], float | None]:
+    """The tensioner of a tensioner file on the track at ``stroke_m`` [m], what metrics.json
+    says about it (an FMU: strongest coupling it offers) and its preload [N] if it is the
+    passive spring-damper (None for an FMU)."""
     from trackmj.elements.tensioner_file import load_tensioner
 
     tensioner = load_tensioner(path)
@@ -63,10 +64,12 @@ def _file_tensioner(path: str | Path, stroke_m: float) -> tuple[TensionerElement
         from trackmj.elements.fmu import FmuElement
 
         element = FmuElement(tensioner, stroke_m, "strong")
-        return element, element.summary() | {"file": str(path)}
+        return element, element.summary() | {"file": str(path)}, None
     t = tensioner.passive
+    if t is None:
+        raise ValueError(f"{path}: a tensioner file holds a [passive] or an [fmu] table")
     return (PassiveTensioner(t.preload_N, t.stiffness_N_m, t.damping_N_s_m, t.stroke_ref_m),
-            {"element": "passive", "file": str(path)})
+            {"element": "passive", "file": str(path)}, t.preload_N)
 
 
 def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = None,
@@ -94,14 +97,15 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
         raise ValueError("give a preload or a tensioner file, not both")
     plant = TrackPlant.load(model, params, machine=machine, overrides=overrides)
     if tensioner is not None:
-        element, described = _file_tensioner(tensioner, plant.stroke_m)
+        element, described, passive_preload_N = _file_tensioner(tensioner, plant.stroke_m)
     else:
-        element = PassiveTensioner.from_params(plant.params)
+        passive = PassiveTensioner.from_params(plant.params)
         described = {"element": "passive", "file": "model"}
         if preload_N is not None:
             if not (math.isfinite(preload_N) and preload_N >= 0.0):
                 raise ValueError(f"preload {preload_N!r} N: must be finite and >= 0")
-            element.preload_N = preload_N
+            passive.preload_N = preload_N
+        element, passive_preload_N = passive, passive.preload_N
     ramp_s = min(1.0, duration_s / 4.0)
     steps = round(duration_s / COUPLING_STEP_S)
     series = {name: np.empty(steps) for name in TIMESERIES_UNITS}
@@ -133,7 +137,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     metrics = {
         "speed_m_s": speed_m_s, "duration_s": duration_s, "ramp_s": ramp_s,
         "tensioner": described,
-        **({"preload_N": element.preload_N} if described["element"] == "passive" else {}),
+        **({"preload_N": passive_preload_N} if passive_preload_N is not None else {}),
         "real_time_factor": duration_s / wall, "plant_real_time_factor": duration_s / plant_wall,
         "wall_time_s": wall, "machine": host_machine(),
         "track_energy": energy.to_dict(),

@@ -54,7 +54,7 @@ class Schedule:
 
     @property
     def t_s(self) -> NDArray[np.float64]:
-        return COUPLING_STEP_S * np.arange(1, len(self.inputs) + 1)
+        return COUPLING_STEP_S * np.arange(1, len(self.inputs) + 1, dtype=np.float64)
 
     @property
     def steps(self) -> int:

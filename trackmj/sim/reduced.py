@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,11 +24,11 @@ from trackmj.ports import (
     StepInputs,
     steps_per_period,
 )
-from trackmj.results.metrics import overshoot, settling_time
+from trackmj.results.signals import overshoot, settling_time
+from trackmj.sim.controllers import ESTIMATORS
 from trackmj.sim.loop import Schedule, run_loop
 from trackmj.sim.observers import Recorder
 from trackmj.sim.plants import ReducedLoopPlant
-from trackmj.sim.registry import ESTIMATORS
 
 
 @dataclass
@@ -49,11 +50,20 @@ class LoopResult:
     switches: int
 
 
+class PosteriorEstimator(Estimator, Protocol):
+    """An estimator that shows its posterior mean ``x``, shape (5,): the four plant states
+    and the disturbance state y0 (the Kalman filters of :mod:`trackmj.control.estimators`)."""
+
+    @property
+    def x(self) -> NDArray[np.float64]: ...
+
+
 class _StateProbe:
     """Observer keeping the plant's true state (steps, 4) and the estimator's posterior
     (steps, 5: the four plant states and the disturbance state y0) of every step."""
 
-    def __init__(self, plant: ReducedLoopPlant, estimator: Estimator, steps: int) -> None:
+    def __init__(self, plant: ReducedLoopPlant, estimator: PosteriorEstimator,
+                 steps: int) -> None:
         self.plant, self.estimator = plant, estimator
         self.truth, self.estimate = np.empty((steps, 4)), np.empty((steps, 5))
 
@@ -105,7 +115,7 @@ def run_closed_loop(cfg: ControlConfig, plant_params: PlantParams, controller: C
 def step_metrics(res: LoopResult, t_step: float, f_final: float,
                  band: float = 0.02) -> dict[str, float]:
     """Step response figures after a step at ``t_step`` [s] to ``f_final`` [N]: settling
-    time to ±band·f_final [s] (:func:`trackmj.results.metrics.settling_time`, NaN if not settled),
+    time to ±band·f_final [s] (:func:`trackmj.results.signals.settling_time`, NaN if not settled),
     overshoot beyond f_final as a fraction of it [-] (the study's definition), RMSE over
     the last second [N], and the estimator's tension RMSE over the run [N]."""
     settle = settling_time(res.t, res.force, f_final, t_step, band_rel=band)

@@ -23,10 +23,12 @@ from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.host import machine as host_machine
 from trackmj.ports import COUPLING_STEP_S, StepInputs, steps_per_period
-from trackmj.results.metrics import compute_metrics, prediction_vs_measured
+from trackmj.results.comparison import prediction_vs_measured
+from trackmj.results.metrics import compute_metrics
 from trackmj.results.store import Result, run_metadata
-from trackmj.scenarios.schema import Scenario
+from trackmj.scenarios.scenario import Scenario
 from trackmj.sim.architectures import assemble
+from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.loop import Schedule, run_loop
 from trackmj.sim.observers import (
     CHANNEL_SETS,
@@ -38,7 +40,7 @@ from trackmj.sim.observers import (
     Recorder,
     capture_mujoco_warnings,
 )
-from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS
+from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 from trackmj.sim.setup import Overrides, RunSetup, prepare
 from trackmj.validator import ParameterError
 
@@ -70,7 +72,7 @@ def physics_limits(setup: RunSetup, stroke_range_m: tuple[float, float]) -> Phys
                          stroke_range_m=stroke_range_m)
 
 
-def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
+def simulate(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_ARCHITECTURE,
              controller: str | None = None, estimator: str | None = None, seed: int = 0,
              duration: float | None = None, variant: str = "nominal",
              model: str | Path | None = None, hydraulics: str | Path | None = None,
@@ -118,7 +120,7 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = "tp",
     measured : str or Path, optional
         A measured log (:mod:`trackmj.results.measured`: CSV or Parquet, ``t_s`` and any of the
         run's columns, e.g. ``tension_N``, ``p_head [MPa]``); the metrics get
-        ``prediction_vs_measured`` (:func:`trackmj.results.metrics.prediction_vs_measured`).
+        ``prediction_vs_measured`` (:func:`trackmj.results.comparison.prediction_vs_measured`).
     channels : str
         ``"default"``: the contract columns; ``"all"``: also per-cylinder pressures, valve
         flows, strand tensions and the hitch load, with units
@@ -182,7 +184,7 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
     ``measured``: a log from :func:`measured_log`)."""
     _check_channels(channels)
     if ARCHITECTURES[setup.architecture].replays_tp and tp_result is None:
-        tp_result = run(dataclasses.replace(setup, architecture="tp"))
+        tp_result = run(dataclasses.replace(setup, architecture=REFERENCE_ARCHITECTURE))
     with capture_mujoco_warnings() as warnings:
         asm = assemble(setup, tp_result)
         cfg = asm.control
@@ -235,8 +237,8 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
     windows = setup.scenario.metric_windows(setup.duration_s,
                                             link_pitch_m=setup.model.track.pitch_m)
     m = compute_metrics(result.columns(), windows, control_period_s=controller.period_s,
-                        solve_times_s=np.array(recorder.solve_times_s),
-                        solve_success=np.array(recorder.solve_success), wall_time_s=wall)
+                        solve_times_s=recorder.solve_times_s,
+                        solve_success=recorder.solve_success, wall_time_s=wall)
     m |= asm.element.run_metrics(setup.duration_s)
     m["controller_fallbacks"] = float(controller.statistics().fallbacks)
     m["controller_overruns"] = float(np.sum(np.array(recorder.solve_times_s)

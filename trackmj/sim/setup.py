@@ -42,15 +42,13 @@ from trackmj.machines.idler import (
 )
 from trackmj.machines.sizing import input_weight_scale
 from trackmj.ports import COUPLING_STEP_S
-from trackmj.scenarios.schema import Scenario, Variant, load_scenario
+from trackmj.scenarios.load import load_scenario
+from trackmj.scenarios.scenario import Scenario
+from trackmj.scenarios.schema import Variant
 from trackmj.sim.control_plant import nominal_plant_params
-from trackmj.sim.registry import (
-    ARCHITECTURES,
-    CONTROLLERS,
-    ESTIMATORS,
-    REPLACEABLE_ELEMENT,
-    by_name,
-)
+from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
+from trackmj.sim.entries import by_name
+from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE, REPLACEABLE_ELEMENT
 from trackmj.track.mechanics import ModelParams, load_model_params
 from trackmj.track.mjcf.builders import with_heightfield
 from trackmj.track.mjcf.cache import model_key
@@ -172,6 +170,15 @@ class RunSetup:
         """Equivalent idler of the run's track model (identified once per process)."""
         return _idler(self.model, self.machine)
 
+    @property
+    def contact_stiffness_scale(self) -> float:
+        """The variant's scale of every contact stiffness [-]."""
+        return self.variant.contact_stiffness_scale
+
+    def track_mjcf(self) -> str:
+        """MJCF text of the run's track on the scenario's terrain for its seed and length."""
+        return self.mjcf(self.scenario.terrain_profile(self.seed, self.duration_s))
+
     def mjcf(self, terrain: RoadProfile | None) -> str:
         """MJCF text of the run's track model, on ``terrain`` (None: flat ground)."""
         text = model_mjcf(self.model, self.machine)
@@ -249,7 +256,7 @@ def _check_bands_agree(sc: Scenario, control: ControlConfig, control_file: str) 
             "--set control.controller.force_max_N=...)")
 
 
-def prepare(scenario: Scenario | str | Path, *, architecture: str = "tp",
+def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_ARCHITECTURE,
             controller: str | None = None, estimator: str | None = None, seed: int = 0,
             duration: float | None = None, variant: str = "nominal",
             model: str | Path | None = None, hydraulics: str | Path | None = None,
