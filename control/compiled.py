@@ -293,7 +293,7 @@ def compiling() -> bool:
         return False
     from numba.core import config
 
-    return not config.DISABLE_JIT
+    return not config.DISABLE_JIT  # pyright: ignore[reportAttributeAccessIssue]  # set at import
 
 
 Bound = CompiledFunction | BufferedFunction | AliasedBuffer

@@ -28,10 +28,12 @@ class BufferedFunction:
                 if a.dtype != np.float64 or not a.flags.c_contiguous or a.size != nnz(i):
                     raise ValueError(f"{fn.name()}: {kind} {i} must be a contiguous float64 "
                                      f"array of {nnz(i)} values")
+        # casadi's stub declares (i, buffer, size) where SWIG takes the buffer alone, and
+        # numpy's stubs give ndarray no __buffer__ before Python 3.12
         for i, a in enumerate(args):
-            self._buf.set_arg(i, memoryview(a))
+            self._buf.set_arg(i, memoryview(a))  # pyright: ignore[reportCallIssue, reportArgumentType]  # stubs, see above
         for i, r in enumerate(self.res):
-            self._buf.set_res(i, memoryview(r))
+            self._buf.set_res(i, memoryview(r))  # pyright: ignore[reportCallIssue, reportArgumentType]  # stubs, see above
         self.call = self.__call__
 
     def __call__(self) -> int:

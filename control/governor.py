@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from trackmj.control.params import ControllerParams, PlantParams
+from trackmj.control.params import ControllerParams, PlantParams, resolved
 
 
 def feasible_band(ctrl: ControllerParams, plant: PlantParams,
@@ -29,8 +29,9 @@ def feasible_band(ctrl: ControllerParams, plant: PlantParams,
     """(lo, hi) [N] of the governed reference at supply pressure ``supply_pressure_Pa``."""
     reach = (plant.area_head_m2 * (supply_pressure_Pa - ctrl.governor_valve_drop_Pa)
              - plant.area_rod_m2 * plant.tank_pressure_Pa)
-    return (ctrl.force_min_N + ctrl.reference_margin_N,
-            min(ctrl.force_max_N - ctrl.reference_margin_N, reach))
+    margin = resolved(ctrl, "reference_margin_N")
+    return (resolved(ctrl, "force_min_N") + margin,
+            min(resolved(ctrl, "force_max_N") - margin, reach))
 
 
 def govern(preview: NDArray[np.float64], band: tuple[float, float]) -> NDArray[np.float64]:

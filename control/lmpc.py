@@ -85,4 +85,5 @@ class LinearMpc(_MpcBase):
     def _solve(
         self, w0: NDArray[np.float64], p: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool, int]:
-        return self._call_solver(w0, p, lambda st: bool(st.get("success", False)))
+        return self._call_solver(self.solver, w0, p,
+                                 lambda st: bool(st.get("success", False)))

@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
+import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
@@ -85,14 +86,16 @@ class _MpcBase:
         return parameter_vector(x0, ref, self.u_prev, self.theta, self.ctrl)
 
     def _call_solver(
-        self, w0: NDArray[np.float64], p: NDArray[np.float64], converged: Callable[[dict], bool]
+        self, solver: ca.Function, w0: NDArray[np.float64], p: NDArray[np.float64],
+        converged: Callable[[dict], bool]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], bool, int]:
-        """Run ``self.solver`` warm-started; (w, lam_g, ok, iterations) where ok needs the
-        solver's own verdict (``converged(stats)``) and a plan within FEASIBILITY_TOL."""
+        """Run ``solver`` (a CasADi NLP/QP solver on ``self.ocp``) warm-started; (w, lam_g,
+        ok, iterations) where ok needs the solver's own verdict (``converged(stats)``) and a
+        plan within FEASIBILITY_TOL."""
         lam0 = self._lam_g if self._lam_g is not None else 0.0
-        r = self.solver(x0=w0, p=p, lbx=self.ocp.lbw, ubx=self.ocp.ubw, lbg=self.ocp.lbg,
-                        ubg=self.ocp.ubg, lam_g0=lam0)
-        st = self.solver.stats()
+        r = solver(x0=w0, p=p, lbx=self.ocp.lbw, ubx=self.ocp.ubw, lbg=self.ocp.lbg,
+                   ubg=self.ocp.ubg, lam_g0=lam0)
+        st = solver.stats()
         w, g = np.array(r["x"]).ravel(), np.array(r["g"]).ravel()
         viol = max(
             np.max(self.ocp.lbg - g, initial=0.0),
@@ -100,7 +103,7 @@ class _MpcBase:
             np.max(self.ocp.lbw - w, initial=0.0),
             np.max(w - self.ocp.ubw, initial=0.0),
         )
-        ok = converged(st) and viol <= FEASIBILITY_TOL
+        ok = converged(st) and bool(viol <= FEASIBILITY_TOL)
         return w, np.array(r["lam_g"]).ravel(), ok, int(st.get("iter_count", 0))
 
     def _solve(

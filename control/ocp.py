@@ -19,6 +19,7 @@ Gauss-Newton Hessian (constraint curvature dropped).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import casadi as ca
@@ -26,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.model import N_THETA, ReducedModel
-from trackmj.control.params import ControllerParams, MpcParams
+from trackmj.control.params import ControllerParams, MpcParams, resolved
 
 X_SCALE = np.array((1e6, 1e6, 1e-3, 0.1))  # SI per scaled unit: MPa, mm, 0.1 m/s
 
@@ -87,15 +88,17 @@ def build_ocp(
     n, d, nb = mpc.horizon_steps, mpc.collocation_degree, mpc.horizon_steps // mpc.block_steps
     h = ctrl.period_s
     _, cmat = radau_matrices(d)
-    f_c = model.casadi_function()
+    f_c: Callable[[ca.SX, ca.SX, ca.SX], ca.SX] = model.casadi_function()
     extra = []
     if linear:
         lin_p = ca.SX.sym("lin", N_LINEAR)
         extra = [lin_p]
         a_mat = ca.reshape(lin_p[4:20], 4, 4)
 
-        def f_c(x: ca.SX, u_: ca.SX, _theta: ca.SX) -> ca.SX:
+        def f_linear(x: ca.SX, u_: ca.SX, _theta: ca.SX) -> ca.SX:
             return lin_p[:4] + ca.mtimes(a_mat, x) + lin_p[20:] * u_
+
+        f_c = f_linear
 
     x0 = ca.SX.sym("x0", 4)
     ref = ca.SX.sym("ref", n + 1)
@@ -112,7 +115,7 @@ def build_ocp(
     ah, ar = model.p.area_head_m2, model.p.area_rod_m2
 
     g, lbg, ubg = [], [], []
-    cost = 0
+    cost = ca.SX(0)
     forces = []
     x_start = x0 / scale
     for i in range(n):
@@ -165,7 +168,8 @@ def parameter_vector(
     ctrl: ControllerParams,
 ) -> NDArray[np.float64]:
     """Assemble the OCP parameter vector p (see module docstring)."""
-    lim = (ctrl.force_min_N, ctrl.force_max_N, ctrl.pressure_min_Pa, ctrl.pressure_max_Pa)
+    lim = (resolved(ctrl, "force_min_N"), resolved(ctrl, "force_max_N"), ctrl.pressure_min_Pa,
+           ctrl.pressure_max_Pa)
     return np.concatenate((x0, ref, (u_prev,), theta, lim))
 
 

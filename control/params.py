@@ -44,6 +44,17 @@ DERIVED = {("controller", "force_min_N"): BAND_REL[0],
 when the file (or an override) leaves the key out."""
 
 
+def resolved(params: Parameters, key: str) -> float:
+    """``params.<key>`` [N], a key of :data:`DERIVED` (given in the file or derived from the
+    nominal tension by :func:`load_config`); ParameterError when it is still None (parameters
+    built without :func:`load_config` that leave the key out)."""
+    value = getattr(params, key)
+    if value is None:
+        raise ParameterError(f"[{type(params).__name__}].{key}: not given and not derived "
+                             "from a nominal tension (read the control file with load_config)")
+    return value
+
+
 @dataclass(frozen=True, slots=True)
 class PlantParams(Parameters):
     """Reduced model: one equivalent cylinder (both cylinders lumped) + idler mass-spring-damper.

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from trackmj.control.governor import feasible_band, govern
 from trackmj.control.model import ReducedModel
-from trackmj.control.params import ControllerParams, PidParams
+from trackmj.control.params import ControllerParams, PidParams, resolved
 from trackmj.ports import ControllerStatistics, ControlOutput
 
 
@@ -97,10 +97,10 @@ class PidController:
                                         self.pid.measurement_filter_s)
         band = feasible_band(self.ctrl, self.model.p, self.supply_pressure_Pa)
         e_raw = float(govern(np.asarray(reference_preview[:1], float), band)[0]) - f
-        e = math.copysign(max(abs(e_raw) - self.pid.error_dead_band_N, 0.0), e_raw)
+        e = math.copysign(max(abs(e_raw) - resolved(self.pid, "error_dead_band_N"), 0.0), e_raw)
         # conditional integration: the valve->tension plant is integrating, so the integral
         # is only needed against slow disturbances (leakage, supply), not to reach a step
-        e_int = e_raw if abs(e_raw) <= self.pid.integration_band_N else 0.0
+        e_int = e_raw if abs(e_raw) <= resolved(self.pid, "integration_band_N") else 0.0
         # derivative on the first-order filtered measurement (Tf), backward difference
         f_prev = f if self.f_filtered is None else self.f_filtered
         self.f_filtered = self._lag(f_prev, f, self.tf)

@@ -170,17 +170,15 @@ class CondensedSqp:
         qp_viol = ca.mmax(ca.vertcat(ca.fmax(a_z - bnd[1], 0), ca.fmax(bnd[0] - a_z, 0),
                                      ca.fmax(zs - bnd[3], 0), ca.fmax(bnd[2] - zs, 0)))
         resid = ca.mtimes(ca.DM(hess), dx) + gs + ca.mtimes(ca.DM(jin).T, la)
-        lam_eq = [None] * n
-        nxt = None
+        lam_eq_back: list[ca.SX] = []  # node n - 1 first
         for i in reversed(range(n)):
             ri = resid[xcols[i]]
-            if i < n - 1:
-                ri = ri + ca.mtimes(a_blk[i + 1].T, nxt)
+            if lam_eq_back:  # i < n - 1
+                ri = ri + ca.mtimes(a_blk[i + 1].T, lam_eq_back[-1])
             einv_i = ca.reshape(es[i * nxb * nxb:(i + 1) * nxb * nxb], nxb, nxb)
-            nxt = -ca.mtimes(einv_i.T, ri)
-            lam_eq[i] = nxt
+            lam_eq_back.append(-ca.mtimes(einv_i.T, ri))
         dlam_g = ca.SX(ng, 1)
-        dlam_g[eq.tolist()] = ca.vertcat(*lam_eq)
+        dlam_g[eq.tolist()] = ca.vertcat(*reversed(lam_eq_back))
         dlam_g[ineq.tolist()] = la
         dlam_x = ca.vertcat(lz, ca.SX(nx, 1))
         step = ca.Function(

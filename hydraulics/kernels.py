@@ -554,7 +554,7 @@ def _chord(const: np.ndarray, state: np.ndarray, h: float, s1: float, v: float, 
                 p = (p[0], p[1], p[2], p[3], state[SET_NEXT])
             return True, p, it, flows, V
         n_prev = n
-    return False, p, MAX_CHORD, flows, V
+    return False, p, MAX_CHORD, flows, V  # pyright: ignore[reportPossiblyUnboundVariable]  # MAX_CHORD >= 1 loops
 
 
 @njit(cache=True)

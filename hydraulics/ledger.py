@@ -178,7 +178,7 @@ class EnergyLedger:
 
     def as_dict(self) -> dict[str, float]:
         """All fields and derived totals as a plain dict [J]."""
-        d = dict(zip(LEDGER_FIELDS, self.terms.tolist(), strict=True))
+        d: dict[str, float] = dict(zip(LEDGER_FIELDS, self.terms.tolist(), strict=True))
         d.update(pump_losses_J=self.pump_losses_J, throttle_J=self.throttle_J,
                  stored_change_J=self.stored_change_J, losses_J=self.losses_J,
                  balance_error_J=self.balance_error_J)
@@ -189,7 +189,8 @@ class EnergyLedger:
             return NotImplemented
         return bool(np.array_equal(self.terms, other.terms))
 
-    __hash__ = None  # type: ignore[assignment]  (mutable, as the dataclass it replaces)
+    # __eq__ without __hash__: Python sets __hash__ = None (unhashable: mutable, as the
+    # dataclass it replaces)
 
     def __repr__(self) -> str:
         terms = ", ".join(f"{k}={v!r}" for k, v in zip(LEDGER_FIELDS, self.terms.tolist(),

@@ -248,7 +248,7 @@ class HydraulicTensioner:
             self._check_input("setpoint_Pa", setpoint_Pa)
         self.supply_model: SupplyModel = model
         self.prescribed = model == "prescribed"
-        p_set0 = self._setpoint_at(t0_s) if self.setpoint is not None else float(setpoint_Pa)
+        p_set0 = self._setpoint_at(t0_s) if callable(setpoint_Pa) else float(setpoint_Pa)
         if model == "unloading" and prm.accumulator.precharge_Pa >= prm.cut_in_Pa(p_set0):
             raise ValueError(f"unloading supply: the cut-in {prm.cut_in_Pa(p_set0):g} Pa "
                              "must exceed the accumulator precharge "
@@ -516,6 +516,9 @@ class HydraulicTensioner:
                            f"last |dp| = {self._state.item(k.LAST_DP)} Pa)")
 
     def _setpoint_at(self, t_s: float) -> float:
+        """The set-point profile at ``t_s`` [s] -> p_set [Pa gauge], checked finite and >= 0."""
+        if self.setpoint is None:
+            raise RuntimeError("the supply has a constant set-point, no profile to evaluate")
         ps = float(self.setpoint(t_s))
         if not (math.isfinite(ps) and ps >= 0.0):
             raise ValueError(f"supply set-point gave p_set = {ps!r} Pa at t = {t_s} s")

@@ -29,7 +29,7 @@ _EXPORTS: dict[str, str] = {
     "sweep": "trackmj.study.sweep",
     "load_sweep": "trackmj.study.sweep",
     "read_sweep": "trackmj.study.sweep",
-    "load_scenario": "trackmj.scenarios.schema",
+    "load_scenario": "trackmj.scenarios.load",
     "read_result": "trackmj.results.store",
     "write_result": "trackmj.results.store",
     "Result": "trackmj.results.store",
@@ -44,7 +44,7 @@ __all__ = ["Executor", "Result", "RunSpec", "TrackPlant", "__version__", "load_s
 
 if TYPE_CHECKING:
     from trackmj.results.store import Result, read_result, write_result
-    from trackmj.scenarios.schema import load_scenario
+    from trackmj.scenarios.load import load_scenario
     from trackmj.sim.run import simulate
     from trackmj.study.executor import Executor, RunSpec
     from trackmj.study.sweep import load_sweep, read_sweep, sweep

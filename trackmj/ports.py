@@ -39,7 +39,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple, Protocol, TypeVar, runtime_checkable
+from typing import Any, ClassVar, Literal, NamedTuple, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,7 +60,11 @@ def steps_per_period(period_s: float, dt_s: float = COUPLING_STEP_S) -> int:
     return k
 
 
-TupleT = TypeVar("TupleT", bound=tuple)
+ElementCoupling = Literal["strong", "weak"]
+"""How an architecture couples its element to the mechanics: "strong" (the affine law with
+dF/dv) or "weak" (the last step's force held)."""
+
+TupleT = TypeVar("TupleT", bound=NamedTuple)
 
 
 def positional(cls: type[TupleT], order: Sequence[str]) -> Callable[[Iterable[Any]], TupleT]:
@@ -70,7 +74,7 @@ def positional(cls: type[TupleT], order: Sequence[str]) -> Callable[[Iterable[An
     1 kHz. Each such call site names the order it writes its values in, and this checks it
     against the declared fields when the module loads: a reordered or renamed field fails
     loudly at import, never as silently swapped values. Cold code builds by keyword."""
-    declared: tuple[str, ...] = cls._fields  # type: ignore[attr-defined]  # a NamedTuple's
+    declared: tuple[str, ...] = cls._fields
     if tuple(order) != declared:
         raise TypeError(f"{cls.__name__} declares the fields {declared} but a call site "
                         f"writes {tuple(order)}")
@@ -249,18 +253,18 @@ class Element(TensionerElement, Protocol):
     element without pressures); stroke_range_m: (lowest, highest) stroke [m] the element's
     travel (with its end stops' allowance) admits, checked by the physics guard;
     channels: the extra columns ``channel_values()`` returns, name -> unit, recorded with
-    ``--channels all`` (empty for an element with none). The three are read-only to the loop
-    (an element may hold them as class or instance attributes).
+    ``--channels all`` (empty for an element with none), a table of the element's class.
+    The loop only reads ``pressure_nodes`` and ``stroke_range_m`` (an element may hold them as
+    class or instance attributes).
     """
+
+    channels: ClassVar[Mapping[str, str]]
 
     @property
     def pressure_nodes(self) -> tuple[str, ...]: ...
 
     @property
     def stroke_range_m(self) -> tuple[float, float]: ...
-
-    @property
-    def channels(self) -> Mapping[str, str]: ...
 
     def channel_values(self) -> Sequence[float]:
         """The ``channels`` after the last completed step, in their order (SI)."""

@@ -241,8 +241,8 @@ class Location:
             if option is not None:
                 return option + "".join(f"[{p}]" if isinstance(p, int) else f".{p}"
                                         for p in full[n:])
-        last = max(i for i, p in enumerate(full) if isinstance(p, str))
-        name = full[last] + "".join(f"[{p}]" for p in full[last + 1:])
+        last, head = max((i, p) for i, p in enumerate(full) if isinstance(p, str))
+        name = head + "".join(f"[{p}]" for p in full[last + 1:])
         table = _path_text(full[:last])
         if self.file is not None:
             return f"{self.file} {table}.{name}" if table else f"{self.file}: {name}"
@@ -385,13 +385,13 @@ def _coerce(value: Any, hint: Any, spec: Spec, at: Location,
             return None
         (inner,) = (a for a in args if a is not type(None))
         return _coerce(value, inner, spec, at, parts)
-    if dataclasses.is_dataclass(hint):
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
         if not isinstance(value, hint):
             raise fail(f"expected {_expected(hint)}, got {_kind(value)}")
         return value
     if origin in (dict, Mapping):
         item = args[1]
-        if dataclasses.is_dataclass(item):
+        if isinstance(item, type) and dataclasses.is_dataclass(item):
             if not isinstance(value, dict) or not all(
                     isinstance(k, str) and isinstance(v, item) for k, v in value.items()):
                 raise fail(f"expected {_expected(hint)} of {item.__name__} tables")
@@ -547,12 +547,12 @@ def build(cls: type[T], data: Mapping[str, Any], *, file: str = "<data>",
           overrides: Mapping[str, Any] | None = None, require_source: bool = True) -> T:
     """Validate parsed TOML ``data`` into ``cls`` as :func:`load_file` does; ``file`` names
     the data's origin in messages."""
-    data = _copy(data)
+    raw: dict[str, Any] = _copy(data)
     kind = getattr(cls, "file_kind", None)
-    applied = apply_overrides(cls, data, overrides or {}, kind)
+    applied = apply_overrides(cls, raw, overrides or {}, kind)
     sources: dict[str, str] = {}
     at = Location(file=file, overridden={p: opt for p, opt, _ in applied})
-    obj = _build(cls, data, at, require_source, sources)
+    obj = _build(cls, raw, at, require_source, sources)
     for path, option, value in applied:
         sources[".".join(map(str, path))] = f"{option}={_show(value)}"
     for name, fld in _schema(cls).items():
@@ -812,6 +812,16 @@ class KeySpec:
         return f"{self.key}: {', '.join(bits)}{opt}" + (f" - {self.doc}" if self.doc else "")
 
 
+def _default(f: dataclasses.Field) -> Any:
+    """The default value of dataclass field ``f`` (its ``default`` or a new value of its
+    ``default_factory``); TypeError if it has neither (a required field)."""
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    raise TypeError(f"the field {f.name} has no default")
+
+
 def describe_schema(cls: type, prefix: str = "") -> list[KeySpec]:
     """Every key of the file read into ``cls``, with type, unit, range, default and doc
     (``source`` keys not listed: every table of a parameter file has one)."""
@@ -826,9 +836,7 @@ def describe_schema(cls: type, prefix: str = "") -> list[KeySpec]:
         elif kind == "named":
             rows += describe_schema(get_args(fld.hint)[1], key + ".<name>.")
         else:
-            f = defaults[name]
-            default = None if fld.required else repr(f.default if f.default is not
-                                                      dataclasses.MISSING else f.default_factory())
+            default = None if fld.required else repr(_default(defaults[name]))
             choices = f"one of {list(fld.spec.choices)}" if fld.spec.choices else ""
             expected = _expected(fld.hint)
             if fld.spec.allow_empty:

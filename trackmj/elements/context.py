@@ -7,12 +7,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
+from trackmj.ports import ElementCoupling
+
 if TYPE_CHECKING:
     from trackmj.control.model import ReducedModel
     from trackmj.elements.tensioner_file import TensionerFile
     from trackmj.hydraulics import HydraulicParams
     from trackmj.machines.idler import EquivalentIdler
-    from trackmj.scenarios.schema import Scenario
+    from trackmj.scenarios.scenario import Scenario
 
 
 class ElementSetup(Protocol):
@@ -43,5 +45,5 @@ class ElementContext:
     setup: ElementSetup
     stroke_m: float
     model: ReducedModel
-    coupling: str
+    coupling: ElementCoupling
     tensioner: TensionerFile | None

@@ -1,4 +1,5 @@
-"""The energy table of a run with the hydraulic plugin, ``Result.metrics["energy_J"]`` (written to ``metrics.json``).
+"""The energy table of a run with the hydraulic plugin, ``Result.metrics["energy_J"]``
+(written to ``metrics.json``).
 
 All terms in J over the whole run, t = 0 to its end, gauge basis
 (energies relative to the atmospheric reservoir). For a run with the hydraulic plugin the
@@ -34,9 +35,9 @@ state). Keys:
 - ``mechanical``: work into the track, ∫F·v dt;
 - ``residual``: pump − every term above.
 
-dp-b has no hydraulics: its table (:func:`trackmj.elements.ideal.ideal_actuator_table`) has ``ideal_actuator``
-true, a ``note``, ``mechanical`` and, as ``circuit``, the energy an ideal actuator with the
-same cylinders would draw.
+dp-b has no hydraulics: its table (:func:`trackmj.elements.ideal.ideal_actuator_table`) has
+``ideal_actuator`` true, a ``note``, ``mechanical`` and, as ``circuit``, the energy an ideal
+actuator with the same cylinders would draw.
 """
 
 from __future__ import annotations

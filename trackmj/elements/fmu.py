@@ -49,12 +49,12 @@ import numpy as np
 from trackmj.elements.cylinder import equivalent_cylinder, equivalent_pressures
 from trackmj.errors import PhysicsError
 from trackmj.fmi import FmuError
-from trackmj.fmi.fmu import FmuInstance
-from trackmj.ports import COUPLING_STEP_S, ElementLog, ForceLaw
+from trackmj.fmi.fmu import FmuDescription, FmuInstance
+from trackmj.ports import COUPLING_STEP_S, Element, ElementLog, ForceLaw
 
 if TYPE_CHECKING:
     from trackmj.elements.context import ElementContext
-    from trackmj.elements.tensioner_file import TensionerFile
+    from trackmj.elements.tensioner_file import FmuTable, TensionerFile
 
 NAN = math.nan
 MAX_NEWTON_ITER = 30
@@ -92,7 +92,11 @@ class FmuElement:
                  supply_Pa: float = 0.0,
                  equivalent: tuple[float, float, float] | None = None) -> None:
         table, d = tensioner.fmu, tensioner.description
-        self.table, self.description = table, d
+        if table is None:
+            raise ValueError(f"the tensioner file {tensioner.name} has no [fmu] table: it "
+                             f"makes the element {tensioner.element!r}, not 'fmu'")
+        self.table: FmuTable = table
+        self.description: FmuDescription = d
         self.name = d.name
         if coupling == "weak":
             self.coupling = "weak"
@@ -102,7 +106,8 @@ class FmuElement:
             self.coupling = "strong" if d.can_roll_back else "weak"
         self.h = COUPLING_STEP_S
         self.offset = table.stroke_offset_m
-        self.stroke_range_m = tuple(table.travel_m)
+        lo, hi = table.travel_m
+        self.stroke_range_m = (lo, hi)
         self.limit = table.force_limit_N
         self.equivalent = equivalent
         self.pressure_nodes = tuple(name for q, name in PRESSURE_NODES if q in d.outputs)
@@ -378,6 +383,9 @@ class FmuElement:
             else:
                 x1, out = [], self._me_eval([], s1, v1)[1]
         else:
+            if self._jac is None:
+                raise RuntimeError(f"the FMU element {self.name}: complete_step before the "
+                                   "step's force_law")
             lu, v_star, x_star, dxdv = self._jac
             if inst.n_states:
                 guess = (np.array(x_star) + dxdv * (v1 - v_star)).tolist()
@@ -404,8 +412,10 @@ class FmuElement:
         self._z = z
 
 
-def build(ctx: ElementContext) -> FmuElement:
+def build(ctx: ElementContext) -> Element:
     """The FMU of the run's tensioner file on the mechanics' stroke; pressures the FMU does
     not output are shown as the equivalent of its force on the hydraulic file's cylinders."""
+    if ctx.tensioner is None:
+        raise ValueError("the element 'fmu' needs a tensioner file with an [fmu] table")
     return FmuElement(ctx.tensioner, ctx.stroke_m, ctx.coupling, ctx.setup.supply0_Pa,
                       equivalent_cylinder(ctx.setup.hydraulics))

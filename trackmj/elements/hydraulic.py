@@ -10,6 +10,7 @@ from trackmj.elements.cylinder import cylinder_travel_m
 from trackmj.elements.energy_table import energy_table
 from trackmj.hydraulics import HydraulicTensioner
 from trackmj.hydraulics.tensioner import FLOW_NAMES, NODE_NAMES
+from trackmj.ports import Element
 from trackmj.validator import ParameterError
 
 if TYPE_CHECKING:
@@ -67,7 +68,7 @@ class HydraulicElement:
                 "energy_J": energy_table(ledger, self.tensioner.supply_model, duration_s)}
 
 
-def build(ctx: ElementContext) -> HydraulicElement:
+def build(ctx: ElementContext) -> Element:
     """The plugin with the scenario's supply model (default: the hydraulic file's) at the
     hydraulic file's set-point with the scenario's changes, each model starting in its
     steady state without demand; all valves closed (hold); ``ctx.coupling`` strong or weak."""

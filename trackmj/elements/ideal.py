@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from trackmj.elements.cylinder import cylinder_travel_m
-from trackmj.ports import COUPLING_STEP_S, ElementLog, ForceLaw
+from trackmj.ports import COUPLING_STEP_S, Element, ElementLog, ForceLaw
 
 if TYPE_CHECKING:
     from trackmj.elements.context import ElementContext
@@ -95,7 +95,7 @@ class IdealForceSource:
         return {"energy_J": ideal_actuator_table(self, duration_s)}
 
 
-def build(ctx: ElementContext) -> IdealForceSource:
+def build(ctx: ElementContext) -> Element:
     """dp-b's source: the valve mode integrates a force command at the reduced model's
     tension-rate gain at the initial force, through a lag of a quarter period of the oil
     column on the idler mass, with the two cylinders' viscous damping."""

@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from trackmj.elements.cylinder import equivalent_cylinder, equivalent_pressures
-from trackmj.ports import ElementLog, ForceLaw
+from trackmj.ports import Element, ElementLog, ForceLaw
 from trackmj.track.plant import PassiveTensioner
 
 if TYPE_CHECKING:
@@ -65,9 +65,11 @@ class PassiveElement(PassiveTensioner):
         return {"energy_J": {"passive_element": True, "mechanical": self.work_J}}
 
 
-def build(ctx: ElementContext) -> PassiveElement:
+def build(ctx: ElementContext) -> Element:
     """The passive tensioner of the run's tensioner file (its ``[passive]`` table)."""
-    table = ctx.tensioner.passive
+    table = None if ctx.tensioner is None else ctx.tensioner.passive
+    if table is None:
+        raise ValueError("the element 'passive' needs a tensioner file with a [passive] table")
     return PassiveElement(table.preload_N, table.stiffness_N_m, table.damping_N_s_m,
                           table.stroke_ref_m, table.travel_m,
                           equivalent_cylinder(ctx.setup.hydraulics))

@@ -40,6 +40,7 @@ import subprocess
 import sys
 import sysconfig
 import tempfile
+import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -142,15 +143,18 @@ def _with_initial_unknowns(xml: bytes) -> bytes:
     """pythonfmu's modelDescription with ``ModelStructure/InitialUnknowns``: the outputs
     (initial "calculated", FMI 2.0's default for outputs), which pythonfmu 0.7 leaves out
     and FMI 2.0 requires (fmpy's validation refuses the FMU without them)."""
-    import xml.etree.ElementTree as ET
-
     root = ET.fromstring(xml)
     structure = root.find("ModelStructure")
+    if structure is None:
+        raise ValueError("pythonfmu's modelDescription has no ModelStructure")
     outputs = structure.find("Outputs")
     if structure.find("InitialUnknowns") is None and outputs is not None:
         initial = ET.SubElement(structure, "InitialUnknowns")
         for unknown in outputs:
-            ET.SubElement(initial, "Unknown", index=unknown.get("index"))
+            index = unknown.get("index")
+            if index is None:
+                raise ValueError("pythonfmu's modelDescription has an output without index")
+            ET.SubElement(initial, "Unknown", index=index)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 

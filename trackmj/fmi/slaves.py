@@ -23,11 +23,20 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import mujoco
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 
 from trackmj.ports import COUPLING_STEP_S, Command, Readout, StepInputs
+
+if TYPE_CHECKING:
+    from trackmj.control.sensors import Sensors
+    from trackmj.elements.hydraulic import HydraulicElement
+    from trackmj.hydraulics.tensioner import HydraulicTensioner
+    from trackmj.sim.architectures import Assembly
+    from trackmj.sim.setup import RunSetup
+    from trackmj.track.plant import TrackPlant
 
 TRACK_INPUTS = ("force_N", "force_dv_N_s_m", "track_speed_m_s", "hitch_pull_N", "hitch_down_N")
 TRACK_OUTPUTS = ("stroke_m", "velocity_m_s", "tension_N", "chassis_acc_z_m_s2",
@@ -41,7 +50,24 @@ PLANT_OUTPUTS = ("p_head_measured_Pa", "p_rod_measured_Pa", "stroke_measured_m",
                  "velocity_m_s", "chassis_acc_z_m_s2")
 
 
-def machine_files(machine: str) -> dict[str, str | None]:
+class MachineFiles(TypedDict):
+    """The machine arguments of :func:`trackmj.sim.setup.prepare`: a machine (name or file)
+    or a model parameter file on the default machine (None: not given)."""
+
+    machine: str | None
+    model: str | None
+
+
+TrackState = tuple[Any, ...]
+"""A saved track: MjData copy, actuator bias parameters, clock, last force law, speed
+command, hitch flag (opaque to the importer)."""
+
+PlantState = tuple[TrackState, "HydraulicTensioner", "Sensors", "int | None", dict[str, Any]]
+"""A saved plant: the track, copies of the hydraulics and of the sensors (their noise
+generator), the element's last valve mode and the outputs."""
+
+
+def machine_files(machine: str) -> MachineFiles:
     """``prepare`` arguments for the FMU parameter ``machine``: a shipped machine's name
     ("" the default, lf1352) or a machine file (``*_machine.toml``) through the machine
     registry (:func:`trackmj.machines.assembly.resolve`); any other TOML is a model parameter file
@@ -79,20 +105,27 @@ class _Base(Fmi2Slave):
         self.register_variable(Integer("seed", causality=Fmi2Causality.parameter,
                                        variability=Fmi2Variability.fixed,
                                        description="terrain (and sensor noise) seed"))
-        self.plant = None
+        self.plant: TrackPlant | None = None
 
     def _real(self, names, causality, default=0.0):
         for name in names:
             setattr(self, name, default)
             self.register_variable(Real(name, causality=causality))
 
-    def _setup(self, scenario: str):
+    def _track(self) -> TrackPlant:
+        """The track, built when initialisation ends; RuntimeError before."""
+        if self.plant is None:
+            raise RuntimeError(f"{type(self).__name__}: no track before "
+                               "exit_initialization_mode")
+        return self.plant
+
+    def _setup(self, scenario: str) -> RunSetup:
         from trackmj.sim.setup import prepare
 
         name = scenario if self.terrain in ("", "flat") else self.terrain
         return prepare(name, seed=int(self.seed), **machine_files(self.machine))
 
-    def _outputs_track(self, plant, derailment: bool) -> None:
+    def _outputs_track(self, plant: TrackPlant, derailment: bool) -> None:
         self.stroke_m = plant.stroke_m
         self.velocity_m_s = plant.stroke_velocity_m_s
         self.tension_N = plant.idler_force_N
@@ -109,11 +142,11 @@ class _Base(Fmi2Slave):
             self.max_envelope_excursion_m = status.max_envelope_excursion_m
             self.closure_error_m = plant.closure_error_m
 
-    def _track_state(self, plant):
+    def _track_state(self, plant: TrackPlant) -> TrackState:
         return (copy.copy(plant.data), plant.model.actuator_biasprm.copy(), plant.time_s,
                 plant.last_law, plant._speed_command, plant._hitch_loaded)
 
-    def _restore_track(self, plant, state) -> None:
+    def _restore_track(self, plant: TrackPlant, state: TrackState) -> None:
         data, biasprm, plant.time_s, plant.last_law, speed, loaded = state
         mujoco.mj_copyData(plant.data, plant.model, data)
         plant.model.actuator_biasprm[:] = biasprm
@@ -127,6 +160,12 @@ class TrackSlave(_Base):
                    "force F = force_N + force_dv_N_s_m * v over each 1 ms step, > 0 pushes "
                    "the idler outward")
 
+    # inputs, registered by _real and set by the importer (force_N is set in __init__)
+    force_dv_N_s_m: float
+    track_speed_m_s: float
+    hitch_pull_N: float
+    hitch_down_N: float
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._real(TRACK_INPUTS, Fmi2Causality.input)
@@ -139,14 +178,14 @@ class TrackSlave(_Base):
 
     def exit_initialization_mode(self):
         from trackmj.elements.prescribed import ConstantForce
-        from trackmj.sim.architectures import settled_track
+        from trackmj.sim.mechanics import settled_track
 
         self.plant = settled_track(self._setup("W1"), self.force_N)
         self._element = ConstantForce
         self._outputs_track(self.plant, True)
 
     def do_step(self, current_time, step_size):
-        plant = self.plant
+        plant = self._track()
         element = self._element(self.force_N, -self.force_dv_N_s_m)
         inputs = StepInputs(self.track_speed_m_s, self.hitch_pull_N, self.hitch_down_N,
                             math.nan)
@@ -156,13 +195,14 @@ class TrackSlave(_Base):
         self._outputs_track(plant, True)
         return True
 
-    def _get_fmu_state(self):
-        return self._track_state(self.plant), {n: getattr(self, n) for n in
-                                                (*TRACK_OUTPUTS, *DERAILMENT_OUTPUTS)}
+    # the state is this tuple (pythonfmu keeps it opaque), not pythonfmu's dict of variables
+    def _get_fmu_state(self) -> tuple[TrackState, dict[str, Any]]:  # pyright: ignore[reportIncompatibleMethodOverride]  # opaque tuple state
+        return self._track_state(self._track()), {n: getattr(self, n) for n in
+                                                   (*TRACK_OUTPUTS, *DERAILMENT_OUTPUTS)}
 
-    def _set_fmu_state(self, state):
+    def _set_fmu_state(self, state: tuple[TrackState, dict[str, Any]]) -> None:  # pyright: ignore[reportIncompatibleMethodOverride]  # opaque tuple state
         track, outputs = state
-        self._restore_track(self.plant, track)
+        self._restore_track(self._track(), track)
         for name, value in outputs.items():
             setattr(self, name, value)
 
@@ -172,6 +212,14 @@ class PlantSlave(_Base):
 
     description = ("trackmj: one track side (MuJoCo) with the built-in hydraulic tensioner, "
                    "strong coupling; valve command in, sensor signals out")
+
+    # inputs, registered by _real and set by the importer
+    supply_pressure_set_Pa: float
+    track_speed_m_s: float
+    hitch_pull_N: float
+    hitch_down_N: float
+    asm: Assembly
+    sensors: Sensors
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -199,11 +247,12 @@ class PlantSlave(_Base):
         setup = prepare(terrain or self.scenario, **machine_files(self.machine),
                         seed=int(self.seed))
         self.asm = asm = assemble(setup)
-        self.plant = asm.track
+        if asm.track is None:
+            raise ValueError(f"{setup.architecture}: the plant FMU needs the MuJoCo track")
+        self.plant = track = asm.track
         self._nominal_supply_Pa = setup.supply0_Pa
         self.sensors = Sensors(asm.control.sensors, np.random.default_rng([int(self.seed), 1]))
         _, p_head_l, p_head_r, p_rod, p_supply = asm.element.node_pressures()
-        track = self.plant
         self._read(Readout(0.0, setup.force0_N, 0.5 * (p_head_l + p_head_r), p_rod, p_supply,
                            track.stroke_m, track.stroke_velocity_m_s, 0.0, 0.0, 0.0, 0.0,
                            track.chassis_acc_z_m_s2, track.closure_error_m))
@@ -213,7 +262,7 @@ class PlantSlave(_Base):
         return StepInputs(self.track_speed_m_s, self.hitch_pull_N, self.hitch_down_N,
                           supply if supply > 0.0 else self._nominal_supply_Pa)
 
-    def _read(self, r) -> None:
+    def _read(self, r: Readout) -> None:
         z = self.sensors.measure((r.p_head_Pa, r.p_rod_Pa, r.stroke_m))
         self.p_head_measured_Pa, self.p_rod_measured_Pa, self.stroke_measured_m = z.tolist()
         self.tension_N, self.p_head_Pa, self.p_rod_Pa = r.tension_N, r.p_head_Pa, r.p_rod_Pa
@@ -225,22 +274,35 @@ class PlantSlave(_Base):
         if mode not in (-1, 0, 1):
             raise ValueError(f"valve_mode = {mode}: must be +1, 0 or -1")
         command = Command(mode, float(mode), None)
-        for _ in range(_steps(step_size)):
+        steps = _steps(step_size)
+        readout = self.asm.plant.step(command, self._inputs())
+        for _ in range(steps - 1):
             readout = self.asm.plant.step(command, self._inputs())
         self._read(readout)
         return True
 
-    def _get_fmu_state(self):
+    def _hydraulic_element(self) -> HydraulicElement:
+        """The run's element, the built-in hydraulics (tp); TypeError for another."""
+        from trackmj.elements.hydraulic import HydraulicElement
+
         element = self.asm.element
-        return (self._track_state(self.plant), copy.deepcopy(element.tensioner),
+        if not isinstance(element, HydraulicElement):
+            raise TypeError(f"the plant FMU saves the built-in hydraulic element, not "
+                            f"{type(element).__name__}")
+        return element
+
+    # the state is this tuple (pythonfmu keeps it opaque), not pythonfmu's dict of variables
+    def _get_fmu_state(self) -> PlantState:  # pyright: ignore[reportIncompatibleMethodOverride]  # opaque tuple state
+        element = self._hydraulic_element()
+        return (self._track_state(self._track()), copy.deepcopy(element.tensioner),
                 copy.deepcopy(self.sensors), element._mode,
                 {n: getattr(self, n) for n in PLANT_OUTPUTS})
 
-    def _set_fmu_state(self, state):
+    def _set_fmu_state(self, state: PlantState) -> None:  # pyright: ignore[reportIncompatibleMethodOverride]  # opaque tuple state
         from trackmj.elements.hydraulic import HydraulicElement
 
         track, tensioner, sensors, mode, outputs = state
-        self._restore_track(self.plant, track)
+        self._restore_track(self._track(), track)
         element = HydraulicElement(copy.deepcopy(tensioner))
         element._mode = mode
         self.asm.element = self.asm.plant.element = element

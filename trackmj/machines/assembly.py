@@ -90,18 +90,23 @@ def load_machine(path: str | Path) -> Machine:
                              "give it as --model (run, compare) or --params (drive, model), "
                              f"or write a machine file (*{MACHINE_SUFFIX}) naming it")
     table = build(MachineFile, data, file=path.name, require_source=False).machine
-    paths: dict[str, Path | None] = {}
-    for key in ("mechanics", "hydraulics", "control", "idler", "reference_mjcf"):
-        rel = getattr(table, key)
-        if not rel:
-            paths[key] = None
-            continue
-        full = (path.parent / rel).resolve()
-        if not full.is_file():
-            raise ParameterError(f"{path.name} [machine].{key} = {rel!r}: no such file "
-                                 f"{full}")
-        paths[key] = full
-    return Machine(name=table.name, description=table.description, file=path, **paths)
+    return Machine(name=table.name, description=table.description, file=path,
+                   mechanics=_named_file(path, table, "mechanics"),
+                   hydraulics=_named_file(path, table, "hydraulics"),
+                   control=_named_file(path, table, "control"),
+                   idler=_named_file(path, table, "idler") if table.idler else None,
+                   reference_mjcf=(_named_file(path, table, "reference_mjcf")
+                                   if table.reference_mjcf else None))
+
+
+def _named_file(path: Path, table: MachineTable, key: str) -> Path:
+    """The file ``table.<key>`` of the machine file ``path`` names, resolved against its
+    folder; ParameterError naming the key if there is no such file."""
+    rel = getattr(table, key)
+    full = (path.parent / rel).resolve()
+    if not full.is_file():
+        raise ParameterError(f"{path.name} [machine].{key} = {rel!r}: no such file {full}")
+    return full
 
 
 @functools.cache

@@ -35,9 +35,11 @@ from trackmj.machines.idler import (
     IDENTIFICATION,
     EquivalentIdler,
     FrequencyResponse,
+    Identification,
     ModalTerm,
     default_idler_path,
     identification_for,
+    modal_compliance,
     write_idler_file,
 )
 from trackmj.ports import COUPLING_STEP_S
@@ -145,7 +147,7 @@ def _settled_stroke(plant, force_N: float, settle_s: float) -> float:
     return float(np.mean(samples))
 
 
-def identify_idler(make_plant: Callable[[], object], force_low_N: float = 12_000.0,
+def identify_idler(make_plant: Callable[[], TrackPlant], force_low_N: float = 12_000.0,
                    force_high_N: float = 15_000.0, settle_s: float = 1.5,
                    excitation_s: float = 8.0, band_Hz: tuple[float, float] = (1.0, 50.0),
                    amplitude_N: float = 1_500.0, seed: int = 0,
@@ -175,7 +177,7 @@ def identify_idler(make_plant: Callable[[], object], force_low_N: float = 12_000
         natural_frequency_Hz=math.sqrt(stiffness / mass) / (2.0 * math.pi),
         damping_ratio=damping / (2.0 * math.sqrt(stiffness * mass)),
         fit_r2=r2(single, compliance), stroke_m=stroke_low, modes=modes,
-        modal_fit_r2=r2(sum(t.compliance(omega) for t in modes), compliance),
+        modal_fit_r2=r2(modal_compliance(modes, omega), compliance),
         response=FrequencyResponse(freq, compliance, coherence))
 
 
@@ -186,7 +188,7 @@ def identify_packaged_idler() -> EquivalentIdler:
                           min_mass_kg=idler.mass_kg + idler.carrier_mass_kg)
 
 
-def identify_machine_idler(name: str) -> tuple[EquivalentIdler, str, dict[str, object]]:
+def identify_machine_idler(name: str) -> tuple[EquivalentIdler, str, Identification]:
     """Identify the equivalent idler of shipped machine ``name`` on its generated model at
     force levels relative to its nominal tension (:func:`identification_for`); returns the
     idler, the MJCF text and the identification arguments."""

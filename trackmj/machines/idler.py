@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypedDict
 
 import numpy as np
 
@@ -82,7 +84,13 @@ class EquivalentIdler:
 
     def modal_compliance(self, omega: np.ndarray) -> np.ndarray:
         """The modal model's compliance [m/N] at ``omega`` [rad/s]."""
-        return sum(term.compliance(omega) for term in self.modes)
+        return modal_compliance(self.modes, omega)
+
+
+def modal_compliance(modes: Iterable[ModalTerm], omega: np.ndarray) -> np.ndarray:
+    """Σ of the ``modes``' compliances [m/N] at ``omega`` [rad/s], in their order (zeros for
+    no mode)."""
+    return sum((term.compliance(omega) for term in modes), np.zeros_like(omega, dtype=complex))
 
 
 @dataclass(frozen=True)
@@ -115,7 +123,8 @@ class IdlerTable(Parameters):
 
 @dataclass(frozen=True)
 class IdentificationTable(Parameters):
-    """How the idler was identified (the arguments of ``trackmj.machines.identify.identify_idler``)."""
+    """How the idler was identified (the arguments of
+    ``trackmj.machines.identify.identify_idler``)."""
 
     model_file: str = param(doc="the MuJoCo model identified (in the models directory)")
     model_sha256: str = param(pattern="[0-9a-f]{64}", doc="SHA-256 of that file")
@@ -141,7 +150,21 @@ class IdlerFile(Parameters):
     identification: IdentificationTable
 
 
-def identification_for(nominal_tension_N: float) -> dict[str, object]:
+class Identification(TypedDict):
+    """Keyword arguments of :func:`trackmj.machines.identify.identify_idler` that describe an
+    identification: the two settled force levels [N], the settle and excitation durations
+    [s], the multisine's band [Hz], amplitude [N] and seed."""
+
+    force_low_N: float
+    force_high_N: float
+    settle_s: float
+    excitation_s: float
+    band_Hz: tuple[float, float]
+    amplitude_N: float
+    seed: int
+
+
+def identification_for(nominal_tension_N: float) -> Identification:
     """Arguments of ``identify_idler`` for a machine of nominal tension [N]: settled levels
     at 0.8 and 1.0 x nominal, a multisine of 0.1 x nominal (LF1352: 12, 15, 1.5 kN)."""
     return {"force_low_N": 0.8 * nominal_tension_N, "force_high_N": nominal_tension_N,
@@ -189,7 +212,7 @@ def load_identification(path: str | Path | None = None) -> IdentificationTable:
 
 def write_idler_file(idler: EquivalentIdler, path: str | Path,
                      model_path: str | Path | None = None, *,
-                     identification: dict[str, object] | None = None,
+                     identification: Identification | None = None,
                      machine: str = "LF1352", model_text: str | None = None) -> Path:
     """Write ``idler`` as an idler file (with its generated-file header) to ``path``.
 
@@ -218,8 +241,8 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
     digest = (file_sha256(model) if model_text is None
               else hashlib.sha256(model_text.encode()).hexdigest())
     values = {name: float(getattr(idler, name)) for name in SCALARS}
-    identification = {name: list(v) if isinstance(v, tuple) else v
-                      for name, v in (identification or IDENTIFICATION).items()}
+    arguments = {name: list(v) if isinstance(v, tuple) else v
+                 for name, v in (identification or IDENTIFICATION).items()}
     lines = [
         f"# GENERATED FILE - do not edit. The equivalent idler of the {machine} track, "
         "identified",
@@ -237,7 +260,8 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
         "# k, M and c from it (trackmj.sim.control_plant.reduced_plant_params). Units SI.",
         "",
         "[idler]",
-        'source = "identified on the MuJoCo track by trackmj.machines.identify (see [identification])"',
+        'source = "identified on the MuJoCo track by trackmj.machines.identify '
+        '(see [identification])"',
         *(f"{name} = {value!r}" for name, value in values.items()),
         "",
         *(line for term in idler.modes for line in (
@@ -250,7 +274,7 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
         'source = "the arguments of trackmj.machines.identify.identify_idler used for [idler]"',
         f'model_file = "{model.name}"',
         f'model_sha256 = "{digest}"',
-        *(f"{name} = {value!r}" for name, value in identification.items()),
+        *(f"{name} = {value!r}" for name, value in arguments.items()),
         "",
     ]
     path = Path(path)

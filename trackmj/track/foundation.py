@@ -1,5 +1,5 @@
 """Kelvin–Voigt foundation under the track's pins: a force element outside MuJoCo's
-constraint solver (issue 21).
+constraint solver.
 
 The study models the terrain as an equivalent Kelvin–Voigt foundation, its stiffness and
 damping identified from sinkage–load tests, with Coulomb friction at the track–terrain
@@ -58,6 +58,7 @@ contact point (p_x, p_z) [m]; :attr:`Foundation.jac` holds J_n·, J_t· over eac
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -341,8 +342,8 @@ class Foundation:
         Stiffness, damping, friction and slip speed.
     """
 
-    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, pin_geoms: np.ndarray,
-                 law: FoundationLaw) -> None:
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData,
+                 pin_geoms: Sequence[int] | np.ndarray, law: FoundationLaw) -> None:
         self.law = law
         self.line = ground_line(model)
         ground = model.geom("ground").id

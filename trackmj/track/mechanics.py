@@ -247,7 +247,7 @@ class ModelParams(Parameters):
 
 
 def load_model_params(path: str | Path | None = None,
-                      overrides: dict[str, Any] | None = None) -> ModelParams:
+                      overrides: Mapping[str, Any] | None = None) -> ModelParams:
     """Read and validate the model parameter file (default: packaged lf1352.toml);
     ``overrides``: ``{dotted key: value}`` (the ``model`` entry of
     :func:`trackmj.validator.parse_overrides`)."""

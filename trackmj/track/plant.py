@@ -486,7 +486,8 @@ class TrackPlant:
         """Sum of contact normal forces on the track by partner [N]:
         sprocket, road_wheels, idler, return_rollers, ground (the foundation's)."""
         m, d = self.model, self.data
-        totals = dict.fromkeys(("sprocket", "road_wheels", "idler", "return_rollers"), 0.0)
+        totals: dict[str, float] = dict.fromkeys(
+            ("sprocket", "road_wheels", "idler", "return_rollers"), 0.0)
         totals["ground"] = float(self.foundation.normal_forces_N.sum())
         wrench = np.zeros(6)
         for i in range(d.ncon):

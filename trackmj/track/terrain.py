@@ -125,7 +125,8 @@ class Heightfield:
 
 def heightfield(profile: RoadProfile, *, width_m: float = 2.0, nrow: int = 2,
                 base_m: float = 0.5) -> Heightfield:
-    """Heightfield arrays for ``profile`` (same convention as ``trackmj.track.mjcf.builders.with_heightfield``).
+    """Heightfield arrays for ``profile`` (same convention as
+    ``trackmj.track.mjcf.builders.with_heightfield``).
 
     width_m: extent across the track [m]; nrow: rows along y (>= 2); base_m: depth of the
     box below the lowest point [m]. A flat profile gets elevation_z = 1e-6 m (MuJoCo needs > 0).

@@ -7,7 +7,8 @@ wraps, spans, static strand tension), :mod:`.soft` (stated stiffness and damping
 soft-constraint parameters), :mod:`.names` (body, joint and geom names),
 :mod:`.structure` (short hinged chains), :mod:`.builders` (one builder per subtree, the
 machine/scene split, the heightfield terrain), :mod:`.generate` (settled ``home``
-keyframe, the committed files), :mod:`.cache` (generated models by content hash). The
+keyframe, the committed files), :mod:`.cache` (generated models by content hash),
+:mod:`.tree` (find-or-raise access to the element tree). The
 parameters they read are the mechanics file's (:mod:`trackmj.track.mechanics`). Nothing
 here imports the plant.
 """

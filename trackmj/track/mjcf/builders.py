@@ -59,6 +59,7 @@ from trackmj.track.mjcf.layout import Layout, hub_radius, outward_sign, slide_ax
 from trackmj.track.mjcf.names import link_name, pin_name
 from trackmj.track.mjcf.soft import SoftConstraint, body_inv_weight, row_diag, soft_constraint
 from trackmj.track.mjcf.structure import chain_links, pin_series_count
+from trackmj.track.mjcf.tree import attribute, find
 from trackmj.track.terrain import RoadProfile, heightfield
 from trackmj.validator import ParameterError
 
@@ -398,8 +399,8 @@ def _map_soft_constraints(root: ET.Element, p: ModelParams) -> None:
     on the ``ground`` class, so the scene's ground geom (and a heightfield) carries none."""
     model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
     mapping = soft_constraints(p, model)
-    classes = {"ground": root.find("default/default[@class='collision']"
-                                   "/default[@class='ground']/geom")}
+    classes = {"ground": find(root, "default/default[@class='collision']"
+                                    "/default[@class='ground']/geom")}
     for geom in root.iter("geom"):
         name = geom.get("name", "")
         soft = mapping.get(name)
@@ -409,12 +410,12 @@ def _map_soft_constraints(root: ET.Element, p: ModelParams) -> None:
             target.set("solimp", _fmt(*soft.solimp))
     # the pin class takes pin_00's mapping; a connect carrying another number of pins in
     # series (a chain of another length) carries its own
-    pin_class = root.find("default/default[@class='pin_joint']/equality")
+    pin_class = find(root, "default/default[@class='pin_joint']/equality")
     first = mapping[pin_name(0)]
     pin_class.set("solref", _fmt(*first.solref))
     pin_class.set("solimp", _fmt(*first.solimp))
     for connect in root.iter("connect"):
-        soft = mapping[connect.get("name")]
+        soft = mapping[attribute(connect, "name")]
         if soft != first:
             connect.set("solref", _fmt(*soft.solref))
             connect.set("solimp", _fmt(*soft.solimp))
@@ -476,11 +477,11 @@ def split_mjcf(mjcf: str, machine_file: str) -> tuple[str, str]:
     (the machine part's file name), which holds everything else. :func:`join_mjcf` undoes
     it."""
     root = ET.fromstring(_strip_comment(mjcf))
-    name = root.get("model")
-    asset = root.find("asset")
+    name = attribute(root, "model")
+    asset = find(root, "asset")
     root.remove(asset)
-    world = root.find("worldbody")
-    items = [world.find(path) for path in SCENE_ITEMS]
+    world = find(root, "worldbody")
+    items = [find(world, path) for path in SCENE_ITEMS]
     for item in items:
         world.remove(item)
     scene = ET.Element("mujoco", model=name)
@@ -502,13 +503,14 @@ def join_mjcf(scene: str, machine: str) -> str:
     compiled model is the one of the full model :func:`split_mjcf` split)."""
     scene_root = ET.fromstring(_strip_comment(scene))
     root = ET.fromstring(_strip_comment(machine))
-    position = list(root).index(root.find("default")) + 1
-    root.insert(position, scene_root.find("asset"))
-    world = root.find("worldbody")
-    for k, item in enumerate(scene_root.find("worldbody")):
+    position = list(root).index(find(root, "default")) + 1
+    root.insert(position, find(scene_root, "asset"))
+    world = find(root, "worldbody")
+    for k, item in enumerate(find(scene_root, "worldbody")):
         world.insert(k, item)
     ET.indent(root, space="  ")
-    return _header_comment(root.get("model")) + ET.tostring(root, encoding="unicode") + "\n"
+    return (_header_comment(attribute(root, "model")) + ET.tostring(root, encoding="unicode")
+            + "\n")
 
 
 def read_mjcf(path: str | Path) -> str:
@@ -519,7 +521,7 @@ def read_mjcf(path: str | Path) -> str:
     include = ET.fromstring(_strip_comment(text)).find("include")
     if include is None:
         return text
-    return join_mjcf(text, (path.parent / include.get("file")).read_text())
+    return join_mjcf(text, (path.parent / attribute(include, "file")).read_text())
 
 
 def with_heightfield(mjcf: str, profile: RoadProfile) -> str:
@@ -537,15 +539,15 @@ def with_heightfield(mjcf: str, profile: RoadProfile) -> str:
     field = heightfield(profile, width_m=TERRAIN_WIDTH_M, base_m=TERRAIN_BASE_M)
     root = ET.fromstring(_strip_comment(mjcf))
     nrow, ncol = field.data.shape
-    _sub(root.find("asset"), "hfield", name="terrain", nrow=str(nrow), ncol=str(ncol),
+    _sub(find(root, "asset"), "hfield", name="terrain", nrow=str(nrow), ncol=str(ncol),
          size=_fmt(*field.size), elevation=" ".join(f"{v:.6f}" for v in field.data.ravel()))
-    world = root.find("worldbody")
-    ground = world.find("geom[@name='ground']")
+    world = find(root, "worldbody")
+    ground = find(world, "geom[@name='ground']")
     for key in ("type", "size"):
         ground.attrib.pop(key, None)
     ground.set("type", "hfield")
     ground.set("hfield", "terrain")
     ground.set("pos", _fmt(*field.pos))
-    world.find("geom[@name='ground_visual']").set("pos", _fmt(0.0, 0.0, field.pos[2] - 0.01))
+    find(world, "geom[@name='ground_visual']").set("pos", _fmt(0.0, 0.0, field.pos[2] - 0.01))
     ET.indent(root, space="  ")
     return ET.tostring(root, encoding="unicode") + "\n"

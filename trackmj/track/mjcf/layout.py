@@ -245,19 +245,28 @@ def check_closure(p: ModelParams, at: Location) -> tuple[float, float]:
                    f"of the other wheels): {fits} or move the idler")
 
 
+def _closing_idler_x(p: ModelParams, lo: float, hi: float) -> float:
+    """The idler x [m] in [lo, hi] where the loop closes (brentq on :func:`closure_gap`);
+    ValueError without a sign change in the interval."""
+    root = brentq(lambda x: closure_gap(p, x), lo, hi, xtol=1e-12)
+    assert isinstance(root, float)  # without full_output brentq returns the root alone
+    return root
+
+
 def compute_layout(p: ModelParams) -> Layout:
     """Lay the pins on a closed loop around sprocket, rollers, idler and road wheels,
     moving the idler along its slide until the last chord closes the loop exactly."""
     count = p.track.link_count
     at = Location(label="ModelParams")
     lo, hi = p.idler.x_m - CLOSURE_WINDOW_M, p.idler.x_m + CLOSURE_WINDOW_M
+    idler_x: float | None
     try:
-        idler_x = brentq(lambda x: closure_gap(p, x), lo, hi, xtol=1e-12)
+        idler_x = _closing_idler_x(p, lo, hi)
     except (ValueError, RuntimeError):    # no sign change, or a walk round the loop twice
         idler_x = None
     free = check_closure(p, at)
     if idler_x is None or not free[0] <= idler_x <= free[1]:
-        idler_x = brentq(lambda x: closure_gap(p, x), *free, xtol=1e-12)
+        idler_x = _closing_idler_x(p, *free)
     pins = _pins_for(p, idler_x, count)
     sx, sz = p.sprocket.x_m, p.sprocket.z_m
     rp = p.sprocket_pitch_radius_m

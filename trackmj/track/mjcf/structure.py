@@ -1,4 +1,4 @@
-"""Track structure "chains": short hinged sub-chains joined by pin connects (issue 21).
+"""Track structure "chains": short hinged sub-chains joined by pin connects.
 
 Applied to the generated MJCF tree after the free links and their pin connects exist
 (:func:`chain_links`), so the generator's link code stays one. The loop of n links is cut,
@@ -33,6 +33,7 @@ import numpy as np
 
 from trackmj.track.mechanics import ModelParams
 from trackmj.track.mjcf.names import link_name, pin_name
+from trackmj.track.mjcf.tree import attribute, find
 from trackmj.validator import ParameterError
 
 
@@ -92,11 +93,11 @@ def chain_links(root: ET.Element, p: ModelParams) -> None:
                              f"[{p.pin_joint_table}] torsional spring-damper; use "
                              "structure = \"free\" with it")
 
-    world = root.find("worldbody")
+    world = find(root, "worldbody")
     bodies = {b.get("name"): b for b in world.findall("body")}
     # world pose of every link at the layout, before any is re-parented
-    pose = {link_name(k): (_floats(bodies[link_name(k)].get("pos")),
-                           _floats(bodies[link_name(k)].get("quat")))
+    pose = {link_name(k): (_floats(attribute(bodies[link_name(k)], "pos")),
+                           _floats(attribute(bodies[link_name(k)], "quat")))
             for k in range(p.track.link_count)}
     rot, conj, rel_quat = np.empty(9), np.empty(4), np.empty(4)
     for k in hinged_pins(p):
@@ -114,9 +115,9 @@ def chain_links(root: ET.Element, p: ModelParams) -> None:
                                    axis="0 1 0", pos="0 0 0"))
         world.remove(child)
         parent.append(child)
-    equality = root.find("equality")
+    equality = find(root, "equality")
     for k in hinged_pins(p):
-        equality.remove(equality.find(f"connect[@name='{pin_name(k)}']"))
+        equality.remove(find(equality, f"connect[@name='{pin_name(k)}']"))
 
 
 def equalise_link_weights(model: mujoco.MjModel) -> None:
