@@ -1,4 +1,5 @@
-"""Calibration against measured logs (trackmj.study.calibrate) and the log reader (trackmj.results.measured).
+"""Calibration against measured logs (trackmj.study.calibrate) and the log reader
+(trackmj.results.measured).
 
 The log is made with trackmj itself: a closed-loop run of a short step-up/step-down
 condition with the head-branch restrictor area and the oil bulk modulus off nominal, plus

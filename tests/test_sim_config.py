@@ -42,8 +42,8 @@ def test_committed_idler_file_equals_a_fresh_identification() -> None:
     for f in dataclasses.fields(EquivalentIdler):
         if f.name in ("modes", "response"):
             continue
-        assert getattr(stored, f.name) == pytest.approx(getattr(fresh, f.name),
-                                                        rel=IDENTIFICATION_RTOL, abs=1e-12), (f.name, REGENERATE)
+        expected = pytest.approx(getattr(fresh, f.name), rel=IDENTIFICATION_RTOL, abs=1e-12)
+        assert getattr(stored, f.name) == expected, (f.name, REGENERATE)
     for a, b in zip(stored.modes, fresh.modes, strict=True):
         assert dataclasses.astuple(a) == pytest.approx(dataclasses.astuple(b),
                                                        rel=IDENTIFICATION_RTOL), REGENERATE

@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import importlib
 
-TYPE_CHECKING = False   # type checkers take this name as True; importing typing costs ~3 ms
 from trackmj.version import __version__
+
+TYPE_CHECKING = False   # type checkers take this name as True; importing typing costs ~3 ms
 
 _EXPORTS: dict[str, str] = {
     "simulate": "trackmj.sim.run",

@@ -44,6 +44,11 @@ the root object's :func:`sources_field` (table path -> source). Scenario files m
 Overrides (``--set kind.table.key=value``, :func:`parse_overrides`) are applied to the raw
 TOML data before validation, so they pass the same checks; a message about an overridden
 value names the option.
+
+One module, although it is long: the coercion of values, the override paths and the key
+listing (:func:`describe_schema`, ``trackmj keys``) all walk the same field specs, and
+``hydraulics/`` and ``control/`` import it as a leaf; split, each part would reach into the
+others' private helpers.
 """
 
 from __future__ import annotations
