@@ -6,13 +6,15 @@ from __future__ import annotations
 import itertools
 
 import matplotlib.pyplot as plt
+import matplotlib.text
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
 from synthetic import energy_table, synthetic_result
 
-from trackmj.results import figures
+from trackmj.results import figure_compare, figure_energy, figure_panels, figure_run, figure_style
 from trackmj.results.comparison import prediction_vs_tp
+from trackmj.results.metric_windows import windows_of
 from trackmj.scenarios.load import load_scenario
 
 
@@ -20,7 +22,8 @@ from trackmj.scenarios.load import load_scenario
 def captured(monkeypatch) -> list[plt.Figure]:
     """The figures the module would save, kept open for inspection."""
     figs: list[plt.Figure] = []
-    monkeypatch.setattr(figures, "_save", lambda fig, path: figs.append(fig) or path)
+    for module in (figure_run, figure_compare):
+        monkeypatch.setattr(module, "save_png", lambda fig, path: figs.append(fig) or path)
     yield figs
     for fig in figs:
         plt.close(fig)
@@ -52,8 +55,6 @@ def _check_axes(fig: plt.Figure) -> None:
             box = legend.get_window_extent(renderer).transformed(ax.transAxes.inverted())
             assert box.y0 >= 0.99 or box.x0 >= 1.0 or box.y1 <= 0.0, (
                 f"legend of '{ax.get_ylabel()}' overlaps its data")
-    import matplotlib.text
-
     small = {(t.get_text()[:40], t.get_fontsize()) for t in fig.findobj(matplotlib.text.Text)
              if t.get_text().strip() and t.get_visible() and t.get_fontsize() < 9}
     assert not small, small
@@ -62,7 +63,7 @@ def _check_axes(fig: plt.Figure) -> None:
 def test_run_figure_units_legends_and_zooms(captured) -> None:
     tp = _runs("W3", duration_s=22.0)[0]
     tp.metrics["energy_J"]["numerical"] = {"circuit": 20.0, "interface": 5.0}
-    figures.run_figure(tp, "unused.png")
+    figure_run.run_figure(tp, "unused.png")
     fig = captured[0]
     _check_axes(fig)
     titles = [ax.get_title(loc="left") for ax in fig.axes if ax.get_title(loc="left")]
@@ -83,11 +84,11 @@ def test_run_figure_units_legends_and_zooms(captured) -> None:
 def test_overlay_and_psd_figures_units_and_legends(captured) -> None:
     runs = _runs()
     preds = {r.architecture: prediction_vs_tp(r.columns(), r.metrics, runs[0].columns(),
-                                              runs[0].metrics, figures.windows_of(r))
+                                              runs[0].metrics, windows_of(r))
              for r in runs}
-    figures.overlay_figure(runs, "unused.png", predictions=preds)
-    figures.overlay_figure(runs, "unused.png", label_by="controller")
-    figures.psd_figure(runs, "unused.png")
+    figure_compare.overlay_figure(runs, "unused.png", predictions=preds)
+    figure_compare.overlay_figure(runs, "unused.png", label_by="controller")
+    figure_compare.psd_figure(runs, "unused.png")
     for fig in captured:
         _check_axes(fig)
     bars = next(ax for ax in captured[0].axes if ax.get_ylabel() == "F_ten RMSE vs tp [kN]")
@@ -101,12 +102,37 @@ def test_styles_differ_in_more_than_colour() -> None:
     """Readable in grayscale: within the architectures and within the controllers, each line
     has its own dash pattern and marker, and its own colour too."""
     for group in (("tp", "tp-weak", "dp-a", "dp-b"), ("nmpc", "lmpc", "pid")):
-        styles = [figures.style(name) for name in group]
+        styles = [figure_style.style(name) for name in group]
         assert len({str(s["linestyle"]) for s in styles}) == len(group)
         assert len({s["marker"] for s in styles}) == len(group)
         assert len({to_rgb(s["color"]) for s in styles}) == len(group)
-    hatches = [h for _, h in figures.ENERGY_STYLES.values()]
+    hatches = [h for _, h in figure_style.ENERGY_STYLES.values()]
     assert len(set(hatches)) == len(hatches)
+
+
+def test_a_name_without_a_style_gets_a_spare_one(captured, monkeypatch) -> None:
+    """An architecture the style table does not name is still drawn with a colour, dash
+    pattern and marker of its own (a spare one, by its line's index) and gets grey bars; one
+    table entry gives it its style, with no other edit."""
+    runs = _runs()
+    runs[1] = synthetic_result("W1", "dp-c", duration_s=6.0, offset_N=150.0,
+                               energy=energy_table(1.1))
+
+    def line_of(fig: plt.Figure, label: str):
+        return next(line for line in fig.axes[0].lines if line.get_label() == label)
+
+    figure_compare.overlay_figure(runs, "unused.png")
+    line = line_of(captured[-1], "dp-c 2 Hz low-pass")
+    spare = figure_style.SPARE_STYLES[1]
+    assert (line.get_color(), line.get_marker()) == (spare["color"], spare["marker"])
+    figure_compare.variants_figure(["a", "b"], {"RMSE [kN]": {"tp": [1.0, 2.0],
+                                                              "dp-c": [1.5, 2.5]}}, "unused.png")
+    assert len(captured[-1].axes[0].patches) == 4
+    monkeypatch.setitem(figure_style.STYLES, "dp-c", dict(color="#123456", linestyle=":",
+                                                          marker="h"))
+    figure_compare.overlay_figure(runs, "unused.png")
+    line = line_of(captured[-1], "dp-c 2 Hz low-pass")
+    assert (line.get_color(), line.get_marker()) == ("#123456", "h")
 
 
 def test_energy_bars_are_a_waterfall_ending_at_the_totals() -> None:
@@ -117,12 +143,12 @@ def test_energy_bars_are_a_waterfall_ending_at_the_totals() -> None:
     with_table = synthetic_result(energy=table)
     without = synthetic_result()
     fig, ax = plt.subplots()
-    figures._energy_bars(ax, ["tp", "old"], [with_table, without])
+    figure_energy.energy_bars(ax, ["tp", "old"], [with_table, without])
     bars = sorted((p for p in ax.patches if abs(p.get_x() + p.get_width() / 2) < 0.45),
                   key=lambda p: p.get_x())
     for a, b in itertools.pairwise(bars):
         assert b.get_y() == pytest.approx(a.get_y() + a.get_height())
-    circuit_terms, supply_terms = figures.energy_waterfall(with_table.metrics)
+    circuit_terms, supply_terms = figure_energy.energy_waterfall(with_table.metrics)
     assert [n for n, _ in supply_terms] == ["residual", "relief"]
     n_circuit = len([v for _, v in circuit_terms if v != 0.0])
     end_circuit = bars[n_circuit - 1].get_y() + bars[n_circuit - 1].get_height()
@@ -148,7 +174,7 @@ def test_zooms_follow_each_conditions_events(scenario: str, starts: list[float])
     disturbance edge, or steady running; NL1's supply held at 9 MPa from t = 0 is its
     condition, not an edge."""
     w = load_scenario(scenario).metric_windows(link_pitch_m=0.075)
-    zooms = figures._zoom_windows(w, 30.0)
+    zooms = figure_panels.zoom_windows(w, 30.0)
     assert [z[1] for z in zooms] == starts
     assert all(t1 > t0 for _, t0, t1 in zooms)
 
@@ -156,15 +182,15 @@ def test_zooms_follow_each_conditions_events(scenario: str, starts: list[float])
 def test_envelope_holds_each_bins_extremes() -> None:
     t = np.arange(1, 1001) * 1e-3
     x = np.sin(2 * np.pi * 20.0 * t)
-    tb, lo, hi = figures._envelope(t, x)
+    tb, lo, hi = figure_style.envelope(t, x)
     assert len(tb) == 20 and np.allclose(hi, 1.0, atol=2e-3) and np.allclose(lo, -1.0, atol=2e-3)
 
 
 def test_figures_write_png_files(tmp_path) -> None:
     runs = _runs()
-    paths = [figures.run_figure(runs[2], tmp_path / "run.png"),
-             figures.overlay_figure(runs, tmp_path / "overlay.png"),
-             figures.psd_figure(runs, tmp_path / "psd.png")]
+    paths = [figure_run.run_figure(runs[2], tmp_path / "run.png"),
+             figure_compare.overlay_figure(runs, tmp_path / "overlay.png"),
+             figure_compare.psd_figure(runs, tmp_path / "psd.png")]
     for path in paths:
         data = path.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000

@@ -184,7 +184,7 @@ def test_one_registry_line_adds_a_metric(monkeypatch) -> None:
     """A new metric is its step and one entry in METRICS: compute_metrics writes it (last,
     after the metrics registered before it), tables show its label and unit, lookup reads
     it; no other edit."""
-    from trackmj.results.figures import column_label, column_words
+    from trackmj.results.columns import column_label, column_words
 
     def tension_median(run: M.RunSignals) -> dict[str, float]:
         return {"tension_median_N": float(np.median(run.tension[run.in_tracking]))}

@@ -12,6 +12,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
+from trackmj.machines.plant import load_plant
 from trackmj.results.playback import (
     FRAME_PERIOD_S,
     RUN_RRD,
@@ -43,7 +44,7 @@ def synthetic_result(n_steps: int) -> Result:
 
 @pytest.fixture(scope="module")
 def plant() -> TrackPlant:
-    return TrackPlant.load()
+    return load_plant()
 
 
 @pytest.fixture(scope="module")

@@ -137,7 +137,7 @@ def test_scattered_samples_are_plotted_per_metric(tmp_path, monkeypatch) -> None
             for i in range(5)]
     rows[4] |= {"rmse_N": None, "error": "PhysicsError: ..."}
     write_table(rows, tmp_path / "results.parquet")
-    import trackmj.results.figures as figures_module
+    import trackmj.results.figure_sweep as figures_module
 
     drawn = []
     original = figures_module._metric_figure
@@ -166,7 +166,7 @@ def test_a_sweep_without_swept_keys_gets_bars_per_scenario_and_case(tmp_path,
              "wall_time_s": 1.0 + seed, "error": None}
             for sc in ("NL1", "W1") for k, c in enumerate(("nmpc", "pid")) for seed in (0, 2)]
     write_table(rows, tmp_path / "results.parquet")
-    import trackmj.results.figures as figures
+    import trackmj.results.figure_sweep as figures
 
     captured, original = [], figures._case_figure
     monkeypatch.setattr(figures, "_case_figure",

@@ -23,6 +23,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
 
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.validator import ParameterError
@@ -114,16 +117,10 @@ class Trace:
 
 def _read_table(path: Path) -> dict[str, np.ndarray]:
     """Column name -> float values of a CSV or Parquet file (pyarrow)."""
-    import pyarrow as pa
-
     try:
         if path.suffix.lower() in (".parquet", ".pq"):
-            import pyarrow.parquet as pq
-
             table = pq.read_table(path)
         else:
-            import pyarrow.csv as pacsv
-
             table = pacsv.read_csv(path)
     except (OSError, pa.ArrowInvalid) as exc:
         raise ParameterError(f"{path.name}: cannot read as "
@@ -240,7 +237,7 @@ class InputSignal:
 
     def __repr__(self) -> str:
         """Names the file, the column and the SHA-256 of the signal (a run's identity,
-        :func:`trackmj.study.campaign.identity`, changes with the file's content)."""
+        :func:`trackmj.study.identity.identity`, changes with the file's content)."""
         digest = hashlib.sha256(self.t_s.tobytes() + self.values.tobytes()).hexdigest()
         return f"InputSignal({self.file!r}, {self.column!r}, sha256={digest})"
 

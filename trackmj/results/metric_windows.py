@@ -1,6 +1,6 @@
 """The windows, bands and settings a run's metrics are measured on (:class:`MetricWindows`),
 built from a scenario's ``[limits]`` and ``[evaluation]`` tables and written beside the
-metrics (``metrics["evaluation"]``)."""
+metrics (``metrics["evaluation"]``), where :func:`windows_of` reads them back."""
 
 from __future__ import annotations
 
@@ -8,6 +8,8 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
+
+from trackmj.results.store import Result
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -84,3 +86,12 @@ class MetricWindows:
 
         names = {f.name for f in dataclasses.fields(cls)}
         return cls(**{k: tupled(v) for k, v in table.items() if k in names})
+
+
+def windows_of(result: Result) -> MetricWindows:
+    """The metric windows a result was measured on (its ``evaluation`` table)."""
+    table = result.metrics.get("evaluation")
+    if not isinstance(table, Mapping):
+        raise KeyError(f"{result.scenario} {result.architecture}: metrics have no "
+                       "'evaluation' table (a result written before the windows were stored)")
+    return MetricWindows.from_table(table)

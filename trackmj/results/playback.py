@@ -380,8 +380,10 @@ class PlaybackRecorder:
         loop = np.concatenate([pins, pins[:, :1]], axis=1)
         shift = np.array([0.0, self.half_width_m, 0.0])
         strips = np.stack([loop, loop - shift, loop + shift], axis=1)
+        # rerun converts float64 points to its float32 strips; its type stub names float32 only
         s.send_columns("scene/track/links", indexes=times, columns=rr.LineStrips3D.columns(
-            strips=strips.reshape(-1, *loop.shape[1:])).partition(np.full(k, 3)))
+            strips=strips.reshape(-1, *loop.shape[1:]),  # pyright: ignore[reportArgumentType]
+        ).partition(np.full(k, 3)))
         tension = self._tension[:k]
         s.send_columns("scene/track/pins", indexes=times, columns=rr.Points3D.columns(
             positions=pins.reshape(-1, 3),

@@ -35,6 +35,7 @@ from __future__ import annotations
 import ctypes
 import errno
 import fcntl
+import importlib
 import json
 import math
 import os
@@ -50,6 +51,7 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
+from trackmj.host import machine as describe_machine
 from trackmj.io import current_umask
 from trackmj.ports import COLUMN_UNITS
 from trackmj.version import __version__
@@ -123,9 +125,7 @@ def run_metadata(scenario: str, architecture: str, controller: str, estimator: s
     """Table metadata of a run; ``machine`` defaults to :func:`trackmj.host.machine`;
     extras that are not strings are stored as JSON."""
     if machine is None:
-        from trackmj.host import machine as describe
-
-        machine = describe()
+        machine = describe_machine()
     meta = {"scenario": scenario, "architecture": architecture, "controller": controller,
             "estimator": estimator, "seed": str(int(seed)), "trackmj_version": __version__,
             "machine": machine}
@@ -135,8 +135,6 @@ def run_metadata(scenario: str, architecture: str, controller: str, estimator: s
 
 def _require(module: str, what: str, install: str) -> Any:
     """Import optional ``module`` for ``what``; ImportError saying what to install."""
-    import importlib
-
     try:
         return importlib.import_module(module)
     except ImportError:
