@@ -10,7 +10,9 @@ import math
 import pytest
 from synthetic import energy_table, synthetic_result
 
+import trackmj.results.seed_stats as seed_stats
 import trackmj.study.campaign as campaign
+import trackmj.study.identity as identity
 from trackmj.cli.main import main
 from trackmj.results.store import ResultDirectoryError
 from trackmj.scenarios.events import check_duration, cut_events, moved_events
@@ -47,7 +49,7 @@ def test_resume_skips_done_runs_and_reruns_after_a_source_change(tmp_path, monke
         made = campaign.run_campaign(store, _runs(), executor=ex)
     assert (len(made.outcomes), made.resumed, len(ex.ran)) == (2 - 2, 2, 2)
     before = {r.key for r in _runs()}
-    monkeypatch.setattr(campaign, "source_hash", lambda: "edited source")
+    monkeypatch.setattr(identity, "source_hash", lambda: "edited source")
     runs = _runs()
     assert not before & {r.key for r in runs}
     with campaign.Store(tmp_path, "sweep") as store:        # the code changed: made again
@@ -117,8 +119,8 @@ def test_failed_runs_are_error_rows_with_units_readable_by_pandas_and_polars(tmp
 
 
 def test_statistics_filter_non_finite_values():
-    assert campaign.mean_std([1.0, 3.0, math.nan, None]) == (2.0, 1.0, 2)
-    assert campaign.mean_std([math.nan]) == (pytest.approx(math.nan, nan_ok=True), 0.0, 0)
+    assert seed_stats.mean_std([1.0, 3.0, math.nan, None]) == (2.0, 1.0, 2)
+    assert seed_stats.mean_std([math.nan]) == (pytest.approx(math.nan, nan_ok=True), 0.0, 0)
 
 
 # ----------------------------------------------------------------------------- events

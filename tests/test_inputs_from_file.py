@@ -148,7 +148,7 @@ def test_parquet_inputs_and_the_identity_follows_the_file_content(tmp_path):
     import pyarrow.parquet as pq
 
     from trackmj.sim.setup import prepare
-    from trackmj.study.campaign import run_key
+    from trackmj.study.identity import run_key
 
     t = 1e-3 * np.arange(0, 2501)
     path = scenario_with(tmp_path, {REFERENCE_TABLE: '[reference]\nfrom_file = "ref.parquet"\n'})

@@ -1,9 +1,11 @@
 """Studies made of many runs, and the procedures that derive a machine's files.
 
-* :mod:`.campaign`: runs into one directory, each known by its identity, resumable;
+* :mod:`.campaign`: runs into one directory, resumable, one row per run;
+* :mod:`.identity`: what a run is known by (its identity and the keys hashed from it);
 * :mod:`.executor`, :mod:`.worker`: the Dask executor and its warmed workers;
-* :mod:`.compare`, :mod:`.report`, :mod:`.sweep`: ``trackmj compare``, ``report``, ``sweep``;
-* :mod:`.calibrate`: ``trackmj calibrate``, parameter keys fitted to measured logs;
-* :mod:`.w3_hitch`: W3's hitch load calibrated against the idler load;
-* :mod:`.identify`: the equivalent idler identified on the MuJoCo track.
+* :mod:`.compare`, :mod:`.report`, :mod:`.sweep`: ``trackmj compare``, ``report``, ``sweep``
+  (the report's parts in ``report_*`` and the study's figures in :mod:`.study_numbers`);
+* :mod:`.calibrate`: ``trackmj calibrate``, parameter keys fitted to measured logs (its
+  spec file in :mod:`.calibrate_spec`);
+* :mod:`.w3_hitch`: W3's hitch load calibrated against the idler load.
 """

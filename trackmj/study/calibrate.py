@@ -37,18 +37,8 @@ the noise-only ones; without it the true values fell outside in one of two noise
 Both terms assume the model is the plant: a model error leaves correlated residuals and
 the intervals are then too narrow.
 
-Spec file (read by the one validator, :mod:`trackmj.validator`)::
-
-    [calibrate]
-    scenario = "W1"            # the conditions the log was taken in (name or file)
-    duration_s = 10.0
-    seed = 0
-    [[calibrate.parameters]]
-    key = "hydraulics.metering.head_branch_area_m2"
-    bounds = [1.6e-8, 8.0e-8]
-
-optional: ``[calibrate]`` architecture, start_s, start_points, fd_step_rel,
-max_evaluations, set; per parameter ``start`` (default: its value in the files).
+The spec file (which keys, within which bounds, under which conditions) is
+:mod:`trackmj.study.calibrate_spec`.
 """
 
 from __future__ import annotations
@@ -59,100 +49,30 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import qmc
+from scipy.stats import t as student_t
 
-from trackmj.ports import COUPLING_STEP_S, Command
+from trackmj.errors import PhysicsError
+from trackmj.ports import COLUMN_UNITS, COUPLING_STEP_S, Command, Readout
 from trackmj.results.measured import Trace, read_trace, run_grid
-from trackmj.validator import FILE_KINDS, Location, ParameterError, Parameters, load_file, param
+from trackmj.results.store import ResultWriter
+from trackmj.sim.architectures import assemble
+from trackmj.sim.observers import PhysicsGuard, capture_mujoco_warnings
+from trackmj.sim.run import physics_limits, schedule
+from trackmj.sim.setup import RunSetup, overrides_by_kind, prepare
+from trackmj.study.calibrate_spec import CalibrateTable, load_spec
+from trackmj.study.executor import Executor
+from trackmj.validator import ParameterError
 
 FIT_CHANNELS = ("tension_N", "p_head_Pa", "p_rod_Pa", "stroke_m")
 """Log columns the fit compares with the replayed run (any subset, at least one)."""
 CALIBRATION_JSON = "calibration.json"
 CALIBRATION_PNG = "calibration.png"
 CONFIDENCE = 0.95
-
-
-@dataclass(frozen=True)
-class FitParameter(Parameters):
-    """One key fitted within its bounds."""
-
-    key: str = param(pattern=r"[a-z]+(\.[A-Za-z0-9_]+)+",
-                     doc="a --set key KIND.TABLE.KEY (trackmj keys lists them)")
-    bounds: tuple[float, float] = param(unit="unit of the key",
-                                        doc="[low, high] the fit stays within")
-    start: float | None = param(unit="unit of the key", default=None,
-                                doc="optional start value; default: the files' value")
-
-    def cross_check(self, at: Location) -> None:
-        if self.key.partition(".")[0] not in FILE_KINDS:
-            raise at.error("key", self.key, f"must start with one of {', '.join(FILE_KINDS)}")
-        low, high = self.bounds
-        if not high > low:
-            raise at.error("bounds", list(self.bounds), "must be [low, high] with high > low")
-        if self.start is not None and not low <= self.start <= high:
-            raise at.error("start", self.start, f"lies outside bounds [{low:g}, {high:g}]")
-
-
-@dataclass(frozen=True)
-class CalibrateTable(Parameters):
-    """The ``[calibrate]`` table: the conditions of the logs and how to fit."""
-
-    scenario: str = param(doc="the conditions the logs were taken in: a built-in name or a "
-                          "scenario file (relative to the spec)")
-    duration_s: float = param(0.01, 3600.0, doc="replayed time from t = 0")
-    seed: int = param(0, 2**32 - 1, unit="1", doc="terrain seed of the conditions")
-    parameters: tuple[FitParameter, ...] = param(doc="the keys fitted")
-    architecture: str = param(choices=("tp", "tp-weak"), default="tp",
-                              doc="plant replayed (mechanics and element)")
-    start_s: float = param(0.0, 3600.0, default=0.0,
-                           doc="residuals from here to the end (skip a start-up)")
-    start_points: int = param(0, 1000, unit="1", default=0,
-                              doc="Latin-hypercube start points evaluated before the local "
-                              "fit (0: start at the start values)")
-    fd_step_rel: float = param(1e-3, 0.1, default=3e-2,
-                               unit="1", doc="relative finite-difference step")
-    block_s: float = param(0.001, 1.0, default=0.01,
-                           doc="residuals are block means over this long (white sensor "
-                           "noise stays white, σ/√m; fewer, equally informative residuals)")
-    max_evaluations: int = param(1, 1000, unit="1", default=40,
-                                 doc="most residual evaluations of the local fit")
-    set: tuple[str, ...] | None = param(default=None,
-                                        doc="optional fixed --set overrides of every run")
-
-    def cross_check(self, at: Location) -> None:
-        if not self.parameters:
-            raise at.error("parameters", [], "lists no parameter to fit")
-        keys = [p.key for p in self.parameters]
-        for i, key in enumerate(keys):
-            if key in keys[:i]:
-                raise at.error(("parameters", i, "key"), key, "is fitted twice")
-        if self.start_s >= self.duration_s:
-            raise at.error("start_s", self.start_s,
-                           f"must be < duration_s = {self.duration_s!r}")
-
-
-@dataclass(frozen=True)
-class CalibrationSpec(Parameters):
-    """A calibration spec file."""
-
-    calibrate: CalibrateTable
-    file_kind: ClassVar[str] = "calibration spec"
-
-
-def load_spec(path: str | Path) -> tuple[CalibrateTable, str]:
-    """The validated ``[calibrate]`` table and its scenario (a file path resolved against
-    the spec's directory, or a built-in name)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ParameterError(f"calibration spec not found: {path}")
-    spec = load_file(CalibrationSpec, path, require_source=False).calibrate
-    scenario = spec.scenario
-    local = path.parent / scenario
-    if scenario.endswith(".toml") and local.is_file():
-        scenario = str(local)
-    return spec, scenario
 
 
 @dataclass(frozen=True)
@@ -214,11 +134,6 @@ def replay(setup: Any, mode: np.ndarray, u: np.ndarray,
         Field name -> values at the end of each step, shape (steps,). The physics guard
         watches every step (:class:`trackmj.errors.PhysicsError`).
     """
-    from trackmj.ports import Readout
-    from trackmj.sim.architectures import assemble
-    from trackmj.sim.observers import PhysicsGuard, capture_mujoco_warnings
-    from trackmj.sim.run import physics_limits, schedule
-
     with capture_mujoco_warnings() as warnings:
         asm = assemble(setup)
         sched = schedule(setup, 0, 0.01)
@@ -308,9 +223,7 @@ class Problem:
     def values(self, theta: np.ndarray) -> dict[str, float]:
         return dict(zip(self.keys, self.x(theta).tolist(), strict=True))
 
-    def setup(self, values: Mapping[str, float]) -> Any:
-        from trackmj.sim.setup import overrides_by_kind, prepare
-
+    def setup(self, values: Mapping[str, float]) -> RunSetup:
         fixed = overrides_by_kind(list(self.spec.set or ()))
         merged = {f"{kind}.{k}": v for kind, keys in fixed.items() for k, v in keys.items()}
         return prepare(self.scenario, architecture=self.spec.architecture,
@@ -349,8 +262,6 @@ class Problem:
 def _lhs_cost(problem: Problem, values: dict[str, float]) -> tuple[float, dict[str, Any]]:
     """Cost of one start point (in a worker): (0.5 Σr², its run record); a point whose run
     leaves physics costs inf and its record says why."""
-    from trackmj.errors import PhysicsError
-
     problem = Problem(problem.spec, problem.scenario, problem.logs, [])
     try:
         r = problem.weighted(values, "start")
@@ -362,17 +273,17 @@ def _lhs_cost(problem: Problem, values: dict[str, float]) -> tuple[float, dict[s
 
 def _starts(problem: Problem) -> list[dict[str, float]]:
     """The Latin-hypercube start points (seeded by the spec's seed)."""
-    from scipy.stats import qmc
-
     n = problem.spec.start_points
-    theta = qmc.LatinHypercube(d=len(problem.keys), seed=problem.spec.seed).random(n)
+    # seed=, the legacy keyword scipy still takes (its signature names only rng=): an int
+    # rng= would draw from a generator spawned off it, so other start points
+    engine = qmc.LatinHypercube(d=len(problem.keys),
+                                seed=problem.spec.seed)  # pyright: ignore[reportCallIssue]
+    theta = engine.random(n)
     return [problem.values(th) for th in theta]
 
 
 def _best_start(problem: Problem, workers: int | None) -> dict[str, float]:
     """Evaluate the start points on the Dask executor; the lowest cost wins."""
-    from trackmj.study.executor import Executor
-
     points = _starts(problem)
     with Executor(workers=workers) as ex:
         futures = ex.client.map(_lhs_cost, [problem] * len(points), points, pure=False)
@@ -429,11 +340,11 @@ def _roughness(problem: Problem, theta: np.ndarray, cost: float) -> float:
     return 0.5 * (max(costs) - min(costs))
 
 
-def fit(problem: Problem, start: Mapping[str, float]) -> dict[str, Any]:
-    """Least-squares fit from ``start``; estimates, 95 % intervals, residual RMS."""
-    from scipy.optimize import least_squares
-    from scipy.stats import t as student_t
-
+def _solve(problem: Problem, start: Mapping[str, float]
+           ) -> tuple[Any, Callable[[np.ndarray], np.ndarray]]:
+    """The least-squares fit from ``start`` (trust region reflective; one-sided differences
+    of ``fd_step_rel``, stepping back inside the upper bound): scipy's result (θ in ``x``)
+    and the residual function of θ (cached per θ)."""
     cache: dict[bytes, np.ndarray] = {}
     step = problem.spec.fd_step_rel
 
@@ -460,9 +371,19 @@ def fit(problem: Problem, start: Mapping[str, float]) -> dict[str, Any]:
         return jacobians[key]
 
     theta0 = np.clip(problem.theta(start), 0.0, 1.0)
-    sol = least_squares(fun, theta0, jac=jac, bounds=(0.0, 1.0), method="trf",
+    # jac: a callable, as documented; scipy's signature is unannotated, and its default
+    # "2-point" makes the checker infer str
+    sol = least_squares(fun, theta0, jac=jac,  # pyright: ignore[reportArgumentType]
+                        bounds=(0.0, 1.0), method="trf",
                         x_scale=1.0, max_nfev=problem.spec.max_evaluations,
                         ftol=1e-4, xtol=1e-3)
+    return sol, fun
+
+
+def fit(problem: Problem, start: Mapping[str, float]) -> dict[str, Any]:
+    """Least-squares fit from ``start``; estimates, 95 % intervals, residual RMS."""
+    step = problem.spec.fd_step_rel
+    sol, fun = _solve(problem, start)
     r, j = fun(sol.x), _central_jacobian(problem, sol.x, step)   # d r / d theta
     n, p = len(r), len(sol.x)
     dof = max(n - p, 1)
@@ -523,27 +444,12 @@ def calibrate(spec_path: str | Path, logs: Sequence[str | Path], out: str | Path
     -------
     Calibration
     """
-    from trackmj.results.store import ResultWriter
-
     spec, scenario = load_spec(spec_path)
     if not logs:
         raise ParameterError("calibrate needs one or more --measured LOG files")
     loaded = [load_log(path, spec.duration_s) for path in logs]
     problem = Problem(spec, scenario, loaded, [])
-    for i, p in enumerate(spec.parameters):   # every key and bound checked before any run
-        for value in p.bounds:
-            try:
-                problem.setup({p.key: value})
-            except ParameterError as exc:
-                raise ParameterError(f"{Path(spec_path).name} [[calibrate.parameters]][{i}] "
-                                     f"key = {p.key!r} at bound {value:g}: {exc}") from None
-    nominal = problem.setup({})
-    start = {}
-    for p in spec.parameters:
-        value = p.start if p.start is not None else _files_value(nominal, p.key)
-        low, high = p.bounds
-        start[p.key] = value if value is not None and low <= value <= high else math.sqrt(
-            low * high) if low > 0 else 0.5 * (low + high)
+    start = _start_values(problem, spec_path)
     with ResultWriter(out, marker=CALIBRATION_JSON) as writer:
         wall = time.perf_counter()
         if spec.start_points:
@@ -564,16 +470,38 @@ def calibrate(spec_path: str | Path, logs: Sequence[str | Path], out: str | Path
     return Calibration(Path(out), doc)
 
 
-def _unit(column: str) -> str:
-    from trackmj.results.store import COLUMN_UNITS
+def _start_values(problem: Problem, spec_path: str | Path) -> dict[str, float]:
+    """Each key's start value: its ``start``, else its value in the files if that lies
+    within its bounds, else the middle of the bounds (geometric for positive bounds). Every
+    key and bound is checked first, before any run (ParameterError naming the spec's
+    entry)."""
+    spec = problem.spec
+    for i, p in enumerate(spec.parameters):
+        for value in p.bounds:
+            try:
+                problem.setup({p.key: value})
+            except ParameterError as exc:
+                raise ParameterError(f"{Path(spec_path).name} [[calibrate.parameters]][{i}] "
+                                     f"key = {p.key!r} at bound {value:g}: {exc}") from None
+    nominal = problem.setup({})
+    start = {}
+    for p in spec.parameters:
+        value = p.start if p.start is not None else _files_value(nominal, p.key)
+        low, high = p.bounds
+        start[p.key] = value if value is not None and low <= value <= high else math.sqrt(
+            low * high) if low > 0 else 0.5 * (low + high)
+    return start
 
+
+def _unit(column: str) -> str:
     return COLUMN_UNITS[column]
 
 
 def _figure(logs: Sequence[Log], start: Sequence[Mapping[str, np.ndarray]],
             fitted: Sequence[Mapping[str, np.ndarray]], doc: Mapping[str, Any],
             path: Path) -> Path:
-    from trackmj.results.figures import calibration_figure
+    # matplotlib (which the figure module switches to Agg) is heavy: loaded only to draw
+    from trackmj.results.figure_compare import calibration_figure
 
     est = "\n".join(f"{k} = {v:.4g}, 95 % [{lo:.4g}, {hi:.4g}]"
                      for (k, v), (lo, hi) in zip(doc["estimates"].items(),

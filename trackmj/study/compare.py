@@ -14,7 +14,9 @@ from typing import Any
 from trackmj.host import machine
 from trackmj.io import write_text_atomic
 from trackmj.results.comparison import prediction_vs_tp
-from trackmj.results.figures import overlay_figure, psd_figure, run_figure, windows_of
+from trackmj.results.figure_compare import overlay_figure, psd_figure
+from trackmj.results.figure_run import run_figure
+from trackmj.results.metric_windows import windows_of
 from trackmj.results.metrics import METRIC_DISPLAY, lookup
 from trackmj.results.store import Result
 from trackmj.results.store import _json_ready as jsonable  # the one JSON form of metrics

@@ -15,6 +15,7 @@ failed run becomes an outcome with its error, never a lost batch.
 from __future__ import annotations
 
 import functools
+import multiprocessing
 import os
 import time
 import uuid
@@ -23,7 +24,14 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from tqdm import tqdm
+
 from trackmj.results.store import Result
+from trackmj.scenarios.load import load_scenario
+from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
+from trackmj.sim.run import simulate
+from trackmj.sim.setup import overrides_by_kind
+from trackmj.validator import ParameterError
 
 
 @dataclass(frozen=True)
@@ -35,7 +43,7 @@ class RunSpec:
     """
 
     scenario: str
-    architecture: str = "tp"
+    architecture: str = REFERENCE_ARCHITECTURE
     controller: str | None = None
     estimator: str | None = None
     seed: int = 0
@@ -49,8 +57,8 @@ class RunSpec:
     machine: str | None = None
 
     def as_tp(self) -> RunSpec:
-        """The same case in the tp architecture (what a dp-a run replays)."""
-        return replace(self, architecture="tp")
+        """The same case in the reference architecture (what a dp-a run replays)."""
+        return replace(self, architecture=REFERENCE_ARCHITECTURE)
 
     def prepare_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`trackmj.sim.setup.prepare` for this run."""
@@ -85,8 +93,6 @@ class RunOutcome:
 def execute(spec: RunSpec, tp: RunOutcome | None = None) -> RunOutcome:
     """Run ``spec`` here (in a worker); ``tp`` is the outcome of its tp run for dp-a.
     Exceptions become the outcome's error, so one run cannot lose the batch."""
-    from trackmj.sim.run import simulate
-
     start = time.perf_counter()
     try:
         if tp is not None and not tp.ok:
@@ -119,7 +125,7 @@ class Executor:
     _cluster: Any = field(default=None, init=False)
 
     def __enter__(self) -> Executor:
-        from distributed import Client, LocalCluster
+        from distributed import Client, LocalCluster  # heavy: loaded when a cluster starts
 
         if self.scheduler is not None:
             self.client = Client(self.scheduler, timeout="20s")
@@ -129,7 +135,10 @@ class Executor:
             raise ValueError(f"workers = {self.workers!r}: need an integer >= 1")
         _configure_local_workers()
         self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                     dashboard_address=None, silence_logs=50,
+                                     # None: no dashboard (documented; unannotated, its
+                                     # default ":8787" makes the checker infer str)
+                                     dashboard_address=None,  # pyright: ignore[reportArgumentType]
+                                     silence_logs=50,
                                      scheduler_kwargs={"dashboard_address": ":0"})
         self.client = Client(self._cluster)
         return self
@@ -149,7 +158,7 @@ class Executor:
 
         progress: description of a progress bar over the simulated seconds of the runs.
         """
-        from distributed import as_completed
+        from distributed import as_completed  # heavy: loaded when a cluster runs
 
         if self.client is None:
             raise RuntimeError("use the Executor as a context manager")
@@ -206,9 +215,7 @@ def _configure_local_workers() -> None:
     """Dask settings for the local cluster: worker processes forked from a forkserver that
     imports :mod:`trackmj.study.worker` first (it pins the BLAS/OpenMP/numba thread pools to one
     thread before numpy is imported, then warms the run code), non-daemonic workers."""
-    import multiprocessing
-
-    import dask
+    import dask.config  # heavy (dask, distributed): loaded when a local cluster starts
     from distributed import utils
 
     dask.config.set({"distributed.worker.daemon": False,
@@ -224,8 +231,6 @@ class _ProgressBar:
     """tqdm bar over the simulated seconds of ``specs``, with runs done and failed."""
 
     def __init__(self, specs: Sequence[RunSpec], description: str) -> None:
-        from tqdm import tqdm
-
         self.seconds = {spec: simulated_seconds(spec) for spec in specs}
         self.runs, self.finished, self.failed = len(specs), 0, 0
         self.bar = tqdm(total=sum(self.seconds.values()), desc=description, mininterval=0.5,
@@ -253,8 +258,6 @@ def simulated_seconds(spec: RunSpec) -> float:
     cannot be read; the run itself will report why)."""
     if spec.duration is not None:
         return float(spec.duration)
-    from trackmj.validator import ParameterError
-
     scenario_keys = tuple((k.partition(".")[2], v) for k, v in spec.overrides
                           if k.startswith("scenario."))
     try:
@@ -265,14 +268,10 @@ def simulated_seconds(spec: RunSpec) -> float:
 
 @functools.cache
 def _scenario_duration(scenario: str, overrides: tuple[tuple[str, Any], ...]) -> float:
-    from trackmj.scenarios.schema import load_scenario
-
     return load_scenario(scenario, overrides=dict(overrides)).duration_s
 
 
 def _replays_tp(spec: RunSpec) -> bool:
-    from trackmj.sim.registry import ARCHITECTURES
-
     return ARCHITECTURES[spec.architecture].replays_tp
 
 
@@ -280,8 +279,6 @@ def overrides_tuple(overrides: Mapping[str, Any] | Sequence[str] | None) -> tupl
     """Overrides in :attr:`RunSpec.overrides` form, from a mapping or ``--set`` items."""
     if not overrides:
         return ()
-    from trackmj.sim.setup import overrides_by_kind
-
     def frozen(value: Any) -> Any:   # TOML arrays -> tuples, so a RunSpec stays hashable
         return tuple(frozen(v) for v in value) if isinstance(value, list | tuple) else value
 

@@ -82,7 +82,7 @@ def plan(scenarios: Sequence[str], seeds: Sequence[int], duration: float | None,
     cut off a scenario's step, pulse or drop moves its events inside the run
     (:func:`~trackmj.study.report_cases.event_moves`). Each run is validated here
     (ParameterError before anything runs) and known by its identity
-    (:func:`trackmj.study.campaign.run_key`)."""
+    (:func:`trackmj.study.identity.run_key`)."""
     if baselines is None:
         baselines = registered_baselines()
     specs = []

@@ -17,11 +17,11 @@ import numpy as np
 
 from trackmj.host import machine
 from trackmj.results.energy_terms import energy_terms, headline_energy
-from trackmj.results.figures import windows_of
+from trackmj.results.metric_windows import windows_of
 from trackmj.results.metrics import lookup
+from trackmj.results.seed_stats import finite
 from trackmj.scenarios.load import load_scenario
 from trackmj.sim.registry import REFERENCE_ARCHITECTURE as REFERENCE
-from trackmj.study.campaign import finite
 from trackmj.study.report_matrix import Matrix, MatrixRun
 from trackmj.study.report_stats import lower_by, mean_std, reductions
 from trackmj.study.report_verdicts import verdict_magnitude, verdict_reduction

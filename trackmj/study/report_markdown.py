@@ -12,13 +12,15 @@ from pathlib import Path
 import numpy as np
 
 from trackmj.host import machine
-from trackmj.results.figures import overlay_figure, psd_figure, run_figure, variants_figure
+from trackmj.results.figure_compare import overlay_figure, psd_figure, variants_figure
+from trackmj.results.figure_run import run_figure
 from trackmj.results.metrics import METRIC_DISPLAY
+from trackmj.results.seed_stats import finite
 from trackmj.results.store import Result
 from trackmj.scenarios.events import describe_moves
 from trackmj.scenarios.load import load_scenario
 from trackmj.sim.registry import REFERENCE_ARCHITECTURE as REFERENCE
-from trackmj.study.campaign import RUNS, finite
+from trackmj.study.campaign import RUNS
 from trackmj.study.report_cases import event_moves, run_name
 from trackmj.study.report_claims import Finding
 from trackmj.study.report_matrix import Case, Matrix, MatrixRun

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from trackmj.results.comparison import prediction_vs_tp
-from trackmj.results.figures import windows_of
+from trackmj.results.metric_windows import windows_of
 from trackmj.results.metrics import lookup
 from trackmj.results.store import Result
 from trackmj.scenarios.load import load_scenario

@@ -9,13 +9,13 @@ from typing import Any
 
 import numpy as np
 
-from trackmj.study.campaign import finite
-from trackmj.study.campaign import mean_std as statistics
+from trackmj.results.seed_stats import finite
+from trackmj.results.seed_stats import mean_std as statistics
 
 
 def mean_std(values: Iterable[float], scale: float = 1.0, digits: int = 3) -> str:
     """"mean ± std" of the finite values (population std over seeds,
-    :func:`trackmj.study.campaign.mean_std`), scaled; "–" if none; "(k of n undefined)" appended
+    :func:`trackmj.results.seed_stats.mean_std`), scaled; "–" if none; "(k of n undefined)" appended
     when some are NaN (e.g. never settled)."""
     values = list(values)
     mean, std, n = statistics(values)

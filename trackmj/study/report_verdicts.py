@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from trackmj.study.campaign import finite
+from trackmj.results.seed_stats import finite
 from trackmj.study.report_stats import percent
 
 VERDICT_RULES = (

@@ -55,7 +55,7 @@ Output directory ``DIR``:
   with ``keep_runs``.
 
 Resume: a run whose ``run_key`` already has a row is skipped (a failed one too, unless
-``retry_failed``). The key is the run's identity (:func:`trackmj.study.campaign.run_key`: the
+``retry_failed``). The key is the run's identity (:func:`trackmj.study.identity.run_key`: the
 validated model, hydraulic, control and scenario parameters after overrides, the variant,
 architecture, controller, estimator, seed, duration, tensioner and FMU file hashes and the
 hash of trackmj's source); a changed file or a changed code changes it. Rows of runs the
@@ -74,20 +74,30 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypedDict, TypeVar, overload
 
+import numpy as np
+
+from trackmj.io import write_text_atomic
 from trackmj.machines.assembly import names
-from trackmj.sim.registry import ARCHITECTURES, CONTROLLERS, ESTIMATORS, by_name, choices
+from trackmj.results.columns import key_field
+from trackmj.results.store import _require
+from trackmj.scenarios.events import moved_events
+from trackmj.scenarios.load import BUILTIN, load_scenario
+from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
+from trackmj.sim.entries import by_name, choices
+from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
+from trackmj.sim.setup import prepare
 from trackmj.study.campaign import (
     RESULTS,
     PlannedRun,
     Store,
-    _key_field,
     plan_run,
     read_rows,
     read_units,
     run_campaign,
 )
+from trackmj.study.executor import RunSpec, overrides_tuple
 from trackmj.validator import (
     FILE_KINDS,
     Location,
@@ -104,6 +114,14 @@ FIGURES = "figures"
 MAX_RUNS = 100_000
 """Largest sweep accepted: a grid grows as the product of its value counts."""
 KEY_PATTERN = rf"({'|'.join(FILE_KINDS)})(\.[A-Za-z0-9_]+)+"
+T = TypeVar("T")
+
+
+def _given(value: T | None, what: str) -> T:
+    """``value`` of an optional spec key that the spec's ``cross_check`` requires here."""
+    if value is None:
+        raise ValueError(f"{what} is missing (the spec's cross_check requires it)")
+    return value
 
 
 # ----------------------------------------------------------------------------- spec
@@ -159,7 +177,8 @@ class SweepTable(Parameters):
                                      doc="simulated time per run (default: the scenario's)")
     seeds: tuple[int, ...] = param(0, 2**32 - 1, unit="1", default=(0,),
                                    doc="noise and terrain seeds; every point runs each")
-    architectures: tuple[str, ...] = param(choices=choices(ARCHITECTURES), default=("tp",),
+    architectures: tuple[str, ...] = param(choices=choices(ARCHITECTURES),
+                                           default=(REFERENCE_ARCHITECTURE,),
                                            doc="coupling architectures")
     controllers: tuple[str, ...] | None = param(choices=by_name(CONTROLLERS), default=None,
                                                 doc="controllers (default: the scenario's)")
@@ -235,24 +254,27 @@ class SweepSpec:
         """The spec's name in messages."""
         return self.source.name if self.source is not None else "sweep spec"
 
+    @overload
+    def path(self, value: str) -> str: ...
+    @overload
+    def path(self, value: None) -> None: ...
+    @overload
+    def path(self, value: str | None) -> str | None: ...
+
     def path(self, value: str | None) -> str | None:
         """A file of the spec as an absolute path string (built-in scenario names stay)."""
         if value is None:
             return None
-        if value.upper() in _builtin_scenarios():
+        if value.upper() in BUILTIN:
             return value
         path = Path(value).expanduser()
         return str(path if path.is_absolute() else (self.base / path).resolve())
 
     def scenarios(self) -> tuple[str, ...]:
-        names = self.table.scenarios or (self.table.scenario,)
+        """The spec's scenarios, files as absolute paths (``scenario`` or ``scenarios``:
+        the spec gives exactly one)."""
+        names = self.table.scenarios or (_given(self.table.scenario, "scenario"),)
         return tuple(self.path(n) for n in names)
-
-
-def _builtin_scenarios() -> tuple[str, ...]:
-    from trackmj.scenarios.load import BUILTIN
-
-    return BUILTIN
 
 
 def load_sweep(spec: str | Path | Mapping[str, Any] | SweepSpec) -> SweepSpec:
@@ -284,7 +306,7 @@ def load_sweep(spec: str | Path | Mapping[str, Any] | SweepSpec) -> SweepSpec:
 def _typed(spec: SweepSpec, index: int, value: float) -> float | int:
     """``value`` as the type the swept key's file declares (int keys take integers)."""
     p = spec.table.parameters[index]
-    found = _key_field(p.key)
+    found = key_field(p.key)
     hint = found[0] if found is not None else float
     where = f"{spec.where()} [[sweep.parameters]][{index}] (key {p.key!r})"
     if hint is int:
@@ -307,7 +329,7 @@ def _kind_text(hint: Any) -> str:
 
 def _range(p: SweptParameter, fraction: Sequence[float]) -> list[float]:
     """Points at ``fraction`` (0..1) of p's range, linear or in log(value)."""
-    lo, hi = float(p.low), float(p.high)
+    lo, hi = float(_given(p.low, "low")), float(_given(p.high, "high"))
     if p.scale == "log":
         return [math.exp(math.log(lo) + f * (math.log(hi) - math.log(lo))) for f in fraction]
     return [lo + f * (hi - lo) for f in fraction]
@@ -320,40 +342,54 @@ def parameter_points(spec: SweepSpec) -> list[dict[str, float | int]]:
     paired by independent random permutations of the ``seed``). No parameters: one empty
     point."""
     table = spec.table
-    n_points = table.samples if table.method == "lhs" else math.prod(
-        len(p.values) if p.values is not None else int(p.count) for p in table.parameters)
+    lhs = table.method == "lhs"
+    n_points = _given(table.samples, "samples") if lhs else math.prod(
+        len(p.values) if p.values is not None else int(_given(p.count, "count"))
+        for p in table.parameters)
     if n_points > MAX_RUNS:
         raise ParameterError(f"{spec.where()}: {n_points} parameter points; a sweep has at "
                              f"most {MAX_RUNS} runs (fewer values, or method = 'lhs')")
-    if table.method == "lhs":
-        import numpy as np
-
-        n = int(table.samples)
-        rng = np.random.default_rng(table.seed)
-        columns = []
-        for p in table.parameters:
-            fraction = (rng.permutation(n) + rng.random(n)) / n
-            columns.append(_range(p, fraction.tolist()))
-        raw = [dict(zip((p.key for p in table.parameters), row, strict=True))
-               for row in zip(*columns, strict=True)]
-    else:
-        axes = []
-        for p in table.parameters:
-            if p.values is not None:
-                axes.append(list(p.values))
-            else:
-                count = int(p.count)
-                axes.append(_range(p, [k / (count - 1) for k in range(count)]
-                                   if count > 1 else [0.0]))
-        raw = [dict(zip((p.key for p in table.parameters), combo, strict=True))
-               for combo in itertools.product(*axes)]
+    raw = _lhs_points(table, int(n_points)) if lhs else _grid_points(table)
     return [{key: _typed(spec, i, value) for i, (key, value) in enumerate(point.items())}
             for point in raw]
 
 
+def _lhs_points(table: SweepTable, n: int) -> list[dict[str, float]]:
+    """``n`` Latin-hypercube points (see :func:`parameter_points`), by key."""
+    rng = np.random.default_rng(table.seed)
+    columns = []
+    for p in table.parameters:
+        fraction = (rng.permutation(n) + rng.random(n)) / n
+        columns.append(_range(p, fraction.tolist()))
+    return [dict(zip((p.key for p in table.parameters), row, strict=True))
+            for row in zip(*columns, strict=True)]
+
+
+def _grid_points(table: SweepTable) -> list[dict[str, float]]:
+    """Every combination of the keys' grid values, the first key varying slowest."""
+    axes = []
+    for p in table.parameters:
+        if p.values is not None:
+            axes.append(list(p.values))
+        else:
+            count = int(_given(p.count, "count"))
+            axes.append(_range(p, [k / (count - 1) for k in range(count)]
+                               if count > 1 else [0.0]))
+    return [dict(zip((p.key for p in table.parameters), combo, strict=True))
+            for combo in itertools.product(*axes)]
 
 
 # ----------------------------------------------------------------------------- runs
+
+class _Files(TypedDict):
+    """The files of every run of a spec (absolute paths; a machine may be a shipped name)."""
+
+    model: str | None
+    hydraulics: str | None
+    control: str | None
+    tensioner: str | None
+    machine: str | None
+
 
 def _fixed_overrides(spec: SweepSpec) -> dict[str, Any]:
     """The spec's ``set`` items as ``{"KIND.TABLE.KEY": value}``; a key that is also swept
@@ -372,19 +408,12 @@ def _fixed_overrides(spec: SweepSpec) -> dict[str, Any]:
     return fixed
 
 
-
-
 def plan(spec: SweepSpec) -> list[PlannedRun]:
     """Every run of ``spec`` (:class:`trackmj.study.campaign.PlannedRun`), each validated by
     :func:`trackmj.sim.setup.prepare` (the same checks as ``trackmj run``); ParameterError
     naming the spec and the run if one is invalid, before anything runs. A duration that
     would cut off one of a scenario's events moves the events inside the run
     (:func:`trackmj.scenarios.events.moved_events`); the moves are fixed overrides of the run."""
-    from trackmj.scenarios.events import moved_events
-    from trackmj.scenarios.load import load_scenario
-    from trackmj.sim.setup import prepare
-    from trackmj.study.executor import RunSpec, overrides_tuple
-
     table = spec.table
     points = parameter_points(spec)
     fixed = _fixed_overrides(spec)
@@ -393,10 +422,11 @@ def plan(spec: SweepSpec) -> list[PlannedRun]:
     if n_runs > MAX_RUNS:
         raise ParameterError(f"{spec.where()}: {n_runs} runs; a sweep has at most "
                              f"{MAX_RUNS} (fewer values, or method = 'lhs')")
-    files = {"model": spec.path(table.model), "hydraulics": spec.path(table.hydraulics),
-             "control": spec.path(table.control), "tensioner": spec.path(table.tensioner),
-             "machine": (table.machine if table.machine is None or table.machine in names()
-                         else spec.path(table.machine))}
+    files: _Files = {
+        "model": spec.path(table.model), "hydraulics": spec.path(table.hydraulics),
+        "control": spec.path(table.control), "tensioner": spec.path(table.tensioner),
+        "machine": (table.machine if table.machine is None or table.machine in names()
+                    else spec.path(table.machine))}
     inputs = json.dumps({"files": {k: v for k, v in files.items() if v},
                          "set": list(table.set or ())}, sort_keys=True)
     runs = []
@@ -441,8 +471,6 @@ def read_sweep(out_dir: str | Path) -> Any:
     out_dir : str or Path
         The sweep's output directory (or the parquet file itself).
     """
-    from trackmj.results.store import _require
-
     pandas = _require("pandas", "read_sweep()", "'trackmj[pandas]'")
     path = Path(out_dir)
     path = path / RESULTS if path.is_dir() else path
@@ -522,8 +550,6 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
                                                                    machine=machine))
     runs = plan(spec)
     with Store(out, "sweep", markers=(SPEC_COPY, FIGURES)) as store:
-        from trackmj.io import write_text_atomic
-
         if spec.text:
             write_text_atomic(store.out / SPEC_COPY, spec.text)
         made = run_campaign(store, runs, executor=executor, workers=workers,
@@ -542,10 +568,11 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
 def plot_sweep(out_dir: str | Path, *, keys: set[str] | None = None,
                redraw: bool = True) -> list[Path]:
     """Draw ``DIR/figures/<metric>.png`` from ``DIR/results.parquet`` for every metric that
-    varies across the runs (:func:`trackmj.results.figures.sweep_figures`); ``keys``: only the rows
-    of these runs (default: every row); ``redraw=False`` keeps the figures that exist.
+    varies across the runs (:func:`trackmj.results.figure_sweep.sweep_figures`); ``keys``: only
+    the rows of these runs (default: every row); ``redraw=False`` keeps the figures that exist.
     Returns the paths of the figures of the varying metrics (drawn now or kept)."""
-    from trackmj.results.figures import sweep_figures
+    # matplotlib (which the figure module switches to Agg) is heavy: loaded only to draw
+    from trackmj.results.figure_sweep import sweep_figures
 
     out = Path(out_dir)
     rows = [r for r in read_rows(out / RESULTS)

@@ -32,9 +32,11 @@ import math
 
 import numpy as np
 
+from trackmj.elements.hydraulic import HydraulicElement
 from trackmj.hydraulics import HydraulicTensioner
 from trackmj.ports import COUPLING_STEP_S, StepInputs
-from trackmj.scenarios.schema import LoadPulse, Scenario, Supply
+from trackmj.scenarios.scenario import Scenario
+from trackmj.scenarios.schema import LoadPulse, Supply
 from trackmj.sim.architectures import assemble
 from trackmj.sim.setup import prepare
 from trackmj.track.plant import TrackPlant
@@ -53,6 +55,10 @@ def hold_mode_run(scenario: Scenario) -> tuple[TrackPlant, HydraulicTensioner]:
     calibration rig."""
     rig = dataclasses.replace(scenario, supply=Supply(model=RIG_SUPPLY_MODEL))
     asm = assemble(prepare(rig))
+    if asm.track is None or not isinstance(asm.element, HydraulicElement):
+        raise TypeError("the calibration rig needs the MuJoCo track and the hydraulic plugin "
+                        f"(the tp architecture); got {type(asm.element).__name__} on "
+                        f"{'no track' if asm.track is None else 'the track'}")
     return asm.track, asm.element.tensioner
 
 

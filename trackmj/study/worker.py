@@ -42,6 +42,7 @@ def pin_threads() -> None:
 def warm() -> float:
     """Import and load what every run needs; returns the wall time taken [s]."""
     start = time.perf_counter()
+    # imported here, after pin_threads(): numpy and numba size their thread pools on import
     from trackmj.hydraulics import HydraulicTensioner
     from trackmj.ports import COUPLING_STEP_S
     from trackmj.sim.setup import prepare
@@ -62,9 +63,10 @@ def warm() -> float:
             element.complete_step(COUPLING_STEP_S, stroke, 0.0)
             element.log()
     # the scenario's controller and estimator: their compiled SX kernels (generated modules
-    # and numba's cache, control/compiled.py) are loaded, or compiled once
+    # and numba's cache, control/compiled.py) are loaded, or compiled once; imported here,
+    # after pin_threads(), like the run code above
     from trackmj.sim.architectures import control_and_model
-    from trackmj.sim.registry import CONTROLLERS, ESTIMATORS
+    from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 
     cfg, model = control_and_model(setup, stroke)
     CONTROLLERS[setup.controller].build(model, cfg)
