@@ -107,7 +107,7 @@ def test_view_exit_code_follows_the_viewer(tmp_path, monkeypatch, viewer, code) 
 
 
 def test_model_info_columns_are_aligned_and_the_mass_is_explained(capsys) -> None:
-    from trackmj.track.plant import TrackPlant
+    from trackmj.machines.plant import load_plant
 
     assert main(["model", "info"]) == 0
     lines = capsys.readouterr().out.splitlines()
@@ -115,7 +115,7 @@ def test_model_info_columns_are_aligned_and_the_mass_is_explained(capsys) -> Non
               re.match(r"\S+( \S+)*\s{2,}", line).end() for line in lines}
     assert len(starts) == 1, lines
     (mass,) = [ln for ln in lines if ln.startswith("mass ")]
-    plant = TrackPlant.load()
+    plant = load_plant()
     assert f"{plant.model.body_mass.sum():.0f} kg: one track side" in mass
 
 

@@ -2,9 +2,9 @@
 the registered blocks), ``keys`` (the ``--set`` keys) and ``view`` (a run's Rerun recording
 in the viewer).
 
-The scenario loader (Numba, SciPy) and the playback module (Rerun, MuJoCo) are imported
-inside the handlers: ``trackmj --help`` and argument errors import this module and must stay
-fast.
+The scenario loader (Numba, SciPy), the files' key tables (SciPy) and the playback module
+(Rerun, MuJoCo) are imported inside the handlers: ``trackmj --help`` and argument errors
+import this module and must stay fast.
 """
 
 from __future__ import annotations
@@ -17,7 +17,6 @@ import textwrap
 
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.registry import ARCHITECTURES, ELEMENTS
-from trackmj.study.campaign import file_schema
 from trackmj.validator import FILE_KINDS, describe_schema
 
 VIEWER_START_S = 5.0
@@ -80,6 +79,9 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 def cmd_keys(args: argparse.Namespace) -> int:
     """``trackmj keys``: the ``--set`` keys of each file kind with type, unit, range and
     meaning."""
+    # start-up: --help and argument errors must not import SciPy
+    from trackmj.results.columns import file_schema
+
     unknown = [k for k in args.kinds if k not in FILE_KINDS]
     if unknown:
         raise ValueError(f"keys {unknown[0]!r}: allowed {', '.join(FILE_KINDS)}")

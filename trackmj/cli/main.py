@@ -15,8 +15,7 @@ import sys
 from collections.abc import Sequence
 
 from trackmj.cli.parser import build_parser
-from trackmj.errors import PhysicsError
-from trackmj.fmi import FmuError
+from trackmj.errors import FmuError, PhysicsError
 from trackmj.results.store import ResultDirectoryError
 from trackmj.validator import ParameterError
 

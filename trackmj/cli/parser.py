@@ -9,6 +9,7 @@ block registered there is offered here with no edit.
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from trackmj.cli.fmu_commands import cmd_fmu_export
 from trackmj.cli.info_commands import cmd_keys, cmd_scenarios, cmd_view
@@ -19,6 +20,7 @@ from trackmj.cli.track_commands import (
     cmd_model_generate,
     cmd_model_info,
 )
+from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS, baselines
 from trackmj.sim.entries import by_name, choices
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
@@ -75,7 +77,7 @@ class _HelpFormatter(argparse.HelpFormatter):
 class _Parser(argparse.ArgumentParser):
     """ArgumentParser whose help shows defaults (subcommands inherit it)."""
 
-    def __init__(self, *args: object, **kwargs: object) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("formatter_class", _HelpFormatter)
         super().__init__(*args, **kwargs)
 
@@ -88,7 +90,7 @@ def _tensioner_arg(p: argparse.ArgumentParser) -> None:
 
 def _machine_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--machine", metavar="NAME|FILE", help="a shipped machine ('trackmj "
-                   "machines') or a machine file *_machine.toml (default: lf1352)")
+                   f"machines') or a machine file *_machine.toml (default: {DEFAULT_MACHINE})")
 
 
 def _model_args(p: argparse.ArgumentParser) -> None:

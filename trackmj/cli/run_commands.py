@@ -18,9 +18,6 @@ from trackmj.elements.tensioner_file import load_tensioner
 from trackmj.results.store import ResultWriter
 from trackmj.sim.controllers import CONTROLLERS
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
-from trackmj.study.calibrate import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
-from trackmj.study.campaign import inputs_key, run_key, stamped
-from trackmj.study.executor import as_path, overrides_tuple
 
 
 def _files(args: argparse.Namespace) -> dict:
@@ -32,6 +29,9 @@ def _files(args: argparse.Namespace) -> dict:
 
 def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
     """RunSpec fields shared by every run of a compare command."""
+    # start-up: --help and argument errors must not import MuJoCo, CasADi or SciPy
+    from trackmj.study.executor import as_path, overrides_tuple
+
     return dict(scenario=scenario, estimator=getattr(args, "estimator", None),
                 duration=args.duration, overrides=overrides_tuple(args.set),
                 model=as_path(args.model), hydraulics=as_path(args.hydraulics),
@@ -52,27 +52,28 @@ def _machine_spec(machine: str | None) -> str | None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """``trackmj run``: one closed-loop run written to its folder, with its summary."""
-    # start-up: --help and argument errors must not import MuJoCo or Matplotlib
-    from trackmj.results.figures import run_figure
+    # start-up: --help and argument errors must not import MuJoCo, CasADi, Rerun or Matplotlib
+    from trackmj.results.figure_run import run_figure
     from trackmj.results.playback import RUN_RRD
     from trackmj.scenarios.events import check_duration
     from trackmj.sim.run import measured_log, run
     from trackmj.sim.setup import prepare
+    from trackmj.study.identity import inputs_key, run_key, stamped
 
     setup = prepare(args.scenario, architecture=args.arch, controller=args.controller,
                     estimator=args.estimator, seed=args.seed, duration=args.duration,
                     variant=args.variant, **_files(args))
     check_duration(setup.scenario, setup.duration_s)
-    measured = (None if args.measured is None
-                else measured_log(setup, args.measured, args.channels))
+    log: str | None = args.measured
+    measured = None if log is None else measured_log(setup, log, args.channels)
     key = inputs_key(setup)
     defaults = not (args.estimator or args.duration is not None or args.set or args.model
                     or args.hydraulics or args.control or args.tensioner)
     out = Path(args.out) if args.out else run_folder(setup, key, defaults=defaults)
     refuse_other_inputs(out, key, overwrite=args.overwrite)
     with ResultWriter(out) as writer:
-        result = run(setup, rrd=writer.stage / RUN_RRD if args.rrd else None, progress=True,
-                     measured=measured, channels=args.channels)
+        result = run(setup, rrd=_staged(writer, RUN_RRD) if args.rrd else None,
+                     progress=True, measured=measured, channels=args.channels)
         result = stamped(result, inputs_key=key, run_key=run_key(setup))
         writer.commit(result, csv=args.csv,
                       extras={"timeseries.png": lambda path: run_figure(result, path,
@@ -82,15 +83,23 @@ def cmd_run(args: argparse.Namespace) -> int:
     if result.metrics.get("tensioner", {}).get("element") == "fmu":
         print(tensioner_line(result.metrics["tensioner"]))
     print(summary_table([result], "{r.architecture}"))
-    if measured is not None:
-        print(measured_table(result.metrics["prediction_vs_measured"], args.measured))
+    if log is not None:
+        print(measured_table(result.metrics["prediction_vs_measured"], log))
     return 0
+
+
+def _staged(writer: ResultWriter, name: str) -> Path:
+    """Path of file ``name`` in the stage of ``writer``, which is open (inside its ``with``
+    block); RuntimeError otherwise."""
+    if writer.stage is None:
+        raise RuntimeError("a ResultWriter has a stage only inside its with block")
+    return writer.stage / name
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
     """``trackmj compare``: every architecture (× ``--controllers``) on one scenario;
     exit code 1 if a run failed."""
-    # start-up: --help and argument errors must not import MuJoCo
+    # start-up: --help and argument errors must not import MuJoCo, CasADi or Matplotlib
     from trackmj.scenarios.events import check_duration
     from trackmj.sim.setup import prepare
     from trackmj.study.compare import compare, write_compare
@@ -138,7 +147,7 @@ def _report_choices(args: argparse.Namespace, study_archs: tuple[str, ...]
 def cmd_report(args: argparse.Namespace) -> int:
     """``trackmj report``: the study's matrix of runs, resumed, and report.md; exit code 1
     if a run failed."""
-    # start-up: --help and argument errors must not import MuJoCo
+    # start-up: --help and argument errors must not import MuJoCo, CasADi or Matplotlib
     from trackmj.machines.assembly import resolve
     from trackmj.study.report import REPORT_ARCHS, check_report_dir, plan, run_matrix, write_report
 
@@ -182,6 +191,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """``trackmj calibrate``: fit a spec's keys to measured logs, with 95 % intervals."""
+    # start-up: --help and argument errors must not import MuJoCo, CasADi or SciPy
+    from trackmj.study.calibrate import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
+
     out = Path(args.out)
     done = calibrate(args.spec, args.measured, out, workers=args.workers)
     doc = done.document

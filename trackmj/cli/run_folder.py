@@ -11,14 +11,18 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from trackmj.results.store import METRICS, ResultDirectoryError
 
+if TYPE_CHECKING:
+    from trackmj.sim.setup import RunSetup
 
-def run_folder(setup: object, key: str, *, defaults: bool) -> Path:
+
+def run_folder(setup: RunSetup, key: str, *, defaults: bool) -> Path:
     """Default folder of ``trackmj run``: ``runs/SCENARIO-ARCH-CONTROLLER-sSEED`` for the
     scenario's own inputs (``defaults``), with ``-VARIANT`` for a W5 variant and the first
-    8 digits of the inputs' hash (:func:`trackmj.study.campaign.inputs_key`) for any other input
+    8 digits of the inputs' hash (:func:`trackmj.study.identity.inputs_key`) for any other input
     (estimator, --duration, --set, parameter or tensioner files), so that runs of other
     inputs never share a folder."""
     name = (f"{setup.scenario.name}-{setup.architecture}-{setup.controller}-"

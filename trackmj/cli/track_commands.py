@@ -9,9 +9,14 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import TYPE_CHECKING
 
 from trackmj.cli.summary import tensioner_line
+from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.validator import ParameterError, parse_overrides
+
+if TYPE_CHECKING:
+    from trackmj.track.plant import TrackPlant
 
 
 def model_overrides(items: list[str]) -> dict:
@@ -31,11 +36,11 @@ def cmd_model_info(args: argparse.Namespace) -> int:
     # start-up: --help and argument errors must not import MuJoCo
     import mujoco
 
+    from trackmj.machines.plant import load_plant
     from trackmj.track.mjcf.structure import structure_text
-    from trackmj.track.plant import TrackPlant
 
-    plant = TrackPlant.load(args.model, args.params, machine=args.machine,
-                            overrides=model_overrides(args.set))
+    plant = load_plant(args.model, args.params, machine=args.machine,
+                       overrides=model_overrides(args.set))
     m, d = plant.model, plant.data
     p = plant.params
     link_mass = p.track.link_mass_kg * plant.link_count
@@ -76,7 +81,7 @@ def cmd_model_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def _geometry_rows(plant: object) -> list[tuple[str, str]]:
+def _geometry_rows(plant: TrackPlant) -> list[tuple[str, str]]:
     """The derived geometry of the plant's layout and what its home keyframe measures."""
     # start-up: --help and argument errors must not import SciPy
     from trackmj.track.mjcf.geometry import catenary_sag_m, derive_geometry, measured_sag_m
@@ -141,7 +146,7 @@ def cmd_model_generate(args: argparse.Namespace) -> int:
 def cmd_machines(args: argparse.Namespace) -> int:
     """``trackmj machines``: the shipped machines, one a line."""
     # start-up: --help and argument errors must not import MuJoCo
-    from trackmj.machines.assembly import DEFAULT_MACHINE, shipped
+    from trackmj.machines.assembly import shipped
 
     machines = shipped()
     width = max(len(name) for name in machines) + 2

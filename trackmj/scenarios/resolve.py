@@ -40,8 +40,9 @@ def packaged_nominal() -> tuple[float, float]:
             load_hydraulic_params().supply.setpoint_Pa)
 
 
-def _absolute(x: float | None, rel: float | None, scale: float) -> float:
-    """``x`` if the file gives it absolute, else ``scale`` x ``rel``."""
+def _absolute(x: float | None, rel: float | None, scale: float) -> float | None:
+    """``x`` if the file gives it absolute, else ``scale`` x ``rel`` (None if it gives
+    neither: a [reference] from_file has no initial value)."""
     return x if rel is None else scale * rel
 
 

@@ -31,6 +31,7 @@ from trackmj.scenarios.schema import (
     Terrain,
     Track,
     Variant,
+    present,
     reference_signal,
 )
 from trackmj.track.terrain import RoadProfile, road_profile, taper_start
@@ -144,7 +145,7 @@ class Scenario:
         p = np.full(t.shape, float(nominal_Pa))
         for d in self.supply.drops:
             on = _edge(t, d.start_s, d.transition_s) - _edge(t, d.end_s, d.transition_s)
-            p = p + (d.pressure_Pa - nominal_Pa) * on
+            p = p + (present(d.pressure_Pa, "supply.drops.pressure_Pa") - nominal_Pa) * on
         return p
 
     def supply_setpoint_profile(self, nominal_Pa: float) -> Callable[[float], float] | None:
@@ -170,22 +171,29 @@ class Scenario:
         if "track" in self.signals:
             return self.signals["track"](t_s)
         t = np.asarray(t_s, dtype=float)
-        return self.track.speed_m_s * _edge(t, 0.0, self.track.ramp_s)
+        speed, ramp = self._constant_track()
+        return speed * _edge(t, 0.0, ramp)
 
     def distance_m(self, duration_s: float) -> float:
         """Track distance driven in ``duration_s`` [s] [m]."""
         if "track" in self.signals:
             t = np.linspace(0.0, duration_s, max(2, round(duration_s / COUPLING_STEP_S) + 1))
             return float(np.trapezoid(self.track_speed_m_s(t), t))
-        return self.track.speed_m_s * max(duration_s - 0.5 * self.track.ramp_s, 0.0)
+        speed, ramp = self._constant_track()
+        return speed * max(duration_s - 0.5 * ramp, 0.0)
 
     def steady_speed_m_s(self, duration_s: float) -> float:
         """Mean commanded track speed over the steady window [steady_start_s, duration] [m/s]
         (the speed of a file's trace there; the constant speed otherwise)."""
         if "track" not in self.signals:
-            return self.track.speed_m_s
+            return self._constant_track()[0]
         t = np.arange(self.evaluation.steady_start_s, duration_s, COUPLING_STEP_S)
         return float(np.mean(self.track_speed_m_s(t))) if len(t) else 0.0
+
+    def _constant_track(self) -> tuple[float, float]:
+        """The [track] speed [m/s] and ramp [s] of a track speed not read from a file."""
+        return (present(self.track.speed_m_s, "track.speed_m_s"),
+                present(self.track.ramp_s, "track.ramp_s"))
 
     def hitch_force_N(self, t_s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Rear-hitch load (pull rearward [N], push down [N]) in the chassis frame that
@@ -193,7 +201,8 @@ class Scenario:
         pull = self._pulses(t_s, lambda p: p.hitch_N * math.cos(math.radians(p.pull_angle_deg)))
         down = self._pulses(t_s, lambda p: p.hitch_N * math.sin(math.radians(p.pull_angle_deg)))
         if "hitch" in self.signals:
-            load, angle = self.signals["hitch"](t_s), math.radians(self.hitch.pull_angle_deg)
+            load = self.signals["hitch"](t_s)
+            angle = math.radians(present(self.hitch, "hitch").pull_angle_deg)
             pull, down = pull + load * math.cos(angle), down + load * math.sin(angle)
         return pull, down
 
@@ -211,13 +220,14 @@ class Scenario:
         tr = self.terrain
         if tr.kind == "flat":
             return None
+        road = tr.road()
         duration = self.duration_s if duration_s is None else duration_s
         distance = self.distance_m(duration)
-        length = distance + tr.margin_m - tr.x_start_m
+        length = distance + road.margin_m - road.x_start_m
         rng = np.random.default_rng([seed, TERRAIN_SEED_SALT])
-        prof = road_profile(length, tr.dx_m, tr.road_class, rng, n_min=tr.n_min_cycles_m,
-                            n_max=tr.n_max_cycles_m, x_start_m=tr.x_start_m)
-        return taper_start(prof, tr.flat_until_m, tr.taper_m)
+        prof = road_profile(length, road.dx_m, road.road_class, rng, n_min=road.n_min_cycles_m,
+                            n_max=road.n_max_cycles_m, x_start_m=road.x_start_m)
+        return taper_start(prof, road.flat_until_m, road.taper_m)
 
     def variant(self, name: str) -> Variant:
         """The variant called ``name``; KeyError listing the available ones."""
@@ -240,7 +250,8 @@ class Scenario:
         dist, labels = self._disturbances()
         ev, speed = self.evaluation, self.steady_speed_m_s(duration)
         return MetricWindows(
-            force_min_N=self.limits.force_min_N, force_max_N=self.limits.force_max_N,
+            force_min_N=present(self.limits.force_min_N, "limits.force_min_N"),
+            force_max_N=present(self.limits.force_max_N, "limits.force_max_N"),
             evaluation_start_s=ev.start_s, step=self._first_step(duration), disturbances=dist,
             disturbance_labels=labels,
             steady=(ev.steady_start_s, duration), settle_band_rel=ev.settle_band_rel,
@@ -264,15 +275,18 @@ class Scenario:
         later += [r.start_s for r in self.reference.ramps if r.start_s > s0.time_s]
         t_stop = min([*later, duration_s])
         before = float(self.reference_N(s0.time_s - 1e-9))
-        return (s0.time_s, before, before + s0.delta_N, t_stop)
+        return (s0.time_s, before, before + present(s0.delta_N, "reference.steps.delta_N"),
+                t_stop)
 
     def _disturbances(self) -> tuple[tuple[tuple[float, float], ...], tuple[str, ...]]:
         """The load pulses' then the supply drops' windows (start, end) [s] and their
         labels."""
         dist = tuple((p.start_s, p.end_s) for p in self.load_pulses)
         dist += tuple((d.start_s, d.end_s) for d in self.supply.drops)
-        labels = tuple(f"load pulse {p.delta_N / 1e3:+g} kN" for p in self.load_pulses)
-        labels += tuple(f"supply drop to {d.pressure_Pa / 1e6:g} MPa" for d in self.supply.drops)
+        pulses_N = [present(p.delta_N, "load_pulses.delta_N") for p in self.load_pulses]
+        drops_Pa = [present(d.pressure_Pa, "supply.drops.pressure_Pa") for d in self.supply.drops]
+        labels = tuple(f"load pulse {x / 1e3:+g} kN" for x in pulses_N)
+        labels += tuple(f"supply drop to {x / 1e6:g} MPa" for x in drops_Pa)
         return dist, labels
 
     def _tooth_band_Hz(self, speed_m_s: float,
@@ -290,4 +304,5 @@ class Scenario:
         flat ground."""
         if self.terrain.kind != "iso8608":
             return None
-        return (speed_m_s * self.terrain.n_min_cycles_m, speed_m_s * self.terrain.n_max_cycles_m)
+        road = self.terrain.road()
+        return (speed_m_s * road.n_min_cycles_m, speed_m_s * road.n_max_cycles_m)

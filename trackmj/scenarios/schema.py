@@ -46,8 +46,8 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
-from typing import Any, ClassVar, Literal
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar, Literal, TypeVar
 
 import numpy as np
 
@@ -62,6 +62,18 @@ NAME_PATTERN = r"[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 """Scenario and variant names: they become parts of run directory names."""
 REFERENCE_MAX_N = 50e3
 """F_ref must stay within [0, REFERENCE_MAX_N] over the run [N]."""
+
+_T = TypeVar("_T")
+
+
+def present(value: _T | None, key: str) -> _T:
+    """``value`` of the optional scenario ``key`` (dotted, e.g. ``"terrain.dx_m"``) where the
+    file's checks or the resolution to absolute values guarantee one; RuntimeError naming the
+    key if it is None (a bug in the caller, not an error in the file)."""
+    if value is None:
+        raise RuntimeError(f"scenario key {key} is None where the file's checks or its "
+                           "resolution to absolute values guarantee a value")
+    return value
 
 
 @dataclass(frozen=True)
@@ -239,8 +251,21 @@ class Supply(Parameters):
                                f"{a.end_s + a.transition_s!r} s; drops must not overlap")
 
 
-_ISO8608_KEYS = ("road_class", "n_min_cycles_m", "n_max_cycles_m", "dx_m", "x_start_m",
-                 "flat_until_m", "taper_m", "margin_m")
+@dataclass(frozen=True)
+class Road:
+    """The keys of an ``iso8608`` [terrain], each given (their meaning: :class:`Terrain`)."""
+
+    road_class: str
+    n_min_cycles_m: float
+    n_max_cycles_m: float
+    dx_m: float
+    x_start_m: float
+    flat_until_m: float
+    taper_m: float
+    margin_m: float
+
+
+_ISO8608_KEYS = tuple(f.name for f in fields(Road))
 
 
 @dataclass(frozen=True)
@@ -274,12 +299,25 @@ class Terrain(Parameters):
             if getattr(self, key) is None:
                 raise ParameterError(f"{at.table()}: missing key {key!r} (needed for "
                                      "kind = 'iso8608')")
-        if self.n_max_cycles_m <= self.n_min_cycles_m:
-            raise at.error("n_max_cycles_m", self.n_max_cycles_m,
-                           f"must be > n_min_cycles_m = {self.n_min_cycles_m!r}")
-        if self.n_max_cycles_m > 0.5 / self.dx_m:
-            raise at.error("n_max_cycles_m", self.n_max_cycles_m,
-                           f"exceeds the grid's Nyquist 1/(2 dx_m) = {0.5 / self.dx_m:g}")
+        road = self.road()
+        if road.n_max_cycles_m <= road.n_min_cycles_m:
+            raise at.error("n_max_cycles_m", road.n_max_cycles_m,
+                           f"must be > n_min_cycles_m = {road.n_min_cycles_m!r}")
+        if road.n_max_cycles_m > 0.5 / road.dx_m:
+            raise at.error("n_max_cycles_m", road.n_max_cycles_m,
+                           f"exceeds the grid's Nyquist 1/(2 dx_m) = {0.5 / road.dx_m:g}")
+
+    def road(self) -> Road:
+        """The iso8608 keys, each given (the checks require them for kind = 'iso8608');
+        RuntimeError naming the first one left out (a flat terrain may leave them out)."""
+        return Road(road_class=present(self.road_class, "terrain.road_class"),
+                    n_min_cycles_m=present(self.n_min_cycles_m, "terrain.n_min_cycles_m"),
+                    n_max_cycles_m=present(self.n_max_cycles_m, "terrain.n_max_cycles_m"),
+                    dx_m=present(self.dx_m, "terrain.dx_m"),
+                    x_start_m=present(self.x_start_m, "terrain.x_start_m"),
+                    flat_until_m=present(self.flat_until_m, "terrain.flat_until_m"),
+                    taper_m=present(self.taper_m, "terrain.taper_m"),
+                    margin_m=present(self.margin_m, "terrain.margin_m"))
 
 
 @dataclass(frozen=True)
@@ -489,11 +527,12 @@ def _is_absolute(ref: Reference) -> bool:
 def reference_signal(ref: Reference, t: np.ndarray) -> np.ndarray:
     """F_ref(t) [N] of an absolute [reference] table (initial_N + steps + ramps), shape of
     ``t`` [s]."""
-    f = np.full(t.shape, ref.initial_N)
+    f = np.full(t.shape, present(ref.initial_N, "reference.initial_N"))
     for s in ref.steps:
-        f = f + np.where(t >= s.time_s, s.delta_N, 0.0)
+        f = f + np.where(t >= s.time_s, present(s.delta_N, "reference.steps.delta_N"), 0.0)
     for r in ref.ramps:
         end = math.inf if r.end_s is None else r.end_s
-        f = f + r.rate_N_s * np.clip(t - r.start_s, 0.0, end - r.start_s)
+        rate = present(r.rate_N_s, "reference.ramps.rate_N_s")
+        f = f + rate * np.clip(t - r.start_s, 0.0, end - r.start_s)
     return f
 
