@@ -95,9 +95,10 @@ def inner_bare(start: int, steps: int) -> None:
     """Under valgrind: the default machine driven by the passive tensioner to W1's speed,
     collection over ``steps`` plant steps after ``start`` steps."""
     toggle = ctypes.CDLL(str(_helper())).trackmj_collect
-    from trackmj.track.plant import PassiveTensioner, TrackPlant
+    from trackmj.machines.plant import load_plant
+    from trackmj.track.plant import PassiveTensioner
 
-    plant = TrackPlant.load()
+    plant = load_plant()
     passive = PassiveTensioner.from_params(plant.params)
     plant.run(passive, start * 1e-3, lambda t: SPEED_M_S * min(1.0, t))
     plant.set_track_speed(SPEED_M_S)

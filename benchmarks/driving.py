@@ -11,8 +11,9 @@ import time
 
 import mujoco
 
+from trackmj.machines.plant import load_plant
 from trackmj.track.foundation import step
-from trackmj.track.plant import PassiveTensioner, TrackPlant
+from trackmj.track.plant import PassiveTensioner
 
 SPEED_M_S = 1.5
 """Track speed of the benchmarks [m/s], reached by a 1 s ramp and held for 0.5 s."""
@@ -22,7 +23,7 @@ class DrivingSnapshot:
     """The default model driven to SPEED_M_S with the passive tensioner, and its state."""
 
     def __init__(self) -> None:
-        self.plant = TrackPlant.load()
+        self.plant = load_plant()
         self.passive = PassiveTensioner.from_params(self.plant.params)
         self.plant.run(self.passive, 1.5, lambda t: SPEED_M_S * min(1.0, t))
         d = self.plant.data

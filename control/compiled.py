@@ -42,6 +42,10 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils, config
+from numba.extending import intrinsic
 from numpy.typing import NDArray
 
 from trackmj.control.fastcall import BufferedFunction
@@ -93,8 +97,6 @@ def _emit(builder: Any, base: Any, rows: NDArray[np.int64], n_in: int, n_out: in
     """Straight-line LLVM for ``rows`` (see :func:`instructions`); ``base`` points to the
     int64 addresses of the arguments, results and constants. ``in_place``: every result is
     stored after the last input is read (results may be bound to inputs)."""
-    from llvmlite import ir
-
     dbl, i64 = ir.DoubleType(), ir.IntType(64)
     ptr = dbl.as_pointer()
     module = builder.module
@@ -147,10 +149,6 @@ def intrinsic_from(encoded: str, n_in: int, n_out: int, in_place: bool = False) 
     """The numba intrinsic ``body(addresses)`` that evaluates the rows ``encoded`` (base64
     of int64 rows, see :func:`instructions`; ``in_place`` as in :func:`_emit`); used by
     the generated modules."""
-    from numba import types
-    from numba.core import cgutils
-    from numba.extending import intrinsic
-
     rows = np.frombuffer(base64.b64decode(encoded), dtype=np.int64).reshape(-1, 4)
 
     @intrinsic
@@ -257,8 +255,6 @@ class CompiledFunction:
         self.addresses = np.array([a.ctypes.data for a in (*args, *self.res,
                                                             self._constants)],
                                   dtype=np.int64)
-        from numba import types
-
         in_place = any(np.may_share_memory(r, a) for r in self.res for a in args)
         kernel = _module(fn, rows, in_place).kernel
         kernel.compile((types.Array(types.int64, 1, "C"),))   # now, not at the first call
@@ -291,8 +287,6 @@ def compiling() -> bool:
     """Whether :func:`bind` compiles (numba active and ``TRACKMJ_NO_COMPILE`` unset)."""
     if os.environ.get(DISABLE_ENV, "") not in ("", "0"):
         return False
-    from numba.core import config
-
     return not config.DISABLE_JIT  # pyright: ignore[reportAttributeAccessIssue]  # set at import
 
 

@@ -72,6 +72,196 @@ def _violations(w: ca.SX, lbw: NDArray[np.float64], ubw: NDArray[np.float64], g:
     return ca.vertcat(*terms)
 
 
+@dataclass(frozen=True)
+class _Layout:
+    """Where the blocks sit in the OCP's w and g (see :class:`CondensedSqp`).
+
+    nb input blocks, n steps of nxb = 4d collocation states; nw, ng sizes of w and g;
+    nz = nb + n QP variables [u, s]; nx = n·nxb states; ``rows`` constraints per step;
+    npar parameters.
+    ``eq``/``ineq``: indices into g of the collocation equations and of the linear rows;
+    ``xcols[i]``: indices into w of X_i.
+    """
+
+    nb: int
+    n: int
+    nxb: int
+    nw: int
+    ng: int
+    nz: int
+    nx: int
+    rows: int
+    npar: int
+    eq: NDArray[np.int64]
+    ineq: NDArray[np.int64]
+    xcols: list[list[int]]
+
+
+def _layout(ocp: Ocp, n_steps: int, degree: int) -> _Layout:
+    """The index sets of ``ocp``; ValueError if it is not laid out as CondensedSqp needs."""
+    nb, n, nxb = ocp.n_blocks, n_steps, 4 * degree
+    nw, ng, nz = ocp.w.numel(), ocp.g.numel(), ocp.n_blocks + n_steps
+    nx = n * nxb
+    rows = ng // n
+    if rows * n != ng or nz + nx != nw:
+        raise ValueError("CondensedSqp: OCP layout does not match n_steps/degree")
+    if np.isfinite(ocp.lbw[nz:]).any() or np.isfinite(ocp.ubw[nz:]).any():
+        raise ValueError("CondensedSqp: collocation states must be unbounded")
+    eq = np.concatenate([i * rows + np.arange(nxb) for i in range(n)])
+    ineq = np.setdiff1d(np.arange(ng), eq)
+    xcols = [list(range(nz + i * nxb, nz + (i + 1) * nxb)) for i in range(n)]
+    return _Layout(nb, n, nxb, nw, ng, nz, nx, rows, ocp.p.numel(), eq, ineq, xcols)
+
+
+@dataclass(frozen=True)
+class _Linearisation:
+    """The OCP linearised and condensed: constraint Jacobian ``jac`` (ng x nw), cost
+    gradient ``grad`` (nw), the constant cost Hessian ``hess`` (nw x nw) and linear-row
+    Jacobian ``jin``; per step E_i^-1 (``e_inv``, nxb x nxb) and the constant coupling
+    A_i = dG_i/dX_{i-1} (``a_blk``); dX = ``c_all`` + ``s_all`` du stacked over the steps
+    (nx, nx x nb)."""
+
+    jac: ca.SX
+    grad: ca.SX
+    hess: ca.DM
+    jin: ca.DM
+    e_inv: list[ca.SX]
+    a_blk: list[ca.DM]
+    c_all: ca.SX
+    s_all: ca.SX
+
+
+def _derivatives(ocp: Ocp, lay: _Layout, wp: ca.SX) -> tuple[ca.SX, ca.SX, ca.DM, ca.DM]:
+    """(jac, grad, hess, jin) of the OCP; ValueError unless the cost is quadratic and the
+    non-collocation rows linear in w (their Hessian and Jacobian are then constants)."""
+    w, f, g = ocp.w, ocp.f, ocp.g
+    jac = ca.jacobian(g, w)
+    grad = ca.gradient(f, w)
+    hess = ca.hessian(f, w)[0]
+    jin = jac[lay.ineq.tolist(), :]
+    if ca.depends_on(hess, wp) or ca.depends_on(jin, wp):
+        raise ValueError("CondensedSqp: cost must be quadratic and non-collocation "
+                         "constraints linear in w")
+    hess, jin = ca.evalf(hess), ca.evalf(jin)
+    return jac, grad, hess, jin
+
+
+def _linearise(ocp: Ocp, lay: _Layout, wp: ca.SX) -> _Linearisation:
+    """The derivatives and the forward recursion dX_i = c_i + S_i du over the collocation
+    blocks; ValueError where a block couples other variables or non-constantly."""
+    jac, grad, hess, jin = _derivatives(ocp, lay, wp)
+    g, nb, nxb, rows, xcols = ocp.g, lay.nb, lay.nxb, lay.rows, lay.xcols
+    e_inv, a_blk, c_blk, s_blk = [], [], [], []
+    c_prev, s_prev = ca.SX(nxb, 1), ca.SX(nxb, nb)
+    for i in range(lay.n):
+        r = list(range(i * rows, i * rows + nxb))
+        jr = jac[r, :]
+        others = set(jr.sparsity().get_col()) - set(xcols[i]) - set(range(nb))
+        if i > 0:
+            others -= set(xcols[i - 1])
+        if others:
+            raise ValueError(f"CondensedSqp: collocation block {i} couples other variables")
+        ei = ca.inv(jac[r, xcols[i]])
+        ai = ca.evalf(jac[r, xcols[i - 1]]) if i > 0 else ca.DM(nxb, nxb)
+        if i > 0 and ca.depends_on(jac[r, xcols[i - 1]], wp):
+            raise ValueError("CondensedSqp: block coupling must be constant")
+        c_prev = -ca.mtimes(ei, g[r] + ca.mtimes(ai, c_prev))
+        s_prev = -ca.mtimes(ei, jac[r, :nb] + ca.mtimes(ai, s_prev))
+        e_inv.append(ei)
+        a_blk.append(ai)
+        c_blk.append(c_prev)
+        s_blk.append(s_prev)
+    return _Linearisation(jac, grad, hess, jin, e_inv, a_blk, ca.vertcat(*c_blk),
+                          ca.vertcat(*s_blk))
+
+
+def _qp_data_functions(ocp: Ocp, lay: _Layout, lin: _Linearisation,
+                       fopts: dict) -> tuple[ca.Function, ca.Function, ca.SX]:
+    """``sqp_qp_data`` (w, p, lam_g, lam_x) -> the condensed QP [H, g, A, lba, uba, lbz,
+    ubz], the recursion's c, S and E^-1, the gradient and (f, l1 and max violation);
+    ``sqp_du_inf`` -> the dual infeasibility; and the violations of w and g (for the
+    merit)."""
+    w, p, g, nz, nx, n, ineq = ocp.w, ocp.p, ocp.g, lay.nz, lay.nx, lay.n, lay.ineq
+    hess, jin, grad = lin.hess, lin.jin, lin.grad
+    t_map = ca.vertcat(ca.SX.eye(nz), ca.horzcat(lin.s_all, ca.SX(nx, n)))
+    t0 = ca.vertcat(ca.SX(nz, 1), lin.c_all)
+    g_in = g[ineq.tolist()]
+    r_in = g_in + ca.mtimes(jin, t0)
+    lam_g, lam_x = ca.SX.sym("lam_g", lay.ng), ca.SX.sym("lam_x", lay.nw)
+    viol = _violations(w, ocp.lbw, ocp.ubw, g, ocp.lbg, ocp.ubg)
+    du_inf = ca.norm_inf(grad + ca.mtimes(lin.jac.T, lam_g) + lam_x)
+    d = ca.densify
+    qp_data = ca.Function(
+        "sqp_qp_data", [w, p, lam_g, lam_x],
+        [d(ca.mtimes([t_map.T, ca.DM(hess), t_map])),
+         d(ca.mtimes(t_map.T, ca.mtimes(ca.DM(hess), t0) + grad)),
+         d(ca.mtimes(ca.DM(jin), t_map)),
+         d(ocp.lbg[ineq] - r_in), d(ocp.ubg[ineq] - r_in),
+         d(ocp.lbw[:nz] - w[:nz]), d(ocp.ubw[:nz] - w[:nz]),
+         d(lin.c_all), d(lin.s_all), d(ca.vertcat(*[ca.vec(e) for e in lin.e_inv])), d(grad),
+         ca.vertcat(ocp.f, ca.sum1(viol), ca.mmax(viol))], fopts)
+    # dual infeasibility, only needed once the iterate is primal feasible (~8 % of the
+    # QP-data instructions, so a separate function)
+    du_fn = ca.Function("sqp_du_inf", [w, p, lam_g, lam_x], [du_inf], fopts)
+    return qp_data, du_fn, viol
+
+
+def _step_function(lay: _Layout, lin: _Linearisation, fopts: dict) -> ca.Function:
+    """``sqp_step`` (QP solution z, lam_a, lam_z; c, S, E^-1, gradient; the QP's bounds)
+    -> (dx, dlam_g, dlam_x, [|dlam|_inf, gradient·dx, |dx|_inf, QP violation]): the QP
+    solution expanded and the collocation multipliers recovered backwards."""
+    nb, n, nxb, nz, nx, ineq, xcols = lay.nb, lay.n, lay.nxb, lay.nz, lay.nx, lay.ineq, \
+        lay.xcols
+    hess, jin, d = lin.hess, lin.jin, ca.densify
+    zs, la, lz = ca.SX.sym("z", nz), ca.SX.sym("lam_a", ineq.size), ca.SX.sym("lam_z", nz)
+    cs, ss = ca.SX.sym("c", nx), ca.SX.sym("S", nx, nb)
+    es, gs = ca.SX.sym("e_inv", nxb * nxb * n), ca.SX.sym("grad", lay.nw)
+    bnd = [ca.SX.sym(name, k) for name, k in
+           (("lba", ineq.size), ("uba", ineq.size), ("lbz", nz), ("ubz", nz))]
+    s_du = ca.mtimes(ss, zs[:nb])
+    dx = ca.vertcat(zs, cs + s_du)
+    # primal feasibility of the QP solution: DAQP is a dual active-set method, so a
+    # feasible return is optimal and an infeasible QP or an aborted solve is not feasible
+    a_z = ca.mtimes(ca.DM(jin), ca.vertcat(zs, s_du))
+    qp_viol = ca.mmax(ca.vertcat(ca.fmax(a_z - bnd[1], 0), ca.fmax(bnd[0] - a_z, 0),
+                                 ca.fmax(zs - bnd[3], 0), ca.fmax(bnd[2] - zs, 0)))
+    resid = ca.mtimes(ca.DM(hess), dx) + gs + ca.mtimes(ca.DM(jin).T, la)
+    lam_eq_back: list[ca.SX] = []  # node n - 1 first
+    for i in reversed(range(n)):
+        ri = resid[xcols[i]]
+        if lam_eq_back:  # i < n - 1
+            ri = ri + ca.mtimes(lin.a_blk[i + 1].T, lam_eq_back[-1])
+        einv_i = ca.reshape(es[i * nxb * nxb:(i + 1) * nxb * nxb], nxb, nxb)
+        lam_eq_back.append(-ca.mtimes(einv_i.T, ri))
+    dlam_g = ca.SX(lay.ng, 1)
+    dlam_g[lay.eq.tolist()] = ca.vertcat(*reversed(lam_eq_back))
+    dlam_g[ineq.tolist()] = la
+    dlam_x = ca.vertcat(lz, ca.SX(nx, 1))
+    return ca.Function(
+        "sqp_step", [zs, la, lz, cs, ss, es, gs, *bnd],
+        [d(dx), d(dlam_g), d(dlam_x),
+         ca.vertcat(ca.fmax(ca.norm_inf(dlam_g), ca.norm_inf(lz)), ca.dot(gs, dx),
+                    ca.norm_inf(dx), qp_viol)], fopts)
+
+
+def _merit_function(ocp: Ocp, viol: ca.SX, fopts: dict) -> ca.Function:
+    """``sqp_merit`` (w, dx, t, p) -> (f, l1 and max violation) at the trial point
+    w + t·dx."""
+    w, p, nw = ocp.w, ocp.p, ocp.w.numel()
+    ws, dxs, ts = ca.SX.sym("w", nw), ca.SX.sym("dx", nw), ca.SX.sym("t")
+    trial = ca.Function("sqp_fg", [w, p], [ocp.f, viol])(ws + ts * dxs, p)
+    return ca.Function("sqp_merit", [ws, dxs, ts, p],
+                       [ca.vertcat(trial[0], ca.sum1(trial[1]), ca.mmax(trial[1]))], fopts)
+
+
+def _qp_solver(lay: _Layout) -> ca.Function:
+    """DAQP on the dense condensed QP in [du, ds] (nz variables, the linear rows)."""
+    return ca.conic("sqp_qp", "daqp",
+                    {"h": ca.Sparsity.dense(lay.nz, lay.nz),
+                     "a": ca.Sparsity.dense(lay.ineq.size, lay.nz)},
+                    {"error_on_fail": False})
+
+
 class CondensedSqp:
     """``sqpmethod``-equivalent Gauss-Newton SQP on ``ocp`` with condensed exact QPs.
 
@@ -89,127 +279,29 @@ class CondensedSqp:
         self.max_iter, self.tol_pr, self.tol_du = max_iter, tol_pr, tol_du
         self.accept_iter = max_iter if accept_iter is None else accept_iter
         self.accept_violation = accept_violation
-        w, p, f, g = ocp.w, ocp.p, ocp.f, ocp.g
-        nb, n, nxb = ocp.n_blocks, n_steps, 4 * degree
-        nw, ng, nz = w.numel(), g.numel(), ocp.n_blocks + n_steps
-        nx = n * nxb
-        rows = ng // n
-        if rows * n != ng or nz + nx != nw:
-            raise ValueError("CondensedSqp: OCP layout does not match n_steps/degree")
-        if np.isfinite(ocp.lbw[nz:]).any() or np.isfinite(ocp.ubw[nz:]).any():
-            raise ValueError("CondensedSqp: collocation states must be unbounded")
-        eq = np.concatenate([i * rows + np.arange(nxb) for i in range(n)])
-        ineq = np.setdiff1d(np.arange(ng), eq)
-        xcols = [list(range(nz + i * nxb, nz + (i + 1) * nxb)) for i in range(n)]
-        wp = ca.vertcat(w, p)
-
-        jac = ca.jacobian(g, w)
-        grad = ca.gradient(f, w)
-        hess = ca.hessian(f, w)[0]
-        jin = jac[ineq.tolist(), :]
-        if ca.depends_on(hess, wp) or ca.depends_on(jin, wp):
-            raise ValueError("CondensedSqp: cost must be quadratic and non-collocation "
-                             "constraints linear in w")
-        hess, jin = ca.evalf(hess), ca.evalf(jin)
-
-        # forward recursion dX_i = c_i + S_i du over the collocation blocks
-        e_inv, a_blk, c_blk, s_blk = [], [], [], []
-        c_prev, s_prev = ca.SX(nxb, 1), ca.SX(nxb, nb)
-        for i in range(n):
-            r = list(range(i * rows, i * rows + nxb))
-            jr = jac[r, :]
-            others = set(jr.sparsity().get_col()) - set(xcols[i]) - set(range(nb))
-            if i > 0:
-                others -= set(xcols[i - 1])
-            if others:
-                raise ValueError(f"CondensedSqp: collocation block {i} couples other variables")
-            ei = ca.inv(jac[r, xcols[i]])
-            ai = ca.evalf(jac[r, xcols[i - 1]]) if i > 0 else ca.DM(nxb, nxb)
-            if i > 0 and ca.depends_on(jac[r, xcols[i - 1]], wp):
-                raise ValueError("CondensedSqp: block coupling must be constant")
-            c_prev = -ca.mtimes(ei, g[r] + ca.mtimes(ai, c_prev))
-            s_prev = -ca.mtimes(ei, jac[r, :nb] + ca.mtimes(ai, s_prev))
-            e_inv.append(ei)
-            a_blk.append(ai)
-            c_blk.append(c_prev)
-            s_blk.append(s_prev)
-        c_all, s_all = ca.vertcat(*c_blk), ca.vertcat(*s_blk)
-        t_map = ca.vertcat(ca.SX.eye(nz), ca.horzcat(s_all, ca.SX(nx, n)))
-        t0 = ca.vertcat(ca.SX(nz, 1), c_all)
-        g_in = g[ineq.tolist()]
-        r_in = g_in + ca.mtimes(jin, t0)
-        lam_g, lam_x = ca.SX.sym("lam_g", ng), ca.SX.sym("lam_x", nw)
-        viol = _violations(w, ocp.lbw, ocp.ubw, g, ocp.lbg, ocp.ubg)
-        du_inf = ca.norm_inf(grad + ca.mtimes(jac.T, lam_g) + lam_x)
-        d = ca.densify
+        lay = _layout(ocp, n_steps, degree)
+        lin = _linearise(ocp, lay, ca.vertcat(ocp.w, ocp.p))
         fopts = function_options or {}
-        qp_data = ca.Function(
-            "sqp_qp_data", [w, p, lam_g, lam_x],
-            [d(ca.mtimes([t_map.T, ca.DM(hess), t_map])),
-             d(ca.mtimes(t_map.T, ca.mtimes(ca.DM(hess), t0) + grad)),
-             d(ca.mtimes(ca.DM(jin), t_map)),
-             d(ocp.lbg[ineq] - r_in), d(ocp.ubg[ineq] - r_in),
-             d(ocp.lbw[:nz] - w[:nz]), d(ocp.ubw[:nz] - w[:nz]),
-             d(c_all), d(s_all), d(ca.vertcat(*[ca.vec(e) for e in e_inv])), d(grad),
-             ca.vertcat(f, ca.sum1(viol), ca.mmax(viol))], fopts)
-        # dual infeasibility, only needed once the iterate is primal feasible (~8 % of the
-        # QP-data instructions, so a separate function)
-        du_fn = ca.Function("sqp_du_inf", [w, p, lam_g, lam_x], [du_inf], fopts)
+        qp_data, du_fn, viol = _qp_data_functions(ocp, lay, lin, fopts)
+        step = _step_function(lay, lin, fopts)
+        merit = _merit_function(ocp, viol, fopts)
+        self._bind(lay, qp_data, du_fn, step, merit, _qp_solver(lay))
 
-        # step: expand the QP solution, recover the collocation multipliers backwards
-        zs, la, lz = ca.SX.sym("z", nz), ca.SX.sym("lam_a", ineq.size), ca.SX.sym("lam_z", nz)
-        cs, ss = ca.SX.sym("c", nx), ca.SX.sym("S", nx, nb)
-        es, gs = ca.SX.sym("e_inv", nxb * nxb * n), ca.SX.sym("grad", nw)
-        bnd = [ca.SX.sym(name, k) for name, k in
-               (("lba", ineq.size), ("uba", ineq.size), ("lbz", nz), ("ubz", nz))]
-        s_du = ca.mtimes(ss, zs[:nb])
-        dx = ca.vertcat(zs, cs + s_du)
-        # primal feasibility of the QP solution: DAQP is a dual active-set method, so a
-        # feasible return is optimal and an infeasible QP or an aborted solve is not feasible
-        a_z = ca.mtimes(ca.DM(jin), ca.vertcat(zs, s_du))
-        qp_viol = ca.mmax(ca.vertcat(ca.fmax(a_z - bnd[1], 0), ca.fmax(bnd[0] - a_z, 0),
-                                     ca.fmax(zs - bnd[3], 0), ca.fmax(bnd[2] - zs, 0)))
-        resid = ca.mtimes(ca.DM(hess), dx) + gs + ca.mtimes(ca.DM(jin).T, la)
-        lam_eq_back: list[ca.SX] = []  # node n - 1 first
-        for i in reversed(range(n)):
-            ri = resid[xcols[i]]
-            if lam_eq_back:  # i < n - 1
-                ri = ri + ca.mtimes(a_blk[i + 1].T, lam_eq_back[-1])
-            einv_i = ca.reshape(es[i * nxb * nxb:(i + 1) * nxb * nxb], nxb, nxb)
-            lam_eq_back.append(-ca.mtimes(einv_i.T, ri))
-        dlam_g = ca.SX(ng, 1)
-        dlam_g[eq.tolist()] = ca.vertcat(*reversed(lam_eq_back))
-        dlam_g[ineq.tolist()] = la
-        dlam_x = ca.vertcat(lz, ca.SX(nx, 1))
-        step = ca.Function(
-            "sqp_step", [zs, la, lz, cs, ss, es, gs, *bnd],
-            [d(dx), d(dlam_g), d(dlam_x),
-             ca.vertcat(ca.fmax(ca.norm_inf(dlam_g), ca.norm_inf(lz)), ca.dot(gs, dx),
-                        ca.norm_inf(dx), qp_viol)], fopts)
-
-        # merit at a trial point w + t dx
-        ws, dxs, ts = ca.SX.sym("w", nw), ca.SX.sym("dx", nw), ca.SX.sym("t")
-        trial = ca.Function("sqp_fg", [w, p], [f, viol])(ws + ts * dxs, p)
-        merit = ca.Function("sqp_merit", [ws, dxs, ts, p],
-                            [ca.vertcat(trial[0], ca.sum1(trial[1]), ca.mmax(trial[1]))], fopts)
-
-        qp = ca.conic("sqp_qp", "daqp",
-                      {"h": ca.Sparsity.dense(nz, nz), "a": ca.Sparsity.dense(ineq.size, nz)},
-                      {"error_on_fail": False})
-
-        # preallocated state: every buffer below stays bound to these arrays
-        self.w, self.p = np.zeros(nw), np.zeros(p.numel())
-        self.lam_g, self.lam_x = np.zeros(ng), np.zeros(nw)
+    def _bind(self, lay: _Layout, qp_data: ca.Function, du_fn: ca.Function,
+              step: ca.Function, merit: ca.Function, qp: ca.Function) -> None:
+        """Preallocate the iterate and bind the functions to it and to each other's
+        results: every buffer stays bound to these arrays."""
+        self.w, self.p = np.zeros(lay.nw), np.zeros(lay.npar)
+        self.lam_g, self.lam_x = np.zeros(lay.ng), np.zeros(lay.nw)
         self._t = np.zeros(1)
         self._qp_data = bind(qp_data, [self.w, self.p, self.lam_g, self.lam_x])
         h, gq, aq, lba, uba, lbz, ubz, c_v, s_v, e_v, g_v, self._scal = self._qp_data.res
-        zero_z, zero_a = np.zeros(nz), np.zeros(ineq.size)
+        zero_z, zero_a = np.zeros(lay.nz), np.zeros(lay.ineq.size)
         self._qp = BufferedFunction(qp, [h, gq, aq, lba, uba, lbz, ubz, zero_z.copy(), zero_z,
-                                  zero_a, np.zeros(0), np.zeros(0)][: qp.n_in()])
+                                         zero_a, np.zeros(0), np.zeros(0)][: qp.n_in()])
         z_qp, _, lam_a, lam_z = self._qp.res
         self._du_inf = bind(du_fn, [self.w, self.p, self.lam_g, self.lam_x])
-        self._step = bind(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v,
-                                             lba, uba, lbz, ubz])
+        self._step = bind(step, [z_qp, lam_a, lam_z, c_v, s_v, e_v, g_v, lba, uba, lbz, ubz])
         self.dx, self.dlam_g, self.dlam_x, self._step_scal = self._step.res
         self._merit = bind(merit, [self.w, self.dx, self._t, self.p])
 

@@ -89,6 +89,23 @@ class StepRecord:
     interface_residual_J: float
 
 
+def _check_scheme(dt_s: float, coupling: str, exchange_steps: int, substep_s: float) -> None:
+    """ValueError unless the exchange step dt_s [s] is finite and > 0, ``coupling`` is a
+    scheme and the multi-rate settings are consistent (substep_s [s] in (0, dt_s])."""
+    if not (math.isfinite(dt_s) and dt_s > 0.0):
+        raise ValueError(f"dt_s = {dt_s!r} must be finite and > 0")
+    if coupling not in ("strong", "weak", "multirate"):
+        raise ValueError(f"coupling = {coupling!r} must be 'strong', 'weak' or 'multirate'")
+    if exchange_steps < 1 or not (0.0 < substep_s <= dt_s):
+        raise ValueError("exchange_steps must be >= 1 and substep_s in (0, dt_s]")
+
+
+def _pump_leak_gain(prm: HydraulicParams) -> float:
+    """The variable pump's leakage per pressure [m^3/(s·Pa)]: its standby flow at the
+    file's set-point."""
+    return prm.variable_pump.standby_flow_m3_s / prm.supply.setpoint_Pa
+
+
 class HydraulicTensioner:
     """Two-cylinder hydraulic tensioner implementing ``trackmj.ports.TensionerElement``.
 
@@ -215,18 +232,43 @@ class HydraulicTensioner:
                  coupling: Coupling = "strong", exchange_steps: int = 5,
                  substep_s: float = 1e-4, t0_s: float = 0.0,
                  supply_pressure_Pa: float | None = None) -> None:
-        self.params = prm = params if params is not None else load_hydraulic_params()
-        if not (math.isfinite(dt_s) and dt_s > 0.0):
-            raise ValueError(f"dt_s = {dt_s!r} must be finite and > 0")
-        if coupling not in ("strong", "weak", "multirate"):
-            raise ValueError(f"coupling = {coupling!r} must be 'strong', 'weak' or 'multirate'")
-        if exchange_steps < 1 or not (0.0 < substep_s <= dt_s):
-            raise ValueError("exchange_steps must be >= 1 and substep_s in (0, dt_s]")
+        self.params = params if params is not None else load_hydraulic_params()
+        _check_scheme(dt_s, coupling, exchange_steps, substep_s)
         self._check_input("stroke_m", stroke_m)
         self.dt = float(dt_s)
         self.coupling = coupling
         self.exchange_steps = exchange_steps
         self.n_sub = max(1, round(dt_s / substep_s))
+        model, p_set0 = self._choose_supply(supply_model, setpoint_Pa, supply_profile, t0_s)
+        self._const = c = self._circuit_constants()
+        self._supply_constants(c, model, p_set0)
+        self._state = st = np.zeros(k.N_STATE)  # layout: kernels module docstring
+        self._make_valves()
+        self._strong = coupling == "strong"
+        self.t = float(t0_s)
+        self.s = float(stroke_m)
+        self.v = 0.0
+        self._initial_pressures(model, p_set0, head_pressure_Pa, supply_pressure_Pa)
+        k.initialise(c, st, self.s)
+        self.step_ledger = EnergyLedger.view(st[k.STEP_LEDGER:k.STEP_LEDGER + k.N_LEDGER])
+        self.ledger = EnergyLedger.view(st[k.LEDGER:k.LEDGER + k.N_LEDGER])
+        self.diverged = False  # multi-rate only: the lagged exchange left physics
+        self.divergence_time_s = math.nan
+        self._law = ForceLaw(st.item(k.LAW), 0.0)
+        self._calls = 0
+        self._v_hold = 0.0
+        self._s_hyd = self.s
+        self._completed = False  # a step was completed (record / log exist)
+
+    def _choose_supply(self, supply_model: SupplyModel | None,
+                       setpoint_Pa: float | Callable[[float], float] | None,
+                       supply_profile: Callable[[float], float] | None,
+                       t0_s: float) -> tuple[SupplyModel, float]:
+        """Resolve the supply model and its set-point (constructor's arguments, else the
+        file's defaults), set ``setpoint``, ``supply_model`` and ``prescribed``; returns the
+        model and the initial set-point p_set(t0) [Pa gauge]. ValueError on a combination
+        the models do not take."""
+        prm = self.params
         if supply_profile is not None:
             if supply_model not in (None, "prescribed") or setpoint_Pa is not None:
                 raise ValueError("supply_profile is the prescribed model's set-point: give "
@@ -254,16 +296,21 @@ class HydraulicTensioner:
                              "must exceed the accumulator precharge "
                              f"{prm.accumulator.precharge_Pa:g} Pa, or the accumulator is "
                              "empty before the pump loads")
-        cyl, cav, rel, acc, cp = prm.cylinder, prm.cavitation, prm.relief, prm.accumulator, \
-            prm.coupling
+        return model, p_set0
+
+    def _circuit_constants(self) -> np.ndarray:
+        """The kernels' constants (float64[kernels.N_CONST]) of the cylinders, lines, fluid,
+        cavitation, valves, metering, friction, end stops and Newton; sets ``Ah``, ``Ar``
+        [m^2], ``pT``, ``floor``, ``mu_open``, ``mu_width``, ``p_atm`` [Pa]. The supply's
+        entries are left 0 (:meth:`_supply_constants`)."""
+        prm = self.params
+        cyl, cav, acc, cp = prm.cylinder, prm.cavitation, prm.accumulator, prm.coupling
         self.Ah, self.Ar = cyl.area_head_m2, cyl.area_rod_m2
         self.pT = prm.tank_pressure_Pa
         self.floor = cav.floor_Pa
         self.mu_open = self.pT - cav.makeup_crack_below_tank_Pa
         self.mu_width = cav.makeup_full_below_tank_Pa - cav.makeup_crack_below_tank_Pa
         self.p_atm = acc.atmospheric_pressure_Pa_abs
-        fp, vp, uv = prm.fixed_pump, prm.variable_pump, prm.unloading_valve
-        k_leak = vp.standby_flow_m3_s / prm.supply.setpoint_Pa
         cq, rho = prm.orifice.discharge_coefficient, prm.fluid.density_kg_m3
         c = np.zeros(k.N_CONST)  # layout: kernels module docstring
         c[k.C_AH], c[k.C_AR] = self.Ah, self.Ar
@@ -275,27 +322,11 @@ class HydraulicTensioner:
         c[k.C_FLOOR], c[k.C_BAND] = self.floor, cav.band_Pa
         c[k.C_MU_OPEN], c[k.C_MU_WIDTH] = self.mu_open, self.mu_width
         c[k.C_K_MU] = orifice_gain(cq, cav.makeup_area_m2, rho)
-        c[k.C_REL_CRACK] = (1.0 + rel.safety_margin_rel) * p_set0
-        c[k.C_REL_WIDTH], c[k.C_K_REL] = rel.band_Pa, orifice_gain(cq, rel.full_area_m2, rho)
-        c[k.C_Q_PUMP] = fp.flow_m3_s
-        c[k.C_ACC_V0], c[k.C_ACC_P0] = acc.gas_volume_m3, acc.precharge_Pa
-        c[k.C_P_ATM], c[k.C_ACC_N] = self.p_atm, acc.polytropic_exponent
         c[k.C_FRIC_C], c[k.C_FRIC_VS] = cyl.coulomb_friction_N, cyl.coulomb_velocity_m_s
         c[k.C_FRIC_B] = cyl.viscous_friction_N_s_m
         c[k.C_ES_K], c[k.C_ES_C] = cyl.endstop_stiffness_N_m, cyl.endstop_damping_N_s_m
         c[k.C_TOL], c[k.C_MAX_ITER] = cp.newton_tol_Pa, cp.newton_max_iter
         c[k.C_V_CORR], c[k.C_MAX_CORR] = cp.min_correction_velocity_m_s, cp.max_correction_N
-        c[k.C_PRESCRIBED] = 1.0 if self.prescribed else 0.0
-        c[k.C_MODEL] = k.MODEL_CODES[model]
-        c[k.C_ACC] = 1.0 if model in ("fixed_relief", "unloading") else 0.0
-        c[k.C_QG_MAX], c[k.C_DROOP], c[k.C_TAU] = (vp.max_flow_m3_s, vp.droop_Pa,
-                                                   vp.time_constant_s)
-        c[k.C_K_PUMP_LEAK] = k_leak
-        variable = model == "compensated"
-        c[k.C_ETA_V] = 1.0 if variable else fp.volumetric_efficiency
-        c[k.C_ETA_HM] = vp.mechanical_efficiency if variable else fp.mechanical_efficiency
-        c[k.C_P_UNLOADED] = uv.unloaded_pressure_Pa
-        c[k.C_CUT_IN_REL] = 1.0 - uv.differential_rel
         mv, sv = prm.main_valve, prm.switching_valves
         c[k.C_MV_OVERLAP], c[k.C_MV_LEAK], c[k.C_MV_OPEN] = (mv.overlap, mv.leak_area_m2,
                                                               mv.open_area_m2)
@@ -304,38 +335,61 @@ class HydraulicTensioner:
         c[k.C_ROD_FEED] = prm.metering.rod_feed_area_m2
         c[k.C_HEAD_BRANCH] = prm.metering.head_branch_area_m2
         c[k.C_CQ], c[k.C_SQRT_RHO], c[k.C_TWO] = cq, math.sqrt(rho), 2.0
-        self._const = c
-        self._state = st = np.zeros(k.N_STATE)  # layout: kernels module docstring
+        return c
+
+    def _supply_constants(self, c: np.ndarray, model: SupplyModel, p_set0: float) -> None:
+        """Fill the supply's entries of the kernels' constants ``c`` in place: relief,
+        pumps, accumulator, unloading valve and the model's flags, for ``model`` at the
+        initial set-point ``p_set0`` [Pa gauge]."""
+        prm = self.params
+        rel, acc = prm.relief, prm.accumulator
+        fp, vp, uv = prm.fixed_pump, prm.variable_pump, prm.unloading_valve
+        cq, rho = prm.orifice.discharge_coefficient, prm.fluid.density_kg_m3
+        c[k.C_REL_CRACK] = (1.0 + rel.safety_margin_rel) * p_set0
+        c[k.C_REL_WIDTH], c[k.C_K_REL] = rel.band_Pa, orifice_gain(cq, rel.full_area_m2, rho)
+        c[k.C_Q_PUMP] = fp.flow_m3_s
+        c[k.C_ACC_V0], c[k.C_ACC_P0] = acc.gas_volume_m3, acc.precharge_Pa
+        c[k.C_P_ATM], c[k.C_ACC_N] = self.p_atm, acc.polytropic_exponent
+        c[k.C_PRESCRIBED] = 1.0 if self.prescribed else 0.0
+        c[k.C_MODEL] = k.MODEL_CODES[model]
+        c[k.C_ACC] = 1.0 if model in ("fixed_relief", "unloading") else 0.0
+        c[k.C_QG_MAX], c[k.C_DROOP], c[k.C_TAU] = (vp.max_flow_m3_s, vp.droop_Pa,
+                                                   vp.time_constant_s)
+        c[k.C_K_PUMP_LEAK] = _pump_leak_gain(prm)
+        variable = model == "compensated"
+        c[k.C_ETA_V] = 1.0 if variable else fp.volumetric_efficiency
+        c[k.C_ETA_HM] = vp.mechanical_efficiency if variable else fp.mechanical_efficiency
+        c[k.C_P_UNLOADED] = uv.unloaded_pressure_Pa
+        c[k.C_CUT_IN_REL] = 1.0 - uv.differential_rel
+
+    def _make_valves(self) -> None:
+        """The solenoids ``main``, ``vl``, ``vr`` on one bank (rows in the kernels' order),
+        alike and at rest."""
+        mv, sv = self.params.main_valve, self.params.switching_valves
         bank = SolenoidBank((mv, sv, sv))   # rows main, V_L, V_R (the kernels' order)
         self.main = Solenoid(mv, bank=bank, index=0)
         self.vl = Solenoid(sv, bank=bank, index=1)
         self.vr = Solenoid(sv, bank=bank, index=2)
-        st[k.TWINS] = 1.0   # alike and at rest: V_R moves as V_L while commanded alike
-        self._strong = coupling == "strong"
-        self.t = float(t0_s)
-        self.s = float(stroke_m)
-        self.v = 0.0
+        self._state[k.TWINS] = 1.0   # alike and at rest: V_R moves as V_L while commanded alike
+
+    def _initial_pressures(self, model: SupplyModel, p_set0: float,
+                           head_pressure_Pa: float | None,
+                           supply_pressure_Pa: float | None) -> None:
+        """Initial set-point, pump state and node pressures in the state array (see the
+        constructor's parameters for the defaults)."""
+        st, vp, k_leak = self._state, self.params.variable_pump, _pump_leak_gain(self.params)
         if head_pressure_Pa is None:  # 15 kN with the rods at tank pressure
             head_pressure_Pa = (15e3 + 2.0 * self.Ar * self.pT) / (2.0 * self.Ah)
         st[k.SET_NEXT] = p_set0
         if self.prescribed or supply_pressure_Pa is None:
-            ps = p_set0 / (1.0 + vp.droop_Pa * k_leak / vp.max_flow_m3_s) if variable else p_set0
+            ps = p_set0 / (1.0 + vp.droop_Pa * k_leak / vp.max_flow_m3_s) \
+                if model == "compensated" else p_set0
         else:
             ps = float(supply_pressure_Pa)
             self._check_input("supply_pressure_Pa", ps)
         st[k.PUMP_X] = min(1.0, k_leak * ps / vp.max_flow_m3_s)
         st[k.LOADED] = 1.0 if model == "unloading" and ps < p_set0 else 0.0
         st[k.P:k.P + 5] = (ps, head_pressure_Pa, head_pressure_Pa, self.pT, ps)
-        k.initialise(c, st, self.s)
-        self.step_ledger = EnergyLedger.view(st[k.STEP_LEDGER:k.STEP_LEDGER + k.N_LEDGER])
-        self.ledger = EnergyLedger.view(st[k.LEDGER:k.LEDGER + k.N_LEDGER])
-        self.diverged = False  # multi-rate only: the lagged exchange left physics
-        self.divergence_time_s = math.nan
-        self._law = ForceLaw(st.item(k.LAW), 0.0)
-        self._calls = 0
-        self._v_hold = 0.0
-        self._s_hyd = self.s
-        self._completed = False  # a step was completed (record / log exist)
 
     # ----------------------------------------------------------------- public API
     def set_mode(self, mode: int) -> None:

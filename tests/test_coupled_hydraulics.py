@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from trackmj.hydraulics import HydraulicTensioner
+from trackmj.machines.plant import load_plant
 from trackmj.track.plant import TrackPlant
 
 
 def _coupled(mode_schedule, duration_s: float, speed_m_s: float = 1.5):
     """Plant at home, hydraulics initialised to carry the home idler force in the heads."""
-    plant = TrackPlant.load()
+    plant = load_plant()
     probe = plant.last_law  # None at reset: the home force is the preload law's force
     assert probe is None
     home_force = plant.params.tensioner.preload_N - plant.params.tensioner.stiffness_N_m * (

@@ -16,7 +16,7 @@ from trackmj.machines.identify import (
     r2,
 )
 from trackmj.machines.idler import ModalTerm
-from trackmj.track.plant import TrackPlant
+from trackmj.machines.plant import load_plant
 
 
 def test_single_dof_fit_recovers_a_known_system() -> None:
@@ -66,9 +66,9 @@ def test_identified_idler_of_the_track() -> None:
     cannot: its fitted mass, unconstrained, falls below the idler and carrier that move,
     80 kg, so the identification floors it there); the modes are the body mode and the
     idler mode."""
-    free_fit = identify_idler(TrackPlant.load)
+    free_fit = identify_idler(load_plant)
     assert free_fit.fit_r2 < 0.5 and free_fit.mass_kg < 80.0
-    idler = identify_idler(TrackPlant.load, min_mass_kg=80.0)
+    idler = identify_idler(load_plant, min_mass_kg=80.0)
     assert idler.response.coherence.mean() > 0.9
     assert idler.modal_fit_r2 >= 0.9
     assert idler.modal_fit_r2 > idler.fit_r2

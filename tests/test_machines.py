@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from trackmj.cli.main import main
 from trackmj.io import cache_dir
 from trackmj.machines.assembly import load_machine, model_mjcf, resolve, shipped
+from trackmj.machines.plant import load_plant
 from trackmj.track.mechanics import load_model_params
 from trackmj.track.mjcf.cache import cached_mjcf
 from trackmj.track.mjcf.generate import generate_mjcf
@@ -156,7 +157,7 @@ def front_drive():
 def test_front_sprocket_slide_points_rearward() -> None:
     p = load_model_params(overrides=FRONT)
     assert slide_axis(p) == (-1.0, 0.0)
-    plant = TrackPlant.load(overrides=FRONT)
+    plant = load_plant(overrides=FRONT)
     m = plant.model
     np.testing.assert_array_equal(m.jnt_axis[m.joint("idler_slide").id], (-1.0, 0.0, 0.0))
     # standing at home (settled under the passive spring) the tensioner pushes the idler

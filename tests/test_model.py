@@ -9,6 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from trackmj.machines.plant import load_plant
 from trackmj.ports import ForceLaw
 from trackmj.track.mechanics import default_xml_path
 from trackmj.track.mjcf.builders import build_mjcf, join_mjcf, read_mjcf, split_mjcf
@@ -270,7 +271,7 @@ def assert_sparse_matches_dense(plant: TrackPlant, every_ms: int, min_rows: int)
 
 
 def _trajectory() -> np.ndarray:
-    plant = TrackPlant.load()
+    plant = load_plant()
     element = PassiveTensioner.from_params(plant.params)
     states: list[np.ndarray] = []
     plant.run(element, 0.5, 1.0, lambda pl: states.append(pl.data.qpos.copy()))
@@ -282,7 +283,7 @@ def test_runs_are_bit_identical() -> None:
 
 
 def _chassis_heights(terrain: RoadProfile) -> np.ndarray:
-    plant = TrackPlant.load(terrain=terrain)
+    plant = load_plant(terrain=terrain)
     element = PassiveTensioner.from_params(plant.params)
     heights: list[float] = []
     plant.run(element, 4.0, lambda t: 1.5 * min(1.0, t),
@@ -295,7 +296,7 @@ def test_heightfield_terrain() -> None:
     """A flat heightfield behaves like the plane; a 50 mm step lifts the chassis by it."""
     x = np.arange(0.0, 60.0, 0.05) - 10.0
     flat = _chassis_heights(RoadProfile(-10.0, 0.05, np.zeros_like(x)))
-    plane_plant = TrackPlant.load()
+    plane_plant = load_plant()
     plane: list[float] = []
     plane_plant.run(PassiveTensioner.from_params(plane_plant.params), 4.0,
                     lambda t: 1.5 * min(1.0, t), lambda pl: plane.append(pl.chassis_pose[1]))

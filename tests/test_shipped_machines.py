@@ -16,11 +16,11 @@ from test_contacts import _static_stiffness
 from trackmj.elements.energy_table import accounted_J
 from trackmj.elements.prescribed import ConstantForce
 from trackmj.machines import assembly as machines
+from trackmj.machines.plant import load_plant
 from trackmj.sim.drive import drive
 from trackmj.sim.run import simulate
 from trackmj.track.foundation import S_DELTA
 from trackmj.track.mjcf.layout import slide_axis
-from trackmj.track.plant import TrackPlant
 
 NAMES = machines.names()
 SPEED_M_S, DRIVE_S, STEADY_FROM_S = 1.5, 10.0, 2.0
@@ -38,7 +38,7 @@ def standing(machine: str) -> dict:
     """The machine standing, settled 1.5 s under its preload, then 0.3 s averaged: the
     idler's wrap and strand directions, the exit pins' tension, Σ ground normal force and
     the static stiffness of every loaded contact."""
-    plant = TrackPlant.load(machine=machine)
+    plant = load_plant(machine=machine)
     p = plant.params
     preload = p.tensioner.preload_N
     stiffness = _static_stiffness(plant, preload)   # settles 1.5 s, then 0.3 s of contacts

@@ -247,3 +247,39 @@ def test_public_api_documents_every_parameter(name: str, obj: object) -> None:
     extra = [p for p in documented if p not in params]
     assert not missing and not extra, f"{name}: undocumented {missing}, unknown {extra}"
 
+
+
+def _unexplained_local_imports(path: Path) -> list[int]:
+    """Line numbers of function-local import groups (import lines with only blank lines
+    between them) with no comment on their lines or the line before: a local import must
+    say why it is local."""
+    source = path.read_text()
+    lines = source.splitlines()
+    imports = sorted({(node.lineno, node.end_lineno or node.lineno)
+                      for fn in ast.walk(ast.parse(source))
+                      if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef))
+                      for node in ast.walk(fn) if isinstance(node, (ast.Import, ast.ImportFrom))})
+    groups: list[tuple[int, int]] = []
+    for start, end in imports:
+        if groups and all(not line.strip() for line in lines[groups[-1][1]:start - 1]):
+            groups[-1] = (groups[-1][0], end)
+        else:
+            groups.append((start, end))
+    return [start for start, end in groups
+            if not any("#" in lines[k] for k in range(start - 2, end))]
+
+
+def test_every_function_local_import_says_why() -> None:
+    """Allowed reasons: an optional heavy dependency (fmpy, pythonfmu, rerun, matplotlib,
+    dask), the command line's start-up, a registry's names that must not import what they
+    name, the worker's pinned thread pools."""
+    unexplained = {name: lines for name, path in MODULES.items()
+                   if (lines := _unexplained_local_imports(path))}
+    assert unexplained == {}
+
+
+def test_the_reason_check_sees_a_silent_local_import(tmp_path: Path) -> None:
+    module = tmp_path / "m.py"
+    module.write_text("def f():\n    import json\n\n    return json\n\n\n"
+                      "def g():\n    # start-up: why\n    import json\n    return json\n")
+    assert _unexplained_local_imports(module) == [2]

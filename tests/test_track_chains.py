@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 from test_contacts import STATIC_TOLERANCE, _static_stiffness, span_under_tension
 from test_model import assert_sparse_matches_dense
 
+from trackmj.machines.plant import load_plant
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.mechanics import ModelParams, load_model_params
 from trackmj.track.mjcf.generate import generate_mjcf
@@ -62,7 +63,7 @@ def test_chain_sizes_cover_the_loop_evenly(links: int, longest: int) -> None:
 @pytest.mark.parametrize("structure", ["default", "pairs", "free"])
 def test_structure_cuts_the_loop_into_its_chains(structure: str, pairs, free,
                                                  model_params: ModelParams) -> None:
-    plant = {"default": TrackPlant.load, "pairs": lambda: _plant(pairs),
+    plant = {"default": load_plant, "pairs": lambda: _plant(pairs),
              "free": lambda: _plant(free)}[structure]()
     m, p, n = plant.model, plant.params, model_params.track.link_count
     starts = chain_starts(p)
@@ -106,7 +107,7 @@ def test_span_stretches_as_its_connects_pins_in_series(structure: str, pairs) ->
     """The free upper span stretches by Σ m_c·ΔT/K when its tension rises by ΔT, m_c the
     pins each connect in it carries (its chain's); its hinged pins carry the tension of
     their neighbours (the cfrc_int readout)."""
-    plant = TrackPlant.load() if structure == "default" else _plant(pairs)
+    plant = load_plant() if structure == "default" else _plant(pairs)
     series = pin_series_count(plant.params)
     spans = [span_under_tension(plant, f) for f in (11_000.0, 15_000.0)]
     for a, b, _, _, tension in spans:

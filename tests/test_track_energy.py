@@ -14,9 +14,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from trackmj.machines.plant import load_plant
 from trackmj.sim.drive import TIMESERIES_UNITS, drive
 from trackmj.track.energy import CONTACTS, TrackEnergyLedger
-from trackmj.track.plant import PassiveTensioner, TrackPlant
+from trackmj.track.plant import PassiveTensioner
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +57,7 @@ def test_free_fall_loses_the_integrators_known_energy() -> None:
     energy but the integrator's explicit-force term: the chained links' mass matrix
     depends on their pose, and the loop keeps a slow spin from the settle (under 2e-6 of
     the loss)."""
-    plant = TrackPlant.load()
+    plant = load_plant()
     m = plant.model
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
     plant.foundation.line[:, 1] -= 1e3

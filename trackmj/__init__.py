@@ -11,7 +11,8 @@ The Python API reads like the command line::
 
 Exports: :func:`simulate`, :func:`sweep`, :func:`load_sweep`, :func:`read_sweep`,
 :func:`load_scenario`, :func:`read_result`, :func:`write_result`, :class:`Result`,
-:class:`TrackPlant`, :class:`Executor`, :class:`RunSpec`. They are imported on first use
+:class:`TrackPlant` (:func:`load_plant` loads a machine's), :class:`Executor`,
+:class:`RunSpec`. They are imported on first use
 (module ``__getattr__``), so ``import trackmj`` stays cheap: it imports no numpy, MuJoCo
 or numba, and the pure subpackages ``trackmj.hydraulics`` and ``trackmj.control`` that live
 under it stay importable without MuJoCo.
@@ -35,15 +36,18 @@ _EXPORTS: dict[str, str] = {
     "write_result": "trackmj.results.store",
     "Result": "trackmj.results.store",
     "TrackPlant": "trackmj.track.plant",
+    "load_plant": "trackmj.machines.plant",
     "Executor": "trackmj.study.executor",
     "RunSpec": "trackmj.study.executor",
 }
 """Public name -> the module that defines it."""
 
-__all__ = ["Executor", "Result", "RunSpec", "TrackPlant", "__version__", "load_scenario",
-           "load_sweep", "read_result", "read_sweep", "simulate", "sweep", "write_result"]
+__all__ = ["Executor", "Result", "RunSpec", "TrackPlant", "__version__", "load_plant",
+           "load_scenario", "load_sweep", "read_result", "read_sweep", "simulate", "sweep",
+           "write_result"]
 
 if TYPE_CHECKING:
+    from trackmj.machines.plant import load_plant
     from trackmj.results.store import Result, read_result, write_result
     from trackmj.scenarios.load import load_scenario
     from trackmj.sim.run import simulate

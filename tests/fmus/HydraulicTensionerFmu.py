@@ -10,7 +10,7 @@ import copy
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 
-from trackmj.fmi import hold_module_dict
+from trackmj.fmi.export import hold_module_dict
 
 hold_module_dict(globals())   # pythonfmu's findClass releases this dict once too often
 

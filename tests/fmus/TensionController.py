@@ -4,7 +4,7 @@ F = p_head·A_head − p_rod·A_rod, held over its period."""
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 
-from trackmj.fmi import hold_module_dict
+from trackmj.fmi.export import hold_module_dict
 
 hold_module_dict(globals())   # pythonfmu's findClass releases this dict once too often
 

@@ -12,7 +12,7 @@ from trackmj.ports import ElementCoupling
 if TYPE_CHECKING:
     from trackmj.control.model import ReducedModel
     from trackmj.elements.tensioner_file import TensionerFile
-    from trackmj.hydraulics import HydraulicParams
+    from trackmj.hydraulics.params import HydraulicParams
     from trackmj.machines.idler import EquivalentIdler
     from trackmj.scenarios.scenario import Scenario
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from trackmj.hydraulics import HydraulicParams
+    from trackmj.hydraulics.params import HydraulicParams
 
 END_STOP_ALLOWANCE_M = 5e-3
 """End-stop penetration a physical run may reach beyond the cylinder travel [m] (50 kN per

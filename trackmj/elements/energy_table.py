@@ -45,7 +45,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from trackmj.hydraulics import EnergyLedger
+    from trackmj.hydraulics.ledger import EnergyLedger
 
 
 def energy_table(ledger: EnergyLedger, supply_model: str, t_end_s: float) -> dict[str, Any]:

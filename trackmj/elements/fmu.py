@@ -30,7 +30,7 @@ law(v_{k+1}))·v_{k+1}·h into the next law (NEPCE, bounded by ``max_correction_
 hydraulic plugin does. Booked: the work into the mechanics ∫law(v)·v dt, the residual, and
 the FMU's own port power ∫P dt where it outputs one. Guards (a PhysicsError, the run stops
 with exit 3): a non-finite output, |F| beyond ``force_limit_N``, the stroke outside
-``travel_m``. A failing FMI call is an :class:`~trackmj.fmi.FmuError` (exit 3).
+``travel_m``. A failing FMI call is an :class:`~trackmj.errors.FmuError` (exit 3).
 
 Inputs are set before every step: stroke at the end of the step (less ``stroke_offset_m``),
 the step's velocity, and the valve command (mode, u, supply set value) in force.
@@ -47,8 +47,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from trackmj.elements.cylinder import equivalent_cylinder, equivalent_pressures
-from trackmj.errors import PhysicsError
-from trackmj.fmi import FmuError
+from trackmj.errors import FmuError, PhysicsError
 from trackmj.fmi.fmu import FmuDescription, FmuInstance
 from trackmj.ports import COUPLING_STEP_S, Element, ElementLog, ForceLaw
 

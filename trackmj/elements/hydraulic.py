@@ -8,8 +8,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from trackmj.elements.cylinder import cylinder_travel_m
 from trackmj.elements.energy_table import energy_table
-from trackmj.hydraulics import HydraulicTensioner
-from trackmj.hydraulics.tensioner import FLOW_NAMES, NODE_NAMES
+from trackmj.hydraulics.tensioner import FLOW_NAMES, NODE_NAMES, HydraulicTensioner
 from trackmj.ports import Element
 from trackmj.validator import ParameterError
 

@@ -25,6 +25,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from trackmj.errors import FmuError
+from trackmj.fmi.fmu import FmuInstance, describe
 from trackmj.ports import ControllerStatistics, ControlOutput, steps_per_period
 from trackmj.validator import Location, ParameterError, Parameters, load_file, param, sources_field
 
@@ -87,8 +89,6 @@ class ControllerFile(Parameters):
 def load_controller_file(path: str | Path) -> ControllerFile:
     """Read and validate a controller file and check its FMU (co-simulation; the mapped
     variables' causality and type) before any run."""
-    from trackmj.fmi.fmu import describe
-
     path = Path(path)
     loaded = load_file(ControllerFile, path)
     table = loaded.controller
@@ -115,8 +115,6 @@ class FmuController:
     horizon_steps = 0   # it takes the current reference only
 
     def __init__(self, loaded: ControllerFile) -> None:
-        from trackmj.fmi.fmu import FmuInstance
-
         self.period_s = loaded.controller.period_s
         self.description = d = loaded.description
         self.inst = FmuInstance(d, "trackmj-controller")
@@ -140,8 +138,6 @@ class FmuController:
         self.inst.do_step(t, self.period_s)
         u = float(self.inst.read(self._channel))
         if not np.isfinite(u):
-            from trackmj.fmi import FmuError
-
             raise FmuError(f"the FMU {self.description.name} output {self._output} = {u!r} "
                            f"at t = {t:.3f} s (non-finite)")
         return ControlOutput(min(1.0, max(-1.0, u)), True, time.perf_counter() - start)

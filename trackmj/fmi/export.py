@@ -22,7 +22,7 @@ The generated module also puts the exporting environment's site-packages ahead o
 Python's own (measured: the host's older scipy shadowing the environment's crashed the
 embedded interpreter), sets ``sys.executable`` where the host has none (mujoco's glfw probe
 starts a subprocess), holds a reference pythonfmu releases once too often
-(:func:`trackmj.fmi.hold_module_dict`), and freezes the garbage collector at interpreter
+(:func:`hold_module_dict`), and freezes the garbage collector at interpreter
 exit: in a C host the final cycle collection of ``Py_Finalize`` (pythonfmu finalises the
 interpreter it started when the FMU is unloaded) crashed on a corrupted object with MuJoCo,
 numba and scipy loaded; the root cause was not found, the process ending frees the memory.
@@ -72,6 +72,20 @@ class Exported:
     shim: bool
     notes: tuple[str, ...]
 
+_HELD: list[dict] = []
+
+
+def hold_module_dict(namespace: dict) -> None:
+    """Keep one more reference to a pythonfmu slave module's globals, each time the module's
+    code runs. pythonfmu 0.7's binary (``findClass``, PySlaveInstance.cpp) executes the
+    module's file in the module's dict and then DECREFs that dict, which
+    ``PyModule_GetDict`` lent it (a borrowed reference): one reference too few per
+    instantiation, and the dict is freed while in use (measured: segmentation faults in the
+    garbage collector, at random, in fmpy and in a C host). Call it at the top level of
+    every pythonfmu slave script (this module imports only the standard library, so it
+    comes first): ``hold_module_dict(globals())``."""
+    _HELD.append(namespace)
+
 
 def _script(identifier: str, slave: str, site_dirs: list[str]) -> str:
     version = sys.version_info[:2]
@@ -96,7 +110,7 @@ sys.path[:] = _before[:1] + _added + [p for p in _before[1:] if p not in _added]
 if not sys.executable:   # embedded in a host without Python: subprocesses need a Python
     sys.executable = {executable!r}
 
-from trackmj.fmi import hold_module_dict  # noqa: E402
+from trackmj.fmi.export import hold_module_dict  # noqa: E402
 
 hold_module_dict(globals())   # pythonfmu's findClass releases this dict once too often
 atexit.register(gc.freeze)   # see trackmj.fmi.export: no cycle collection at finalisation
@@ -174,7 +188,7 @@ def export(kind: str, out: str | Path) -> Exported:
     Exported
         The FMU and what the importing host needs.
     """
-    try:
+    try:   # optional dependency (trackmj[fmi]): needed only to export
         from pythonfmu.builder import FmuBuilder
     except ImportError:
         raise ValueError("exporting an FMU needs pythonfmu: pip install 'trackmj[fmi]'") \

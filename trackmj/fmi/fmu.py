@@ -10,7 +10,7 @@ the key and the variable.
 
 :class:`FmuInstance` wraps fmpy's ``FMU2Slave``/``FMU2Model``/``FMU3Slave``/``FMU3Model``:
 values are set and read by port quantity, and any failing call raises
-:class:`~trackmj.fmi.FmuError` ("the FMU cyl.fmu: fmi2DoStep at t = 1.234 s failed with
+:class:`~trackmj.errors.FmuError` ("the FMU cyl.fmu: fmi2DoStep at t = 1.234 s failed with
 status 3 (error)").
 """
 
@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from trackmj.fmi import FmuError
+from trackmj.errors import FmuError
 from trackmj.validator import Location, ParameterError
 
 REAL_TYPES = ("Real", "Float64", "Float32")
@@ -101,7 +101,7 @@ def _fmi3_directional(path: Path, interface: str) -> bool:
 def open_description(path: Path, where: str) -> Any:
     """fmpy's model description of the FMU at ``path``; ParameterError starting with
     ``where`` if the file is missing, not a zip, or has no readable modelDescription."""
-    try:
+    try:   # optional dependency (trackmj[fmi]): loaded only when an FMU is read
         import fmpy
     except ImportError:
         raise ParameterError(f"{where}: reading an FMU needs fmpy: pip install "
@@ -144,7 +144,7 @@ def choose_interface(md: Any, asked: str, where: str, path: Path) -> tuple[str, 
 
 
 def _check_platform(path: Path, version: str, where: str) -> None:
-    import fmpy
+    import fmpy  # optional dependency (trackmj[fmi]), present once open_description ran
 
     platforms = fmpy.supported_platforms(str(path))
     if fmpy.platform not in platforms:
@@ -252,6 +252,7 @@ class FmuInstance:
     """
 
     def __init__(self, description: FmuDescription, instance_name: str = "trackmj") -> None:
+        # optional dependency (trackmj[fmi]), present once the description was read
         import fmpy
         from fmpy.fmi2 import FMU2Model, FMU2Slave
         from fmpy.fmi3 import FMU3Model, FMU3Slave

@@ -26,16 +26,20 @@ import math
 from typing import TYPE_CHECKING, Any, TypedDict
 
 import mujoco
+import numpy as np
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 
+from trackmj.control.sensors import Sensors
+from trackmj.elements.hydraulic import HydraulicElement
+from trackmj.elements.prescribed import ConstantForce
+from trackmj.machines.assembly import MACHINE_SUFFIX, names
 from trackmj.ports import COUPLING_STEP_S, Command, Readout, StepInputs
+from trackmj.sim.architectures import Assembly, assemble
+from trackmj.sim.mechanics import settled_track
+from trackmj.sim.setup import RunSetup, prepare
 
 if TYPE_CHECKING:
-    from trackmj.control.sensors import Sensors
-    from trackmj.elements.hydraulic import HydraulicElement
     from trackmj.hydraulics.tensioner import HydraulicTensioner
-    from trackmj.sim.architectures import Assembly
-    from trackmj.sim.setup import RunSetup
     from trackmj.track.plant import TrackPlant
 
 TRACK_INPUTS = ("force_N", "force_dv_N_s_m", "track_speed_m_s", "hitch_pull_N", "hitch_down_N")
@@ -72,8 +76,6 @@ def machine_files(machine: str) -> MachineFiles:
     ("" the default, lf1352) or a machine file (``*_machine.toml``) through the machine
     registry (:func:`trackmj.machines.assembly.resolve`); any other TOML is a model parameter file
     on the default machine. The one place the FMUs resolve a machine."""
-    from trackmj.machines.assembly import MACHINE_SUFFIX, names
-
     text = machine.strip()
     if not text or text.lower() in names() or text.endswith(MACHINE_SUFFIX):
         return {"machine": text or None, "model": None}
@@ -120,8 +122,6 @@ class _Base(Fmi2Slave):
         return self.plant
 
     def _setup(self, scenario: str) -> RunSetup:
-        from trackmj.sim.setup import prepare
-
         name = scenario if self.terrain in ("", "flat") else self.terrain
         return prepare(name, seed=int(self.seed), **machine_files(self.machine))
 
@@ -177,9 +177,6 @@ class TrackSlave(_Base):
                                            variability=Fmi2Variability.discrete))
 
     def exit_initialization_mode(self):
-        from trackmj.elements.prescribed import ConstantForce
-        from trackmj.sim.mechanics import settled_track
-
         self.plant = settled_track(self._setup("W1"), self.force_N)
         self._element = ConstantForce
         self._outputs_track(self.plant, True)
@@ -237,12 +234,6 @@ class PlantSlave(_Base):
         self._real(PLANT_OUTPUTS, Fmi2Causality.output, math.nan)
 
     def exit_initialization_mode(self):
-        import numpy as np
-
-        from trackmj.control.sensors import Sensors
-        from trackmj.sim.architectures import assemble
-        from trackmj.sim.setup import prepare
-
         terrain = None if self.terrain in ("", "flat") else self.terrain
         setup = prepare(terrain or self.scenario, **machine_files(self.machine),
                         seed=int(self.seed))
@@ -283,8 +274,6 @@ class PlantSlave(_Base):
 
     def _hydraulic_element(self) -> HydraulicElement:
         """The run's element, the built-in hydraulics (tp); TypeError for another."""
-        from trackmj.elements.hydraulic import HydraulicElement
-
         element = self.asm.element
         if not isinstance(element, HydraulicElement):
             raise TypeError(f"the plant FMU saves the built-in hydraulic element, not "
@@ -299,8 +288,6 @@ class PlantSlave(_Base):
                 {n: getattr(self, n) for n in PLANT_OUTPUTS})
 
     def _set_fmu_state(self, state: PlantState) -> None:  # pyright: ignore[reportIncompatibleMethodOverride]  # opaque tuple state
-        from trackmj.elements.hydraulic import HydraulicElement
-
         track, tensioner, sensors, mode, outputs = state
         self._restore_track(self._track(), track)
         element = HydraulicElement(copy.deepcopy(tensioner))

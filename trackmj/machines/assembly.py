@@ -26,12 +26,12 @@ import functools
 from dataclasses import dataclass
 from pathlib import Path
 
+from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.track.mechanics import ModelParams, load_model_params, models_dir
 from trackmj.track.mjcf.builders import read_mjcf
 from trackmj.track.mjcf.cache import cached_mjcf
 from trackmj.validator import ParameterError, Parameters, build, param, read_toml
 
-DEFAULT_MACHINE = "lf1352"
 MACHINE_SUFFIX = "_machine.toml"
 _NAME = r"[a-z0-9][a-z0-9_-]*"
 _FILE = r".*\S.*"

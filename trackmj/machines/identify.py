@@ -42,6 +42,7 @@ from trackmj.machines.idler import (
     modal_compliance,
     write_idler_file,
 )
+from trackmj.machines.plant import load_plant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.track.mechanics import load_model_params, models_dir
 from trackmj.track.plant import TrackPlant
@@ -184,7 +185,7 @@ def identify_idler(make_plant: Callable[[], TrackPlant], force_low_N: float = 12
 def identify_packaged_idler() -> EquivalentIdler:
     """Identify the equivalent idler on the packaged track (a few seconds, deterministic)."""
     idler = load_model_params().idler   # the fitted mass floored at what moves for sure
-    return identify_idler(TrackPlant.load, **IDENTIFICATION,
+    return identify_idler(load_plant, **IDENTIFICATION,
                           min_mass_kg=idler.mass_kg + idler.carrier_mass_kg)
 
 

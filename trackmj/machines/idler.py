@@ -247,7 +247,7 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
         f"# GENERATED FILE - do not edit. The equivalent idler of the {machine} track, "
         "identified",
         f"# on the {'committed' if model_text is None else 'generated'} MuJoCo model by "
-        "trackmj.machines.identify.identify_idler(TrackPlant.load):",
+        "trackmj.machines.identify.identify_idler(load_plant):",
         "# static stiffness between two settled force levels, then the frequency response of",
         "# the stroke to a multisine force, fitted by a single-DOF model (k fixed) and by a",
         "# modal model. Written by trackmj.machines.idler.write_idler_file; regenerate after "

@@ -10,8 +10,8 @@ k, M, c from the equivalent idler identified on the MuJoCo track
 from __future__ import annotations
 
 from trackmj.control.params import ControlConfig, PlantParams, load_config
-from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
 from trackmj.hydraulics.components import series_area
+from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
 from trackmj.machines.idler import EquivalentIdler, load_idler
 from trackmj.track.mechanics import load_model_params
 

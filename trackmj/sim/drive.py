@@ -24,8 +24,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from trackmj.elements.fmu import FmuElement
+from trackmj.elements.tensioner_file import load_tensioner
 from trackmj.host import machine as host_machine
+from trackmj.machines.plant import load_plant
 from trackmj.ports import COUPLING_STEP_S, TensionerElement
+from trackmj.results.store import ResultWriter, parquet_bytes
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.plant import PassiveTensioner, TrackPlant
 
@@ -57,12 +61,8 @@ def _file_tensioner(path: str | Path, stroke_m: float
     """The tensioner of a tensioner file on the track at ``stroke_m`` [m], what metrics.json
     says about it (an FMU: strongest coupling it offers) and its preload [N] if it is the
     passive spring-damper (None for an FMU)."""
-    from trackmj.elements.tensioner_file import load_tensioner
-
     tensioner = load_tensioner(path)
     if tensioner.fmu is not None:
-        from trackmj.elements.fmu import FmuElement
-
         element = FmuElement(tensioner, stroke_m, "strong")
         return element, element.summary() | {"file": str(path)}, None
     t = tensioner.passive
@@ -82,12 +82,40 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     ``tensioner`` file's, and book the energy ledger from rest; write ``out_dir`` if given.
     ``machine``, ``params`` (a model file replacing the machine's mechanics), ``overrides``
     (``{dotted key: value}`` of the model file) and ``model`` (an MJCF file) as in
-    :meth:`TrackPlant.load`.
+    :func:`trackmj.machines.plant.load_plant`.
 
     Raises ValueError for a speed outside [−5, 5] m/s or a duration outside (0, 3600] s,
     ParameterError for a bad tensioner file (before any work), PhysicsError or FmuError if
     an FMU tensioner leaves physics or fails.
     """
+    _check_drive(speed_m_s, duration_s, tensioner, preload_N)
+    plant = load_plant(model, params, machine=machine, overrides=overrides)
+    element, described, passive_preload_N = _drive_tensioner(plant, tensioner, preload_N)
+    ramp_s = min(1.0, duration_s / 4.0)
+    steps = round(duration_s / COUPLING_STEP_S)
+    ledger = TrackEnergyLedger(plant)
+    series, derailed, wall, plant_wall = _drive_loop(plant, element, ledger, speed_m_s,
+                                                     ramp_s, steps)
+    energy = ledger.finish()
+    metrics = {
+        "speed_m_s": speed_m_s, "duration_s": duration_s, "ramp_s": ramp_s,
+        "tensioner": described,
+        **({"preload_N": passive_preload_N} if passive_preload_N is not None else {}),
+        "real_time_factor": duration_s / wall, "plant_real_time_factor": duration_s / plant_wall,
+        "wall_time_s": wall, "machine": host_machine(),
+        "track_energy": energy.to_dict(),
+        "steady": _steady_means(series, ramp_s + 1.0 if duration_s > ramp_s + 1.0 else 0.0),
+        "max_pin_gap_m": float(series["max_pin_gap_m"].max()),
+        "mujoco_warnings": plant.warning_count, "derailment_checks_failed": derailed,
+    }
+    out = write_drive(out_dir, metrics, series) if out_dir is not None else None
+    return DriveResult(metrics, series, out)
+
+
+def _check_drive(speed_m_s: float, duration_s: float, tensioner: str | Path | None,
+                 preload_N: float | None) -> None:
+    """ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s or both
+    a preload and a tensioner file."""
     if not (math.isfinite(speed_m_s) and abs(speed_m_s) <= MAX_SPEED_M_S):
         raise ValueError(f"speed {speed_m_s!r} m/s: allowed [-{MAX_SPEED_M_S}, "
                          f"{MAX_SPEED_M_S}]")
@@ -95,21 +123,32 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
         raise ValueError(f"duration {duration_s!r} s: allowed (0, {MAX_DURATION_S}]")
     if tensioner is not None and preload_N is not None:
         raise ValueError("give a preload or a tensioner file, not both")
-    plant = TrackPlant.load(model, params, machine=machine, overrides=overrides)
+
+
+def _drive_tensioner(plant: TrackPlant, tensioner: str | Path | None, preload_N: float | None
+                     ) -> tuple[TensionerElement, dict[str, Any], float | None]:
+    """The tensioner file's element (:func:`_file_tensioner`) or the model's passive
+    tensioner (at ``preload_N`` [N] if given), what metrics.json says about it and its
+    preload [N] (None for an FMU)."""
     if tensioner is not None:
-        element, described, passive_preload_N = _file_tensioner(tensioner, plant.stroke_m)
-    else:
-        passive = PassiveTensioner.from_params(plant.params)
-        described = {"element": "passive", "file": "model"}
-        if preload_N is not None:
-            if not (math.isfinite(preload_N) and preload_N >= 0.0):
-                raise ValueError(f"preload {preload_N!r} N: must be finite and >= 0")
-            passive.preload_N = preload_N
-        element, passive_preload_N = passive, passive.preload_N
-    ramp_s = min(1.0, duration_s / 4.0)
-    steps = round(duration_s / COUPLING_STEP_S)
+        return _file_tensioner(tensioner, plant.stroke_m)
+    passive = PassiveTensioner.from_params(plant.params)
+    described = {"element": "passive", "file": "model"}
+    if preload_N is not None:
+        if not (math.isfinite(preload_N) and preload_N >= 0.0):
+            raise ValueError(f"preload {preload_N!r} N: must be finite and >= 0")
+        passive.preload_N = preload_N
+    return passive, described, passive.preload_N
+
+
+def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnergyLedger,
+                speed_m_s: float, ramp_s: float, steps: int
+                ) -> tuple[dict[str, np.ndarray], int, float, float]:
+    """``steps`` coupling steps at the ramped sprocket speed, booking ``ledger``; returns
+    the time series (column -> (steps,), :data:`TIMESERIES_UNITS`), the failed derailment
+    checks, the loop's and the plant steps' wall times [s]. RuntimeError if the track
+    leaves physics (non-finite velocities)."""
     series = {name: np.empty(steps) for name in TIMESERIES_UNITS}
-    ledger = TrackEnergyLedger(plant)
     check_every = round(DERAILMENT_CHECK_S / COUPLING_STEP_S)
     derailed = 0
     plant_wall = 0.0
@@ -132,21 +171,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
             raise RuntimeError(f"drive: the track left physics at t = {plant.time_s:.3f} s "
                                f"(non-finite velocities; MuJoCo warnings "
                                f"{plant.warning_count})")
-    wall = time.perf_counter() - start
-    energy = ledger.finish()
-    metrics = {
-        "speed_m_s": speed_m_s, "duration_s": duration_s, "ramp_s": ramp_s,
-        "tensioner": described,
-        **({"preload_N": passive_preload_N} if passive_preload_N is not None else {}),
-        "real_time_factor": duration_s / wall, "plant_real_time_factor": duration_s / plant_wall,
-        "wall_time_s": wall, "machine": host_machine(),
-        "track_energy": energy.to_dict(),
-        "steady": _steady_means(series, ramp_s + 1.0 if duration_s > ramp_s + 1.0 else 0.0),
-        "max_pin_gap_m": float(series["max_pin_gap_m"].max()),
-        "mujoco_warnings": plant.warning_count, "derailment_checks_failed": derailed,
-    }
-    out = write_drive(out_dir, metrics, series) if out_dir is not None else None
-    return DriveResult(metrics, series, out)
+    return series, derailed, time.perf_counter() - start, plant_wall
 
 
 def _steady_means(series: dict[str, np.ndarray], from_s: float) -> dict[str, float]:
@@ -167,8 +192,6 @@ def write_drive(out_dir: str | Path, metrics: dict, series: dict[str, np.ndarray
     """Write metrics.json and timeseries.parquet into ``out_dir`` as a whole, the same way a
     run's result directory is written (:class:`trackmj.results.store.ResultWriter`: staged, locked
     and swapped in)."""
-    from trackmj.results.store import ResultWriter, parquet_bytes
-
     fields = [pa.field(name, pa.float64(), metadata={"unit": TIMESERIES_UNITS[name]})
               for name in series]
     table = pa.Table.from_arrays([pa.array(v) for v in series.values()],

@@ -18,6 +18,7 @@ from typing import Any
 import mujoco
 import numpy as np
 import pyarrow as pa
+from tqdm import tqdm
 
 from trackmj.errors import PhysicsError
 from trackmj.ports import (
@@ -196,31 +197,32 @@ class PhysicsGuard:
     def _fail(self, r: Readout, what: str) -> None:
         raise PhysicsError(f"t = {r.t_s:.3f} s: {what}; the run left physics and was stopped")
 
-    def on_step(self, k: int, r: Readout, command: Command) -> None:
+    def on_step(self, k: int, readout: Readout, command: Command) -> None:
         if self.warnings:
-            self._fail(r, f"MuJoCo warning: {self.warnings[0]}")
-        _, tension, p_head, p_rod, _, stroke, velocity, _, _, _, _, _, closure = r
+            self._fail(readout, f"MuJoCo warning: {self.warnings[0]}")
+        _, tension, p_head, p_rod, _, stroke, velocity, _, _, _, _, _, closure = readout
         if not math.isfinite(tension + p_head + p_rod + stroke + velocity):
-            fields = r._asdict()
+            fields = readout._asdict()
             bad = [f"{name} = {fields[name]!r}" for name in _STATE
                    if not math.isfinite(fields[name])]
-            self._fail(r, "non-finite state (" + ", ".join(bad) + ")")
+            self._fail(readout, "non-finite state (" + ", ".join(bad) + ")")
         if not self._lo <= stroke <= self._hi:
-            self._fail(r, f"stroke {stroke * 1e3:.1f} mm outside the travel "
-                          f"[{self._lo * 1e3:.1f}, {self._hi * 1e3:.1f}] mm the end stops "
-                          "must hold")
+            self._fail(readout, f"stroke {stroke * 1e3:.1f} mm outside the travel "
+                                 f"[{self._lo * 1e3:.1f}, {self._hi * 1e3:.1f}] mm the end stops "
+                                 "must hold")
         if closure > self._closure_max:
-            self._fail(r, f"track loop closure gap {closure * 1e3:.1f} mm exceeds "
-                          f"{self.limits.closure_max_m * 1e3:.1f} mm")
+            self._fail(readout, f"track loop closure gap {closure * 1e3:.1f} mm exceeds "
+                                 f"{self.limits.closure_max_m * 1e3:.1f} mm")
         if self.pressures is not None:
             values, names = self.pressures(), self.pressure_names
         else:
-            values, names = (r.p_head_Pa, r.p_rod_Pa, r.p_supply_Pa), ("head", "rod", "supply")
+            values, names = (readout.p_head_Pa, readout.p_rod_Pa,
+                             readout.p_supply_Pa), ("head", "rod", "supply")
         vacuum = self._vacuum
         if values and min(values) < vacuum:   # NaN (no such node) never compares below
             name, value = min(zip(names, values, strict=True), key=lambda nv: nv[1])
-            self._fail(r, f"{name} pressure {value / 1e6:.3f} MPa gauge below vacuum "
-                          f"({vacuum / 1e6:.3f} MPa gauge)")
+            self._fail(readout, f"{name} pressure {value / 1e6:.3f} MPa gauge below vacuum "
+                                 f"({vacuum / 1e6:.3f} MPa gauge)")
 
 
 @contextlib.contextmanager
@@ -243,8 +245,6 @@ class Progress:
     UPDATE_STEPS = 100
 
     def __init__(self, steps: int, description: str) -> None:
-        from tqdm import tqdm
-
         self.bar = tqdm(total=steps, unit_scale=COUPLING_STEP_S, unit="simulated s",
                         desc=description, leave=False, mininterval=0.5,
                         bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} "

@@ -15,19 +15,31 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.host import machine as host_machine
-from trackmj.ports import COUPLING_STEP_S, StepInputs, steps_per_period
+from trackmj.hydraulics.tensioner import FLOW_NAMES
+from trackmj.ports import (
+    COLUMN_UNITS,
+    COUPLING_STEP_S,
+    Controller,
+    Estimator,
+    Observer,
+    StepInputs,
+    steps_per_period,
+)
 from trackmj.results.comparison import prediction_vs_measured
+from trackmj.results.measured import load_measured
 from trackmj.results.metrics import compute_metrics
 from trackmj.results.store import Result, run_metadata
 from trackmj.scenarios.scenario import Scenario
-from trackmj.sim.architectures import assemble
+from trackmj.sim.architectures import Assembly, assemble
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.loop import Schedule, run_loop
 from trackmj.sim.observers import (
@@ -43,6 +55,9 @@ from trackmj.sim.observers import (
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 from trackmj.sim.setup import Overrides, RunSetup, prepare
 from trackmj.validator import ParameterError
+
+if TYPE_CHECKING:
+    from trackmj.results.playback import PlaybackRecorder
 
 FRAME_EVERY_STEPS = 20
 """Rerun scene frames every 20 ms of simulated time."""
@@ -138,7 +153,7 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_A
     trackmj.errors.PhysicsError
         The run left physics (MuJoCo warning, non-finite state, pressure below vacuum,
         stroke outside the travel, loop closure broken; an FMU's force beyond its limit).
-    trackmj.fmi.FmuError
+    trackmj.errors.FmuError
         An FMU failed during the run (the message names the FMU and the call).
     """
     _check_channels(channels)
@@ -161,10 +176,6 @@ def measured_log(setup: RunSetup, path: str | Path,
     """The measured log at ``path`` on the run's grid, checked against the columns the run
     records with ``channels`` and its duration before the run (ParameterError naming the
     file and column)."""
-    from trackmj.hydraulics.tensioner import FLOW_NAMES
-    from trackmj.results.measured import load_measured
-    from trackmj.results.store import COLUMN_UNITS
-
     names = list(COLUMN_UNITS)
     if channels == "all":
         names += [*EXTRA_CHANNELS, *(f"q_{n}_m3_s" for n in FLOW_NAMES)]
@@ -187,58 +198,107 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
         tp_result = run(dataclasses.replace(setup, architecture=REFERENCE_ARCHITECTURE))
     with capture_mujoco_warnings() as warnings:
         asm = assemble(setup, tp_result)
-        cfg = asm.control
-        entry = CONTROLLERS[setup.controller]
-        available = {"controller_file": setup.controller_file}
-        controller = entry.build(asm.model, cfg, **{n: available[n] for n in entry.needs})
-        estimator = ESTIMATORS[setup.estimator].build(asm.model, cfg, COUPLING_STEP_S,
-                                                      asm.initial_estimate)
-        # the run owns this generator: its noise can be drawn a second ahead (same numbers)
-        sensors = Sensors(cfg.sensors, np.random.default_rng([setup.seed, 1]), block=1000)
+        controller, estimator, sensors = _blocks(setup, asm)
         sched = schedule(setup, controller.horizon_steps, controller.period_s)
-        recorder = Recorder(sched)
-        element = asm.element
-        guard = PhysicsGuard(physics_limits(setup, element.stroke_range_m), warnings,
-                             element.node_pressures, element.pressure_nodes)
-        observers = [recorder, guard]
-        extra = (ChannelRecorder(sched, asm.element, asm.track) if channels == "all"
-                 else None)
-        if extra is not None:
-            observers.append(extra)
-        bar = Progress(setup.steps, f"{setup.scenario.name} {setup.architecture}") \
-            if progress else None
-        if bar is not None:
-            observers.append(bar)
-        playback = None
-        if rrd is not None and asm.track is not None:
-            from trackmj.results.playback import PlaybackRecorder
-
-            playback = PlaybackRecorder(asm.track, rrd)
-            observers.append(PlaybackFrames(playback, FRAME_EVERY_STEPS))
-        wall_start = time.perf_counter()
-        try:
-            run_loop(sched, controller=controller, valves=ValveLogic(cfg.valves,
-                                                                     COUPLING_STEP_S),
-                     plant=asm.plant, sensors=sensors, estimator=estimator,
-                     observers=observers)
-        except BaseException:
-            if playback is not None:
-                playback.discard()   # no half-written recording
-            raise
-        finally:
-            if bar is not None:
-                bar.close()
-        wall = time.perf_counter() - wall_start
+        watch = _watch(setup, asm, sched, warnings, channels=channels, progress=progress,
+                       rrd=rrd)
+        wall = _run_watched(sched, asm, controller, estimator, sensors, watch)
     meta = run_metadata(setup.scenario.name, setup.architecture, setup.controller,
                         setup.estimator, setup.seed, host_machine(), variant=setup.variant.name,
                         duration_s=setup.duration_s, files=setup.files,
                         overrides=setup.overrides)
-    result = Result(recorder.table(meta, extra), {})
+    result = Result(watch.recorder.table(meta, watch.extra), {})
+    result.metrics = _run_metrics(setup, asm, result, watch.recorder, controller, wall,
+                                  measured)
+    if watch.playback is not None:
+        watch.playback.log_timeseries(result)
+        watch.playback.close()
+    return result
+
+
+def _blocks(setup: RunSetup, asm: Assembly) -> tuple[Controller, Estimator, Sensors]:
+    """The run's controller and estimator from their registries, and its sensors."""
+    cfg = asm.control
+    entry = CONTROLLERS[setup.controller]
+    available = {"controller_file": setup.controller_file}
+    controller = entry.build(asm.model, cfg, **{n: available[n] for n in entry.needs})
+    estimator = ESTIMATORS[setup.estimator].build(asm.model, cfg, COUPLING_STEP_S,
+                                                  asm.initial_estimate)
+    # the run owns this generator: its noise can be drawn a second ahead (same numbers)
+    sensors = Sensors(cfg.sensors, np.random.default_rng([setup.seed, 1]), block=1000)
+    return controller, estimator, sensors
+
+
+@dataclass(frozen=True)
+class _Watch:
+    """The loop's observers in calling order (``all``), and those the run reads afterwards:
+    the recorder, the extra channels (``channels="all"``), the progress bar and the Rerun
+    recording (None when not asked for)."""
+
+    all: list[Observer]
+    recorder: Recorder
+    extra: ChannelRecorder | None
+    bar: Progress | None
+    playback: PlaybackRecorder | None
+
+
+def _watch(setup: RunSetup, asm: Assembly, sched: Schedule, warnings: list[str], *,
+           channels: str, progress: bool, rrd: str | Path | None) -> _Watch:
+    """The recorder and the physics guard, then as asked the extra channels, the progress
+    bar and the Rerun recording (track architectures)."""
+    recorder = Recorder(sched)
+    element = asm.element
+    guard = PhysicsGuard(physics_limits(setup, element.stroke_range_m), warnings,
+                         element.node_pressures, element.pressure_nodes)
+    observers: list[Observer] = [recorder, guard]
+    extra = (ChannelRecorder(sched, asm.element, asm.track) if channels == "all"
+             else None)
+    if extra is not None:
+        observers.append(extra)
+    bar = Progress(setup.steps, f"{setup.scenario.name} {setup.architecture}") \
+        if progress else None
+    if bar is not None:
+        observers.append(bar)
+    playback = None
+    if rrd is not None and asm.track is not None:
+        # rerun (heavy, optional at run time) loads only when a recording is asked for
+        from trackmj.results.playback import PlaybackRecorder
+
+        playback = PlaybackRecorder(asm.track, rrd)
+        observers.append(PlaybackFrames(playback, FRAME_EVERY_STEPS))
+    return _Watch(observers, recorder, extra, bar, playback)
+
+
+def _run_watched(sched: Schedule, asm: Assembly, controller: Controller, estimator: Estimator,
+                 sensors: Sensors, watch: _Watch) -> float:
+    """The loop under the observers; returns its wall time [s]. A failed run discards its
+    Rerun recording; the progress bar is closed either way."""
+    wall_start = time.perf_counter()
+    try:
+        run_loop(sched, controller=controller, valves=ValveLogic(asm.control.valves,
+                                                                 COUPLING_STEP_S),
+                 plant=asm.plant, sensors=sensors, estimator=estimator,
+                 observers=watch.all)
+    except BaseException:
+        if watch.playback is not None:
+            watch.playback.discard()   # no half-written recording
+        raise
+    finally:
+        if watch.bar is not None:
+            watch.bar.close()
+    return time.perf_counter() - wall_start
+
+
+def _run_metrics(setup: RunSetup, asm: Assembly, result: Result, recorder: Recorder,
+                 controller: Controller, wall_s: float,
+                 measured: dict[str, np.ndarray] | None) -> dict:
+    """metrics.json of the run: the scenario's metrics over its windows, the element's,
+    the controller's counts, MuJoCo's warnings and, with a measured log, the comparison."""
     windows = setup.scenario.metric_windows(setup.duration_s,
                                             link_pitch_m=setup.model.track.pitch_m)
     m = compute_metrics(result.columns(), windows, control_period_s=controller.period_s,
                         solve_times_s=recorder.solve_times_s,
-                        solve_success=recorder.solve_success, wall_time_s=wall)
+                        solve_success=recorder.solve_success, wall_time_s=wall_s)
     m |= asm.element.run_metrics(setup.duration_s)
     m["controller_fallbacks"] = float(controller.statistics().fallbacks)
     m["controller_overruns"] = float(np.sum(np.array(recorder.solve_times_s)
@@ -248,9 +308,4 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
     if measured is not None:
         m["prediction_vs_measured"] = prediction_vs_measured(result.columns(), measured,
                                                              windows)
-    result.metrics = m
-    if playback is not None:
-        playback.log_timeseries(result)
-        playback.close()
-    return result
-
+    return m

@@ -22,16 +22,17 @@ import mujoco
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig, load_config
 from trackmj.elements.tensioner_file import TensionerFile, load_tensioner
-from trackmj.hydraulics import HydraulicParams, load_hydraulic_params
+from trackmj.fmi.controller import load_controller_file
+from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
 from trackmj.io import cache_dir, write_text_atomic
 from trackmj.machines.assembly import (
-    DEFAULT_MACHINE,
     Machine,
     is_own,
     mechanics,
     model_mjcf,
     resolve,
 )
+from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.machines.identify import identify_idler
 from trackmj.machines.idler import (
     SCALARS,
@@ -220,8 +221,6 @@ def controller_choice(value: str) -> tuple[str, Any]:
     """A registered controller's key, or ``"fmu:FILE.toml"`` -> ("fmu", the loaded
     controller file, its FMU checked)."""
     if value.startswith(FMU_CONTROLLER_PREFIX):
-        from trackmj.fmi.controller import load_controller_file
-
         return "fmu", load_controller_file(value[len(FMU_CONTROLLER_PREFIX):])
     named = by_name(CONTROLLERS)
     if value not in named:

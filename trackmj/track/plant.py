@@ -20,23 +20,21 @@ Sign conventions (see also :mod:`trackmj.ports`):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import mujoco
 import numba
 import numpy as np
+from scipy.spatial import ConvexHull
 
 from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElement
 from trackmj.track.foundation import Foundation, FoundationLaw
 from trackmj.track.foundation import step as foundation_step
-from trackmj.track.mechanics import ModelParams, load_model_params
-from trackmj.track.mjcf.builders import read_mjcf, with_heightfield
+from trackmj.track.mechanics import ModelParams
 from trackmj.track.mjcf.names import link_name, pin_name
 from trackmj.track.mjcf.structure import equalise_link_weights
-from trackmj.track.terrain import RoadProfile
 
 
 @numba.njit(cache=True)
@@ -258,46 +256,6 @@ class TrackPlant:
         _ = self.closure_error_m   # load (or compile) the kernel here, not in the first step
 
     # ------------------------------------------------------------------ construction
-    @classmethod
-    def load(cls, xml_path: str | Path | None = None,
-             param_path: str | Path | None = None,
-             terrain: RoadProfile | None = None, *, machine: str | Path | None = None,
-             overrides: Mapping[str, Any] | None = None) -> TrackPlant:
-        """Load a machine's track (default the packaged LF1352).
-
-        machine: a shipped machine's name or a machine file (:mod:`trackmj.machines.assembly`);
-        param_path: a model parameter file replacing the machine's mechanics; overrides:
-        ``{dotted key: value}`` of the model file (``--set model.KEY=VALUE``); xml_path: an
-        MJCF file to load instead of the model of those parameters (the machine's committed
-        reference for its own parameters, else generated and cached; a scene that includes
-        its machine part is joined with it). terrain: optional
-        road profile replacing the flat ground by a heightfield (see
-        :func:`trackmj.track.mjcf.builders.with_heightfield`).
-        """
-        from trackmj.machines.assembly import is_own, mechanics, model_mjcf, resolve
-
-        mach = resolve(machine)
-        params = (load_model_params(param_path or mach.mechanics, overrides=overrides)
-                  if param_path is not None or overrides else mechanics(mach))
-        if xml_path is not None:
-            path: Path | None = Path(xml_path)
-            if not path.is_file():
-                raise FileNotFoundError(f"model file not found: {path}")
-            text = read_mjcf(path)
-        else:
-            path = mach.reference_mjcf if is_own(params, mach) else None
-            text = model_mjcf(params, mach)
-        try:
-            if terrain is not None:
-                text = with_heightfield(text, terrain)
-            model = mujoco.MjModel.from_xml_string(text)
-        except ValueError as exc:
-            raise ValueError(f"{path or 'generated model'}: MuJoCo could not load the model: "
-                             f"{exc}") from None
-        plant = cls(model, params)
-        plant.model_path = path
-        return plant
-
     def reset(self, keyframe: str | None = "home") -> None:
         """Reset to a keyframe (default the pretensioned ``home``) or to the layout."""
         mujoco.mj_resetData(self.model, self.data)
@@ -524,8 +482,6 @@ class TrackPlant:
         return self._chassis_frame_pins() + np.array([0.0, self.params.chassis.ride_height_m])
 
     def _home_envelope(self) -> np.ndarray:
-        from scipy.spatial import ConvexHull
-
         pts = self._chassis_frame_pins()
         return pts[ConvexHull(pts).vertices]  # counter-clockwise
 

@@ -17,16 +17,17 @@ import functools
 import hashlib
 from pathlib import Path
 
+import mujoco
+
 from trackmj.io import cache_dir, write_text_atomic
 from trackmj.track.mechanics import MODEL_NAME, ModelParams
+from trackmj.track.mjcf.generate import generate_mjcf
 
 
 @functools.cache
 def _generator_digest() -> str:
     """SHA-256 over the generator's source files and the MuJoCo version: a change of
     either makes every cached model stale."""
-    import mujoco
-
     digest = hashlib.sha256(mujoco.__version__.encode())
     here = Path(__file__).parent
     for path in [*sorted(here.glob("*.py")), here.parent / "terrain.py"]:
@@ -44,8 +45,6 @@ def model_key(params: ModelParams) -> str:
 def cached_mjcf(params: ModelParams, name: str = MODEL_NAME) -> str:
     """MJCF text (with the settled ``home`` keyframe) of ``params`` for machine ``name``:
     from the cache directory if generated before, else generated and stored there."""
-    from trackmj.track.mjcf.generate import generate_mjcf
-
     path = cache_dir() / f"{name}-{model_key(params)[:32]}.xml"
     try:
         return path.read_text()
