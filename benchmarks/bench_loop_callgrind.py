@@ -95,7 +95,7 @@ def inner_bare(start: int, steps: int) -> None:
     """Under valgrind: the default machine driven by the passive tensioner to W1's speed,
     collection over ``steps`` plant steps after ``start`` steps."""
     toggle = ctypes.CDLL(str(_helper())).trackmj_collect
-    from trackmj.machines.plant import load_plant
+    from trackmj.machines.track_plant import load_plant
     from trackmj.track.plant import PassiveTensioner
 
     plant = load_plant()

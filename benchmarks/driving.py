@@ -11,7 +11,7 @@ import time
 
 import mujoco
 
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 from trackmj.track.foundation import step
 from trackmj.track.plant import PassiveTensioner
 

@@ -248,7 +248,7 @@ class Coupling(Parameters):
 @dataclass(frozen=True, slots=True)
 class PressureProfile(Parameters):
     """Piecewise-linear supply set-point p_set(t) [Pa gauge] over times [s]; held at the ends
-    (built from a scenario's set-point changes, see ``trackmj.scenarios.scenario``)."""
+    (built from a scenario's set-point changes, see ``trackmj.scenarios.resolved``)."""
 
     times_s: tuple[float, ...] = param(0.0, None, doc="breakpoints, strictly increasing")
     pressures_Pa: tuple[float, ...] = param(0.0, None, doc="pressure at each breakpoint")

@@ -29,6 +29,6 @@ def model_params():
 @pytest.fixture
 def plant():
     """A fresh plant at the home keyframe (MuJoCo is imported only by tests that use it)."""
-    from trackmj.machines.plant import load_plant
+    from trackmj.machines.track_plant import load_plant
 
     return load_plant()

@@ -123,6 +123,7 @@ def test_read_result_names_what_is_missing(result, tmp_path) -> None:
         trackmj.read_result(out)
 
 
+@pytest.mark.slow
 def test_a_repeated_track_restores_its_settled_state_bit_for_bit(monkeypatch) -> None:
     """Runs on the same track (here: another bulk modulus) reuse the settled state of the
     first instead of settling again; the result is the one a fresh settle gives."""

@@ -155,6 +155,7 @@ def test_moved_events_keep_their_order_inside_the_run():
 
 # ----------------------------------------------------------------------------- real runs
 
+@pytest.mark.slow
 def test_report_and_sweep_give_identical_numbers_for_the_same_runs(tmp_path):
     """The same W1 tp run (1.5 s, its step and ramp moved inside) planned by the report and
     by a sweep: one identity, and the same numbers in both results.parquet files."""
@@ -181,6 +182,7 @@ def test_report_and_sweep_give_identical_numbers_for_the_same_runs(tmp_path):
     assert differ == []
 
 
+@pytest.mark.slow
 def test_two_runs_with_different_set_keep_both_results(tmp_path, monkeypatch, capsys):
     """trackmj run never replaces a result of other inputs: a run with --set gets its own
     default folder; the same inputs again replace theirs; --out onto another run's folder

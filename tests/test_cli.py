@@ -107,7 +107,7 @@ def test_view_exit_code_follows_the_viewer(tmp_path, monkeypatch, viewer, code) 
 
 
 def test_model_info_columns_are_aligned_and_the_mass_is_explained(capsys) -> None:
-    from trackmj.machines.plant import load_plant
+    from trackmj.machines.track_plant import load_plant
 
     assert main(["model", "info"]) == 0
     lines = capsys.readouterr().out.splitlines()

@@ -15,6 +15,7 @@ from trackmj.sim.registry import ARCHITECTURES
 from trackmj.study.compare import CompareRun, check_compare_dir, write_compare
 
 
+@pytest.mark.slow
 def test_quick_compare_writes_runs_prediction_errors_and_figures(tmp_path, capsys) -> None:
     out = tmp_path / "cmp"
     args = ["compare", "W2", "--duration", "1.5", "--workers", "2", "--out", str(out)]
@@ -48,6 +49,7 @@ def test_quick_compare_writes_runs_prediction_errors_and_figures(tmp_path, capsy
     assert "holds no trackmj comparison" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_several_controllers_get_their_own_figures(tmp_path) -> None:
     runs = [synthetic_result("W1", a, controller=c, offset_N=k * 100.0, energy=energy_table())
             for c in ("nmpc", "pid") for k, a in enumerate(("tp", "dp-b"))]

@@ -198,6 +198,7 @@ def span_under_tension(plant: TrackPlant, force_N: float) -> tuple[int, int, flo
     return a, b, float(length), float(mean_tension), tension
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("pins", ["steel", "bushings"])
 def test_free_span_stretches_as_pins_in_series(model_params: ModelParams, pins: str) -> None:
     """On free links the upper span between return roller 2 and the idler holds n pins in

@@ -58,6 +58,7 @@ def _monte_carlo(
     return nees, nis, ferr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cls", [ExtendedKalmanFilter, UnscentedKalmanFilter])
 def test_nees_nis_inside_chi_square_bands(cls: type) -> None:
     nees, nis, ferr = _monte_carlo(cls, CFG.estimator)

@@ -69,6 +69,7 @@ def test_forced_infeasible_falls_back_and_counts(mpc_class: type) -> None:
     assert all(CFG.controller.u_min <= o.u <= CFG.controller.u_max for o in outs)
 
 
+@pytest.mark.slow
 def test_controller_period_must_be_multiple_of_step() -> None:
     assert steps_per_period(0.010, 0.001) == 10
     with pytest.raises(ValueError, match="integer multiple"):

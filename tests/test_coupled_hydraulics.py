@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from trackmj.hydraulics import HydraulicTensioner
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 from trackmj.track.plant import TrackPlant
 
 

@@ -25,6 +25,7 @@ def _check_band_and_recovery(result, edges: list[str]) -> dict:
     return acc
 
 
+@pytest.mark.slow
 def test_w3_push_edge_is_rejected_within_two_seconds() -> None:
     """The calibrated +2 kN push moved to 2-4 s (its 0.1 s edges while the track drives at
     1.5 m/s; the tow pulse pushed past the run's end): after each edge the 0.5 s mean is back
@@ -37,6 +38,7 @@ def test_w3_push_edge_is_rejected_within_two_seconds() -> None:
     assert result.metrics["mujoco_warnings"] == 0
 
 
+@pytest.mark.slow
 def test_w4_supply_drop_is_rejected_and_leaves_no_offset() -> None:
     """The W4 drop to 9 MPa moved to 2-5 s: the 0.5 s mean stays in [F_min, F_max] and within
     ±5 % of the reference through both edges, and 2 s after the restore the mean offset is
@@ -51,6 +53,7 @@ def test_w4_supply_drop_is_rejected_and_leaves_no_offset() -> None:
     assert math.isfinite(acc["recovery_max_s"])
 
 
+@pytest.mark.slow
 def test_reference_beyond_f_max_is_held_at_the_limit_without_stalling() -> None:
     """A ramp of 1.2 kN/s from 15 kN passes F_max = 20 kN at 6.2 s: the governor saturates it
     0.5 kN inside the band, the tension is held there (the valves keep acting, the mean
@@ -80,11 +83,13 @@ def _late_switch_rate_and_offset(controller: str, **changes: float) -> tuple[flo
     return rate, float(np.mean(cols["tension_N"][late] - cols["tension_ref_N"][late]))
 
 
+@pytest.mark.slow
 def test_lmpc_holds_a_constant_tension() -> None:
     rate, offset = _late_switch_rate_and_offset("lmpc")
     assert rate < 10.0 and abs(offset) < 0.02 * 15e3
 
 
+@pytest.mark.slow
 def test_pid_measurement_filter_keeps_the_ripple_from_switching_the_valves() -> None:
     """Without its 60 ms measurement filter the 20 Hz tooth-passing ripple drives the PID's
     valves at the 30 ms hold's limit (~30 Hz, measured 30); with it the PID switches at

@@ -44,6 +44,7 @@ def _source_side(e: dict) -> float:
             - e["stored_change"]["supply_oil"] - e["stored_change"]["accumulator"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", [("default", "nmpc"), ("default", "pid"),
                                   ("fixed_relief", "nmpc"), ("fixed_relief", "pid")])
 def test_energy_table_accounts_for_the_pump_energy(runs, case) -> None:

@@ -100,6 +100,7 @@ def test_rough_road_that_pulls_the_rods_below_vacuum_stops(tmp_path, capsys) -> 
     assert re.search(r"t = \d\.\d+ s: .* pressure -[\d.]+ MPa gauge below vacuum", err)
 
 
+@pytest.mark.slow
 def test_ctrl_c_ends_with_one_line_and_keeps_the_previous_result(tmp_path, monkeypatch,
                                                                 capsys) -> None:
     out = tmp_path / "w1"

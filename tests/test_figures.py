@@ -81,6 +81,7 @@ def test_run_figure_units_legends_and_zooms(captured) -> None:
                                                                    "+1 pressurize"]
 
 
+@pytest.mark.slow
 def test_overlay_and_psd_figures_units_and_legends(captured) -> None:
     runs = _runs()
     preds = {r.architecture: prediction_vs_tp(r.columns(), r.metrics, runs[0].columns(),
@@ -186,6 +187,7 @@ def test_envelope_holds_each_bins_extremes() -> None:
     assert len(tb) == 20 and np.allclose(hi, 1.0, atol=2e-3) and np.allclose(lo, -1.0, atol=2e-3)
 
 
+@pytest.mark.slow
 def test_figures_write_png_files(tmp_path) -> None:
     runs = _runs()
     paths = [figure_run.run_figure(runs[2], tmp_path / "run.png"),

@@ -76,6 +76,7 @@ def spec_file(tmp: Path, **extra: object) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_replayed_valve_command_reproduces_the_run(truth_run):
     """The fit's open-loop plant under the run's own valve command is the run, bit for bit
     (what makes a fit at the true values leave the sensor noise alone)."""
@@ -89,6 +90,7 @@ def test_replayed_valve_command_reproduces_the_run(truth_run):
         np.testing.assert_array_equal(values, truth_run[name], err_msg=name)
 
 
+@pytest.mark.slow
 def test_calibration_recovers_off_nominal_values(noisy_log, tmp_path):
     from trackmj.study.calibrate import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
 

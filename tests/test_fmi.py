@@ -88,6 +88,7 @@ def w1_runs(hydraulic_fmu) -> dict:
                                  tensioner=hydraulic_fmu)}
 
 
+@pytest.mark.slow
 def test_round_trip_strong_coupling_reproduces_the_built_in_plugin(w1_runs) -> None:
     """The plugin wrapped as an FMU and coupled strongly (roll-back, central difference on
     dF/dv, NEPCE) gives the built-in element's tension within 1e-6 relative at every step,
@@ -122,6 +123,7 @@ def test_round_trip_weak_coupling_is_within_the_tp_weak_difference(w1_runs) -> N
     assert trace["fmu-weak"] <= 2.0 * trace["tp-weak"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("fmu", "interface", "coupling"), [
     ("gas2.fmu", "auto", "strong"),
     ("gas2.fmu", "model-exchange", "implicit"),
@@ -166,6 +168,7 @@ def test_exported_fmus_pass_fmpy_validation(exported) -> None:
         assert validate_fmu(str(path)) == []
 
 
+@pytest.mark.slow
 def test_fmpy_simulate_fmu_settles_the_track_where_drive_puts_it(exported, tmp_path) -> None:
     """fmpy.simulate_fmu runs the track FMU standing with a constant 13 kN force (2e4 N·s/m
     of damping through force_dv): its stroke settles within 0.5 mm of where trackmj drive
@@ -189,6 +192,7 @@ def test_fmpy_simulate_fmu_settles_the_track_where_drive_puts_it(exported, tmp_p
     assert np.allclose(result["tension_N"][1:], 13e3, atol=2e4 * 0.01)
 
 
+@pytest.mark.slow
 def test_a_c_importer_without_python_steps_the_track_fmu(exported, tmp_path) -> None:
     """A C program (no Python in its process, an empty environment, as Simulink would load
     it) loads the track FMU's binary, steps it 2 s at 1 ms and reads a finite stroke."""
@@ -277,6 +281,7 @@ def test_an_fmu_that_fails_mid_run_stops_it_and_keeps_earlier_results(
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
+@pytest.mark.slow
 def test_a_controller_fmu_closes_the_loop(tmp_path) -> None:
     """A proportional controller exported by pythonfmu (as a Simulink controller would be)
     as --controller fmu:FILE: it runs every 10 ms and tracks W1's 12 kN and 15 kN levels

@@ -95,6 +95,7 @@ def _extend(ht: HydraulicTensioner, steps: int) -> list[list[float]]:
     return out
 
 
+@pytest.mark.slow
 def test_compiled_kernels_match_their_python_source() -> None:
     env = dict(os.environ, NUMBA_DISABLE_JIT="1")
     proc = subprocess.run([sys.executable, __file__], env=env, capture_output=True, text=True,

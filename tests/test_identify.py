@@ -16,7 +16,7 @@ from trackmj.machines.identify import (
     r2,
 )
 from trackmj.machines.idler import ModalTerm
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 
 
 def test_single_dof_fit_recovers_a_known_system() -> None:
@@ -60,6 +60,7 @@ def test_frequency_response_of_a_sampled_oscillator() -> None:
     assert coherence.min() > 0.99
 
 
+@pytest.mark.slow
 def test_identified_idler_of_the_track() -> None:
     """The static stiffness and the dynamic fit come from separate experiments and agree;
     the modal model describes the measured response (R² >= 0.9, the single-DOF model

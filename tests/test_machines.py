@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from trackmj.cli.main import main
 from trackmj.io import cache_dir
 from trackmj.machines.assembly import load_machine, model_mjcf, resolve, shipped
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 from trackmj.track.mechanics import load_model_params
 from trackmj.track.mjcf.cache import cached_mjcf
 from trackmj.track.mjcf.generate import generate_mjcf
@@ -239,6 +239,7 @@ def _with_closing_count(o: dict) -> dict:
     return o | {"track.link_count": 100}
 
 
+@pytest.mark.slow
 @settings(max_examples=4, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
 @given(layouts())
@@ -258,6 +259,7 @@ def test_random_plausible_layouts_generate_close_and_drive(o) -> None:
     assert not plant.derailment().any
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None, derandomize=True)
 @given(layouts(), st.sampled_from(["short", "long", "outside", "overlap", "low"]))
 def test_random_infeasible_layouts_are_refused_with_a_message(o, how) -> None:
@@ -274,6 +276,7 @@ def test_random_infeasible_layouts_are_refused_with_a_message(o, how) -> None:
         load_model_params(overrides=o | bad)
 
 
+@pytest.mark.slow
 def test_run_on_a_machine_file_of_another_layout(tmp_path) -> None:
     """A user's machine (the mirrored, front-sprocket LF1352 as mechanics, the LF1352's
     hydraulics and control files as stand-ins) runs W2 closed loop from its machine file:

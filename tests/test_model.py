@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 from trackmj.ports import ForceLaw
 from trackmj.track.mechanics import default_xml_path
 from trackmj.track.mjcf.builders import build_mjcf, join_mjcf, read_mjcf, split_mjcf
@@ -194,6 +194,7 @@ def test_static_tension_matches_idler_force_balance(plant: TrackPlant) -> None:
     assert measured == pytest.approx(t_hand, rel=0.10), (measured, t_hand)
 
 
+@pytest.mark.slow
 def test_driving_keeps_track_engaged(plant: TrackPlant) -> None:
     element = PassiveTensioner.from_params(plant.params)
     speed, ramp = 1.5, 1.0
@@ -292,6 +293,7 @@ def _chassis_heights(terrain: RoadProfile) -> np.ndarray:
     return np.array(heights)
 
 
+@pytest.mark.slow
 def test_heightfield_terrain() -> None:
     """A flat heightfield behaves like the plane; a 50 mm step lifts the chassis by it."""
     x = np.arange(0.0, 60.0, 0.05) - 10.0

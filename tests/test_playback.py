@@ -12,7 +12,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 from trackmj.results.playback import (
     FRAME_PERIOD_S,
     RUN_RRD,

@@ -15,7 +15,7 @@ from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
 from trackmj.machines.idler import load_idler
 from trackmj.ports import Command, ControlOutput, ElementLog, StepInputs, positional
 from trackmj.sim.loop import _command
-from trackmj.sim.plants import CoupledPlant, EquivalentIdlerMechanics
+from trackmj.sim.loop_plants import CoupledPlant, EquivalentIdlerMechanics
 
 
 class Pair(NamedTuple):

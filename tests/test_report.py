@@ -55,6 +55,7 @@ def _w1_runs(seeds=(0, 1)) -> list:
     return runs
 
 
+@pytest.mark.slow
 def test_claims_on_synthetic_runs_state_what_they_measure(tmp_path) -> None:
     """dp-a is tp − 400 N (below a reference tp already lags) and uses 15 % more of every
     energy term: the report must find TP lower in tracking error and 13 % lower in energy
@@ -145,6 +146,7 @@ def test_summary_table_names_views_and_says_when_nothing_settled() -> None:
     assert "zero-phase 2nd-order Butterworth at 2 Hz" in table
 
 
+@pytest.mark.slow
 def test_quick_report_runs_writes_claims_and_resumes(tmp_path, capsys) -> None:
     """A real quick report (W1, one seed, 1.5 s, tp/dp-a/dp-b): each run under runs/, the
     claims section, and a second call that resumes every run instead of running it."""
@@ -169,6 +171,7 @@ def test_quick_report_runs_writes_claims_and_resumes(tmp_path, capsys) -> None:
     assert main([*args[:-1], str(tmp_path / "other")]) == 2
 
 
+@pytest.mark.slow
 def test_every_claim_is_answered_on_a_synthetic_matrix(tmp_path, monkeypatch) -> None:
     """All five conditions (W5 with its nine variants): every claim of the study gets a row
     with a verdict, W2's body acceleration is compared with dp-b only (dp-a has no chassis),

@@ -16,7 +16,7 @@ from test_contacts import _static_stiffness
 from trackmj.elements.energy_table import accounted_J
 from trackmj.elements.prescribed import ConstantForce
 from trackmj.machines import assembly as machines
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 from trackmj.sim.drive import drive
 from trackmj.sim.run import simulate
 from trackmj.track.foundation import S_DELTA
@@ -124,6 +124,7 @@ def _amplitude(t: np.ndarray, y: np.ndarray, f_Hz: float) -> float:
     return float(math.hypot(coef[0], coef[1]))
 
 
+@pytest.mark.slow
 def test_driving_keeps_the_track_engaged_near_the_preload(driven) -> None:
     m, s, p = driven["metrics"], driven["series"], driven["params"]
     steady = s["t_s"] >= STEADY_FROM_S
@@ -174,6 +175,7 @@ def w1(machine: str) -> tuple[float, dict, str]:
     return nominal, simulate("W1", duration=W1_S, machine=machine).metrics, machine
 
 
+@pytest.mark.slow
 def test_w1_closed_loop_stays_in_the_machines_band(w1, request) -> None:
     """The band is [2/3, 4/3] x the machine's nominal tension (10-20 kN on LF1352)."""
     nominal, metrics, machine = w1
@@ -184,6 +186,7 @@ def test_w1_closed_loop_stays_in_the_machines_band(w1, request) -> None:
     assert low <= acc["mean_min_N"] and acc["mean_max_N"] <= high, acc
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("machine", sorted(W1_START_UP_FAILS))
 def test_w1_with_a_gentler_start_stays_in_the_band(machine: str) -> None:
     """What the xfail above claims: the band is lost to the start-up's traction alone."""

@@ -34,6 +34,7 @@ IDENTIFICATION_RTOL = 1e-6
 than 1e-6 (a pin stiffness 1 % off moves k by ~0.5 %)."""
 
 
+@pytest.mark.slow
 def test_committed_idler_file_equals_a_fresh_identification() -> None:
     """The committed file is what the committed track gives, within CPU rounding (after a
     change of models/lf1352.xml this fails until the file is regenerated)."""

@@ -100,6 +100,7 @@ def test_bad_scenario_file_gives_clear_error_and_writes_nothing(tmp_path, capsys
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_cli_run_writes_outputs(tmp_path) -> None:
     out = tmp_path / "w1"
     assert main(["run", "W2", "--duration", "1.5", "--out", str(out)]) == 0
@@ -109,6 +110,7 @@ def test_cli_run_writes_outputs(tmp_path) -> None:
     assert (out / "timeseries.png").stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_cli_overrides_change_the_run_and_are_recorded(tmp_path, capsys) -> None:
     standing, driven = tmp_path / "standing", tmp_path / "driven"
     assert main(["run", "W2", "--duration", "1.5", "--out", str(standing),

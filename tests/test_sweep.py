@@ -233,6 +233,7 @@ def test_workers_start_warm_with_one_thread(executor) -> None:
     assert reports[0][0] > 0.0 and reports[0][1:] == ("1", 1)
 
 
+@pytest.mark.slow
 def test_grid_writes_one_row_per_run_with_its_parameters_and_metrics(grid) -> None:
     out, _, summary = grid
     assert (summary.runs, summary.ran, summary.skipped, summary.failed) == (4, 4, 0, 0)
@@ -258,6 +259,7 @@ def test_resume_skips_the_rows_already_written(grid, executor) -> None:
     assert (out / "results.parquet").read_bytes() == before
 
 
+@pytest.mark.slow
 def test_figures_per_metric_and_redraw(grid, executor) -> None:
     out, spec, summary = grid
     names = {p.name for p in summary.figures}
@@ -308,6 +310,7 @@ def test_cli_sweep_refuses_a_bad_spec_naming_it(tmp_path, capsys) -> None:
     assert "sweep needs a spec file" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_run_that_kills_its_worker_is_an_outcome_with_the_error(executor, monkeypatch):
     """A run that takes its worker process down (here: os._exit, as a segfault would) is
     retried on restarted workers by Dask and then reported as failed; the batch goes on."""

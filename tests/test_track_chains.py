@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from test_contacts import STATIC_TOLERANCE, _static_stiffness, span_under_tension
 from test_model import assert_sparse_matches_dense
 
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.mechanics import ModelParams, load_model_params
 from trackmj.track.mjcf.generate import generate_mjcf

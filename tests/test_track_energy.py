@@ -14,7 +14,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 from trackmj.sim.drive import TIMESERIES_UNITS, drive
 from trackmj.track.energy import CONTACTS, TrackEnergyLedger
 from trackmj.track.plant import PassiveTensioner

@@ -28,6 +28,7 @@ def test_calibrated_hitch_pulse_gives_target_idler_load_change(w3, index: int) -
     assert change == pytest.approx(pulse.delta_N, rel=0.10)
 
 
+@pytest.mark.slow
 def test_pushing_raises_and_towing_lowers_the_idler_load(w3) -> None:
     """Physics of the two paths at equal magnitude: a push (brake torque, tight top strand)
     moves the idler load more than a tow (drive torque, tight ground strand)."""

@@ -36,7 +36,7 @@ _EXPORTS: dict[str, str] = {
     "write_result": "trackmj.results.store",
     "Result": "trackmj.results.store",
     "TrackPlant": "trackmj.track.plant",
-    "load_plant": "trackmj.machines.plant",
+    "load_plant": "trackmj.machines.track_plant",
     "Executor": "trackmj.study.executor",
     "RunSpec": "trackmj.study.executor",
 }
@@ -47,7 +47,7 @@ __all__ = ["Executor", "Result", "RunSpec", "TrackPlant", "__version__", "load_p
            "write_result"]
 
 if TYPE_CHECKING:
-    from trackmj.machines.plant import load_plant
+    from trackmj.machines.track_plant import load_plant
     from trackmj.results.store import Result, read_result, write_result
     from trackmj.scenarios.load import load_scenario
     from trackmj.sim.run import simulate

@@ -36,7 +36,7 @@ def cmd_model_info(args: argparse.Namespace) -> int:
     # start-up: --help and argument errors must not import MuJoCo
     import mujoco
 
-    from trackmj.machines.plant import load_plant
+    from trackmj.machines.track_plant import load_plant
     from trackmj.track.mjcf.structure import structure_text
 
     plant = load_plant(args.model, args.params, machine=args.machine,

@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from trackmj.elements.tensioner_file import TensionerFile
     from trackmj.hydraulics.params import HydraulicParams
     from trackmj.machines.idler import EquivalentIdler
-    from trackmj.scenarios.scenario import Scenario
+    from trackmj.scenarios.resolved import Scenario
 
 
 class ElementSetup(Protocol):

@@ -7,7 +7,7 @@
 * :mod:`trackmj.elements.fmu`: an FMU as the tensioner element (``ports.Element``), coupled
   strongly (co-simulation with state roll-back, or model exchange integrated implicitly
   with the mechanics) or weakly (co-simulation without roll-back).
-* :mod:`trackmj.fmi.controller`: an FMU as the controller (``ports.Controller``).
+* :mod:`trackmj.fmi.controller_fmu`: an FMU as the controller (``ports.Controller``).
 * :mod:`trackmj.fmi.export`: trackmj's track, or track + hydraulics, as an FMU.
 * :mod:`trackmj.fmi.slaves`: the slave classes those FMUs run in the importing tool.
 """

@@ -6,7 +6,7 @@ hydraulic, control and idler files).
 * :mod:`.default`: the default machine's name (light: the command line's help names it);
 * :mod:`.identify`: identifying the equivalent idler on the machine's track;
 * :mod:`.idler`: the identified equivalent idler and its file;
-* :mod:`.plant`: a machine's track as a ``TrackPlant`` (:func:`~.plant.load_plant`);
+* :mod:`.track_plant`: a machine's track as a ``TrackPlant`` (:func:`~.track_plant.load_plant`);
 * :mod:`.sizing`: the sizing rules of a machine's tensioner and controller.
 
 A new machine is its files in ``models/``: the shipped ones are found by name there.

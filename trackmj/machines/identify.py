@@ -42,7 +42,7 @@ from trackmj.machines.idler import (
     modal_compliance,
     write_idler_file,
 )
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.track.mechanics import load_model_params, models_dir
 from trackmj.track.plant import TrackPlant

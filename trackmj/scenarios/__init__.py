@@ -3,7 +3,7 @@
 * :mod:`.schema`: the scenario file's tables, read by the one validator.
 * :mod:`.resolve`: relative values made absolute for a machine.
 * :mod:`.inputs`: the ``from_file`` input signals.
-* :mod:`.scenario`: the resolved :class:`~trackmj.scenarios.scenario.Scenario` and its
+* :mod:`.resolved`: the resolved :class:`~trackmj.scenarios.resolved.Scenario` and its
   signals, road profile and metric windows.
 * :mod:`.load`: the built-in scenarios and
   :func:`~trackmj.scenarios.load.load_scenario`.

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from trackmj.scenarios.scenario import Scenario
+from trackmj.scenarios.resolved import Scenario
 from trackmj.validator import ParameterError
 
 

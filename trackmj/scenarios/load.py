@@ -2,7 +2,7 @@
 package ``trackmj.experiments``; any other argument is a path to a custom file. The file is
 read by the one validator into :class:`~trackmj.scenarios.schema.ScenarioFile`, its relative
 values resolved for the machine given (:mod:`trackmj.scenarios.resolve`), so the
-:class:`~trackmj.scenarios.scenario.Scenario` it returns holds absolute values only.
+:class:`~trackmj.scenarios.resolved.Scenario` it returns holds absolute values only.
 
 The built-in scenarios are the ``*.toml`` files of the experiments folder that are scenario
 files: the name is a scenario name (:data:`~trackmj.scenarios.schema.NAME_PATTERN`) and a
@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from trackmj.scenarios.resolve import drop_twin, packaged_nominal, resolve
-from trackmj.scenarios.scenario import Scenario
+from trackmj.scenarios.resolved import Scenario
 from trackmj.scenarios.schema import NAME_PATTERN, NOMINAL, ScenarioFile
 from trackmj.validator import ParameterError, build, read_toml
 

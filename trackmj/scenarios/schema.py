@@ -503,7 +503,7 @@ class ScenarioFile(Parameters):
 def _check_reference_range(ref: Reference, duration_s: float, at: Location) -> None:
     """F_ref is piecewise linear: its extremes over [0, duration] lie at the breakpoints.
     A reference relative to the nominal tension is checked once resolved
-    (:class:`~trackmj.scenarios.scenario.Scenario`)."""
+    (:class:`~trackmj.scenarios.resolved.Scenario`)."""
     if not _is_absolute(ref):
         return
     times = {0.0, duration_s, *(s.time_s for s in ref.steps)}

@@ -4,7 +4,7 @@ blocks and stepped by the one loop.
 * :mod:`.setup`: everything a run is made of, loaded and validated before anything is built;
 * :mod:`.entries`, :mod:`.controllers`, :mod:`.registry`: the registries (controllers and
   estimators; mechanics, elements, architectures, the reference architecture);
-* :mod:`.architectures`, :mod:`.mechanics`, :mod:`.plants`, :mod:`.control_plant`: the
+* :mod:`.architectures`, :mod:`.mechanics`, :mod:`.loop_plants`, :mod:`.control_plant`: the
   assembly of a run's plant and the controller's reduced model;
 * :mod:`.loop`: the one closed loop, controller -> valves -> plant -> sensors -> estimator
   -> observers; :mod:`.observers`: the recorder, the physics guard, progress;

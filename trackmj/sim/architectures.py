@@ -40,7 +40,7 @@ from trackmj.elements.context import ElementContext
 from trackmj.ports import Element, Mechanics
 from trackmj.results.store import Result
 from trackmj.sim.control_plant import reduced_plant_params
-from trackmj.sim.plants import CoupledPlant
+from trackmj.sim.loop_plants import CoupledPlant
 from trackmj.sim.registry import ARCHITECTURES, ELEMENTS, MECHANICS
 from trackmj.sim.setup import RunSetup
 from trackmj.track.plant import TrackPlant

@@ -54,7 +54,7 @@ CONTROLLERS: dict[str, Entry] = {
     "lmpc": Entry("linear MPC on the model linearised at hold (OSQP)", _lmpc, baseline=True),
     "pid": Entry("PID with SIMC tuning and back-calculation anti-windup", _pid, baseline=True),
     "fmu": Entry("a controller FMU, --controller fmu:FILE.toml (e.g. exported from Simulink)",
-                 lazy("trackmj.fmi.controller", "build_fmu_controller"),
+                 lazy("trackmj.fmi.controller_fmu", "build_fmu_controller"),
                  needs=("controller_file",)),
 }
 """Controller builders ``build(reduced_model, control_config, **needs) -> Controller``."""

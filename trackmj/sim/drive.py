@@ -27,7 +27,7 @@ import pyarrow as pa
 from trackmj.elements.fmu import FmuElement
 from trackmj.elements.tensioner_file import load_tensioner
 from trackmj.host import machine as host_machine
-from trackmj.machines.plant import load_plant
+from trackmj.machines.track_plant import load_plant
 from trackmj.ports import COUPLING_STEP_S, TensionerElement
 from trackmj.results.store import ResultWriter, parquet_bytes
 from trackmj.track.energy import TrackEnergyLedger
@@ -82,7 +82,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     ``tensioner`` file's, and book the energy ledger from rest; write ``out_dir`` if given.
     ``machine``, ``params`` (a model file replacing the machine's mechanics), ``overrides``
     (``{dotted key: value}`` of the model file) and ``model`` (an MJCF file) as in
-    :func:`trackmj.machines.plant.load_plant`.
+    :func:`trackmj.machines.track_plant.load_plant`.
 
     Raises ValueError for a speed outside [−5, 5] m/s or a duration outside (0, 3600] s,
     ParameterError for a bad tensioner file (before any work), PhysicsError or FmuError if

@@ -15,7 +15,7 @@ import numpy as np
 from trackmj.elements.prescribed import ConstantForce
 from trackmj.ports import ForceLaw, Mechanics
 from trackmj.results.store import Result
-from trackmj.sim.plants import EquivalentIdlerMechanics
+from trackmj.sim.loop_plants import EquivalentIdlerMechanics
 from trackmj.track.plant import TrackPlant
 
 if TYPE_CHECKING:

@@ -27,8 +27,8 @@ from trackmj.ports import (
 from trackmj.results.signals import overshoot, settling_time
 from trackmj.sim.controllers import ESTIMATORS
 from trackmj.sim.loop import Schedule, run_loop
+from trackmj.sim.loop_plants import ReducedLoopPlant
 from trackmj.sim.observers import Recorder
-from trackmj.sim.plants import ReducedLoopPlant
 
 
 @dataclass

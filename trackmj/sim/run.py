@@ -38,7 +38,7 @@ from trackmj.results.comparison import prediction_vs_measured
 from trackmj.results.measured import load_measured
 from trackmj.results.metrics import compute_metrics
 from trackmj.results.store import Result, run_metadata
-from trackmj.scenarios.scenario import Scenario
+from trackmj.scenarios.resolved import Scenario
 from trackmj.sim.architectures import Assembly, assemble
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.loop import Schedule, run_loop
@@ -107,7 +107,7 @@ def simulate(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_A
         (``"tp"``, ``"tp-weak"``, ``"dp-a"``, ``"dp-b"``).
     controller, estimator : str, optional
         Keys of the controller and estimator registries; default: the scenario's. A
-        controller FMU: ``"fmu:FILE.toml"`` (see :mod:`trackmj.fmi.controller`).
+        controller FMU: ``"fmu:FILE.toml"`` (see :mod:`trackmj.fmi.controller_fmu`).
     seed : int
         Sensor-noise and terrain seed (>= 0).
     duration : float, optional

@@ -22,7 +22,7 @@ import mujoco
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig, load_config
 from trackmj.elements.tensioner_file import TensionerFile, load_tensioner
-from trackmj.fmi.controller import load_controller_file
+from trackmj.fmi.controller_fmu import load_controller_file
 from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
 from trackmj.io import cache_dir, write_text_atomic
 from trackmj.machines.assembly import (
@@ -44,7 +44,7 @@ from trackmj.machines.idler import (
 from trackmj.machines.sizing import input_weight_scale
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.scenarios.load import load_scenario
-from trackmj.scenarios.scenario import Scenario
+from trackmj.scenarios.resolved import Scenario
 from trackmj.scenarios.schema import Variant
 from trackmj.sim.control_plant import nominal_plant_params
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
@@ -268,7 +268,7 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
     ``overrides`` (see :data:`Overrides`) change keys of the scenario and parameter files;
     they pass the same validation as the files. ``tensioner``: a tensioner file
     (:mod:`trackmj.elements.tensioner_file`) replacing the architecture's hydraulic element, its FMU
-    checked here. ``controller`` may be ``"fmu:FILE.toml"`` (:mod:`trackmj.fmi.controller`).
+    checked here. ``controller`` may be ``"fmu:FILE.toml"`` (:mod:`trackmj.fmi.controller_fmu`).
     ``machine``: a shipped machine's name or a machine file (:mod:`trackmj.machines.assembly`;
     default lf1352) whose mechanics, hydraulics and control files the run takes unless
     ``model``, ``hydraulics`` or ``control`` override them.

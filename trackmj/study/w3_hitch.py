@@ -35,7 +35,7 @@ import numpy as np
 from trackmj.elements.hydraulic import HydraulicElement
 from trackmj.hydraulics import HydraulicTensioner
 from trackmj.ports import COUPLING_STEP_S, StepInputs
-from trackmj.scenarios.scenario import Scenario
+from trackmj.scenarios.resolved import Scenario
 from trackmj.scenarios.schema import LoadPulse, Supply
 from trackmj.sim.architectures import assemble
 from trackmj.sim.setup import prepare
