@@ -513,7 +513,7 @@ class HydraulicTensioner:
         """The handful of values logged every step, without building a StepRecord."""
         if not self._completed:
             raise RuntimeError("no step completed yet")
-        return _element_log(self._state[k.LOG:k.LOG + len(k.LOG_FIELDS)].tolist())
+        return _element_log(ElementLog, self._state[k.LOG:k.LOG + len(k.LOG_FIELDS)].tolist())
 
     @property
     def pressures(self) -> tuple[float, float, float, float, float]:

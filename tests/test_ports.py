@@ -13,7 +13,14 @@ import pytest
 from trackmj.elements.hydraulic import HydraulicElement
 from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
 from trackmj.machines.idler import load_idler
-from trackmj.ports import Command, ControlOutput, ElementLog, StepInputs, positional
+from trackmj.ports import (
+    Command,
+    ControlOutput,
+    ElementLog,
+    StepInputs,
+    check_order,
+    positional,
+)
 from trackmj.sim.loop import _command
 from trackmj.sim.loop_plants import CoupledPlant, EquivalentIdlerMechanics
 
@@ -25,15 +32,17 @@ class Pair(NamedTuple):
 
 def test_positional_refuses_an_order_that_is_not_the_declared_one() -> None:
     build = positional(Pair, ("first", "second"))
-    assert build((1.0, 2.0)) == Pair(first=1.0, second=2.0)
-    assert type(build((1.0, 2.0))) is Pair
+    assert build(Pair, (1.0, 2.0)) == Pair(first=1.0, second=2.0)
+    assert type(build(Pair, (1.0, 2.0))) is Pair
     with pytest.raises(TypeError, match="declares the fields"):
         positional(Pair, ("second", "first"))
+    with pytest.raises(TypeError, match="declares the fields"):
+        check_order(Pair, ("first",))
 
 
 def test_the_loop_command_is_mode_u_solved() -> None:
     solved = ControlOutput(0.25)
-    assert _command((1, 0.25, solved)) == Command(mode=1, u=0.25, solved=solved)
+    assert _command(Command, (1, 0.25, solved)) == Command(mode=1, u=0.25, solved=solved)
 
 
 def test_readout_and_element_log_fields_hold_what_their_names_say() -> None:

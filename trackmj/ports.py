@@ -36,7 +36,6 @@ physics guard, ``stroke_range_m`` (the travel the guard allows) and, at the end,
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal, NamedTuple, Protocol, TypeVar, runtime_checkable
@@ -67,18 +66,25 @@ dF/dv) or "weak" (the last step's force held)."""
 TupleT = TypeVar("TupleT", bound=NamedTuple)
 
 
-def positional(cls: type[TupleT], order: Sequence[str]) -> Callable[[Iterable[Any]], TupleT]:
-    """A constructor of the NamedTuple ``cls`` from values written in ``order`` (its field
-    names): ``tuple.__new__`` bound to ``cls``, the same object as ``cls(*values)`` without
-    NamedTuple's keyword handling, for the few per-step call sites that build records at
-    1 kHz. Each such call site names the order it writes its values in, and this checks it
-    against the declared fields when the module loads: a reordered or renamed field fails
-    loudly at import, never as silently swapped values. Cold code builds by keyword."""
+def check_order(cls: type[NamedTuple], order: Sequence[str]) -> None:
+    """TypeError unless ``order`` (field names, as a per-step call site writes or unpacks
+    the values of the NamedTuple ``cls``) is ``cls``'s declared order: a reordered or
+    renamed field fails loudly when the call site's module loads, never as silently swapped
+    values."""
     declared: tuple[str, ...] = cls._fields
     if tuple(order) != declared:
         raise TypeError(f"{cls.__name__} declares the fields {declared} but a call site "
-                        f"writes {tuple(order)}")
-    return functools.partial(tuple.__new__, cls)
+                        f"uses {tuple(order)}")
+
+
+def positional(cls: type[TupleT], order: Sequence[str]
+               ) -> Callable[[type[TupleT], Iterable[Any]], TupleT]:
+    """``tuple.__new__``, called as ``build(cls, values)``: the same object as
+    ``cls(*values)`` without NamedTuple's keyword handling, for the few per-step call sites
+    that build records at 1 kHz, returned once :func:`check_order` has checked the order
+    the call site writes ``values`` in. Cold code builds by keyword."""
+    check_order(cls, order)
+    return tuple.__new__
 
 
 @dataclass(frozen=True, slots=True)

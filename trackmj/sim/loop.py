@@ -80,7 +80,7 @@ def run_loop(schedule: Schedule, *, controller: Controller, valves: ValveLogic, 
             solved = controller(estimator.period_mean(), schedule.previews[k // ratio], k * h)
             u = solved.u
         mode = valve_step(u)
-        command = _command((mode, u, solved))
+        command = _command(Command, (mode, u, solved))
         readout = plant_step(command, inputs)
         z = measure((readout.p_head_Pa, readout.p_rod_Pa, readout.stroke_m))
         estimate(z, float(mode), inputs.supply_set_Pa)

@@ -22,11 +22,13 @@ from trackmj.ports import (
     COUPLING_STEP_S,
     Command,
     Element,
+    ElementLog,
     ForceLaw,
     Mechanics,
     Readout,
     StepInputs,
     TensionerElement,
+    check_order,
     positional,
 )
 
@@ -36,6 +38,9 @@ _readout = positional(Readout, (
     "stroke_velocity_m_s", "q_supply_m3_s", "e_supply_J", "p_work_J", "mech_work_J",
     "chassis_acc_z_m_s2", "closure_error_m"))
 """Readout from its values in field order, checked against its fields at import."""
+# the order CoupledPlant.step unpacks an element's log in, checked at import
+check_order(ElementLog, ("t_s", "p_head_Pa", "p_rod_Pa", "p_supply_Pa", "q_supply_m3_s",
+                         "force_N", "supply_J", "piston_work_J", "mech_work_J"))
 
 
 class CoupledPlant:
@@ -57,11 +62,11 @@ class CoupledPlant:
         element.set_valves(command.mode, command.u, inputs.supply_set_Pa)
         mech.apply(inputs)
         mech.step(element)
-        log = element.log()
-        return _readout((log.t_s, mech.idler_force_N, log.p_head_Pa, log.p_rod_Pa,
-                         log.p_supply_Pa, mech.stroke_m, mech.stroke_velocity_m_s,
-                         log.q_supply_m3_s, log.supply_J, log.piston_work_J, log.mech_work_J,
-                         mech.chassis_acc_z_m_s2, mech.closure_error_m))
+        t, p_head, p_rod, p_supply, q_supply, _, supply, piston, work = element.log()
+        return _readout(Readout, (t, mech.idler_force_N, p_head, p_rod, p_supply,
+                                  mech.stroke_m, mech.stroke_velocity_m_s, q_supply, supply,
+                                  piston, work, mech.chassis_acc_z_m_s2,
+                                  mech.closure_error_m))
 
 
 class EquivalentIdlerMechanics:
