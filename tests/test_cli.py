@@ -14,7 +14,7 @@ import pytest
 import trackmj
 from trackmj.cli.main import main
 from trackmj.cli.parser import build_parser
-from trackmj.scenarios.load import BUILTIN, load_scenario
+from trackmj.scenarios.load import builtin_names, load_scenario
 from trackmj.sim import controllers
 from trackmj.sim.entries import Entry
 
@@ -31,7 +31,7 @@ def test_version_and_python_dash_m() -> None:
 def test_scenarios_lists_each_builtin_on_one_line(capsys) -> None:
     assert main(["scenarios"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    for name in BUILTIN:
+    for name in builtin_names():
         (line,) = [ln for ln in lines if ln.startswith(name + " ")]
         assert load_scenario(name).title in line
     listed = " ".join(lines).replace(",", " ").split()      # W5's variants, for --variant

@@ -54,9 +54,9 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     """``trackmj scenarios``: the built-in scenarios (W5's variants for ``--variant``), then
     each registry's names with their descriptions."""
     # start-up: --help and argument errors must not import Numba
-    from trackmj.scenarios.load import BUILTIN, load_scenario
+    from trackmj.scenarios.load import builtin_names, load_scenario
 
-    loaded = [load_scenario(name) for name in BUILTIN]
+    loaded = [load_scenario(name) for name in builtin_names()]
     width = max(len(sc.name) for sc in loaded) + 2
     for sc in loaded:
         print(f"{sc.name:<{width}}{sc.title} ({sc.duration_s:g} s, {sc.controller}/"

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +27,7 @@ from trackmj.results.columns import (
     is_key_column,
 )
 from trackmj.results.seed_stats import finite, mean_std
-from trackmj.scenarios.load import BUILTIN
+from trackmj.scenarios.load import builtin_names
 
 CASE = ("scenario", "architecture", "controller", "estimator", "variant", "duration_s",
         "inputs")
@@ -107,9 +107,12 @@ def _save_figure(fig: Figure, path: Path) -> Path:
     return path
 
 
-def scenario_order(name: str) -> tuple[int, str]:
-    """Built-in scenarios in their order (W1-W5, NL1), then the others by name."""
-    return (BUILTIN.index(name), "") if name in BUILTIN else (len(BUILTIN), name)
+def scenario_order(names: Iterable[str]) -> list[str]:
+    """``names`` with the built-in scenarios first in their order (W1-W5, NL1), then the
+    others by name."""
+    builtin = builtin_names()
+    return sorted(names, key=lambda n: (builtin.index(n), "") if n in builtin
+                  else (len(builtin), n))
 
 
 def _metric_figure(rows: list[dict[str, Any]], metric: str, swept: list[str]) -> Figure:
@@ -182,7 +185,7 @@ def _case_series(rows: list[dict[str, Any]], case: tuple, metric: str, key: str,
 def _case_figure(rows: list[dict[str, Any]], metric: str) -> Figure:
     """Grouped bars: a group per scenario, a bar per other case (architecture, controller,
     ...: the fields that differ) with its mean ± std over seeds and its value above it."""
-    scenarios = sorted({r["scenario"] for r in rows}, key=scenario_order)
+    scenarios = scenario_order({r["scenario"] for r in rows})
     cases = sorted({tuple(r.get(c) for c in CASE[1:]) for r in rows}, key=str)
     labels = [_case_label(("", *case), [("", *c) for c in cases]).strip() for case in cases]
     width, height = max(6.0, 1.1 * len(scenarios) * max(1, len(cases)) / 2 + 2.6), 4.4

@@ -55,8 +55,6 @@ def builtin_names() -> tuple[str, ...]:
     return tuple(sorted(found, key=_builtin_order))
 
 
-BUILTIN = builtin_names()
-"""The built-in scenarios found on import, in listing order (``trackmj scenarios``, report)."""
 
 
 def scenario_path(name_or_path: str | Path) -> Path:

@@ -83,7 +83,7 @@ from trackmj.machines.assembly import names
 from trackmj.results.columns import key_field
 from trackmj.results.store import _require
 from trackmj.scenarios.events import moved_events
-from trackmj.scenarios.load import BUILTIN, load_scenario
+from trackmj.scenarios.load import builtin_names, load_scenario
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.entries import by_name, choices
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
@@ -265,7 +265,7 @@ class SweepSpec:
         """A file of the spec as an absolute path string (built-in scenario names stay)."""
         if value is None:
             return None
-        if value.upper() in BUILTIN:
+        if value.upper() in {name.upper() for name in builtin_names()}:
             return value
         path = Path(value).expanduser()
         return str(path if path.is_absolute() else (self.base / path).resolve())
