@@ -215,7 +215,9 @@ def test_a_run_compared_with_its_own_log_has_no_error(truth_run, tmp_path):
 
 @pytest.mark.parametrize(("columns", "words"), [
     ({"t_s": 1e-3 * np.arange(1, 2501), "hitch_kN": np.zeros(2500)},
-     ["bad.csv column 'hitch_kN'", "not a column of the run"]),
+     ["bad.csv: no column to compare", "ignored: hitch_kN"]),
+    ({"t_s": 1e-3 * np.arange(1, 2501), "tension [psi]": np.zeros(2500)},
+     ["bad.csv column 'tension [psi]'", "is not a force"]),
     ({"t_s": 1e-3 * np.arange(1, 1001), "tension_N": np.zeros(1000)},
      ["bad.csv column 't_s'", "too short"]),
 ])

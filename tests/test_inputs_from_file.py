@@ -90,7 +90,7 @@ def test_supply_track_and_hitch_from_files_are_the_signals_in_si(tmp_path):
     ({"t_s": [0.0, 1.0, 2.0], "F_ref_N": [12e3] * 3},
      ["ref.csv column 'F_ref_N'", "too short to cover the run"]),
     ({"t_s": [0.0, 3.0], "F_ref [MPa]": [1.0, 1.0]},
-     ["ref.csv column 'F_ref [MPa]'", "needs a unit of N"]),
+     ["ref.csv column 'F_ref [MPa]'", "is not a force", "needs a unit of force"]),
     ({"t_s": [0.0, 3.0], "F_ref_N": [12e3, 60e3]},
      ["ref.csv column 'F_ref_N'", "must stay in [0, 50000] N"]),
 ])

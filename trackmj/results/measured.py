@@ -1,93 +1,303 @@
-"""Measured time series: rig logs and input traces read from CSV or Parquet files.
+"""Measured time series: rig logs and input traces read from CSV or Parquet files, their
+column headers parsed by pint and converted to SI.
 
-A file holds a time column ``t_s`` and signal columns. A column is named either in SI with
-its unit as the name's suffix (``tension_N``, ``p_head_Pa``, ``stroke_m``), or with another
-unit, as a suffix (``tension_kN``, ``stroke_mm``, ``p_head_MPa``) or in brackets
-(``p_head [MPa]``, ``t [ms]``); every such column is converted to SI on reading and
-renamed to its SI name (``p_head [MPa]`` -> ``p_head_Pa``). Pressures are gauge, as in the
-run's own columns. :data:`UNIT_SCALES` lists the units understood.
+A header is ``name [unit]`` (``p_head [psi]``, ``t [ms]``) or ``name_unit``, the unit a
+suffix after an underscore (``tension_kN``, ``p_head_MPa``, ``stroke_in``, ``t_ms``). The
+name says which **quantity** the column holds; a rig log may hold the run's own columns
+(:data:`trackmj.ports.COLUMN_UNITS`; with ``--channels all`` the run's further ones too):
 
-Checks, each refused with one line naming the file and the column (a
-:class:`~trackmj.validator.ParameterError`, exit 2 on the command line): a time column, time
-strictly increasing, every value finite, and, for a run, the time covering the run
-[1 ms, duration]. Signals are resampled to the run's 1 ms grid by linear interpolation
-(:func:`resample`; a log sampled faster than 1 kHz is interpolated, not averaged).
+=======================  ====================================  =====  ====================
+column (SI name)         quantity                              SI     also accepted, e.g.
+=======================  ====================================  =====  ====================
+``t_s`` (or ``time``)    time (required)                       s      ms, min
+``tension_N``            F_ten, tensioner force on the idler   N      kN, lbf
+``tension_ref_N``        the reference F_ref                   N      kN, lbf
+``p_head_Pa``            mean head-chamber pressure, gauge     Pa     kPa, MPa, bar, psi
+``p_rod_Pa``             mean rod-chamber pressure, gauge      Pa     kPa, MPa, bar, psi
+``p_supply_Pa``          supply pressure, gauge                Pa     kPa, MPa, bar, psi
+``stroke_m``             stroke, > 0 outward                   m      mm, in, ft
+``stroke_velocity_m_s``  stroke velocity                       m/s    mm/s, in/s
+``q_supply_m3_s``        flow out of the supply                m³/s   L/min, gal/min
+``valve_mode``           valve mode −1/0/+1                    1      -
+``u``                    valve opening                         1      -, %
+``e_supply_J``           energy drawn from the supply          J      kJ
+``p_work_J``             piston work ∫Σp·A·v dt                J      kJ
+``mech_work_J``          work into the mechanics ∫F·v dt       J      kJ
+``chassis_acc_z_m_s2``   vertical chassis acceleration         m/s²   g0, ft/s^2
+``closure_error_m``      track loop closure gap                m      mm
+=======================  ====================================  =====  ====================
+
+Units are pint's (:func:`unit_registry`): any unit pint knows with the quantity's dimension
+is converted to SI and the column renamed to its SI name (``p_head [psi]`` -> ``p_head_Pa``
+× 6894.757). pint's spellings: ``psi`` is pound-force per square inch, ``lbf`` pound-force,
+``in`` inch, ``gal`` the US gallon, ``min`` minute, ``g0`` standard gravity (``g`` is the
+gram). Pressures are gauge, as the run's own columns, and converted by a factor alone (no
+offsets; psig, psia and barg are units pint does not know, so refused). In a suffix,
+underscores between unit tokens divide and a digit after a token is its power, as in the
+run's column names (``m_s2`` = m/s^2, ``L_min`` = L/min, ``m3_s`` = m^3/s, ``mm_s`` =
+mm/s; :func:`pint_spelling`, tried when pint does not read the suffix as written; ``-`` is
+read as dimensionless, :data:`UNIT_ALIASES`). The suffix starts at the rightmost
+underscore whose left part names a quantity and whose unit fits
+(``stroke_velocity_mm_s``: stroke_velocity in mm/s); a header in SI of something else
+(``p_head_L_Pa`` when the run does not record it) names no quantity.
+
+Refused, each with one line naming the file, the column and what is expected (a
+:class:`~trackmj.validator.ParameterError`, exit 2 on the command line): a quantity's
+column whose unit pint does not know, whose dimension does not fit (``tension [psi]``,
+``p_head_N``, ``tension_kNm`` — pint reads kNm as kilo-number-metre), or that names no
+unit (``tension``); a quantity's column holding text; no time column, time not strictly
+increasing, a value not finite and, for a run, time not covering the run [1 ms,
+duration]. A header naming no quantity (``temperature [degC]``, ``comment``,
+``engine_rpm``) is **ignored and listed** (:attr:`Trace.ignored`,
+:attr:`MeasuredLog.ignored`); it may hold text.
+
+Signals are resampled to the run's 1 ms grid by linear interpolation (:func:`resample`; a
+log sampled faster than 1 kHz is interpolated, not averaged). Input signals of a scenario
+(:func:`input_signal`) name their column freely (``F_ref [kN]``, ``speed_mm_s``); their unit
+must have the input's dimension.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
-from trackmj.ports import COUPLING_STEP_S
+from trackmj.ports import COLUMN_UNITS, COUPLING_STEP_S
 from trackmj.validator import ParameterError
 
-UNIT_SCALES: dict[str, tuple[str, float]] = {
-    "s": ("s", 1.0), "ms": ("s", 1e-3),
-    "N": ("N", 1.0), "kN": ("N", 1e3),
-    "Pa": ("Pa", 1.0), "kPa": ("Pa", 1e3), "MPa": ("Pa", 1e6), "bar": ("Pa", 1e5),
-    "m": ("m", 1.0), "mm": ("m", 1e-3),
-    "m_s": ("m_s", 1.0), "m/s": ("m_s", 1.0), "mm_s": ("m_s", 1e-3), "mm/s": ("m_s", 1e-3),
-    "m3_s": ("m3_s", 1.0), "m^3/s": ("m3_s", 1.0), "L_min": ("m3_s", 1e-3 / 60.0),
-    "L/min": ("m3_s", 1e-3 / 60.0),
-    "m_s2": ("m_s2", 1.0), "m/s^2": ("m_s2", 1.0),
-    "J": ("J", 1.0), "kJ": ("J", 1e3),
-    "1": ("", 1.0), "-": ("", 1.0),
-}
-"""Unit written in a column header -> (SI suffix of the column's name, factor to SI)."""
-DIMENSIONLESS = ("valve_mode", "u")
-"""Columns without a unit suffix (the run's valve mode −1/0/+1 and opening u [-])."""
+if TYPE_CHECKING:
+    import pint
+
+
+def suffix_of(unit: str) -> str:
+    """The column-name suffix of an SI unit in pint's spelling (``m^3/s`` -> ``m3_s``)."""
+    return unit.replace("^", "").replace("/", "_")
+
+
 TIME = "t_s"
+TIME_NAMES = ("t", "time")
+"""Base names of the time column (``t_s``, ``t [ms]``, ``time [s]``, ``time_ms``)."""
+DIMENSIONLESS = tuple(name for name, unit in COLUMN_UNITS.items() if unit == "1")
+"""Columns without a unit suffix (the run's valve mode −1/0/+1 and opening u [-])."""
+SI_SUFFIXES: dict[str, str] = {suffix_of(unit): unit for unit in COLUMN_UNITS.values()
+                               if unit != "1"}
+"""SI suffix of a column name -> its SI unit in pint's spelling (``m3_s`` -> ``m^3/s``)."""
+UNIT_ALIASES = {"-": "dimensionless"}
+"""Units written in logs that pint's parser refuses, in pint's spelling."""
+UNIT_EXAMPLES: dict[str, tuple[str, str]] = {
+    "s": ("time", "s, ms, min"), "N": ("force", "N, kN, lbf"),
+    "Pa": ("pressure", "Pa, kPa, MPa, bar, psi"), "m": ("length", "m, mm, in, ft"),
+    "m/s": ("velocity", "m/s, mm/s, in/s"), "m^3/s": ("volume flow", "m^3/s, L/min, gal/min"),
+    "m/s^2": ("acceleration", "m/s^2, g0"), "J": ("energy", "J, kJ"),
+    "1": ("dimensionless number", "1, -, %")}
+"""SI unit -> (what it measures, units accepted for it, e.g.), for messages."""
+OTHER_DIMENSIONS = {"kg": "mass", "K": "temperature", "m^2": "area", "m^3": "volume",
+                    "Hz": "frequency", "W": "power", "N/m": "stiffness"}
+"""Further SI units whose dimension a message names in words (a unit of the wrong kind)."""
 COVER_TOLERANCE_S = 0.5 * COUPLING_STEP_S
 """A trace covers the run if it starts by the end of the first step (a run's own ``t_s``
 starts there) and ends by the duration, within half a step [s]; before its first sample
 it holds its first value."""
 
 _BRACKET = re.compile(r"^\s*(?P<name>[^\[\]]+?)\s*\[(?P<unit>[^\[\]]+)\]\s*$")
+_POWER = re.compile(r"(?<=[A-Za-z])(\d+)$")
 
 
-def si_name(header: str) -> tuple[str, float] | None:
-    """(SI column name, factor to SI) of a header, or None if it states no known unit.
+# ----------------------------------------------------------------------------- units
 
-    ``tension_kN`` -> ("tension_N", 1e3); ``p_head [MPa]`` -> ("p_head_Pa", 1e6);
-    ``stroke_m`` -> ("stroke_m", 1.0); ``valve_mode`` -> ("valve_mode", 1.0).
-    """
-    if header in DIMENSIONLESS:
-        return header, 1.0
-    match = _BRACKET.match(header)
-    if match:
-        base, unit = match["name"].strip().replace(" ", "_"), match["unit"].strip()
-        if unit not in UNIT_SCALES:
-            return None
-        suffix, scale = UNIT_SCALES[unit]
-        return (f"{base}_{suffix}" if suffix else base), scale
-    for unit in sorted(UNIT_SCALES, key=len, reverse=True):
-        if "/" in unit or "^" in unit or unit in ("1", "-"):
+@functools.cache
+def unit_registry() -> pint.UnitRegistry:
+    """pint's unit registry, built once per process (~0.3 s)."""
+    # local: pint takes ~0.4 s to import; every scenario load imports this module, few
+    # read a file with units beyond SI
+    import pint
+
+    return pint.UnitRegistry()
+
+
+def pint_spelling(unit: str) -> str:
+    """A unit written as a column-name suffix in pint's spelling: underscores divide, a
+    digit after a token is its power (``m_s2`` -> ``m/s^2``, ``m3_s`` -> ``m^3/s``,
+    ``L_min`` -> ``L/min``)."""
+    return "/".join(_POWER.sub(r"^\1", token) for token in unit.split("_"))
+
+
+def _parse(unit: str) -> pint.Unit | None:
+    """pint's unit for ``unit`` as written (:data:`UNIT_ALIASES` first), else in the
+    suffix spelling (:func:`pint_spelling`); None if neither parses."""
+    registry = unit_registry()
+    for spelling in dict.fromkeys((UNIT_ALIASES.get(unit, unit), pint_spelling(unit))):
+        try:
+            return registry.parse_units(spelling)
+        # pint's parser raises many kinds: UndefinedUnitError, AssertionError ("-"),
+        # ValueError (a factor, "2*N"), the tokenizer's errors
+        except Exception:
             continue
-        if header.endswith("_" + unit) and len(header) > len(unit) + 1:
-            suffix, scale = UNIT_SCALES[unit]
-            return f"{header[: -len(unit) - 1]}_{suffix}", scale
     return None
 
+
+def _article(words: str) -> str:
+    return f"{'an' if words[0] in 'aeiou' else 'a'} {words}"
+
+
+@functools.cache
+def _dimension_words() -> dict[Any, str]:
+    """pint dimensionality -> what it measures (the units of :data:`UNIT_EXAMPLES` and
+    :data:`OTHER_DIMENSIONS`)."""
+    registry = unit_registry()
+    named = {unit: words for unit, (words, _) in UNIT_EXAMPLES.items()} | OTHER_DIMENSIONS
+    return {registry.parse_units(unit).dimensionality: words for unit, words in named.items()}
+
+
+def si_factor(unit: str, si_unit: str) -> float:
+    """Factor taking a value in ``unit`` (as written in a header) to ``si_unit`` (pint's
+    spelling, e.g. ``m^3/s``); ValueError saying why not (a unit pint does not know, or of
+    another dimension)."""
+    if unit in (si_unit, suffix_of(si_unit)):
+        return 1.0
+    parsed = _parse(unit)
+    if parsed is None:
+        raise ValueError(f"unit {unit!r} is not a unit pint knows")
+    target = unit_registry().parse_units(si_unit)
+    if parsed.dimensionality != target.dimensionality:
+        words = _dimension_words().get(parsed.dimensionality)
+        kind = str(parsed.dimensionality) if words is None else _article(words)
+        wanted = UNIT_EXAMPLES[si_unit][0] if si_unit in UNIT_EXAMPLES else si_unit
+        raise ValueError(f"unit {unit!r} ({parsed}, {kind}) is not {_article(wanted)}")
+    return float(unit_registry().Quantity(1.0, parsed).to(target).magnitude)
+
+
+def expects(name: str, si_unit: str) -> str:
+    """What a column of ``name`` (a quantity's SI name, or an input) needs: "tension_N
+    needs a unit of force (N, kN, lbf, ...)"."""
+    words, examples = UNIT_EXAMPLES.get(si_unit, (si_unit, si_unit))
+    if si_unit == "1":
+        return f"{name} is dimensionless (no unit, or {examples})"
+    return f"{name} needs a unit of {words} ({examples}, ...)"
+
+
+# ----------------------------------------------------------------------------- headers
+
+@dataclass(frozen=True)
+class Quantity:
+    """A quantity a log may hold: its SI column ``name`` (``p_head_Pa``) and SI ``unit`` in
+    pint's spelling (``Pa``; ``1``: dimensionless)."""
+
+    name: str
+    unit: str
+
+    def convert(self, unit: str | None) -> float:
+        """Factor to SI of this quantity's column in ``unit`` as written (None: no unit);
+        ValueError saying why not and what it needs."""
+        if unit is None and self.unit != "1":
+            base = self.name.removesuffix("_" + suffix_of(self.unit))
+            example = UNIT_EXAMPLES.get(self.unit, ("", self.unit))[1].split(", ")[1:2]
+            raise ValueError(f"names no unit (write e.g. '{self.name}' or "
+                             f"'{base} [{example[0] if example else self.unit}]'); "
+                             f"{expects(self.name, self.unit)}")
+        try:
+            return 1.0 if unit is None else si_factor(unit, self.unit)
+        except ValueError as exc:
+            raise ValueError(f"{exc}; {expects(self.name, self.unit)}") from None
+
+
+def split_si(name: str) -> tuple[str, Quantity] | None:
+    """(base, quantity) of a column name in SI: ``p_head_Pa`` -> ("p_head", p_head_Pa in
+    Pa), ``valve_mode`` -> ("valve_mode", dimensionless); None without an SI suffix of
+    :data:`SI_SUFFIXES`."""
+    if COLUMN_UNITS.get(name) == "1":
+        return name, Quantity(name, "1")
+    for suffix in sorted(SI_SUFFIXES, key=len, reverse=True):
+        if name.endswith("_" + suffix) and len(name) > len(suffix) + 1:
+            return name[: -len(suffix) - 1], Quantity(name, SI_SUFFIXES[suffix])
+    return None
+
+
+def log_quantities(names: Iterable[str] = ()) -> dict[str, Quantity]:
+    """Base name -> quantity of a log: the run's columns (:data:`COLUMN_UNITS`), the
+    further SI column ``names`` given (a run's ``--channels all`` columns) and the time's
+    names (:data:`TIME_NAMES`)."""
+    out = {}
+    for name in (*COLUMN_UNITS, *names):
+        split = split_si(name)
+        if split is not None:
+            out[split[0]] = split[1]
+    return out | {base: Quantity(TIME, "s") for base in TIME_NAMES}
+
+
+def _splits(header: str) -> list[tuple[str, str]]:
+    """Every (base, unit) of a header split at one underscore, from the right
+    (``p_head_MPa``: (p_head, MPa), (p, head_MPa))."""
+    cuts = [i for i, c in enumerate(header) if c == "_" and 0 < i < len(header) - 1]
+    return [(header[:i], header[i + 1:]) for i in reversed(cuts)]
+
+
+def si_name(header: str, quantities: Mapping[str, Quantity] | None = None
+            ) -> tuple[str, float] | None:
+    """(SI column name, factor to SI) of a log's column header; None if it names no
+    quantity (the column is ignored); ValueError saying why for a quantity's column whose
+    unit pint does not know, has another dimension or is missing.
+
+    ``tension_kN`` -> ("tension_N", 1e3); ``p_head [psi]`` -> ("p_head_Pa", 6894.757...);
+    ``stroke_velocity_mm_s`` -> ("stroke_velocity_m_s", 1e-3); ``valve_mode`` ->
+    ("valve_mode", 1.0); ``temperature [degC]``, ``engine_rpm`` -> None. A suffix is taken
+    at the rightmost underscore whose left part names a quantity and whose unit fits; a
+    header in SI of something else (``p_head_L_Pa`` when that is no quantity) is ignored.
+
+    Parameters
+    ----------
+    header : str
+        The header as written.
+    quantities : mapping, optional
+        Base name -> quantity (default :func:`log_quantities`).
+    """
+    quantities = log_quantities() if quantities is None else quantities
+    match = _BRACKET.match(header)
+    if match:
+        quantity = quantities.get(match["name"].strip().replace(" ", "_"))
+        return None if quantity is None else (quantity.name,
+                                              quantity.convert(match["unit"].strip()))
+    if header in quantities:
+        return quantities[header].name, quantities[header].convert(None)
+    errors = []
+    for base, unit in _splits(header):
+        if base in quantities:
+            try:
+                return quantities[base].name, quantities[base].convert(unit)
+            except ValueError as exc:
+                errors.append(exc)
+    own = split_si(header)
+    if not errors or (own is not None and own[0] not in quantities):
+        return None
+    raise errors[0]
+
+
+# ----------------------------------------------------------------------------- files
 
 @dataclass(frozen=True)
 class Trace:
     """A file's time series in SI: ``t_s`` [s], shape (n,), strictly increasing;
     ``columns``: SI name -> values, shape (n,); ``headers``: SI name -> the header as
-    written (for messages); ``file``: the file's name."""
+    written, for every column naming a quantity (time included); ``ignored``: the headers
+    as written that name no quantity; ``file``: the file's name; ``sha256``: the hex
+    SHA-256 of the file's bytes."""
 
     file: str
     t_s: np.ndarray
     columns: Mapping[str, np.ndarray]
     headers: Mapping[str, str]
+    ignored: tuple[str, ...]
+    sha256: str
 
     def where(self, name: str) -> str:
         """``file column 'header'`` for a message."""
@@ -95,12 +305,13 @@ class Trace:
 
     def require(self, names: Sequence[str]) -> None:
         """ParameterError naming the file if a column is missing."""
-        missing = [n for n in names if n not in self.columns]
+        missing = [n for n in names if n not in self.headers]
         if missing:
             hint = ("" if missing[0] in DIMENSIONLESS else "; name it in SI (tension_N) or "
-                    "with its unit (tension_kN, p_head [MPa])")
+                    "with its unit (tension_kN, p_head [psi])")
+            ignored = f"; ignored: {', '.join(self.ignored)}" if self.ignored else ""
             raise ParameterError(f"{self.file}: no column {missing[0]!r} (has: "
-                                 f"{', '.join(self.headers.values())}){hint}")
+                                 f"{', '.join(self.headers.values())}{ignored}){hint}")
 
     def check_covers(self, duration_s: float, what: str = "the run") -> None:
         """ParameterError naming the file and time column unless t spans [0, duration_s]."""
@@ -115,70 +326,63 @@ class Trace:
         return np.interp(np.asarray(t_s, dtype=float), self.t_s, self.columns[name])
 
 
-def _read_table(path: Path) -> dict[str, np.ndarray]:
-    """Column name -> float values of a CSV or Parquet file (pyarrow)."""
-    try:
-        if path.suffix.lower() in (".parquet", ".pq"):
-            table = pq.read_table(path)
-        else:
-            table = pacsv.read_csv(path)
-    except (OSError, pa.ArrowInvalid) as exc:
-        raise ParameterError(f"{path.name}: cannot read as "
-                             f"{'Parquet' if path.suffix.lower() in ('.parquet', '.pq') else 'CSV'}"
-                             f": {str(exc).splitlines()[0]}") from None
-    out = {}
-    for name in table.column_names:
-        column = table.column(name)
-        if not (pa.types.is_floating(column.type) or pa.types.is_integer(column.type)):
-            raise ParameterError(f"{path.name} column {name!r}: holds {column.type}, not "
-                                 "numbers")
-        out[name] = column.to_numpy(zero_copy_only=False).astype(float)   # nulls -> NaN
-    return out
-
-
-def read_trace(path: str | Path, columns: Sequence[str] | None = None) -> Trace:
-    """Read a measured or input time series (see the module docstring).
-
-    Parameters
-    ----------
-    path : str or Path
-        CSV (one header row) or Parquet (``.parquet``) file.
-    columns : sequence of str, optional
-        SI names of the columns wanted (each must be there); default every column whose
-        header names a unit.
-
-    Returns
-    -------
-    Trace
-        Time and the columns in SI. ParameterError naming the file and column for a
-        missing file or column, time not strictly increasing, or a non-finite value.
-    """
-    path = Path(path)
+def _read_table(path: Path) -> tuple[pa.Table, str]:
+    """The file's table (pyarrow: CSV, or Parquet for ``.parquet``/``.pq``) and the hex
+    SHA-256 of the bytes it was read from; ParameterError naming the file if it is none."""
     if not path.is_file():
         raise ParameterError(f"measured data file not found: {path}")
-    raw = _read_table(path)
-    headers: dict[str, str] = {}
-    values: dict[str, np.ndarray] = {}
-    for header, data in raw.items():
-        named = si_name(header)
-        if named is None:
-            continue
-        name, scale = named
-        if name in values:
-            raise ParameterError(f"{path.name}: columns {headers[name]!r} and {header!r} are "
-                                 f"both {name}")
-        headers[name], values[name] = header, data * scale
-    if TIME not in values:
-        raise ParameterError(f"{path.name}: no time column 't_s' (or 't [s]', 't [ms]'); "
-                             f"columns: {', '.join(raw)}")
-    trace = Trace(path.name, values.pop(TIME), values, headers)
-    wanted = list(values) if columns is None else list(columns)
-    trace.require(wanted)
+    data = path.read_bytes()
+    parquet = path.suffix.lower() in (".parquet", ".pq")
+    try:
+        table = (pq.read_table(pa.BufferReader(data)) if parquet
+                 else pacsv.read_csv(pa.BufferReader(data)))
+    except (OSError, pa.ArrowInvalid) as exc:
+        raise ParameterError(f"{path.name}: cannot read as {'Parquet' if parquet else 'CSV'}"
+                             f": {str(exc).splitlines()[0]}") from None
+    return table, hashlib.sha256(data).hexdigest()
+
+
+def _numbers(file: str, header: str, column: pa.ChunkedArray) -> np.ndarray:
+    """A column's values as floats (nulls -> NaN); ParameterError naming the file and
+    column if it holds other than numbers."""
+    if not (pa.types.is_floating(column.type) or pa.types.is_integer(column.type)):
+        raise ParameterError(f"{file} column {header!r}: holds {column.type}, not numbers")
+    return column.to_numpy(zero_copy_only=False).astype(float)
+
+
+def _named(file: str, headers: Sequence[str], quantities: Mapping[str, Quantity]
+           ) -> tuple[dict[str, tuple[str, float]], tuple[str, ...]]:
+    """SI name -> (header, factor to SI) of the headers naming a quantity, and the headers
+    naming none; ParameterError naming the file and column for a refused header
+    (:func:`si_name`), two headers of one quantity or no time column."""
+    named: dict[str, tuple[str, float]] = {}
+    ignored = []
+    for header in headers:
+        try:
+            found = si_name(header, quantities)
+        except ValueError as exc:
+            raise ParameterError(f"{file} column {header!r}: {exc}") from None
+        if found is None:
+            ignored.append(header)
+        elif found[0] in named:
+            raise ParameterError(f"{file}: columns {named[found[0]][0]!r} and {header!r} are "
+                                 f"both {found[0]}")
+        else:
+            named[found[0]] = (header, found[1])
+    if TIME not in named:
+        raise ParameterError(f"{file}: no time column 't_s' (or 't [s]', 't [ms]', "
+                             f"'time_s'); columns: {', '.join(headers)}")
+    return named, tuple(ignored)
+
+
+def _checked(trace: Trace) -> Trace:
+    """``trace`` after checking it has two or more rows, finite values and strictly
+    increasing time (ParameterError naming the file and column)."""
     t = trace.t_s
     if len(t) < 2:
         raise ParameterError(f"{trace.where(TIME)}: {len(t)} row(s); a time series needs two "
                              "or more")
-    for name, data in ((TIME, t), *((n, values[n]) for n in wanted)):
+    for name, data in ((TIME, t), *trace.columns.items()):
         bad = ~np.isfinite(data)
         if bad.any():
             i = int(np.argmax(bad))
@@ -189,7 +393,43 @@ def read_trace(path: str | Path, columns: Sequence[str] | None = None) -> Trace:
         i = int(np.argmax(steps <= 0.0))
         raise ParameterError(f"{trace.where(TIME)}: time is not strictly increasing at row "
                              f"{i + 2} (t = {t[i + 1]:g} s after {t[i]:g} s)")
-    return Trace(trace.file, t, {n: values[n] for n in wanted}, headers)
+    return trace
+
+
+def read_trace(path: str | Path, columns: Sequence[str] | None = None,
+               quantities: Mapping[str, Quantity] | None = None) -> Trace:
+    """Read a measured time series (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV (one header row) or Parquet (``.parquet``) file.
+    columns : sequence of str, optional
+        SI names of the columns wanted (each must be there); default every column whose
+        header names a quantity.
+    quantities : mapping, optional
+        Base name -> quantity the headers may name (default :func:`log_quantities`).
+
+    Returns
+    -------
+    Trace
+        Time and the columns in SI, the headers as written, the ignored headers and the
+        file's SHA-256. ParameterError naming the file and column for a missing file or
+        column, a refused header, text in a quantity's column, time not strictly
+        increasing, or a non-finite value.
+    """
+    path = Path(path)
+    table, sha256 = _read_table(path)
+    named, ignored = _named(path.name, table.column_names,
+                            log_quantities() if quantities is None else quantities)
+    headers = {name: header for name, (header, _) in named.items()}
+    wanted = [n for n in named if n != TIME] if columns is None else list(columns)
+    Trace(path.name, np.empty(0), {}, headers, ignored, sha256).require(wanted)
+    raw = dict(zip(table.column_names, table.columns, strict=True))
+    values = {name: _numbers(path.name, header, raw[header]) * factor
+              for name, (header, factor) in named.items()}
+    return _checked(Trace(path.name, values[TIME], {n: values[n] for n in wanted}, headers,
+                          ignored, sha256))
 
 
 def run_grid(duration_s: float) -> np.ndarray:
@@ -206,22 +446,56 @@ def resample(trace: Trace, duration_s: float) -> dict[str, np.ndarray]:
     return {TIME: t} | {name: trace.resample(name, t) for name in trace.columns}
 
 
+def log_record(file: str, sha256: str, used: Mapping[str, str],
+               ignored: Sequence[str]) -> dict[str, Any]:
+    """A log's JSON-ready record: ``{"file", "sha256", "columns_used": {SI name: header as
+    written}, "columns_ignored": [header, ...]}``."""
+    return {"file": file, "sha256": sha256, "columns_used": dict(used),
+            "columns_ignored": list(ignored)}
+
+
+@dataclass(frozen=True)
+class MeasuredLog:
+    """A measured log a run is compared with: ``file`` (its name), ``sha256`` (hex, of the
+    file's bytes), ``columns`` (SI name -> values on the run's 1 ms grid, shape (steps,),
+    ``t_s`` included), ``used`` (SI name -> the header as written, time excluded) and
+    ``ignored`` (the headers as written that name no quantity)."""
+
+    file: str
+    sha256: str
+    columns: dict[str, np.ndarray]
+    used: dict[str, str]
+    ignored: tuple[str, ...]
+
+    def record(self) -> dict[str, Any]:
+        """JSON-ready ``{"file", "sha256", "columns_used", "columns_ignored"}``
+        (:func:`log_record`)."""
+        return log_record(self.file, self.sha256, self.used, self.ignored)
+
+
 def load_measured(path: str | Path, duration_s: float,
-                  run_columns: Sequence[str]) -> dict[str, np.ndarray]:
-    """A measured log to compare a run of ``duration_s`` [s] with: its columns that name a
-    unit, each one of ``run_columns`` (the run's own names), on the run's 1 ms grid
-    (``t_s`` included). ParameterError naming the file and column for a column the run
-    does not record, or a log that does not cover the run."""
-    trace = read_trace(path)
+                  run_columns: Sequence[str]) -> MeasuredLog:
+    """A measured log to compare a run of ``duration_s`` [s] with: its columns naming a
+    quantity, each one of ``run_columns`` (the run's own SI names, which are quantities
+    too), on the run's 1 ms grid. ParameterError naming the file and column for a refused
+    header, a column the run does not record, no column to compare, or a log that does not
+    cover the run."""
+    trace = read_trace(path, quantities=log_quantities(run_columns))
     for name in trace.columns:
         if name not in run_columns:
             raise ParameterError(f"{trace.where(name)}: {name} is not a column of the run "
                                  f"(compared by the run's own names: "
                                  f"{', '.join(c for c in run_columns if c != TIME)})")
     if not trace.columns:
-        raise ParameterError(f"{trace.file}: no column to compare besides t_s")
-    return resample(trace, duration_s)
+        ignored = f" (ignored: {', '.join(trace.ignored)})" if trace.ignored else ""
+        raise ParameterError(f"{trace.file}: no column to compare besides "
+                             f"{trace.headers[TIME]!r}{ignored}; name columns as the run "
+                             "does, with their unit (tension_N, p_head [psi])")
+    return MeasuredLog(trace.file, trace.sha256, resample(trace, duration_s),
+                       {name: trace.headers[name] for name in trace.columns}, trace.ignored)
 
+
+# ----------------------------------------------------------------------------- inputs
 
 @dataclass(frozen=True)
 class InputSignal:
@@ -254,35 +528,77 @@ class InputSignal:
                                  f"(0 .. {duration_s:g} s)")
 
 
+def input_reading(header: str, si_unit: str) -> tuple[str, float]:
+    """(base, factor to ``si_unit``) of an input column's header (any name): ``F_ref [kN]``
+    -> ("F_ref", 1e3); ``speed_mm_s`` in m/s -> ("speed", 1e-3), the rightmost split whose
+    unit has the input's dimension. ValueError saying why for none."""
+    match = _BRACKET.match(header)
+    splits = ([(match["name"].strip().replace(" ", "_"), match["unit"].strip())] if match
+              else _splits(header))
+    errors = []
+    for base, unit in splits:
+        try:
+            return base, si_factor(unit, si_unit)
+        except ValueError as exc:
+            errors.append(exc)
+    raise errors[0] if errors else ValueError("names no unit")
+
+
+def _input_column(file: str, headers: Sequence[str], column: str | None, suffix: str,
+                  what: str) -> tuple[str, float]:
+    """(header, factor to SI) of the input's column among ``headers`` (time excluded):
+    ``column`` as written or by its SI name (``F_ref_N`` for ``F_ref [kN]``), default the
+    only one. ParameterError naming the file and column otherwise."""
+    si_unit = SI_SUFFIXES[suffix]
+    if column is None:
+        if len(headers) != 1:
+            raise ParameterError(f"{file} ({what}): has {len(headers)} columns besides time "
+                                 f"({', '.join(headers) or 'none'}); name one with "
+                                 "column = ...")
+        header = headers[0]
+    elif column in headers:
+        header = column
+    else:
+        by_si = {}
+        for h in headers:
+            try:
+                by_si[f"{input_reading(h, si_unit)[0]}_{suffix}"] = h
+            except ValueError:
+                continue
+        if column not in by_si:
+            raise ParameterError(f"{file} ({what}): no column {column!r} (has: "
+                                 f"{', '.join(headers) or 'none'})")
+        header = by_si[column]
+    try:
+        return header, input_reading(header, si_unit)[1]
+    except ValueError as exc:
+        raise ParameterError(f"{file} column {header!r} ({what}): {exc}; "
+                             f"{expects(what, si_unit)}") from None
+
+
 def input_signal(path: str | Path, column: str | None, suffix: str,
                  what: str) -> InputSignal:
-    """Read one input column (SI name or header as written, e.g. ``F_ref [kN]``; default the
-    file's only column besides time) whose unit is SI ``suffix`` (``N``, ``Pa``, ``m_s``).
+    """Read one input column (header as written, e.g. ``F_ref [kN]``, or its SI name
+    ``F_ref_N``; default the file's only column besides time) whose unit must have the
+    dimension of SI ``suffix`` (``N``, ``Pa``, ``m_s``; :data:`SI_SUFFIXES`).
 
-    ParameterError naming the file and column for a missing column, another unit, or what
-    :func:`read_trace` refuses; ``what`` names the input in messages."""
-    trace = read_trace(path, [])
-    named = {name: header for name, header in trace.headers.items() if name != TIME}
-    if column is None:
-        if len(named) != 1:
-            raise ParameterError(f"{trace.file} ({what}): has {len(named)} signal columns "
-                                 f"({', '.join(named.values()) or 'none'}); name one with "
-                                 "column = ...")
-        name = next(iter(named))
-    else:
-        by_header = {header: name for name, header in named.items()}
-        name = by_header.get(column, column)
-        if name not in named:
-            raise ParameterError(f"{trace.file} ({what}): no column {column!r} (has: "
-                                 f"{', '.join(named.values()) or 'none'})")
-    if not name.endswith("_" + suffix):
-        raise ParameterError(f"{trace.file} column {named[name]!r} ({what}): is in "
-                             f"{name.rpartition('_')[2]}; {what} needs a unit of {suffix} "
-                             f"(e.g. {what.split()[0]}_{suffix} or a unit in brackets)")
-    trace = read_trace(path, [name])
+    ParameterError naming the file and column for a missing column, a unit pint does not
+    know or of another dimension, or what :func:`read_trace` refuses; ``what`` names the
+    input in messages."""
+    path = Path(path)
+    table, sha256 = _read_table(path)
+    time_names = {base: Quantity(TIME, "s") for base in TIME_NAMES}
+    named, others = _named(path.name, table.column_names, time_names)
+    header, factor = _input_column(path.name, others, column, suffix, what)
+    raw = dict(zip(table.column_names, table.columns, strict=True))
+    time_header, time_factor = named[TIME]
+    trace = _checked(Trace(path.name, _numbers(path.name, time_header, raw[time_header])
+                           * time_factor,
+                           {header: _numbers(path.name, header, raw[header]) * factor},
+                           {TIME: time_header, header: header}, others, sha256))
     if trace.t_s[0] > COUPLING_STEP_S + COVER_TOLERANCE_S:
         raise ParameterError(f"{trace.where(TIME)} ({what}): starts at {trace.t_s[0]:g} s; "
                              f"an input must start by {COUPLING_STEP_S:g} s")
     t = COUPLING_STEP_S * np.arange(0, int(np.floor(trace.t_s[-1] / COUPLING_STEP_S
                                                       + 1e-9)) + 1)
-    return InputSignal(trace.file, named[name], t, trace.resample(name, t))
+    return InputSignal(trace.file, header, t, trace.resample(header, t))

@@ -37,6 +37,16 @@ the noise-only ones; without it the true values fell outside in one of two noise
 Both terms assume the model is the plant: a model error leaves correlated residuals and
 the intervals are then too narrow.
 
+Logs are read as a run's measured logs (:func:`trackmj.results.measured.read_trace`):
+headers in any unit pint knows of the column's dimension (``p_head [psi]``,
+``tension_lbf``, ``stroke [in]``), converted to SI; a fitted or command column in an unknown
+or misfitting unit is refused naming the file and the column (exit 2). ``calibration.json``
+records each log (``logs``: path, file name, SHA-256, ``columns_used`` {SI name: header} and
+``columns_ignored``: every header the fit does not use, naming no quantity or one it does
+not fit) and each estimate's unit (``units.estimates``, the unit its file declares);
+``calibration.png`` shows the estimates in those units, and per channel the measured trace
+behind the start and fitted runs with the residual measured − fitted below it.
+
 The spec file (which keys, within which bounds, under which conditions) is
 :mod:`trackmj.study.calibrate_spec`.
 """
@@ -49,7 +59,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -58,7 +68,8 @@ from scipy.stats import t as student_t
 
 from trackmj.errors import PhysicsError
 from trackmj.ports import COLUMN_UNITS, COUPLING_STEP_S, Command, Readout
-from trackmj.results.measured import Trace, read_trace, run_grid
+from trackmj.results.columns import display_unit, key_unit
+from trackmj.results.measured import TIME, Trace, log_record, read_trace, run_grid
 from trackmj.results.store import ResultWriter
 from trackmj.sim.architectures import assemble
 from trackmj.sim.observers import PhysicsGuard, capture_mujoco_warnings
@@ -67,6 +78,9 @@ from trackmj.sim.setup import RunSetup, overrides_by_kind, prepare
 from trackmj.study.calibrate_spec import CalibrateTable, load_spec
 from trackmj.study.executor import Executor
 from trackmj.validator import ParameterError
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 FIT_CHANNELS = ("tension_N", "p_head_Pa", "p_rod_Pa", "stroke_m")
 """Log columns the fit compares with the replayed run (any subset, at least one)."""
@@ -78,23 +92,33 @@ CONFIDENCE = 0.95
 @dataclass(frozen=True)
 class Log:
     """One measured log on the run's grid: the valve command replayed and the channels
-    compared, shape (steps,) each."""
+    compared, shape (steps,) each; the file's name and SHA-256, the columns used (SI name
+    -> header as written) and the headers the fit does not use (naming no quantity, or a
+    quantity it does not fit)."""
 
     file: str
     mode: np.ndarray
     u: np.ndarray
     channels: dict[str, np.ndarray]
+    sha256: str
+    used: dict[str, str]
+    ignored: tuple[str, ...]
+
+    def record(self) -> dict[str, Any]:
+        """JSON-ready ``{"file", "sha256", "columns_used", "columns_ignored"}``."""
+        return log_record(self.file, self.sha256, self.used, self.ignored)
 
 
 def load_log(path: str | Path, duration_s: float) -> Log:
-    """Read a log for a fit of ``duration_s`` [s]: it needs ``valve_mode`` and at least one
+    """Read a log for a fit of ``duration_s`` [s] (headers parsed and converted to SI by
+    :func:`trackmj.results.measured.read_trace`): it needs ``valve_mode`` and at least one
     of :data:`FIT_CHANNELS`; ParameterError naming the file and column otherwise."""
     trace = read_trace(path)
     trace.require(["valve_mode"])
     channels = [c for c in FIT_CHANNELS if c in trace.columns]
     if not channels:
         raise ParameterError(f"{trace.file}: no channel to fit; give one or more of "
-                             f"{', '.join(FIT_CHANNELS)} (or with units, e.g. p_head [MPa])")
+                             f"{', '.join(FIT_CHANNELS)} (or with units, e.g. p_head [psi])")
     trace.check_covers(duration_s, "the calibration")
     mode = held(trace, "valve_mode", duration_s)
     bad = ~np.isin(mode, (-1.0, 0.0, 1.0))
@@ -104,8 +128,10 @@ def load_log(path: str | Path, duration_s: float) -> Log:
                                  run_grid(duration_s)[np.argmax(bad)]))
     u = held(trace, "u", duration_s) if "u" in trace.columns else mode.copy()
     t = run_grid(duration_s)
-    return Log(trace.file, mode.astype(int), u,
-               {c: trace.resample(c, t) for c in channels})
+    used = {n: trace.headers[n] for n in ("valve_mode", "u", *channels) if n in trace.columns}
+    unused = tuple(h for n, h in trace.headers.items() if n != TIME and n not in used)
+    return Log(trace.file, mode.astype(int), u, {c: trace.resample(c, t) for c in channels},
+               trace.sha256, used, trace.ignored + unused)
 
 
 def held(trace: Trace, name: str, duration_s: float) -> np.ndarray:
@@ -435,8 +461,11 @@ def calibrate(spec_path: str | Path, logs: Sequence[str | Path], out: str | Path
         Measured logs (:mod:`trackmj.results.measured`): ``t_s``, ``valve_mode`` (``u``
         optional) and any of :data:`FIT_CHANNELS`.
     out : str or Path
-        Output directory: ``calibration.json`` (estimates, 95 % intervals, residual RMS
-        per channel [SI], every run made) and ``calibration.png`` (measured vs fitted).
+        Output directory: ``calibration.json`` (estimates with their units, 95 %
+        intervals, residual RMS per channel [SI], every run made, and per log its
+        ``path``, ``file``, ``sha256``, ``columns_used`` {SI name: header} and
+        ``columns_ignored``: the headers the fit does not use) and ``calibration.png``
+        (measured against start and fitted, and the residual, per channel and log).
     workers : int, optional
         Dask workers for the Latin-hypercube start (default one per core).
 
@@ -459,9 +488,11 @@ def calibrate(spec_path: str | Path, logs: Sequence[str | Path], out: str | Path
         fitted_sim = problem.simulate(result["estimates"])
         doc = {"spec": str(spec_path), "scenario": scenario, "duration_s": spec.duration_s,
                "seed": spec.seed, "architecture": spec.architecture, "start_s": spec.start_s,
-               "logs": [str(p) for p in logs], "start": start,
-               "confidence": CONFIDENCE, **result,
-               "units": {"residual_rms": {c: _unit(c) for c in FIT_CHANNELS}},
+               "logs": [log.record() | {"path": str(p)} for log, p in zip(loaded, logs,
+                                                                          strict=True)],
+               "start": start, "confidence": CONFIDENCE, **result,
+               "units": {"residual_rms": {c: _unit(c) for c in FIT_CHANNELS},
+                         "estimates": {key: key_unit(key) for key in problem.keys}},
                "runs": problem.runs, "wall_time_s": time.perf_counter() - wall}
         writer.commit_files(
             {CALIBRATION_JSON: (json.dumps(doc, indent=2, sort_keys=True) + "\n").encode()},
@@ -497,16 +528,103 @@ def _unit(column: str) -> str:
     return COLUMN_UNITS[column]
 
 
+
+MEASURED_COLOUR = "#E69F00"
+"""The log's trace on the calibration figure: wide and behind the simulated ones."""
+START_COLOUR = "#0072B2"
+RESIDUAL_MEAN_COLOUR = "#D55E00"
+RESIDUAL_MEAN_S = 0.05
+"""The residual panels draw the 1 ms residual and its means over 50 ms: a model error
+shows as a drift of the means, sensor noise averages out of them."""
+
+
+def estimate_lines(doc: Mapping[str, Any]) -> list[str]:
+    """One line per fitted key: estimate and 95 % interval in the key's display unit
+    (:func:`trackmj.results.columns.display_unit` of the unit its file declares)."""
+    lines = []
+    for key, value in doc["estimates"].items():
+        scale, unit = display_unit(doc["units"]["estimates"][key])
+        low, high = doc["intervals"][key]
+        unit = "" if unit in ("", "1") else f" {unit}"
+        bound = ", at a bound" if doc["at_bound"][key] else ""
+        lines.append(f"{key} = {value * scale:.4g}{unit}   (95 %: {low * scale:.4g} .. "
+                     f"{high * scale:.4g}{unit}; start {doc['start'][key] * scale:.4g}{unit}"
+                     f"{bound})")
+    return lines
+
+
 def _figure(logs: Sequence[Log], start: Sequence[Mapping[str, np.ndarray]],
             fitted: Sequence[Mapping[str, np.ndarray]], doc: Mapping[str, Any],
             path: Path) -> Path:
-    # matplotlib (which the figure module switches to Agg) is heavy: loaded only to draw
-    from trackmj.results.figure_compare import calibration_figure
+    """calibration.png: per log a column, per channel the measured trace (wide, behind),
+    the start and the fitted run (thin, on top) and below it the residual measured −
+    fitted with its RMS over the fitted samples; the estimates with units in the title."""
+    # local: matplotlib (the figure modules switch it to Agg) is heavy: loaded only to draw
+    import matplotlib.pyplot as plt
 
-    est = "\n".join(f"{k} = {v:.4g}, 95 % [{lo:.4g}, {hi:.4g}]"
-                     for (k, v), (lo, hi) in zip(doc["estimates"].items(),
-                                                 doc["intervals"].values(), strict=True))
-    title = f"calibration on {Path(str(doc['scenario'])).name}, {doc['duration_s']:g} s\n{est}"
-    panels = [(log.file, log.channels, s, f) for log, s, f in zip(logs, start, fitted,
-                                                                   strict=True)]
-    return calibration_figure(run_grid(float(doc["duration_s"])), panels, title, path)
+    from trackmj.results.figure_compare import CHANNEL_DISPLAY
+    from trackmj.results.figure_style import legend_above, save_png
+
+    t = run_grid(float(doc["duration_s"]))
+    names = [c for c in CHANNEL_DISPLAY if any(c in log.channels for log in logs)]
+    lines = estimate_lines(doc)
+    fig, axes = plt.subplots(2 * len(names), len(logs), squeeze=False, sharex=True,
+                             figsize=(max(9.0, 7.0 * len(logs)), 3.0 * len(names) + 0.9
+                                      + 0.2 * len(lines)),
+                             height_ratios=[2.0, 1.0] * len(names), layout="constrained")
+    for j, (log, s, f) in enumerate(zip(logs, start, fitted, strict=True)):
+        for i, channel in enumerate(names):
+            ax, ax_res = axes[2 * i][j], axes[2 * i + 1][j]
+            label, scale = CHANNEL_DISPLAY[channel]
+            if channel in log.channels:
+                _channel_panels(ax, ax_res, t, label, scale,
+                                (log.channels[channel], s[channel], f[channel]),
+                                float(doc["start_s"]))
+            else:
+                ax.text(0.5, 0.5, f"no {channel} in this log", ha="center", va="center",
+                        transform=ax.transAxes, fontsize=9, color="0.4")
+                ax.set_yticks([])
+                ax_res.set_yticks([])
+        axes[0][j].set_title(f"log {log.file} (sha256 {log.sha256[:12]})", fontsize=9,
+                             loc="right")
+        axes[-1][j].set_xlabel("time [s]")
+    legend_above(next(ax for ax in axes[0] if ax.lines), ncol=3)
+    fig.suptitle(f"calibration on {Path(str(doc['scenario'])).name}, {doc['duration_s']:g} "
+                 f"s, seed {doc['seed']}, {doc['architecture']}\n" + "\n".join(lines),
+                 fontsize=9)
+    return save_png(fig, path)
+
+
+def _channel_panels(ax: Axes, ax_res: Axes, t: np.ndarray, label: str, scale: float,
+                    traces: tuple[np.ndarray, np.ndarray, np.ndarray], start_s: float) -> None:
+    """One channel: measured, start and fitted on ``ax``; measured − fitted on ``ax_res``
+    (display ``label`` "name [unit]" and ``scale`` from SI; ``traces`` SI, shape (steps,))."""
+    measured, start, fitted = (x * scale for x in traces)
+    ax.plot(t, measured, color=MEASURED_COLOUR, lw=2.4, alpha=0.75, zorder=1,
+            label="measured")
+    ax.plot(t, start, color=START_COLOUR, ls=(0, (1, 1.5)), lw=1.0, zorder=2,
+            label="fit start")
+    ax.plot(t, fitted, color="black", ls=(0, (5, 2)), lw=0.9, zorder=3, label="fitted")
+    ax.set_ylabel(label)
+    residual = measured - fitted
+    fit = t >= start_s
+    rms = float(np.sqrt(np.mean(residual[fit] ** 2)))
+    unit = label[label.index("[") + 1: label.index("]")]
+    m = max(1, round(RESIDUAL_MEAN_S / COUPLING_STEP_S))
+    k = len(t) // m * m
+    ax_res.plot(t, residual, color="0.55", lw=0.5)
+    ax_res.plot(t[:k].reshape(-1, m).mean(axis=1), residual[:k].reshape(-1, m).mean(axis=1),
+                color=RESIDUAL_MEAN_COLOUR, lw=1.4)
+    ax_res.axhline(0.0, color="black", lw=0.6)
+    ax_res.set_ylabel(f"meas. − fitted\n[{unit}]", fontsize=9)
+    ax_res.text(0.995, 0.95, f"RMS {rms:.3g} {unit}; red: {RESIDUAL_MEAN_S * 1e3:g} ms means",
+                transform=ax_res.transAxes,
+                ha="right", va="top", fontsize=8,
+                bbox=dict(facecolor="white", edgecolor="none", alpha=0.8, pad=1.0))
+    if start_s > 0.0:
+        for a in (ax, ax_res):
+            a.axvspan(float(t[0]), start_s, color="0.9", zorder=0, lw=0)
+        ax_res.text(0.5 * start_s, 0.95, "not fitted", ha="center", va="top", fontsize=8,
+                    transform=ax_res.get_xaxis_transform())
+    for a in (ax, ax_res):
+        a.grid(alpha=0.3)
