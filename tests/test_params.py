@@ -81,10 +81,12 @@ def test_cross_field_checks_name_file_table_and_key(tmp_path) -> None:
 
 def test_cli_reports_bad_file_without_traceback(tmp_path, capsys) -> None:
     path = _variant(tmp_path, "pitch_m = 0.075", "pitch_m = 7.5")
-    assert main(["model", "generate", "--params", str(path), "--out",
+    assert main(["model", "generate", "--model", str(path), "--out",
                  str(tmp_path / "x.xml")]) == 2
     err = capsys.readouterr().err
     assert "pitch_m = 7.5" in err and "Traceback" not in err
     assert not (tmp_path / "x.xml").exists()
-    assert main(["drive", "--model", str(tmp_path / "missing.xml")]) == 2
+    assert main(["drive", "--mjcf", str(tmp_path / "missing.xml")]) == 2
     assert "model file not found" in capsys.readouterr().err
+    assert main(["drive", "--model", str(tmp_path / "missing.toml")]) == 2
+    assert "missing.toml" in capsys.readouterr().err

@@ -8,7 +8,10 @@ argument errors import this module and must stay fast.
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from trackmj.cli.summary import tensioner_line
@@ -16,6 +19,7 @@ from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.validator import ParameterError, parse_overrides
 
 if TYPE_CHECKING:
+    from trackmj.track.mjcf.geometry import Span
     from trackmj.track.plant import TrackPlant
 
 
@@ -39,7 +43,7 @@ def cmd_model_info(args: argparse.Namespace) -> int:
     from trackmj.machines.track_plant import load_plant
     from trackmj.track.mjcf.structure import structure_text
 
-    plant = load_plant(args.model, args.params, machine=args.machine,
+    plant = load_plant(args.mjcf, args.model, machine=args.machine,
                        overrides=model_overrides(args.set))
     m, d = plant.model, plant.data
     p = plant.params
@@ -105,14 +109,26 @@ def _geometry_rows(plant: TrackPlant) -> list[tuple[str, str]]:
     ]
     pins = plant.pins_layout_frame()
     upper_N = float(plant.pin_tensions_N()[plant.upper_strand_pins()].mean())
+    supports = _upper_strand_supports(plant)
+    sagged = False
     for s in g.spans:
         text = f"{s.start} -> {s.end}: {s.length_m * 1e3:.0f} mm"
         sag, chord = measured_sag_m(s, pins, p.track.pitch_m) if s.upper else (0.0, 0.0)
         if chord > 0.0:
+            sagged = True
             text += (f", sag at home {sag * 1e3:.1f} mm over {chord * 1e3:.0f} mm (shallow "
                      f"catenary at the home tension "
                      f"{catenary_sag_m(p, s, upper_N, chord) * 1e3:.1f} mm)")
+            text += _span_supports(s, supports)
         rows.append(("upper span" if s.upper else "lower span", text))
+    if sagged:
+        per_m = p.track.link_mass_kg / p.track.pitch_m * p.simulation.gravity_m_s2
+        rows += [("", "sag at home: the pins' largest drop below the chord through the "
+                      "first and last pins inside the span, in the settled home keyframe"),
+                 ("", "catenary: the sag of that chord hanging free between its ends under "
+                      f"the track's own weight only, w·L²·cos θ/(8·T) with w {per_m / 1e3:.2f} "
+                      f"kN/m, T {upper_N / 1e3:.2f} kN (mean upper-strand pin tension at "
+                      "home); a span resting on wheels between its ends sags less")]
     rows += [
         ("weight this side", f"{weight / 1e3:.2f} kN (Σ ground normal force at home "
                              f"{ground / 1e3:.2f} kN)"),
@@ -121,6 +137,45 @@ def _geometry_rows(plant: TrackPlant) -> list[tuple[str, str]]:
                                   f"factor {g.idler_factor:.4f}; frictionless idler)"),
     ]
     return rows
+
+
+def _upper_strand_supports(plant: TrackPlant) -> list[tuple[str, float, float]]:
+    """What carries the upper strand at its current state besides its end wheels: (body,
+    x [m] of the pin it carries in the layout frame, contact normal force [N]) of every
+    contact between an upper-strand link and a body that is not a link."""
+    # start-up: --help and argument errors must not import MuJoCo (nor NumPy)
+    import mujoco
+    import numpy as np
+
+    from trackmj.track.mjcf.names import link_name
+
+    m, d = plant.model, plant.data
+    link_of_body = {m.body(link_name(k)).id: k for k in range(plant.link_count)}
+    upper = set(plant.upper_strand_pins().tolist())
+    x = plant.pins_layout_frame()[:, 0]
+    wrench = np.zeros(6)
+    found = []
+    for i in range(d.ncon):
+        bodies = (int(m.geom_bodyid[d.contact[i].geom1]), int(m.geom_bodyid[d.contact[i].geom2]))
+        links = [link_of_body[b] for b in bodies if b in link_of_body]
+        others = [b for b in bodies if b not in link_of_body]
+        if len(links) == 1 and others and links[0] in upper:
+            mujoco.mj_contactForce(m, d, i, wrench)
+            found.append((m.body(others[0]).name, float(x[links[0]]), float(wrench[0])))
+    return found
+
+
+def _span_supports(span: Span, supports: list[tuple[str, float, float]]) -> str:
+    """"; rests on WHEEL, ... (F kN)" for the ``supports`` inside ``span`` other than its
+    end wheels; empty for a free span."""
+    lo, hi = sorted((span.points[0][0], span.points[1][0]))
+    inside = [(name, force) for name, x, force in supports
+              if lo < x < hi and name not in (span.start, span.end)]
+    if not inside:
+        return ""
+    names = list(dict.fromkeys(name for name, _ in inside))
+    return (f"; not a free span: it rests on {', '.join(names)} "
+            f"({sum(f for _, f in inside) / 1e3:.2f} kN at home)")
 
 
 def cmd_model_generate(args: argparse.Namespace) -> int:
@@ -136,10 +191,11 @@ def cmd_model_generate(args: argparse.Namespace) -> int:
     if out is None:
         raise ValueError(f"machine {machine.name} has no reference_mjcf in "
                          f"{machine.file.name}: give --out FILE.xml")
-    params = load_model_params(args.params or machine.mechanics,
+    params = load_model_params(args.model or machine.mechanics,
                                overrides=model_overrides(args.set))
-    path = write_model(out, params, machine.name)
-    print(f"wrote {path}")
+    scene = write_model(out, params, machine.name)
+    print(f"wrote {out} (the machine part)")
+    print(f"wrote {scene} (the scene including it: the file to load)")
     return 0
 
 
@@ -159,14 +215,17 @@ def cmd_machines(args: argparse.Namespace) -> int:
 
 
 def cmd_drive(args: argparse.Namespace) -> int:
-    """``trackmj drive``: the track driven with the passive tensioner; exit code 1 if MuJoCo
-    warned or a derailment check failed."""
+    """``trackmj drive``: the track driven with the passive tensioner; exit code 0 when
+    healthy, 1 if MuJoCo warned or a derailment check failed (2 for bad input and 3 for a
+    run that leaves physics, from :func:`trackmj.cli.main.main`)."""
     # start-up: --help and argument errors must not import MuJoCo
     from trackmj.sim.drive import drive
 
-    result = drive(args.speed, args.duration, model=args.model, params=args.params,
-                   preload_N=args.preload, out_dir=args.out, tensioner=args.tensioner,
-                   machine=args.machine, overrides=model_overrides(args.set))
+    overrides = model_overrides(args.set)
+    out = args.out or _drive_folder(args)
+    result = drive(args.speed, args.duration, model=args.model, mjcf=args.mjcf,
+                   preload_N=args.preload, out_dir=out, tensioner=args.tensioner,
+                   machine=args.machine, overrides=overrides)
     m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
     print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s: {m['real_time_factor']:.2f}x "
           f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
@@ -185,7 +244,89 @@ def cmd_drive(args: argparse.Namespace) -> int:
           f"; dKE {e['kinetic_change_J'] / 1e3:.3f}, dPE {e['potential_change_J'] / 1e3:.3f}, "
           f"residual {e['residual_J']:.2e} J")
     print(f"max pin gap        {m['max_pin_gap_m'] * 1e3:.3f} mm   MuJoCo warnings "
-          f"{m['mujoco_warnings']}   derailment checks failed {m['derailment_checks_failed']}")
-    if result.out_dir is not None:
-        print(f"wrote {result.out_dir}")
+          f"{m['mujoco_warnings']}")
+    for line in derailment_lines(m):
+        print(line)
+    print(f"wrote {result.out_dir} (metrics.json, timeseries.parquet, drive.png)")
     return 0 if m["mujoco_warnings"] == 0 and m["derailment_checks_failed"] == 0 else 1
+
+
+def _drive_folder(args: argparse.Namespace) -> str:
+    """Default folder of ``drive``: ``runs/drive-MACHINE-SPEED`` and the first 8 digits of
+    the SHA-256 of its other inputs (duration, preload, ``--set``, and the content of the
+    model, MJCF and tensioner files), so drives of other inputs never share a folder and a
+    drive of the same inputs replaces its old result."""
+    inputs: dict[str, object] = {"duration_s": args.duration, "preload_N": args.preload,
+                                 "set": sorted(args.set)}
+    for option in ("model", "mjcf", "tensioner", "machine"):
+        given = getattr(args, option)
+        if given is not None and Path(given).is_file():
+            inputs[option] = hashlib.sha256(Path(given).read_bytes()).hexdigest()
+        else:
+            inputs[option] = given
+    machine = args.machine or DEFAULT_MACHINE
+    digest = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:8]
+    return f"runs/drive-{Path(machine).stem}-{args.speed:g}mps-{digest}"
+
+
+CHECK_WORDS = {"slack_strand": "slack strand", "links_off_envelope": "links off envelope",
+               "sprocket_disengaged": "sprocket disengaged"}
+"""The derailment checks in the drive summary's words, in the order of its table."""
+
+
+def derailment_lines(metrics: dict) -> list[str]:
+    """The drive summary's derailment lines from its metrics (display units kN, mm): how
+    many checks failed and the first failure, then one line per check, the failing ones
+    first in the order they first failed: when and where it first failed, how often, its
+    worst; a passing check's worst value (its margin)."""
+    table = metrics["derailment"]
+    failed, checks = metrics["derailment_checks_failed"], metrics["derailment_checks"]
+    order = sorted(CHECK_WORDS, key=lambda c: (table[c]["first_s"] is None,
+                                               table[c]["first_s"] or 0.0))
+    head = (f"derailment         {failed} of {checks} checks failed (every "
+            f"{metrics['derailment_check_interval_s']:g} s)")
+    if failed:
+        first = order[0]
+        head += f"; first: {CHECK_WORDS[first]} at {table[first]['first_s']:.2f} s"
+    lines = [head]
+    width = max(len(w) for w in CHECK_WORDS.values()) + 2
+    for check in order:
+        row, limit = table[check], _limit_text(check, table[check]["threshold"])
+        worst = row["worst"]
+        if worst is None:
+            text = "not checked (a run shorter than the check interval)"
+        elif row["failing_checks"]:
+            text = (f"FAILED first at {row['first_s']:.2f} s: "
+                    f"{_where_text(check, row['at_first'])} ({limit}); "
+                    f"{_checks(row['failing_checks'])}, last at {row['last_s']:.2f} s; worst "
+                    f"{_where_text(check, worst)} at {worst['t_s']:.2f} s")
+        else:
+            text = (f"passed; closest {_where_text(check, worst)} at {worst['t_s']:.2f} s "
+                    f"({limit})")
+        lines.append(f"  {CHECK_WORDS[check]:<{width}}{text}")
+    return lines
+
+
+def _checks(n: int) -> str:
+    return f"{n} check" if n == 1 else f"{n} checks"
+
+
+def _limit_text(check: str, threshold: float) -> str:
+    """When ``check`` fails, in display units."""
+    if check == "slack_strand":
+        return f"fails below {threshold / 1e3:.2f} kN"
+    if check == "links_off_envelope":
+        return f"fails above {threshold * 1e3:.0f} mm"
+    return f"fails below {threshold:.0f} pins"
+
+
+def _where_text(check: str, where: dict) -> str:
+    """What ``check`` measured and where (an ``at_first`` or ``worst`` entry)."""
+    if check == "slack_strand":
+        if where["pin"] is None:
+            return "no pin in the upper strand"
+        return f"upper-strand min tension {where['tension_N'] / 1e3:.2f} kN at pin {where['pin']}"
+    if check == "links_off_envelope":
+        return (f"pin {where['pin']}, {where['strand']}, {where['excursion_m'] * 1e3:.0f} mm "
+                f"outside (chassis frame x {where['x_m']:.2f} m, z {where['z_m']:.2f} m)")
+    return f"{where['seated_pins']} pins seated"

@@ -87,7 +87,7 @@ def load_machine(path: str | Path) -> Machine:
     data = read_toml(path)
     if "machine" not in data and "track" in data:
         raise ParameterError(f"{path.name} is a model parameter file, not a machine file: "
-                             "give it as --model (run, compare) or --params (drive, model), "
+                             "give it as --model, "
                              f"or write a machine file (*{MACHINE_SUFFIX}) naming it")
     table = build(MachineFile, data, file=path.name, require_source=False).machine
     return Machine(name=table.name, description=table.description, file=path,

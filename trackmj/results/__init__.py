@@ -16,5 +16,6 @@
 * :mod:`.figure_run`: the figure of one run;
 * :mod:`.figure_compare`: the figures that compare runs (overlay, spectra, variants, fit);
 * :mod:`.figure_sweep`: the figures of a sweep's results table;
+* :mod:`.figure_drive`: the figure of a bare-track drive (forces, strands, derailment checks);
 * :mod:`.playback`: the Rerun recording of a run.
 """

@@ -5,11 +5,20 @@ energy ledger (:mod:`trackmj.track.energy`) and a 1 kHz time series.
 Output directory (written whole or not at all: a temporary sibling directory renamed into
 place):
 
-- ``metrics.json``: run settings, ``real_time_factor`` (simulated / wall time of the whole
-  loop, ledger and recording included) and ``plant_real_time_factor`` (plant steps only),
-  the machine, the ``track_energy`` table [J], steady-state means and the health counts;
+- ``metrics.json``: run settings, the machine (the crawler's name) and its input files,
+  ``real_time_factor`` (simulated / wall time of the whole loop, ledger and recording
+  included) and ``plant_real_time_factor`` (plant steps only), the ``host`` computer, the
+  ``track_energy`` table [J], steady-state means, the health counts and the ``derailment``
+  table (:func:`derailment_table`);
 - ``timeseries.parquet``: one row per 1 ms step, SI, each column's unit in its Arrow field
-  metadata under ``unit`` (:data:`TIMESERIES_UNITS`).
+  metadata under ``unit`` (:data:`TIMESERIES_UNITS`);
+- ``drive.png``: idler force, strand tensions and the derailment indicators over time
+  (:func:`trackmj.results.figure_drive.drive_figure`).
+
+Derailment is checked every :data:`DERAILMENT_CHECK_S` (:meth:`TrackPlant.derailment`: three
+checks, and ``derailed`` when any fails). Its timeseries columns (:data:`DERAILMENT_UNITS`)
+hold each check's value from that check's row until the next check's (sample and hold), NaN
+before the first check; the flags are 1.0 when the check fails, else 0.0.
 """
 
 from __future__ import annotations
@@ -17,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,19 +36,37 @@ import pyarrow as pa
 
 from trackmj.elements.fmu import FmuElement
 from trackmj.elements.tensioner_file import load_tensioner
+from trackmj.errors import PhysicsError
 from trackmj.host import machine as host_machine
+from trackmj.machines.assembly import resolve
 from trackmj.machines.track_plant import load_plant
 from trackmj.ports import COUPLING_STEP_S, TensionerElement
+from trackmj.results.figure_drive import drive_figure
 from trackmj.results.store import ResultWriter, parquet_bytes
 from trackmj.track.energy import TrackEnergyLedger
-from trackmj.track.plant import PassiveTensioner, TrackPlant
+from trackmj.track.plant import DerailmentStatus, PassiveTensioner, TrackPlant
 
-TIMESERIES_UNITS: dict[str, str] = {
+STEP_UNITS: dict[str, str] = {
     "t_s": "s", "idler_force_N": "N", "stroke_m": "m", "stroke_velocity_m_s": "m/s",
     "track_speed_m_s": "m/s", "vehicle_speed_m_s": "m/s", "upper_strand_tension_N": "N",
     "lower_strand_tension_N": "N", "max_pin_gap_m": "m",
 }
-"""Columns of ``timeseries.parquet`` and their units."""
+"""Columns of ``timeseries.parquet`` recorded every step, and their units."""
+DERAILMENT_UNITS: dict[str, str] = {
+    "sprocket_seated_pins": "1", "envelope_excursion_max_m": "m", "envelope_worst_pin": "1",
+    "upper_strand_tension_min_N": "N", "upper_strand_slackest_pin": "1",
+    "sprocket_disengaged": "1", "links_off_envelope": "1", "slack_strand": "1", "derailed": "1",
+}
+"""Columns of ``timeseries.parquet`` sampled at each derailment check and held until the
+next (NaN before the first), and their units: the seated sprocket pins, the largest
+envelope excursion and its pin, the least upper-strand pin tension and its pin (0 N and pin
+NaN when no pin is in the upper strand: the strand check fails), and each check's flag
+(1 failing, 0 passing)."""
+TIMESERIES_UNITS: dict[str, str] = STEP_UNITS | DERAILMENT_UNITS
+"""Every column of ``timeseries.parquet`` and its unit."""
+DERAILMENT_CHECKS = ("slack_strand", "links_off_envelope", "sprocket_disengaged", "derailed")
+"""The checks of the ``derailment`` table, ``derailed`` last (any of the others fails)."""
+DRIVE_FIGURE = "drive.png"
 
 MAX_SPEED_M_S = 5.0
 MAX_DURATION_S = 3600.0
@@ -73,40 +101,54 @@ def _file_tensioner(path: str | Path, stroke_m: float
 
 
 def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = None,
-          params: str | Path | None = None, preload_N: float | None = None,
+          mjcf: str | Path | None = None, preload_N: float | None = None,
           out_dir: str | Path | None = None,
           tensioner: str | Path | None = None, machine: str | Path | None = None,
           overrides: dict[str, Any] | None = None) -> DriveResult:
     """Drive the track at ``speed_m_s`` [m/s] (ramped over min(1 s, duration/4)) for
     ``duration_s`` [s] with the passive tensioner (its ``preload_N`` [N] if given) or the
-    ``tensioner`` file's, and book the energy ledger from rest; write ``out_dir`` if given.
-    ``machine``, ``params`` (a model file replacing the machine's mechanics), ``overrides``
-    (``{dotted key: value}`` of the model file) and ``model`` (an MJCF file) as in
-    :func:`trackmj.machines.track_plant.load_plant`.
+    ``tensioner`` file's, book the energy ledger from rest and check derailment every
+    :data:`DERAILMENT_CHECK_S`; write ``out_dir`` (metrics, timeseries, figure) if given.
+    ``machine``, ``model`` (a model parameter TOML replacing the machine's mechanics),
+    ``overrides`` (``{dotted key: value}`` of the model file) and ``mjcf`` (an MJCF file)
+    as in :func:`trackmj.machines.track_plant.load_plant`.
 
     Raises ValueError for a speed outside [−5, 5] m/s or a duration outside (0, 3600] s,
-    ParameterError for a bad tensioner file (before any work), PhysicsError or FmuError if
-    an FMU tensioner leaves physics or fails.
+    ParameterError for a bad tensioner file (before any work), PhysicsError if the track
+    leaves physics, PhysicsError or FmuError if an FMU tensioner leaves physics or fails.
     """
     _check_drive(speed_m_s, duration_s, tensioner, preload_N)
-    plant = load_plant(model, params, machine=machine, overrides=overrides)
+    plant = load_plant(mjcf, model, machine=machine, overrides=overrides)
     element, described, passive_preload_N = _drive_tensioner(plant, tensioner, preload_N)
     ramp_s = min(1.0, duration_s / 4.0)
     steps = round(duration_s / COUPLING_STEP_S)
     ledger = TrackEnergyLedger(plant)
-    series, derailed, wall, plant_wall = _drive_loop(plant, element, ledger, speed_m_s,
-                                                     ramp_s, steps)
+    series, checks, wall, plant_wall = _drive_loop(plant, element, ledger, speed_m_s,
+                                                   ramp_s, steps)
+    rows = [row for row, _ in checks]
+    statuses = [status for _, status in checks]
+    series |= derailment_columns(rows, statuses, steps)
+    table = derailment_table([round(float(series["t_s"][row]), 6) for row in rows],
+                             statuses)   # to 1 µs: the sum of 1 ms steps drifts in the 16th digit
     energy = ledger.finish()
     metrics = {
         "speed_m_s": speed_m_s, "duration_s": duration_s, "ramp_s": ramp_s,
+        "machine": resolve(machine).name,
+        "model_file": None if model is None else str(model),
+        "mjcf_file": None if mjcf is None else str(mjcf),
+        "overrides": dict(overrides or {}),
         "tensioner": described,
         **({"preload_N": passive_preload_N} if passive_preload_N is not None else {}),
         "real_time_factor": duration_s / wall, "plant_real_time_factor": duration_s / plant_wall,
-        "wall_time_s": wall, "machine": host_machine(),
+        "wall_time_s": wall, "host": host_machine(),
         "track_energy": energy.to_dict(),
         "steady": _steady_means(series, ramp_s + 1.0 if duration_s > ramp_s + 1.0 else 0.0),
         "max_pin_gap_m": float(series["max_pin_gap_m"].max()),
-        "mujoco_warnings": plant.warning_count, "derailment_checks_failed": derailed,
+        "mujoco_warnings": plant.warning_count,
+        "derailment_check_interval_s": DERAILMENT_CHECK_S,
+        "derailment_checks": len(checks),
+        "derailment_checks_failed": table["derailed"]["failing_checks"],
+        "derailment": table,
     }
     out = write_drive(out_dir, metrics, series) if out_dir is not None else None
     return DriveResult(metrics, series, out)
@@ -143,14 +185,15 @@ def _drive_tensioner(plant: TrackPlant, tensioner: str | Path | None, preload_N:
 
 def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnergyLedger,
                 speed_m_s: float, ramp_s: float, steps: int
-                ) -> tuple[dict[str, np.ndarray], int, float, float]:
+                ) -> tuple[dict[str, np.ndarray], list[tuple[int, DerailmentStatus]], float,
+                           float]:
     """``steps`` coupling steps at the ramped sprocket speed, booking ``ledger``; returns
-    the time series (column -> (steps,), :data:`TIMESERIES_UNITS`), the failed derailment
-    checks, the loop's and the plant steps' wall times [s]. RuntimeError if the track
-    leaves physics (non-finite velocities)."""
-    series = {name: np.empty(steps) for name in TIMESERIES_UNITS}
+    the time series (column -> (steps,), :data:`STEP_UNITS`), the derailment checks (row,
+    status) every :data:`DERAILMENT_CHECK_S`, the loop's and the plant steps' wall times
+    [s]. PhysicsError if the track leaves physics (non-finite velocities)."""
+    series = {name: np.empty(steps) for name in STEP_UNITS}
     check_every = round(DERAILMENT_CHECK_S / COUPLING_STEP_S)
-    derailed = 0
+    checks: list[tuple[int, DerailmentStatus]] = []
     plant_wall = 0.0
     start = time.perf_counter()
     for k in range(steps):
@@ -165,13 +208,108 @@ def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnerg
                strands.lower_N, plant.closure_error_m)
         for column, value in zip(series.values(), row, strict=True):
             column[k] = value
-        if (k + 1) % check_every == 0 and plant.derailment().any:
-            derailed += 1
+        if (k + 1) % check_every == 0:
+            checks.append((k, plant.derailment()))
         if not np.isfinite(plant.data.qvel).all():
-            raise RuntimeError(f"drive: the track left physics at t = {plant.time_s:.3f} s "
+            raise PhysicsError(f"drive: the track left physics at t = {plant.time_s:.3f} s "
                                f"(non-finite velocities; MuJoCo warnings "
                                f"{plant.warning_count})")
-    return series, derailed, time.perf_counter() - start, plant_wall
+    return series, checks, time.perf_counter() - start, plant_wall
+
+
+def derailment_columns(rows: Sequence[int], statuses: Sequence[DerailmentStatus],
+                       steps: int) -> dict[str, np.ndarray]:
+    """The :data:`DERAILMENT_UNITS` columns, shape (steps,): each check's value (``statuses``
+    at the step indices ``rows``, ascending) held from its row to the next check's, NaN
+    before the first."""
+    values = {name: np.empty(len(statuses)) for name in DERAILMENT_UNITS}
+    for i, s in enumerate(statuses):
+        slackest = s.min_upper_strand_pin if s.min_upper_strand_pin >= 0 else math.nan
+        row = (s.seated_pins, s.max_envelope_excursion_m, s.worst_envelope_pin,
+               s.min_upper_strand_tension_N, slackest, s.sprocket_disengaged,
+               s.links_off_envelope, s.slack_strand, s.any)
+        for column, value in zip(values.values(), row, strict=True):
+            column[i] = float(value)
+    latest = np.searchsorted(np.asarray(rows, dtype=np.int64), np.arange(steps),
+                             side="right") - 1   # the last check at or before each row
+    checked = latest >= 0
+    out = {}
+    for name, v in values.items():
+        column = np.full(steps, math.nan)
+        column[checked] = v[latest[checked]]
+        out[name] = column
+    return out
+
+
+def _fails(check: str, s: DerailmentStatus) -> bool:
+    return s.any if check == "derailed" else bool(getattr(s, check))
+
+
+def _severity(check: str, s: DerailmentStatus) -> float:
+    """How bad ``check`` is in ``s``: the lower, the worse."""
+    if check == "sprocket_disengaged":
+        return s.seated_pins
+    if check == "links_off_envelope":
+        return -s.max_envelope_excursion_m
+    if check == "slack_strand":
+        return s.min_upper_strand_tension_N
+    return -sum(_fails(c, s) for c in DERAILMENT_CHECKS[:-1])
+
+
+def _where(check: str, s: DerailmentStatus, t_s: float) -> dict[str, Any]:
+    """What ``check`` measured in ``s`` at ``t_s`` [s] and where (pins, strand, SI)."""
+    if check == "sprocket_disengaged":
+        return {"t_s": t_s, "seated_pins": s.seated_pins}
+    if check == "links_off_envelope":
+        x, z = s.worst_envelope_xz_m
+        return {"t_s": t_s, "excursion_m": s.max_envelope_excursion_m,
+                "pin": s.worst_envelope_pin, "strand": s.worst_envelope_strand,
+                "x_m": x, "z_m": z}
+    if check == "slack_strand":
+        return {"t_s": t_s, "tension_N": s.min_upper_strand_tension_N,
+                "pin": s.min_upper_strand_pin if s.min_upper_strand_pin >= 0 else None,
+                "strand": "upper"}
+    return {"t_s": t_s, "failing": [c for c in DERAILMENT_CHECKS[:-1] if _fails(c, s)]}
+
+
+def _thresholds() -> dict[str, tuple[str, float | None]]:
+    """Each check's failing condition (words) and threshold (SI; None for ``derailed``)."""
+    p = TrackPlant
+    return {
+        "slack_strand": (f"upper-strand min pin tension < {p.SLACK_TENSION_N:g} N",
+                         p.SLACK_TENSION_N),
+        "links_off_envelope": (f"a pin > {p.ENVELOPE_THRESHOLD_M:g} m outside its home "
+                               "envelope (chassis frame)", p.ENVELOPE_THRESHOLD_M),
+        "sprocket_disengaged": (f"seated sprocket pins < {p.MIN_SEATED_PINS}",
+                                float(p.MIN_SEATED_PINS)),
+        "derailed": ("any of the other checks fails", None)}
+
+
+def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStatus]
+                     ) -> dict[str, dict[str, Any]]:
+    """The ``derailment`` table of metrics.json, one entry per check
+    (:data:`DERAILMENT_CHECKS`) of the ``statuses`` taken at ``times_s`` [s]: its failing
+    condition (``fails_when``, ``threshold`` SI), ``failing_checks`` (how many checks
+    failed), ``first_s`` and ``last_s`` (None when it never failed), what it measured and
+    where at its first failure (``at_first``, None when it never failed) and at its worst
+    over every check, passing or failing (``worst``: the margin of a healthy run; None
+    with no check)."""
+    table = {}
+    conditions = _thresholds()
+    for check in DERAILMENT_CHECKS:
+        words, threshold = conditions[check]
+        failing = [i for i, s in enumerate(statuses) if _fails(check, s)]
+        worst = (min(range(len(statuses)), key=lambda i: _severity(check, statuses[i]))
+                 if statuses else None)
+        table[check] = {
+            "fails_when": words, "threshold": threshold, "failing_checks": len(failing),
+            "first_s": times_s[failing[0]] if failing else None,
+            "last_s": times_s[failing[-1]] if failing else None,
+            "at_first": (_where(check, statuses[failing[0]], times_s[failing[0]])
+                         if failing else None),
+            "worst": None if worst is None else _where(check, statuses[worst],
+                                                       times_s[worst])}
+    return table
 
 
 def _steady_means(series: dict[str, np.ndarray], from_s: float) -> dict[str, float]:
@@ -188,15 +326,17 @@ def _steady_means(series: dict[str, np.ndarray], from_s: float) -> dict[str, flo
     return out
 
 
-def write_drive(out_dir: str | Path, metrics: dict, series: dict[str, np.ndarray]) -> Path:
-    """Write metrics.json and timeseries.parquet into ``out_dir`` as a whole, the same way a
-    run's result directory is written (:class:`trackmj.results.store.ResultWriter`: staged, locked
-    and swapped in)."""
+def write_drive(out_dir: str | Path, metrics: Mapping[str, Any],
+                series: Mapping[str, np.ndarray]) -> Path:
+    """Write metrics.json, timeseries.parquet and the figure (:data:`DRIVE_FIGURE`) into
+    ``out_dir`` as a whole, the same way a run's result directory is written
+    (:class:`trackmj.results.store.ResultWriter`: staged, locked and swapped in)."""
     fields = [pa.field(name, pa.float64(), metadata={"unit": TIMESERIES_UNITS[name]})
               for name in series]
     table = pa.Table.from_arrays([pa.array(v) for v in series.values()],
                                  schema=pa.schema(fields))
     with ResultWriter(out_dir) as writer:
-        return writer.commit_files({
-            "timeseries.parquet": parquet_bytes(table),
-            "metrics.json": (json.dumps(metrics, indent=2) + "\n").encode()})
+        return writer.commit_files(
+            {"timeseries.parquet": parquet_bytes(table),
+             "metrics.json": (json.dumps(metrics, indent=2) + "\n").encode()},
+            extras={DRIVE_FIGURE: lambda path: drive_figure(metrics, series, path)})

@@ -129,15 +129,29 @@ class PassiveTensioner:
                    params.idler.stroke_at_layout_m)
 
 
+STRANDS = ("upper", "lower run", "other")
+"""Where a pin is (:meth:`TrackPlant.pin_strand`): the upper strand, the sprocket's lower
+run (between the sprocket and its nearest road wheel), or elsewhere (the wraps round the
+sprocket and idler, the run under the road wheels)."""
+
+
 @dataclass(frozen=True)
 class DerailmentStatus:
-    """Indicators that the track is losing its guidance (all False when healthy)."""
+    """Indicators that the track is losing its guidance (all False when healthy), with where
+    each is worst. Pin indices k as in :meth:`TrackPlant.pin_tensions_N`; strands as in
+    :data:`STRANDS`; positions in the chassis frame at its layout pose
+    (:meth:`TrackPlant.pins_layout_frame`: x forward, z up from the ground line) [m]."""
 
     sprocket_disengaged: bool   # fewer than 2 pins seated on the sprocket pitch circle
     links_off_envelope: bool    # a pin is further than the threshold outside its home envelope
     slack_strand: bool          # upper-strand tension fell to what its own weight causes
     max_envelope_excursion_m: float
-    min_upper_strand_tension_N: float
+    min_upper_strand_tension_N: float   # 0 when no pin is in the upper strand
+    seated_pins: int            # pins seated on the sprocket pitch circle
+    worst_envelope_pin: int     # the pin furthest outside the home envelope
+    worst_envelope_strand: str  # its strand (:data:`STRANDS`)
+    worst_envelope_xz_m: tuple[float, float]   # its position (x, z) [m], layout frame
+    min_upper_strand_pin: int   # the upper-strand pin of least tension (−1: none there)
 
     @property
     def any(self) -> bool:
@@ -508,17 +522,34 @@ class TrackPlant:
         self._strands(self._tension)
         return np.nonzero(self._lower)[0]
 
+    def pin_strand(self, k: int) -> str:
+        """The strand pin ``k`` is in now (:data:`STRANDS`)."""
+        self._strands(self._tension)
+        return STRANDS[0] if self._upper[k] else STRANDS[1] if self._lower[k] else STRANDS[2]
+
     def derailment(self) -> DerailmentStatus:
-        excursion = float(self.envelope_excursion_m().max())
+        """The derailment indicators now (thresholds ``MIN_SEATED_PINS``,
+        ``ENVELOPE_THRESHOLD_M``, ``SLACK_TENSION_N``) and where each is worst: the pin
+        furthest outside the home envelope and the upper-strand pin of least tension."""
+        excursion = self.envelope_excursion_m()
+        worst = int(excursion.argmax())
         upper = self.upper_strand_pins()
         tension = self.pin_tensions_N()
-        min_upper = float(tension[upper].min()) if len(upper) else 0.0
+        slackest = int(upper[tension[upper].argmin()]) if len(upper) else -1
+        min_upper = float(tension[slackest]) if slackest >= 0 else 0.0
+        seated = self.seated_sprocket_pins()
+        x, z = self.pins_layout_frame()[worst]
         return DerailmentStatus(
-            sprocket_disengaged=self.seated_sprocket_pins() < self.MIN_SEATED_PINS,
-            links_off_envelope=excursion > self.ENVELOPE_THRESHOLD_M,
+            sprocket_disengaged=seated < self.MIN_SEATED_PINS,
+            links_off_envelope=float(excursion[worst]) > self.ENVELOPE_THRESHOLD_M,
             slack_strand=min_upper < self.SLACK_TENSION_N,
-            max_envelope_excursion_m=excursion,
+            max_envelope_excursion_m=float(excursion[worst]),
             min_upper_strand_tension_N=min_upper,
+            seated_pins=seated,
+            worst_envelope_pin=worst,
+            worst_envelope_strand=self.pin_strand(worst),
+            worst_envelope_xz_m=(float(x), float(z)),
+            min_upper_strand_pin=slackest,
         )
 
     # ------------------------------------------------------------------ stepping

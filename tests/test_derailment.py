@@ -1,0 +1,252 @@
+"""Derailment you can act on: which check failed, when and where, in the drive's metrics,
+timeseries, summary and figure; ``--model`` is the model parameter TOML in ``drive`` as in
+``run``, ``--mjcf`` the MJCF file."""
+
+from __future__ import annotations
+
+import json
+import re
+import tomllib
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from trackmj.cli.main import main
+from trackmj.sim.drive import derailment_columns, derailment_table
+from trackmj.track.plant import DerailmentStatus
+
+ROOT = Path(__file__).resolve().parent.parent
+LF1352 = tomllib.loads((ROOT / "models" / "lf1352.toml").read_text())
+LINKS = LF1352["track"]["link_count"]   # 82
+CHECKS = ("slack_strand", "links_off_envelope", "sprocket_disengaged", "derailed")
+COLUMNS = {"sprocket_seated_pins": "1", "envelope_excursion_max_m": "m",
+           "envelope_worst_pin": "1", "upper_strand_tension_min_N": "N",
+           "upper_strand_slackest_pin": "1", "sprocket_disengaged": "1",
+           "links_off_envelope": "1", "slack_strand": "1", "derailed": "1"}
+
+
+def _drive(tmp_path: Path, capsys: pytest.CaptureFixture[str], *args: str
+           ) -> tuple[int, str, dict, dict[str, np.ndarray], dict[str, str]]:
+    """``trackmj drive ARGS --out tmp/drive``: exit code, stdout, metrics, columns, units."""
+    out = tmp_path / "drive"
+    code = main(["drive", *args, "--out", str(out)])
+    printed = capsys.readouterr().out
+    metrics = json.loads((out / "metrics.json").read_text())
+    table = pq.read_table(out / "timeseries.parquet")
+    columns = {name: table.column(name).to_numpy() for name in table.column_names}
+    units = {f.name: f.metadata[b"unit"].decode() for f in table.schema}
+    return code, printed, metrics, columns, units
+
+
+def _png_size(path: Path) -> tuple[int, int]:
+    """(width, height) [px] from the PNG's IHDR chunk."""
+    head = path.read_bytes()[:24]
+    assert head[:8] == b"\x89PNG\r\n\x1a\n"
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
+@pytest.mark.slow
+def test_drive_at_1_kN_and_3_m_s_names_each_failing_check_with_its_first_time(
+        tmp_path, capsys) -> None:
+    """The issue's case: a 1 kN preload at 3 m/s lets the upper strand go slack."""
+    code, printed, m, c, units = _drive(tmp_path, capsys, "--preload", "1e3", "--speed", "3",
+                                        "--duration", "2")
+    assert code == 1
+    table = m["derailment"]
+    assert m["derailment_checks"] == 20 and m["derailment_check_interval_s"] == 0.1
+    slack = table["slack_strand"]
+    assert slack["failing_checks"] >= 1 and m["derailment_checks_failed"] >= 1
+    first, last = slack["first_s"], slack["last_s"]
+    assert 0.0 < first <= last <= 2.0
+    assert first == pytest.approx(round(first * 10) / 10, abs=1e-6)   # at a check
+    at = slack["at_first"]
+    assert at["t_s"] == first and 0 <= at["pin"] < LINKS and at["strand"] == "upper"
+    assert at["tension_N"] < 1000.0
+    # the upper strand's mean tension, recorded every step apart from the check, is at
+    # least its least pin's at that instant
+    row = int(np.argmin(np.abs(c["t_s"] - first)))
+    assert c["upper_strand_tension_N"][row] >= at["tension_N"]
+    assert c["upper_strand_tension_min_N"][row] == pytest.approx(at["tension_N"])
+    assert c["slack_strand"][row] == 1.0 and c["derailed"][row] == 1.0
+    # every check that never failed says so with null times, and still gives its margin
+    failing = [k for k in CHECKS[:-1] if table[k]["failing_checks"]]
+    for check in CHECKS[:-1]:
+        if check not in failing:
+            assert table[check]["first_s"] is None and table[check]["last_s"] is None
+            assert table[check]["at_first"] is None and table[check]["worst"] is not None
+    assert table["derailed"]["first_s"] == min(table[k]["first_s"] for k in failing)
+    assert table["derailed"]["failing_checks"] == m["derailment_checks_failed"]
+    worst = table["links_off_envelope"]["worst"]
+    assert 0 <= worst["pin"] < LINKS and worst["strand"] in ("upper", "lower run", "other")
+    assert {k: units[k] for k in COLUMNS} == COLUMNS
+    # the summary names the first failure and when
+    assert f"first: slack strand at {first:.2f} s" in printed
+    assert re.search(rf"slack strand\s+FAILED first at {first:.2f} s: upper-strand min "
+                     rf"tension \d\.\d\d kN at pin {at['pin']}", printed)
+    assert _png_size(tmp_path / "drive" / "drive.png") == (1200, 1100)
+
+
+def test_healthy_drive_reports_no_failure_with_null_times(tmp_path, capsys) -> None:
+    """The default preload at 1 m/s for 1 s (a 0.25 s ramp) keeps the track guided."""
+    code, printed, m, c, _ = _drive(tmp_path, capsys, "--speed", "1", "--duration", "1")
+    assert code == 0
+    assert m["derailment_checks"] == 10 and m["derailment_checks_failed"] == 0
+    for check in CHECKS:
+        row = m["derailment"][check]
+        assert row["failing_checks"] == 0
+        assert row["first_s"] is None and row["last_s"] is None and row["at_first"] is None
+    margin = m["derailment"]["slack_strand"]["worst"]
+    assert margin["tension_N"] > 1000.0 and 0 <= margin["pin"] < LINKS
+    assert m["derailment"]["sprocket_disengaged"]["worst"]["seated_pins"] >= 2
+    # sampled every 0.1 s and held: NaN before the first check (t = 0.1 s), then 0/1
+    t = c["t_s"]
+    before = t < 0.1 - 1e-6
+    assert np.isnan(c["derailed"][before]).all()
+    assert (c["derailed"][~before] == 0.0).all()
+    seated = c["sprocket_seated_pins"][99:]          # row 99: the first check
+    changes = np.flatnonzero(seated[1:] != seated[:-1]) + 1 + 99
+    assert ((changes + 1) % 100 == 0).all()          # a new value only at a check's row
+    assert "0 of 10 checks failed" in printed and "FAILED" not in printed
+    assert (tmp_path / "drive" / "drive.png").is_file()
+
+
+def _status(seated: int, excursion_m: float, tension_N: float, pin: int = 7
+            ) -> DerailmentStatus:
+    return DerailmentStatus(
+        sprocket_disengaged=seated < 2, links_off_envelope=excursion_m > 0.1,
+        slack_strand=tension_N < 1000.0, max_envelope_excursion_m=excursion_m,
+        min_upper_strand_tension_N=tension_N, seated_pins=seated, worst_envelope_pin=pin,
+        worst_envelope_strand="lower run", worst_envelope_xz_m=(-1.0, 0.05),
+        min_upper_strand_pin=30)
+
+
+def test_table_and_columns_of_hand_written_checks() -> None:
+    """Four checks at 0.1, 0.2, 0.3, 0.4 s (rows 99, 199, 299, 399 of 450 steps)."""
+    statuses = [_status(9, 0.02, 4000.0), _status(1, 0.15, 800.0, pin=41),
+                _status(8, 0.12, 3000.0), _status(9, 0.03, 600.0)]
+    table = derailment_table([0.1, 0.2, 0.3, 0.4], statuses)
+    slack = table["slack_strand"]
+    assert "1000 N" in slack.pop("fails_when")
+    assert slack == {
+        "threshold": 1000.0, "failing_checks": 2, "first_s": 0.2,
+        "last_s": 0.4,
+        "at_first": {"t_s": 0.2, "tension_N": 800.0, "pin": 30, "strand": "upper"},
+        "worst": {"t_s": 0.4, "tension_N": 600.0, "pin": 30, "strand": "upper"}}
+    envelope = table["links_off_envelope"]
+    assert (envelope["failing_checks"], envelope["first_s"], envelope["last_s"]) == (2, 0.2, 0.3)
+    assert envelope["worst"] == {"t_s": 0.2, "excursion_m": 0.15, "pin": 41,
+                                 "strand": "lower run", "x_m": -1.0, "z_m": 0.05}
+    sprocket = table["sprocket_disengaged"]
+    assert (sprocket["failing_checks"], sprocket["first_s"], sprocket["last_s"]) == (1, 0.2, 0.2)
+    assert sprocket["worst"] == {"t_s": 0.2, "seated_pins": 1}
+    derailed = table["derailed"]
+    assert (derailed["failing_checks"], derailed["first_s"], derailed["last_s"]) == (3, 0.2, 0.4)
+    assert derailed["worst"]["failing"] == ["slack_strand", "links_off_envelope",
+                                            "sprocket_disengaged"]
+    quiet = derailment_table([0.1], [_status(9, 0.02, 4000.0)])
+    assert all(quiet[k]["first_s"] is None and quiet[k]["failing_checks"] == 0 for k in CHECKS)
+    assert json.loads(json.dumps(table)) == table    # plain JSON: null, not NaN
+
+    columns = derailment_columns([99, 199, 299, 399], statuses, 450)
+    assert set(columns) == set(COLUMNS)
+    seated = columns["sprocket_seated_pins"]
+    assert np.isnan(seated[:99]).all()
+    np.testing.assert_array_equal(seated[99:199], 9.0)
+    np.testing.assert_array_equal(seated[199:299], 1.0)
+    np.testing.assert_array_equal(seated[399:], 9.0)
+    np.testing.assert_array_equal(columns["slack_strand"][[99, 199, 299, 449]], [0, 1, 0, 1])
+    assert columns["envelope_worst_pin"][250] == 41.0
+    assert np.isnan(derailment_columns([], [], 50)["derailed"]).all()
+
+
+def test_a_pin_pushed_200_mm_below_the_ground_run_is_200_mm_off_its_envelope(plant) -> None:
+    """Move the first chain (links 0..) 0.2 m down at home: the worst pin is one of its pins,
+    0.2 m outside the envelope (the ground run is straight and horizontal), not in a
+    strand, seen where it was put."""
+    home_z = plant.pins_layout_frame()[:4, 1]
+    m = plant.model
+    plant.data.qpos[m.jnt_qposadr[m.joint("link_00_z").id]] -= 0.2
+    mujoco.mj_forward(m, plant.data)
+    s = plant.derailment()
+    assert s.links_off_envelope and not s.slack_strand and not s.sprocket_disengaged
+    assert s.worst_envelope_pin in range(4)
+    assert s.max_envelope_excursion_m == pytest.approx(0.2, abs=0.003)
+    assert s.worst_envelope_strand == "other"
+    assert s.worst_envelope_xz_m[1] == pytest.approx(home_z[s.worst_envelope_pin] - 0.2,
+                                                     abs=1e-3)
+    assert s.seated_pins >= 2 and plant.pin_strand(s.min_upper_strand_pin) == "upper"
+
+
+def test_drive_model_is_the_parameter_toml_and_mjcf_the_model_file(tmp_path, capsys) -> None:
+    """A model TOML with a 6 kN preload (lf1352's is 13 kN): the idler force follows the
+    passive law of that file, F = 6000 N − 1e6 N/m · (stroke − 0.05 m) − 1.4e4 N·s/m · v,
+    the spring at the stroke the step starts from (the row before), the damper at the
+    velocity it ends with."""
+    text = (ROOT / "models" / "lf1352.toml").read_text()
+    assert "preload_N = 13000.0" in text
+    soft = tmp_path / "soft.toml"
+    soft.write_text(text.replace("preload_N = 13000.0", "preload_N = 6000.0"))
+    code, _, m, c, _ = _drive(tmp_path, capsys, "--model", str(soft), "--speed", "0",
+                              "--duration", "0.3")
+    assert code == 0 and m["model_file"] == str(soft) and m["preload_N"] == 6000.0
+    law = 6000.0 - 1.0e6 * (c["stroke_m"][:-1] - 0.05) - 1.4e4 * c["stroke_velocity_m_s"][1:]
+    np.testing.assert_allclose(c["idler_force_N"][1:], law, atol=0.5)
+    assert 5.0e3 < c["idler_force_N"].mean() < 6.5e3
+
+    out = tmp_path / "mjcf"
+    assert main(["drive", "--mjcf", str(ROOT / "models" / "lf1352_scene.xml"), "--speed", "0",
+                 "--duration", "0.2", "--out", str(out)]) == 0
+    committed = json.loads((out / "metrics.json").read_text())
+    assert committed["mjcf_file"].endswith("lf1352_scene.xml")
+    assert committed["steady"]["idler_force_mean_N"] > 9.0e3    # the 13 kN machine
+
+
+def test_params_is_refused_with_what_replaced_it(capsys) -> None:
+    for command in (["drive"], ["model", "info"], ["model", "generate"]):
+        with pytest.raises(SystemExit) as exc:
+            main([*command, "--params", "x.toml"])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert "--model FILE" in err and "--mjcf FILE" in err
+
+
+def test_model_generate_prints_every_file_it_wrote(tmp_path, capsys) -> None:
+    out = tmp_path / "mine.xml"
+    assert main(["model", "generate", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    wrote = [Path(line.split()[1]) for line in printed.splitlines()
+             if line.startswith("wrote ")]
+    assert sorted(p.name for p in wrote) == ["mine.xml", "mine_scene.xml"]
+    assert all(p.is_file() for p in wrote)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.xml", "mine_scene.xml"]
+
+
+def test_model_info_explains_the_sag_against_the_catenary(capsys) -> None:
+    """M113 has no return rollers: its upper strand rests on the road wheels' tops, so it
+    sags less than a free catenary; the line says what holds it."""
+    assert main(["model", "info", "--machine", "m113"]) == 0
+    printed = capsys.readouterr().out
+    span = next(line for line in printed.splitlines() if line.startswith("upper span"))
+    sag, catenary = (float(v) for v in re.findall(
+        r"sag at home ([\d.]+) mm .*catenary at the home tension ([\d.]+) mm", span)[0])
+    assert sag < catenary
+    assert "rests on road_wheel_" in span
+    w = 18.02 / 0.154 * 9.81 / 1e3      # m113.toml: link 18.02 kg, pitch 0.154 m
+    assert f"w {w:.2f} kN/m" in printed
+
+
+def test_drive_writes_its_figure_by_default_one_folder_per_input(tmp_path, monkeypatch,
+                                                                 capsys) -> None:
+    """Without --out a drive still leaves its result and figure, under runs/ named by the
+    machine and speed; another preload goes to another folder, the same inputs replace."""
+    monkeypatch.chdir(tmp_path)
+    for preload in ("9e3", "1.1e4", "9e3"):
+        assert main(["drive", "--speed", "1", "--duration", "0.3", "--preload", preload]) == 0
+    folders = sorted(p.name for p in (tmp_path / "runs").iterdir())
+    assert len(folders) == 2 and all(f.startswith("drive-lf1352-1mps-") for f in folders)
+    for folder in folders:
+        assert (tmp_path / "runs" / folder / "drive.png").is_file()
+    assert "wrote runs/drive-lf1352-1mps-" in capsys.readouterr().out
