@@ -116,7 +116,7 @@ def test_ctrl_c_ends_with_one_line_and_keeps_the_previous_result(tmp_path, monke
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "interrupted" in err and "Traceback" not in err
     assert json.loads((out / "metrics.json").read_text()) == before
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".w1.lock", "w1"]
+    assert [p.name for p in tmp_path.iterdir()] == ["w1"]
 
 
 def test_out_that_is_a_file_is_refused_before_the_run(tmp_path, capsys, monkeypatch) -> None:

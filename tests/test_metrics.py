@@ -153,7 +153,7 @@ def test_a_condition_held_from_the_start_is_not_an_edge() -> None:
 # ---------------------------------------------------------------------- the registry
 
 FULL_OPTIONS = dict(control_period_s=0.01, solve_times_s=[1e-3, 2e-3, 4e-3],
-                    solve_success=[True, False, True], wall_time_s=10.0)
+                    solve_success=[True, False, True], wall_time_s=10.0, clipped_outputs=[])
 """Every option of compute_metrics, so that every step writes its metrics."""
 
 

@@ -1,5 +1,7 @@
 """The tables and lines the commands print about a run: the headline metrics (markdown, one
-column per run), the prediction against a measured log, and an FMU tensioner's coupling.
+column per run) with a warning line for each run that is not a valid result (its
+``flags``, e.g. a controller output clipped), the prediction against a measured log, and an
+FMU tensioner's coupling.
 
 Display units (kN, mm, MPa) appear only here and in the commands' own lines; the metrics
 they read are SI.
@@ -7,7 +9,9 @@ they read are SI.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 SUMMARY_METRICS = ("rmse_lp_N", "rmse_N", "ripple_rms_N", "ripple_band_rms_N.tooth_passing",
                    "ripple_band_rms_N.body_mode", "peak_error_lp_N", "peak_error_N",
@@ -26,6 +30,9 @@ DISTURBANCE_METRICS = ("disturbance_peak_error_lp_N", "recovery_time_lp_s")
 """Rows shown only where a scenario has a disturbance."""
 UNSETTLED = ("settling_time_lp_s", "recovery_time_lp_s")
 """Times that read "not within ±band" when they never came."""
+VALVE_METRICS = ("valve_switches", "valve_switch_rate_Hz")
+"""Rows that read "n/a" for a run whose tensioner takes no valve mode
+(``valve_mode_applied`` false: a passive tensioner, an FMU without a valve_mode input)."""
 
 MEASURED_DISPLAY = {"N": (1e-3, "kN"), "Pa": (1e-6, "MPa"), "m": (1e3, "mm"), "": (1.0, "-")}
 """Display scale and unit of a compared channel, by its SI unit."""
@@ -35,7 +42,8 @@ def summary_table(results: list, title: str) -> str:
     """Markdown table of the headline metrics, one column per result (``title`` formatted
     with ``r=`` the result heads its column). Rows of a step or a disturbance appear only
     where the scenario has one; a settling or recovery time that never came reads "not
-    within ±band" instead of a dash."""
+    within ±band" instead of a dash, a valve metric of a tensioner without valves "n/a".
+    Below the table, one warning line per flag of each run (:func:`warning_lines`)."""
     # start-up: --help and argument errors must not import SciPy
     from trackmj.results.metrics import METRIC_DISPLAY, lookup
 
@@ -49,7 +57,7 @@ def summary_table(results: list, title: str) -> str:
         if (key in STEP_METRICS and not has_step) or (key in DISTURBANCE_METRICS
                                                       and not has_disturbance):
             continue
-        cells = [_cell(lookup(r.metrics, key), w, key, scale)
+        cells = [_cell(lookup(r.metrics, key), r.metrics, w, key, scale)
                  for r, w in zip(results, windows, strict=True)]
         lines.append(f"| {name} [{unit}] | " + " | ".join(cells) + " |")
     cutoff = {w.get("lowpass_cutoff_Hz") for w in windows} - {None}
@@ -58,18 +66,57 @@ def summary_table(results: list, title: str) -> str:
         lines.append(f"low-pass: zero-phase 2nd-order Butterworth at "
                      f"{', '.join(f'{c:g}' for c in sorted(cutoff))} Hz on F_ten; raw: the "
                      "1 kHz F_ten (see README, Metrics)")
+    warnings = [line for r in results
+                for line in warning_lines(r.metrics, title.format(r=r) if len(results) > 1
+                                          else "")]
+    if warnings:
+        lines += ["", *warnings]
     return "\n".join(lines)
 
 
-def _cell(value: float, window: dict, key: str, scale: float) -> str:
+def _cell(value: float, metrics: Mapping[str, Any], window: dict, key: str,
+          scale: float) -> str:
     """One cell of the summary table: the ``value`` of metric ``key`` (NaN where the run has
-    none) times its display ``scale``, or why there is none (``window``: the run's evaluation
-    window)."""
+    none) times its display ``scale``, or why there is none (``metrics``: the run's,
+    ``window``: its evaluation window)."""
+    if key in VALVE_METRICS and metrics.get("valve_mode_applied") is False:
+        return "n/a"
     if value == value:
         return f"{value * scale:.3g}"
     if key in UNSETTLED and "settle_band_rel" in window:
         return f"not within ±{100 * window['settle_band_rel']:g} %"
     return "–"
+
+
+def flagged(metrics: Mapping[str, Any]) -> bool:
+    """Whether a run is marked as not a valid result (its ``flags`` are not empty): ``trackmj
+    run`` then exits with 1 after writing it."""
+    return bool(metrics.get("flags"))
+
+
+def warning_lines(metrics: Mapping[str, Any], run: str = "") -> list[str]:
+    """One line per flag of a run's ``metrics`` (``run``: its name, for a table of several)
+    saying why it is not a valid result."""
+    head = f"WARNING ({run})" if run else "WARNING"
+    lines = []
+    for flag in metrics.get("flags") or ():
+        table = metrics.get(flag)
+        if flag == "controller_output_clipped" and isinstance(table, Mapping):
+            lines.append(f"{head}: {clipping_text(table)}")
+        else:
+            lines.append(f"{head}: {flag} (see metrics.json)")
+    return lines
+
+
+def clipping_text(clipped: Mapping[str, Any]) -> str:
+    """What ``controller_output_clipped`` says, in one sentence."""
+    worst, first = clipped.get("worst", float("nan")), clipped.get("first_s", float("nan"))
+    worst_text = f"{worst:.4g}" if worst == worst else "not finite"
+    return (f"the controller's output was outside its range [-1, 1] "
+            f"{clipped['outputs']:.0f} times, from t = {first:.3f} s (worst {worst_text}), "
+            f"and was clipped to it for {clipped['steps']:.0f} steps "
+            f"({100 * clipped['share']:.0f} % of the run): this result is not what the "
+            "controller asked for; check the output's mapping and scaling")
 
 
 def measured_table(table: dict, log: str) -> str:

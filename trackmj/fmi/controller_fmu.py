@@ -12,11 +12,17 @@ them: its mean over the past period, and the reference F_ref(t)) and it is stepp
 to t + period; its output is applied from t, as trackmj's own controllers' solves are. The
 valve logic (dead zone, minimum hold) then turns u into valve modes; a ``valve_mode``
 output passes through it unchanged (|mode| = 1 is outside any dead zone).
+
+The output is handed to the loop as the FMU gave it: an output outside [−1, 1] is clipped
+there, counted and reported (``controller_output_clipped`` in metrics.json, see
+:func:`trackmj.sim.loop.run_loop`), never silently. The FMU's unzipped copy is removed by
+:meth:`FmuController.close`, or when the controller is collected.
 """
 
 from __future__ import annotations
 
 import time
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -117,10 +123,15 @@ class FmuController:
     def __init__(self, loaded: ControllerFile) -> None:
         self.period_s = loaded.controller.period_s
         self.description = d = loaded.description
-        self.inst = FmuInstance(d, "trackmj-controller")
+        self.inst = inst = FmuInstance(d, "trackmj-controller")
+        self._close = weakref.finalize(self, inst.close)
         self._supply_Pa = 0.0
-        self.inst.start(0.0, dict.fromkeys(d.inputs, 0.0))
+        inst.start(0.0, dict.fromkeys(d.inputs, 0.0))   # closes the instance if it fails
         self._output, self._channel = next(iter(d.outputs.items()))
+
+    def close(self) -> None:
+        """Free the FMU and remove its unzipped copy (again: nothing)."""
+        self._close()
 
     def set_parameters(self, *, supply_pressure_Pa: float | None = None) -> None:
         """The supply set value [Pa gauge] the FMU's ``supply_pressure_Pa`` input sees."""
@@ -140,7 +151,7 @@ class FmuController:
         if not np.isfinite(u):
             raise FmuError(f"the FMU {self.description.name} output {self._output} = {u!r} "
                            f"at t = {t:.3f} s (non-finite)")
-        return ControlOutput(min(1.0, max(-1.0, u)), True, time.perf_counter() - start)
+        return ControlOutput(u, True, time.perf_counter() - start)   # the loop clips it
 
     def statistics(self) -> ControllerStatistics:
         """No plan, no fallback."""

@@ -10,18 +10,33 @@ the key and the variable.
 
 :class:`FmuInstance` wraps fmpy's ``FMU2Slave``/``FMU2Model``/``FMU3Slave``/``FMU3Model``:
 values are set and read by port quantity, and any failing call raises
-:class:`~trackmj.errors.FmuError` ("the FMU cyl.fmu: fmi2DoStep at t = 1.234 s failed with
-status 3 (error)").
+:class:`~trackmj.errors.FmuError` naming the FMU, the call, the time and what the FMU itself
+logged ("the FMU cyl.fmu: instantiate at t = 0.000 s failed: Failed to instantiate model;
+the FMU logged: [Error] Wrong GUID."). Its messages are kept (:class:`FmuLog`), not printed.
+
+The FMU is unzipped into a ``trackmj-fmu-*`` folder of the system's temporary directory,
+removed by :meth:`FmuInstance.close` on every path: a failed load or start closes the
+instance before raising, ``with FmuInstance(...)`` closes it on leaving, and a finalizer
+removes the folder of an instance nobody closed when it is collected (or at exit).
+
+Platforms are named as the standard spells them (:func:`binary_platforms`): FMI 3.0's
+tuples (``x86_64-linux``, ``x86_64-windows``, ``aarch64-darwin``, ...), FMI 2.0's
+``linux64``, ``win64``, ``darwin64``.
 """
 
 from __future__ import annotations
 
 import ctypes
+import functools
+import itertools
 import math
+import os
 import shutil
 import tempfile
+import weakref
 import xml.etree.ElementTree as ET
 import zipfile
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +50,10 @@ INTEGER_TYPES = ("Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "
                  "UInt32", "Int64", "UInt64")
 INPUT_CAUSALITIES = ("input",)
 PARAMETER_CAUSALITIES = ("parameter", "input", "structuralParameter")
+UNZIPPED_PREFIX = "trackmj-fmu-"
+"""Name prefix of an FMU's unzipped copy in the system's temporary directory."""
+SHARED_LIBRARIES = (".so", ".dll", ".dylib")
+"""File endings of an FMU's binaries."""
 
 
 @dataclass(frozen=True)
@@ -143,16 +162,44 @@ def choose_interface(md: Any, asked: str, where: str, path: Path) -> tuple[str, 
     return ("model-exchange" if "model-exchange" in offers else "co-simulation"), offers
 
 
-def _check_platform(path: Path, version: str, where: str) -> None:
+def binary_platforms(path: Path) -> list[str]:
+    """The platforms the FMU at ``path`` has binaries for, named as its ``binaries/`` folders
+    name them (the standard's names: FMI 3.0 ``x86_64-linux``, ``x86_64-windows``,
+    ``aarch64-darwin``, ``x86_64-darwin``, ...; FMI 2.0 ``linux64``, ``win64``,
+    ``darwin64``, ...), sorted, then ``c-code`` if it holds C sources."""
+    with zipfile.ZipFile(path) as zf:
+        names = zf.namelist()
+    platforms = sorted({parts[1] for parts in (name.split("/") for name in names)
+                        if len(parts) == 3 and parts[0] == "binaries"
+                        and parts[2].endswith(SHARED_LIBRARIES)})
+    if any(name.startswith("sources/") and name.endswith(".c") for name in names):
+        platforms.append("c-code")
+    return platforms
+
+
+def this_platform(version: str) -> str:
+    """This computer's platform as FMI ``version`` ("2.0", "3.0") names it (``linux64`` /
+    ``x86_64-linux``, ``win64`` / ``x86_64-windows``, ...)."""
     import fmpy  # optional dependency (trackmj[fmi]), present once open_description ran
 
-    platforms = fmpy.supported_platforms(str(path))
-    if fmpy.platform not in platforms:
-        here = fmpy.platform if version.startswith("2") else fmpy.platform_tuple
-        sources = " (it has C sources only: compile it first, e.g. fmpy's 'compile_platform_" \
-                  "binary')" if platforms == ["c-code"] else ""
-        raise ParameterError(f"{where}: {path.name} has no binary for this platform ({here}); "
-                             f"it has: {', '.join(platforms) or 'none'}{sources}")
+    return fmpy.platform if version.startswith("2") else fmpy.platform_tuple
+
+
+def _check_platform(path: Path, version: str, identifier: str, where: str) -> None:
+    """ParameterError unless the FMU has the binary of ``identifier`` for this platform."""
+    import fmpy  # optional dependency (trackmj[fmi]), present once open_description ran
+
+    here = this_platform(version)
+    library = f"binaries/{here}/{identifier}{fmpy.sharedLibraryExtension}"
+    with zipfile.ZipFile(path) as zf:
+        if library in zf.namelist():
+            return
+    platforms = binary_platforms(path)
+    sources = " (it has C sources only: compile it first, e.g. fmpy's 'compile_platform_" \
+              "binary')" if platforms == ["c-code"] else ""
+    raise ParameterError(f"{where}: {path.name} (FMI {version}) has no binary for this "
+                         f"platform ({here}: {library}); it has: "
+                         f"{', '.join(platforms) or 'none'}{sources}")
 
 
 def map_variables(md: Any, mapping: Mapping[str, str], role: str, at: Location, table: str,
@@ -224,7 +271,8 @@ def describe(path: Path, interface: str, at: Location, inputs: Mapping[str, str]
         raise ParameterError(f"{where}: {path.name} is FMI {version}; FMI 2.0 and 3.0 are "
                              "supported")
     used, offers = choose_interface(md, interface, at.table(), path)
-    _check_platform(path, version, where)
+    part = md.coSimulation if used == "co-simulation" else md.modelExchange
+    _check_platform(path, version, part.modelIdentifier, where)
     name = path.name
     ins = map_variables(md, inputs, "input", at, "inputs", input_kinds, name)
     outs = map_variables(md, outputs, "output", at, "outputs", output_kinds, name)
@@ -240,6 +288,94 @@ def describe(path: Path, interface: str, at: Location, inputs: Mapping[str, str]
                           params, offers)
 
 
+STATUS_NAMES = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+"""FMI status names by value (FMI 2.0 and 3.0 agree)."""
+ERROR_STATUS = 3
+"""Status from which an FMU's log message is shown in an error message (Error, Fatal)."""
+LOG_KEPT = 50
+"""Messages an :class:`FmuLog` keeps (the last ones)."""
+LOG_SHOWN = 3
+"""Error-level messages an error message quotes (the last ones)."""
+
+
+def _text(raw: bytes | None) -> str:
+    return raw.decode("utf-8", "replace").strip() if raw else ""
+
+
+class FmuLog:
+    """What one FMU instance logged through fmpy's logger callback: the last
+    :data:`LOG_KEPT` messages as (status, category, text); ``count`` every message so far."""
+
+    def __init__(self) -> None:
+        self.messages: deque[tuple[int, str, str]] = deque(maxlen=LOG_KEPT)
+        self.count = 0
+
+    def add(self, status: int, category: bytes | None, message: bytes | None) -> None:
+        self.messages.append((int(status), _text(category), _text(message)))
+        self.count += 1
+
+    def fmi3(self, environment: Any, status: int, category: bytes | None,
+             message: bytes | None) -> None:
+        """The FMI 3.0 logMessage callback."""
+        self.add(status, category, message)
+
+    def reason(self, since: int = 0) -> str:
+        """"; the FMU logged: [Error] ..." with the last :data:`LOG_SHOWN` error-level
+        messages among those after the first ``since``; "" if there are none."""
+        recent = list(self.messages)[max(0, len(self.messages) - (self.count - since)):]
+        errors = [f"[{STATUS_NAMES[s] if 0 <= s < len(STATUS_NAMES) else s}] {text}"
+                  for s, _, text in recent if s >= ERROR_STATUS and text][-LOG_SHOWN:]
+        return "; the FMU logged: " + " | ".join(errors) if errors else ""
+
+
+_FMI2_LOGS: weakref.WeakValueDictionary[int, FmuLog] = weakref.WeakValueDictionary()
+"""The FMI 2.0 instances' logs by the component environment their callbacks carry."""
+_FMI2_KEYS = itertools.count(1)
+
+
+def _fmi2_log_message(environment: int | None, instance_name: bytes | None, status: int,
+                      category: bytes | None, message: bytes | None) -> None:
+    log = _FMI2_LOGS.get(environment or 0)
+    if log is not None:
+        log.add(status, category, message)
+
+
+@functools.cache
+def _fmi2_logger() -> Any:
+    """The one FMI 2.0 logger of the process: fmpy's native proxy (which formats the
+    printf-style message) calls the logger registered last, so every instance registers
+    this one and its component environment routes the message to its log."""
+    from fmpy.fmi2 import fmi2CallbackLoggerTYPE  # optional dependency (trackmj[fmi])
+
+    return fmi2CallbackLoggerTYPE(_fmi2_log_message)
+
+
+def fmi2_callbacks(log: FmuLog) -> Any:
+    """fmi2CallbackFunctions whose logger adds the FMU's messages, formatted, to ``log``."""
+    # optional dependency (trackmj[fmi]), present once the description was read
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (
+        fmi2CallbackAllocateMemoryTYPE,
+        fmi2CallbackFreeMemoryTYPE,
+        fmi2CallbackFunctions,
+    )
+
+    key = next(_FMI2_KEYS)
+    _FMI2_LOGS[key] = log
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = _fmi2_logger()
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    callbacks.componentEnvironment = key
+    try:
+        from fmpy.logging import addLoggerProxy  # optional dependency (trackmj[fmi])
+
+        addLoggerProxy(ctypes.byref(callbacks))
+    except (ImportError, OSError, AttributeError):   # no proxy here: messages unformatted
+        pass
+    return callbacks
+
+
 class FmuInstance:
     """One instance of a checked FMU (see the module docstring).
 
@@ -247,8 +383,10 @@ class FmuInstance:
     initialises (model exchange: into continuous-time mode); ``set_inputs`` / ``outputs``
     by port quantity; co-simulation: ``do_step``, ``get_state``/``set_state``/``free_state``;
     model exchange: ``set_time``, ``set_states``, ``states``, ``derivatives``,
-    ``directional``, ``nominals``, ``completed_step``. The FMU's unzipped copy is removed by
-    ``close``.
+    ``directional``, ``nominals``, ``completed_step``. ``close`` (or leaving ``with``)
+    frees it and removes the FMU's unzipped copy; a failed load or start closes it before
+    raising; an instance nobody closed has its copy removed when collected. ``log``: what
+    the FMU logged (:class:`FmuLog`), quoted in error messages.
     """
 
     def __init__(self, description: FmuDescription, instance_name: str = "trackmj") -> None:
@@ -260,32 +398,51 @@ class FmuInstance:
         self.d = d = description
         self.t = 0.0
         self.fmi3 = not d.version.startswith("2")
-        self._dir = tempfile.mkdtemp(prefix="trackmj-fmu-")
-        fmpy.extract(str(d.path), self._dir)
-        cs = d.interface == "co-simulation"
-        cls = ((FMU3Slave if cs else FMU3Model) if self.fmi3
-               else (FMU2Slave if cs else FMU2Model))
-        token = d.md.instantiationToken if self.fmi3 else d.md.guid
-        self.fmu = self._call("load", lambda: cls(
-            guid=token, unzipDirectory=self._dir, modelIdentifier=d.identifier,
-            instanceName=instance_name))
+        self.log = FmuLog()
+        self.fmu: Any = None
         self._instantiated = False
-        self.n_states = d.md.numberOfContinuousStates
-        self.n_events = d.md.numberOfEventIndicators
-        derivatives = d.md.derivatives
-        self.state_vrs = [u.variable.derivative.valueReference for u in derivatives]
-        self.derivative_vrs = [u.variable.valueReference for u in derivatives]
-        self._setters = self._accessors("set")
-        self._getters = self._accessors("get")
-        self._in = {q: (c.vr, self._setters[c.kind]) for q, c in d.inputs.items()}
-        self._out = [(q, c.vr, self._getters[c.kind]) for q, c in d.outputs.items()]
-        self._real_out = [c.vr for c in d.outputs.values() if c.kind == "real"]
-        self._out_names = [q for q, c in d.outputs.items() if c.kind == "real"]
-        self.next_event_s = math.inf
+        self._dir = tempfile.mkdtemp(prefix=UNZIPPED_PREFIX)
+        self._remove_dir = weakref.finalize(self, shutil.rmtree, self._dir, ignore_errors=True)
+        try:
+            fmpy.extract(str(d.path), self._dir)
+            cs = d.interface == "co-simulation"
+            cls = ((FMU3Slave if cs else FMU3Model) if self.fmi3
+                   else (FMU2Slave if cs else FMU2Model))
+            token = d.md.instantiationToken if self.fmi3 else d.md.guid
+            cwd = os.getcwd()
+            try:
+                self.fmu = self._call("load", lambda: cls(
+                    guid=token, unzipDirectory=self._dir, modelIdentifier=d.identifier,
+                    instanceName=instance_name))
+            finally:   # fmpy enters the binary's folder to load it and stays if that fails
+                os.chdir(cwd)
+            self.n_states = d.md.numberOfContinuousStates
+            self.n_events = d.md.numberOfEventIndicators
+            derivatives = d.md.derivatives
+            self.state_vrs = [u.variable.derivative.valueReference for u in derivatives]
+            self.derivative_vrs = [u.variable.valueReference for u in derivatives]
+            self._setters = self._accessors("set")
+            self._getters = self._accessors("get")
+            self._in = {q: (c.vr, self._setters[c.kind]) for q, c in d.inputs.items()}
+            self._out = [(q, c.vr, self._getters[c.kind]) for q, c in d.outputs.items()]
+            self._real_out = [c.vr for c in d.outputs.values() if c.kind == "real"]
+            self._out_names = [q for q, c in d.outputs.items() if c.kind == "real"]
+            self.next_event_s = math.inf
+        except BaseException:
+            self.close()
+            raise
+
+    def __enter__(self) -> FmuInstance:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     # ----------------------------------------------------------------- calls
     def _call(self, what: str, fn: Callable[[], Any]) -> Any:
-        """``fn()``, any failure raised as FmuError naming the FMU, the call and the time."""
+        """``fn()``, any failure raised as FmuError naming the FMU, the call, the time and
+        the error-level messages the FMU logged during the call."""
+        since = self.log.count
         try:
             return fn()
         except FmuError:
@@ -293,7 +450,7 @@ class FmuInstance:
         except Exception as exc:
             detail = str(exc) or type(exc).__name__
             raise FmuError(f"the FMU {self.d.name}: {what} at t = {self.t:.3f} s failed: "
-                           f"{detail}") from exc
+                           f"{detail}{self.log.reason(since)}") from exc
 
     def _accessors(self, verb: str) -> dict[str, Callable[..., Any]]:
         f = self.fmu
@@ -305,10 +462,22 @@ class FmuInstance:
 
     # ----------------------------------------------------------------- life cycle
     def start(self, t0_s: float, inputs: Mapping[str, float]) -> None:
-        """Instantiate, set parameters and ``inputs`` (quantity -> value), initialise."""
+        """Instantiate, set parameters and ``inputs`` (quantity -> value), initialise; a
+        failure closes the instance before it is raised."""
+        try:
+            self._start(t0_s, inputs)
+        except BaseException:
+            self.close()
+            raise
+
+    def _start(self, t0_s: float, inputs: Mapping[str, float]) -> None:
         f, d = self.fmu, self.d
         self.t = t0_s
-        self._call("instantiate", f.instantiate)
+        if self.fmi3:
+            self._call("instantiate", lambda: f.instantiate(logMessage=self.log.fmi3))
+        else:
+            self._call("instantiate",
+                       lambda: f.instantiate(callbacks=fmi2_callbacks(self.log)))
         self._instantiated = True
         if not self.fmi3:
             self._call("fmi2SetupExperiment", lambda: f.setupExperiment(startTime=t0_s))
@@ -341,7 +510,7 @@ class FmuInstance:
                 defined, t_next = info[4], info[5]
             if terminate:
                 raise FmuError(f"the FMU {self.d.name} asked to terminate the simulation at "
-                               f"t = {self.t:.3f} s")
+                               f"t = {self.t:.3f} s{self.log.reason()}")
             if not need:
                 self.next_event_s = t_next if defined else math.inf
                 return
@@ -349,17 +518,21 @@ class FmuInstance:
                        "not settle in 100 rounds")
 
     def close(self) -> None:
-        """Terminate and free the instance, remove the unzipped copy."""
-        f = self.fmu
+        """Terminate and free the instance, unload its library, remove the unzipped copy;
+        again: nothing."""
+        f, self.fmu = self.fmu, None
+        instantiated, self._instantiated = self._instantiated, False
         try:
-            if self._instantiated:
-                f.terminate()
-                f.freeInstance()
-                self._instantiated = False
-            f.freeLibrary()
+            if instantiated:
+                try:
+                    f.terminate()
+                finally:
+                    f.freeInstance()   # fmpy's freeInstance unloads the library too
+            elif f is not None:
+                f.freeLibrary()
         except Exception:   # closing after a failed call: nothing more to learn from it
             pass
-        shutil.rmtree(self._dir, ignore_errors=True)
+        self._remove_dir()
 
     # ----------------------------------------------------------------- values
     def set_inputs(self, values: Mapping[str, float]) -> None:
@@ -393,7 +566,7 @@ class FmuInstance:
         result = self._call(name, lambda: self.fmu.doStep(t_s, h_s))
         if self.fmi3 and result[1]:   # terminateSimulation
             raise FmuError(f"the FMU {self.d.name} asked to terminate the simulation at "
-                           f"t = {t_s:.3f} s")
+                           f"t = {t_s:.3f} s{self.log.reason()}")
 
     def get_state(self) -> Any:
         return self._call("getFMUState", self.fmu.getFMUState)
@@ -452,7 +625,7 @@ class FmuInstance:
         result = self._call("completedIntegratorStep", self.fmu.completedIntegratorStep)
         if result[1]:
             raise FmuError(f"the FMU {self.d.name} asked to terminate the simulation at "
-                           f"t = {self.t:.3f} s")
+                           f"t = {self.t:.3f} s{self.log.reason()}")
         return bool(result[0])
 
     def handle_event(self) -> None:

@@ -45,6 +45,8 @@ Raw only:
   band (8-12 Hz in W1-W5), steady window;
 - ``constraint_violation_s``: time with F outside [force_min_N, force_max_N];
   ``valve_switches`` and ``valve_switch_rate_Hz``: valve mode changes (count, per s);
+  NaN (null) when ``valve_mode_applied`` is false: the tensioner takes no valve mode (a
+  passive tensioner, an FMU without a ``valve_mode`` input), the modes act on nothing;
 - ``control_increment_rms``: RMS of Δu per control period (u dimensionless; NaN unless
   ``control_period_s`` is given);
 - ``interface_energy_residual_J``: p_work_J − mech_work_J at the end (∫Σp·A·v dt vs
@@ -52,6 +54,12 @@ Raw only:
 - ``solve_time_median_s``, ``solve_time_max_s``, ``solve_failures``: if solve times
   given; ``real_time_factor``: simulated time / ``wall_time_s`` if given (> 1: faster
   than real time);
+- ``controller_output_clipped`` (if the clipped outputs are given): the controller's
+  outputs outside the port's range [−1, 1] that the loop clipped: ``outputs`` (how many),
+  ``steps`` (1 ms steps run with a clipped output), ``share`` (of the run's steps),
+  ``first_s`` (time of the first) and ``worst`` (the output farthest outside, as given);
+  ``flags``: the keys of what makes the run not a valid result (``controller_output_clipped``
+  when any output was clipped; [] otherwise);
 - ``acceptance``: the tensioner's acceptance figures
   (:func:`~trackmj.results.acceptance.acceptance`).
 
@@ -116,8 +124,8 @@ class RunSignals:
     (n,). tracking: the tracking window (evaluation_start_s, t_end) [s], in_tracking its
     sample mask. steady: the steady window cut at the run end [s]; None if the scenario has
     none or it is empty (unlike a :data:`~trackmj.results.signals.Window`, None here means
-    no sample). control_period_s, solve_times_s, solve_success, wall_time_s: as given to
-    :func:`compute_metrics`.
+    no sample). control_period_s, solve_times_s, solve_success, wall_time_s,
+    clipped_outputs, valve_mode_applied: as given to :func:`compute_metrics`.
     """
 
     columns: Mapping[str, np.ndarray]
@@ -133,6 +141,8 @@ class RunSignals:
     solve_times_s: Sequence[float] | None = None
     solve_success: Sequence[bool] | None = None
     wall_time_s: float | None = None
+    clipped_outputs: Sequence[tuple[int, float]] | None = None
+    valve_mode_applied: bool = True
 
     @property
     def t_end(self) -> float:
@@ -293,11 +303,16 @@ def constraint_violation(run: RunSignals) -> dict[str, float]:
         run.t, run.tension, w.force_min_N, w.force_max_N, run.tracking)}
 
 
-def valve_switching(run: RunSignals) -> dict[str, float]:
-    """``valve_switches`` (count) and ``valve_switch_rate_Hz`` in the tracking window."""
+def valve_switching(run: RunSignals) -> dict[str, Any]:
+    """``valve_switches`` (count) and ``valve_switch_rate_Hz`` in the tracking window, NaN
+    when the tensioner takes no valve mode; ``valve_mode_applied`` says which."""
+    if not run.valve_mode_applied:
+        return {"valve_switches": math.nan, "valve_switch_rate_Hz": math.nan,
+                "valve_mode_applied": False}
     mode = np.asarray(run.columns["valve_mode"])
     return {"valve_switches": float(switch_count(mode[run.in_tracking])),
-            "valve_switch_rate_Hz": switching_rate(run.t, mode, run.tracking)}
+            "valve_switch_rate_Hz": switching_rate(run.t, mode, run.tracking),
+            "valve_mode_applied": True}
 
 
 def control_increments(run: RunSignals) -> dict[str, float]:
@@ -325,6 +340,30 @@ def solver_statistics(run: RunSignals) -> dict[str, float]:
                              else np.asarray(run.solve_success))
     return {"solve_time_median_s": stats.median_s, "solve_time_max_s": stats.max_s,
             "solve_failures": float(stats.failures)}
+
+
+def output_clipping(run: RunSignals) -> dict[str, Any]:
+    """``controller_output_clipped`` (table: ``outputs``, ``steps``, ``share`` [-],
+    ``first_s`` [s], ``worst`` [-]) and ``flags``, if the clipped outputs were given.
+
+    Each clipped output (step k, value) was held from t_k = t_s[k] − h until the next
+    controller period (``control_period_s``; without it, one step) or the run's end."""
+    if run.clipped_outputs is None:
+        return {}
+    clipped = list(run.clipped_outputs)
+    n, h = len(run.t), sample_period(run.t)
+    stride = 1 if run.control_period_s is None else max(1, round(run.control_period_s / h))
+    steps = sum(min(stride, n - k) for k, _ in clipped)
+    finite = [u for _, u in clipped if math.isfinite(u)]
+    first = clipped[0][0] if clipped else None
+    table = {"outputs": float(len(clipped)), "steps": float(steps),
+             "share": steps / n if n else math.nan,
+             "first_s": (math.nan if first is None    # the start of step k: t_s[k - 1]
+                         else round(float(run.t[first - 1] if first else run.t[0] - h), 9)
+                         + 0.0),   # + 0.0: no "-0.000 s"
+             "worst": max(finite, key=abs) if finite else math.nan}
+    return {"controller_output_clipped": table,
+            "flags": ["controller_output_clipped"] if clipped else []}
 
 
 def real_time(run: RunSignals) -> dict[str, float]:
@@ -441,6 +480,7 @@ METRICS: dict[str, Metric] = {
     "valve_switches": Metric("1", valve_switching),
     "valve_switch_rate_Hz": Metric("Hz", valve_switching,
                                    Display("valve switching", 1.0, "Hz")),
+    "valve_mode_applied": Metric("", valve_switching),
     "control_increment_rms": Metric("1", control_increments),
     "interface_energy_residual_J": Metric(
         "J", interface_energy, Display("interface energy residual", 1.0, "J")),
@@ -448,6 +488,12 @@ METRICS: dict[str, Metric] = {
                                   Display("solve time median", 1e3, "ms")),
     "solve_time_max_s": Metric("s", solver_statistics, Display("solve time max", 1e3, "ms")),
     "solve_failures": Metric("1", solver_statistics),
+    "controller_output_clipped.outputs": Metric("1", output_clipping),
+    "controller_output_clipped.steps": Metric("1", output_clipping),
+    "controller_output_clipped.share": Metric("1", output_clipping),
+    "controller_output_clipped.first_s": Metric("s", output_clipping),
+    "controller_output_clipped.worst": Metric("1", output_clipping),
+    "flags": Metric("", output_clipping),
     "real_time_factor": Metric("1", real_time, Display("real-time factor", 1.0, "×")),
     "acceptance.mean_window_s": Metric("s", acceptance_figures),
     "acceptance.recovery_band_rel": Metric("1", acceptance_figures),
@@ -516,18 +562,25 @@ def compute_metrics(columns: Mapping[str, np.ndarray], windows: MetricWindows, *
                     control_period_s: float | None = None,
                     solve_times_s: Sequence[float] | None = None,
                     solve_success: Sequence[bool] | None = None,
-                    wall_time_s: float | None = None) -> dict[str, Any]:
+                    wall_time_s: float | None = None,
+                    clipped_outputs: Sequence[tuple[int, float]] | None = None,
+                    valve_mode_applied: bool = True) -> dict[str, Any]:
     """The standard metric set (the module docstring lists it) from the timeseries
     contract (see ``trackmj.results.store``) on ``windows``: the outputs of the steps of
     :data:`METRICS`, in the registry's order.
 
     ``control_period_s`` [s] gives ``control_increment_rms``; ``solve_times_s`` [s] and
     ``solve_success`` (per solve) the solve statistics; ``wall_time_s`` [s] the real-time
-    factor. KeyError if a column of :data:`REQUIRED_COLUMNS` is missing.
+    factor; ``clipped_outputs``, (step k, output as given) of each controller output the
+    loop clipped (:attr:`trackmj.sim.observers.Recorder.clipped`), gives
+    ``controller_output_clipped`` and ``flags``; ``valve_mode_applied`` False (the
+    tensioner takes no valve mode) makes the valve metrics NaN. KeyError if a column of
+    :data:`REQUIRED_COLUMNS` is missing.
     """
     run = run_signals(columns, windows, control_period_s=control_period_s,
                       solve_times_s=solve_times_s, solve_success=solve_success,
-                      wall_time_s=wall_time_s)
+                      wall_time_s=wall_time_s, clipped_outputs=clipped_outputs,
+                      valve_mode_applied=valve_mode_applied)
     out: dict[str, Any] = {}
     for step in _steps():
         out |= step(run)

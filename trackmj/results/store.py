@@ -10,7 +10,8 @@ under ``unit``), in this order (:data:`COLUMN_UNITS`):
     mech_work_J (cumulative ∫F·v dt) [J], chassis_acc_z_m_s2 [m/s²], closure_error_m [m];
 
 NaN where an architecture has no such quantity. Table metadata (strings): scenario,
-architecture, controller, estimator, seed, trackmj_version, machine, plus extras.
+architecture, controller, estimator, seed, trackmj_version, machine (the crawler's
+name), host (the computer), plus extras.
 
 Result directory (:class:`ResultWriter`, :func:`write_result`; read by :func:`read_result`):
 
@@ -25,9 +26,10 @@ Result directory (:class:`ResultWriter`, :func:`write_result`; read by :func:`re
 
 A directory is replaced whole: everything is staged in a hidden sibling directory and
 swapped in with one atomic exchange (Linux ``renameat2(RENAME_EXCHANGE)``; elsewhere two
-renames), so the directory always holds one complete run, never a mix of two. A lock beside
-the directory refuses a second writer for as long as the first one runs; an interrupted
-run (exception, Ctrl-C) leaves the previous result untouched.
+renames), so the directory always holds one complete run, never a mix of two. A lock file
+beside the directory (``.NAME.lock``, :class:`LockFile`) refuses a second writer for as long
+as the first one runs and is removed when it finishes; an interrupted run (exception,
+Ctrl-C) leaves the previous result untouched.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 import pyarrow as pa
@@ -121,14 +123,15 @@ def make_table(columns: Mapping[str, np.ndarray], units: Mapping[str, str],
 
 
 def run_metadata(scenario: str, architecture: str, controller: str, estimator: str, seed: int,
-                 machine: str | None = None, **extra: Any) -> dict[str, str]:
-    """Table metadata of a run; ``machine`` defaults to :func:`trackmj.host.machine`;
-    extras that are not strings are stored as JSON."""
-    if machine is None:
-        machine = describe_machine()
+                 host: str | None = None, *, machine: str, **extra: Any) -> dict[str, str]:
+    """Table metadata of a run: ``machine`` is the crawler's name (``lf1352``), ``host`` the
+    computer that ran it (default :func:`trackmj.host.machine`); extras that are not strings
+    are stored as JSON."""
+    if host is None:
+        host = describe_machine()
     meta = {"scenario": scenario, "architecture": architecture, "controller": controller,
             "estimator": estimator, "seed": str(int(seed)), "trackmj_version": __version__,
-            "machine": machine}
+            "machine": machine, "host": host}
     return meta | {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True)
                    for k, v in extra.items()}
 
@@ -334,6 +337,65 @@ def check_output_dir(out: Path, marker: str = METRICS) -> Path:
     return out
 
 
+class LockFile:
+    """An exclusive lock held on the file ``path`` (``flock``), which exists only while it
+    is held: :meth:`acquire` creates it, :meth:`release` removes it, so a finished folder
+    holds no lock files (a killed holder leaves one behind, which the next holder takes
+    over and removes).
+
+    The race of removing a lock file: the holder unlinks the path while it still holds the
+    lock, then unlocks. A process that opened the old file before the unlink and gets its
+    lock after it holds a file that ``path`` no longer names; :meth:`acquire` sees that
+    (the path is gone or is another inode) and opens the path again. So two holders never
+    both hold what ``path`` names.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._fh: IO[str] | None = None
+
+    def acquire(self) -> bool:
+        """Take the lock without waiting; False if another holder (another process, or
+        another LockFile in this one) has it."""
+        if self._fh is not None:
+            raise RuntimeError(f"{self.path}: already held")
+        while True:
+            fh = open(self.path, "a")   # held until release
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                if self._names(fh):
+                    self._fh = fh
+                    return True
+            except BlockingIOError:
+                fh.close()
+                return False
+            except BaseException:
+                fh.close()
+                raise
+            fh.close()   # its holder removed it as we waited: open what the path names now
+
+    def _names(self, fh: IO[str]) -> bool:
+        """Whether ``path`` still names the file ``fh`` has open."""
+        try:
+            on_disk = os.stat(self.path)
+        except FileNotFoundError:
+            return False
+        mine = os.fstat(fh.fileno())
+        return (on_disk.st_dev, on_disk.st_ino) == (mine.st_dev, mine.st_ino)
+
+    def release(self) -> None:
+        """Remove the lock file, then unlock it (nothing if not held)."""
+        fh, self._fh = self._fh, None
+        if fh is None:
+            return
+        try:
+            if self._names(fh):
+                self.path.unlink()
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+            fh.close()
+
+
 class ResultWriter:
     """Writes one result directory whole: ``with ResultWriter(out) as w:`` takes the lock and
     a staging directory ``w.stage`` (a run may write e.g. its Rerun recording there while it
@@ -347,21 +409,23 @@ class ResultWriter:
         self.out = check_output_dir(Path(out), marker)
         self.stage: Path | None = None
         self.committed = False
-        self._lock: Any = None
+        self._lock: LockFile | None = None
 
     def __enter__(self) -> ResultWriter:
         out = self.out
-        self._lock = open(out.parent / f".{out.name}.lock", "a")  # held until __exit__
-        try:
-            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            self._lock.close()
+        lock = LockFile(out.parent / f".{out.name}.lock")   # held until __exit__
+        if not lock.acquire():
             raise ResultDirectoryError(
                 f"--out {out}: another trackmj process is writing this directory; wait for it "
-                "or choose another --out") from None
-        for stale in out.parent.glob(f".{out.name}.stage-*"):  # left by a killed writer
-            shutil.rmtree(stale, ignore_errors=True)
-        self.stage = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.stage-"))
+                "or choose another --out")
+        self._lock = lock
+        try:
+            for stale in out.parent.glob(f".{out.name}.stage-*"):  # left by a killed writer
+                shutil.rmtree(stale, ignore_errors=True)
+            self.stage = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.stage-"))
+        except BaseException:
+            self.__exit__()
+            raise
         return self
 
     def commit(self, result: Result, *, csv: bool = False,
@@ -406,8 +470,7 @@ class ResultWriter:
             shutil.rmtree(self.stage, ignore_errors=True)
             self.stage = None
         if self._lock is not None:
-            fcntl.flock(self._lock, fcntl.LOCK_UN)
-            self._lock.close()
+            self._lock.release()
             self._lock = None
 
 

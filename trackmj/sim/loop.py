@@ -8,8 +8,11 @@ Per 1 ms coupling step k (t = k·h), data flows one way through the ports of
 
 The controller sees the estimator's mean posterior over the past period and the reference
 preview F_ref(t + i·period), i = 0..N; it is told the supply pressure of the step
-(a supply-pressure transducer). The loop never asks which plant, controller or estimator it
-has.
+(a supply-pressure transducer). Its output u is held until its next period; an output
+outside the port's range [−1, 1] is clipped here, the one place (NaN counts as −1, release,
+as the valve logic takes it): the :class:`~trackmj.ports.Command` carries the clipped u and
+``solved`` the output as given, so an observer counts the clipping. The loop never asks
+which plant, controller or estimator it has.
 """
 
 from __future__ import annotations
@@ -79,6 +82,8 @@ def run_loop(schedule: Schedule, *, controller: Controller, valves: ValveLogic, 
             controller.set_parameters(supply_pressure_Pa=inputs.supply_set_Pa)
             solved = controller(estimator.period_mean(), schedule.previews[k // ratio], k * h)
             u = solved.u
+            if not -1.0 <= u <= 1.0:   # outside the port's range (NaN: release): clipped,
+                u = 1.0 if u > 1.0 else -1.0   # the Command's u then differs from solved.u
         mode = valve_step(u)
         command = _command(Command, (mode, u, solved))
         readout = plant_step(command, inputs)

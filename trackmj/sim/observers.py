@@ -41,7 +41,8 @@ class Recorder:
     :data:`~trackmj.ports.READOUT_UNITS`), ``valve_mode`` and ``u``, plus, from the
     schedule, the reference ``tension_ref_N`` and the time grid ``t_s`` = (k + 1)·h (exact,
     where the plant's clock accumulates steps); the controller's solves (wall time [s],
-    success) are kept in :attr:`solve_times_s` and :attr:`solve_success`.
+    success) are kept in :attr:`solve_times_s` and :attr:`solve_success`, and its outputs
+    the loop clipped to [−1, 1] as (step k, output as given) in :attr:`clipped`.
 
     A step's values are appended to a flat float64 buffer (``array('d')``, one C call per
     readout) and copied into :attr:`data` :data:`CHUNK` steps at a time; the same float64
@@ -63,6 +64,7 @@ class Recorder:
         self._values = array("d")   # their values, row after row
         self.solve_times_s: list[float] = []
         self.solve_success: list[bool] = []
+        self.clipped: list[tuple[int, float]] = []
 
     @property
     def rows(self) -> int:
@@ -77,9 +79,12 @@ class Recorder:
         values.extend(readout)
         values.append(command.mode)
         values.append(command.u)
-        if command.solved is not None:
-            self.solve_times_s.append(command.solved.solve_time_s)
-            self.solve_success.append(command.solved.success)
+        solved = command.solved
+        if solved is not None:
+            self.solve_times_s.append(solved.solve_time_s)
+            self.solve_success.append(solved.success)
+            if solved.u != command.u:   # the loop clipped it (NaN differs from everything)
+                self.clipped.append((k, solved.u))
         self._kept += 1
         if self._kept == self.CHUNK:
             self._write()

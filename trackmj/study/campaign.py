@@ -14,7 +14,8 @@ A campaign directory (:class:`Store`):
 
 - ``campaign.json``: what kind of campaign it is (``sweep``, ``report``, ``calibrate``); a
   campaign of another kind into the same directory is refused, and so is a second campaign
-  while one writes it (an exclusive lock, ``.campaign.lock``);
+  while one writes it (an exclusive lock, ``.campaign.lock``, removed when the campaign
+  ends: a finished campaign directory holds no lock files);
 - ``results.parquet``: one row per run, rewritten atomically as runs finish (at most every
   2 s while they do, and at the end, also after Ctrl-C or an error). Columns: the identity
   columns (:data:`IDENTITY`), one column per swept key, every scalar metric (nested metric
@@ -28,11 +29,9 @@ A campaign directory (:class:`Store`):
 
 from __future__ import annotations
 
-import fcntl
 import json
 import math
 import time
-import typing
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +42,13 @@ import pyarrow.parquet as pq
 
 from trackmj.io import write_bytes_atomic, write_text_atomic
 from trackmj.results.columns import column_unit, is_key_column
-from trackmj.results.store import Result, ResultDirectoryError, read_result, write_result
+from trackmj.results.store import (
+    LockFile,
+    Result,
+    ResultDirectoryError,
+    read_result,
+    write_result,
+)
 from trackmj.sim.setup import RunSetup, prepare
 from trackmj.study.executor import Executor, RunOutcome, RunSpec
 from trackmj.study.identity import run_key, stamped
@@ -95,19 +100,14 @@ class Store:
         self.out = check_campaign_dir(out, (CAMPAIGN, RESULTS, *markers), what or kind)
         self.results = self.out / RESULTS
         self.runs = self.out / runs
-        self._fh: typing.TextIO | None = None
+        self._lock = LockFile(self.out / LOCK)
         self.rows: dict[str, dict[str, Any]] = {}
 
     def __enter__(self) -> Store:
-        self._fh = open(self.out / LOCK, "a")   # held until __exit__
-        try:
-            fcntl.flock(self._fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            self._fh.close()
-            self._fh = None
+        if not self._lock.acquire():   # held until __exit__
             raise ResultDirectoryError(f"--out {self.out}: another trackmj campaign is "
                                        "writing this directory; wait for it or choose "
-                                       "another --out") from None
+                                       "another --out")
         try:
             marker = self.out / CAMPAIGN
             if marker.is_file():
@@ -125,10 +125,7 @@ class Store:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self._fh is not None:
-            fcntl.flock(self._fh, fcntl.LOCK_UN)
-            self._fh.close()
-            self._fh = None
+        self._lock.release()
 
     def run_dir(self, run: PlannedRun) -> Path:
         return self.runs / run.name
