@@ -272,7 +272,7 @@ def test_an_fmu_that_fails_mid_run_stops_it_and_keeps_earlier_results(
     out.mkdir()
     (out / "metrics.json").write_text("{}")   # an earlier result's file
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    assert main(["drive", "--duration", "1", "--tensioner", str(toml)]) == 3
+    assert main(["drive", "--duration", "1", "--tensioner", str(toml), "--out", str(out)]) == 3
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and expected in err
     assert re.search(r"t = 0\.(499|500) s", err)

@@ -38,7 +38,7 @@ def synthetic_result(n_steps: int) -> Result:
              "p_supply_Pa": np.full(n_steps, 12e6),
              "valve_mode": (np.arange(n_steps) % 3 - 1).astype(float),
              "u": np.full(n_steps, 0.5), "e_supply_J": 100.0 * t}
-    meta = run_metadata("W1", "tp", "nmpc", "ekf", 0, machine="test")
+    meta = run_metadata("W1", "tp", "nmpc", "ekf", 0, "test", machine="lf1352")
     return Result(make_table(cols, COLUMN_UNITS, meta))
 
 

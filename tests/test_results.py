@@ -17,7 +17,7 @@ import pytest
 
 import trackmj.results.store as R
 
-META = R.run_metadata("W1", "tp", "nmpc", "ekf", 3, machine="test box")
+META = R.run_metadata("W1", "tp", "nmpc", "ekf", 3, "test box", machine="lf1352")
 
 
 def _table(n: int = 500):
@@ -55,7 +55,7 @@ def test_round_trip_with_units_tables_and_nan_metrics(tmp_path) -> None:
     assert back.units["p_head_Pa"] == "Pa" and back.units["valve_mode"] == "1"
     assert (back.scenario, back.architecture, back.controller, back.estimator, back.seed) == (
         "W1", "tp", "nmpc", "ekf", 3)
-    assert back.metadata["machine"] == "test box" and back.metadata["trackmj_version"]
+    assert back.metadata["host"] == "test box" and back.metadata["trackmj_version"]
     assert back.metrics["rmse_N"] == 412.5 and math.isnan(back.metrics["settling_time_s"])
     assert back.metrics["energy_J"]["losses"]["relief"] == 3.0
     assert math.isnan(back.metrics["energy_J"]["losses"]["leakage"])
@@ -84,7 +84,7 @@ def test_failure_mid_write_leaves_no_output(tmp_path, monkeypatch) -> None:
     monkeypatch.setattr(R, "_csv_bytes", boom)
     with pytest.raises(OSError, match="disk full"):
         R.write_result(_result(50), tmp_path / "run", csv=True)
-    assert [p.name for p in tmp_path.iterdir()] == [".run.lock"]  # no directory, no stage
+    assert list(tmp_path.iterdir()) == []  # no directory, no stage, no lock file
 
 
 def test_rewrite_replaces_the_whole_directory(tmp_path) -> None:
@@ -96,7 +96,7 @@ def test_rewrite_replaces_the_whole_directory(tmp_path) -> None:
     assert back.metrics["rmse_N"] == 2.0 and back.timeseries.num_rows == 80
     assert sorted(p.name for p in out.iterdir()) == ["metrics.json", "timeseries.parquet",
                                                      "units.json"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".run.lock", "run"]
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]   # no stage, no lock file
 
 
 def test_failed_overwrite_keeps_the_previous_result(tmp_path, monkeypatch) -> None:
@@ -105,7 +105,7 @@ def test_failed_overwrite_keeps_the_previous_result(tmp_path, monkeypatch) -> No
     with pytest.raises(ZeroDivisionError):
         R.write_result(_result(80, rmse_N=2.0), out)
     assert R.read_result(out).metrics["rmse_N"] == 1.0
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".run.lock", "run"]
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]   # no stage, no lock file
 
 
 def test_second_writer_is_refused_while_the_first_holds_the_lock(tmp_path) -> None:
@@ -118,7 +118,8 @@ def test_second_writer_is_refused_while_the_first_holds_the_lock(tmp_path) -> No
 
 def test_killed_writer_leaves_the_previous_result_and_is_cleaned_up(tmp_path) -> None:
     """A writer killed (SIGKILL) after staging its files: the old result stays whole, the
-    stale stage is removed by the next writer, and the lock died with the process."""
+    stale stage is removed by the next writer, and the lock died with the process (its
+    file, left behind, is taken over and removed by the next writer)."""
     out = R.write_result(_result(50, rmse_N=1.0), tmp_path / "run")
     script = textwrap.dedent(f"""
         import time
@@ -140,7 +141,7 @@ def test_killed_writer_leaves_the_previous_result_and_is_cleaned_up(tmp_path) ->
     assert any(p.name.startswith(".run.stage-") for p in tmp_path.iterdir())
     R.write_result(_result(20, rmse_N=3.0), out)
     assert R.read_result(out).metrics["rmse_N"] == 3.0
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".run.lock", "run"]
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]   # no stage, no lock file
 
 
 def test_output_that_cannot_take_a_result_is_refused_before_any_work(tmp_path) -> None:
@@ -168,6 +169,6 @@ def test_writer_exits_cleanly_on_keyboard_interrupt(tmp_path) -> None:
         (writer.stage / "timeseries.parquet").write_bytes(b"partial")
         raise KeyboardInterrupt
     assert R.read_result(out).metrics["rmse_N"] == 1.0
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".run.lock", "run"]
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]   # no stage, no lock file
     with R.ResultWriter(out):   # the lock was released: a new writer gets it at once
         pass

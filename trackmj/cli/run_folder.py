@@ -1,8 +1,9 @@
 """Where ``trackmj run`` writes a run, and when it refuses a folder.
 
-A folder is named after the run (scenario, architecture, controller, seed, variant) and,
-for inputs that are not the scenario's own, a short hash of them, so runs of other inputs
-never share a folder. A folder that holds a run of other inputs (another inputs key, read
+A folder is named after the run (scenario, architecture, controller, seed, variant, and the
+machine when it is not the default one) and, for inputs that are not the scenario's own
+(a measured log among them), a short hash of them, so runs of other inputs never share a
+folder. A folder that holds a run of other inputs (another inputs key, read
 from its metrics.json) is refused unless ``--overwrite``; a run of the same inputs is
 replaced.
 """
@@ -13,6 +14,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.results.store import METRICS, ResultDirectoryError
 
 if TYPE_CHECKING:
@@ -21,14 +23,17 @@ if TYPE_CHECKING:
 
 def run_folder(setup: RunSetup, key: str, *, defaults: bool) -> Path:
     """Default folder of ``trackmj run``: ``runs/SCENARIO-ARCH-CONTROLLER-sSEED`` for the
-    scenario's own inputs (``defaults``), with ``-VARIANT`` for a W5 variant and the first
-    8 digits of the inputs' hash (:func:`trackmj.study.identity.inputs_key`) for any other input
-    (estimator, --duration, --set, parameter or tensioner files), so that runs of other
-    inputs never share a folder."""
+    scenario's own inputs (``defaults``), with ``-VARIANT`` for a W5 variant, ``-MACHINE``
+    for a machine other than the default one and the first 8 digits of the inputs' hash
+    (:func:`trackmj.study.identity.inputs_key`) for any other input (estimator,
+    --duration, --set, parameter or tensioner files, a measured log), so that runs of
+    other inputs never share a folder."""
     name = (f"{setup.scenario.name}-{setup.architecture}-{setup.controller}-"
             f"s{setup.seed}")
     if setup.variant.name != "nominal":
         name += f"-{setup.variant.name}"
+    if setup.machine.name != DEFAULT_MACHINE:
+        name += f"-{setup.machine.name}"
     if not defaults:
         name += f"-{key[:8]}"
     return Path("runs") / name

@@ -57,6 +57,7 @@ from trackmj.sim.setup import Overrides, RunSetup, prepare
 from trackmj.validator import ParameterError
 
 if TYPE_CHECKING:
+    from trackmj.results.measured import MeasuredLog
     from trackmj.results.playback import PlaybackRecorder
 
 FRAME_EVERY_STEPS = 20
@@ -172,7 +173,7 @@ def _check_channels(channels: str) -> None:
 
 
 def measured_log(setup: RunSetup, path: str | Path,
-                 channels: str = "default") -> dict[str, np.ndarray]:
+                 channels: str = "default") -> MeasuredLog:
     """The measured log at ``path`` on the run's grid, checked against the columns the run
     records with ``channels`` and its duration before the run (ParameterError naming the
     file and column)."""
@@ -190,7 +191,7 @@ measured log may hold too."""
 
 def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = False,
         tp_result: Result | None = None,
-        measured: dict[str, np.ndarray] | None = None, channels: str = "default") -> Result:
+        measured: MeasuredLog | None = None, channels: str = "default") -> Result:
     """Run a prepared setup (see :func:`simulate` for the arguments and the result;
     ``measured``: a log from :func:`measured_log`)."""
     _check_channels(channels)
@@ -204,7 +205,8 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
                        rrd=rrd)
         wall = _run_watched(sched, asm, controller, estimator, sensors, watch)
     meta = run_metadata(setup.scenario.name, setup.architecture, setup.controller,
-                        setup.estimator, setup.seed, host_machine(), variant=setup.variant.name,
+                        setup.estimator, setup.seed, host_machine(),
+                        machine=setup.machine.name, variant=setup.variant.name,
                         duration_s=setup.duration_s, files=setup.files,
                         overrides=setup.overrides)
     result = Result(watch.recorder.table(meta, watch.extra), {})
@@ -289,16 +291,28 @@ def _run_watched(sched: Schedule, asm: Assembly, controller: Controller, estimat
     return time.perf_counter() - wall_start
 
 
+def _takes_valve_mode(setup: RunSetup) -> bool:
+    """Whether the run's tensioner takes the valve mode: the built-in elements do, a
+    passive tensioner does not, an FMU does if an input is mapped to ``valve_mode``."""
+    tensioner = setup.tensioner
+    if tensioner is None:
+        return True
+    return tensioner.fmu is not None and "valve_mode" in tensioner.fmu.inputs.values()
+
+
 def _run_metrics(setup: RunSetup, asm: Assembly, result: Result, recorder: Recorder,
                  controller: Controller, wall_s: float,
-                 measured: dict[str, np.ndarray] | None) -> dict:
+                 measured: MeasuredLog | None) -> dict:
     """metrics.json of the run: the scenario's metrics over its windows, the element's,
-    the controller's counts, MuJoCo's warnings and, with a measured log, the comparison."""
+    the controller's counts, MuJoCo's warnings and, with a measured log, the comparison and
+    the log's record (file, SHA-256, columns used and ignored)."""
     windows = setup.scenario.metric_windows(setup.duration_s,
                                             link_pitch_m=setup.model.track.pitch_m)
     m = compute_metrics(result.columns(), windows, control_period_s=controller.period_s,
                         solve_times_s=recorder.solve_times_s,
-                        solve_success=recorder.solve_success, wall_time_s=wall_s)
+                        solve_success=recorder.solve_success, wall_time_s=wall_s,
+                        clipped_outputs=recorder.clipped,
+                        valve_mode_applied=_takes_valve_mode(setup))
     m |= asm.element.run_metrics(setup.duration_s)
     m["controller_fallbacks"] = float(controller.statistics().fallbacks)
     m["controller_overruns"] = float(np.sum(np.array(recorder.solve_times_s)
@@ -306,6 +320,7 @@ def _run_metrics(setup: RunSetup, asm: Assembly, result: Result, recorder: Recor
     if asm.track is not None:
         m["mujoco_warnings"] = float(asm.track.warning_count)
     if measured is not None:
-        m["prediction_vs_measured"] = prediction_vs_measured(result.columns(), measured,
-                                                             windows)
+        m["prediction_vs_measured"] = prediction_vs_measured(result.columns(),
+                                                             measured.columns, windows)
+        m["measured_log"] = measured.record()
     return m

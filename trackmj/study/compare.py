@@ -104,7 +104,7 @@ def write_compare(run: CompareRun, out_dir: str | Path, scenario: Any,
                                           title=f"{scenario.name} seed {mine[0].seed}, {a}: "
                                                 "controllers"))
     doc = {"scenario": scenario.name, "title": scenario.title, "seed": run.results[0].seed,
-           "duration_s": duration_s, "machine": machine(),
+           "duration_s": duration_s, "host": machine(),
            "evaluation": run.results[0].metrics.get("evaluation"),
            "runs": {f"{r.architecture}-{r.controller}": {
                "architecture": r.architecture, "controller": r.controller,

@@ -6,12 +6,13 @@ The identity holds the scenario (validated, after overrides, events as they will
 machine files' content (the validated model, hydraulic and control parameters after
 overrides and the variant's scaling; the packaged machine's files,
 :func:`machine_files_hash`; a tensioner file's content and its FMU file's SHA-256; a
-controller FMU's file hash), the architecture, controller, estimator, seed, variant,
-duration and the SHA-256 of the *source* of the trackmj, trackmj.hydraulics and
-trackmj.control packages (:func:`source_hash`). :func:`run_key` hashes all of it;
-:func:`inputs_key` the same without the source (what ``trackmj run`` compares before
-replacing a folder: the same inputs run by other code may replace their old result, other
-inputs may not).
+controller FMU's file hash), the machine (its name and files, :func:`machine_identity`), the
+architecture, controller, estimator, seed, variant, duration, the measured log a run is
+compared with (its file name and SHA-256; ``trackmj run --measured``) and the SHA-256 of the
+*source* of the trackmj, trackmj.hydraulics and trackmj.control packages (:func:`source_hash`).
+:func:`run_key` hashes all of it; :func:`inputs_key` the same without the source (what
+``trackmj run`` compares before replacing a folder: the same inputs run by other code may
+replace their old result, other inputs may not).
 """
 
 from __future__ import annotations
@@ -23,11 +24,13 @@ import importlib
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.results.store import Result
 from trackmj.track.mjcf.builders import read_mjcf
+
+if TYPE_CHECKING:
+    from trackmj.results.measured import MeasuredLog
 
 SOURCE_PACKAGES = ("trackmj", "trackmj.hydraulics", "trackmj.control")
 """Packages whose source (every ``.py`` file below them) is part of a run's identity."""
@@ -85,9 +88,10 @@ def _file_hash(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def identity(setup: Any) -> dict[str, Any]:
+def identity(setup: Any, log: MeasuredLog | None = None) -> dict[str, Any]:
     """Everything that determines the run of ``setup`` (a :class:`trackmj.sim.setup.RunSetup`)
-    as a JSON-ready mapping; see the module docstring. ``source`` is :func:`source_hash`."""
+    compared with measured ``log`` (if any) as a JSON-ready mapping; see the module
+    docstring. ``source`` is :func:`source_hash`."""
     scenario = {f.name: repr(getattr(setup.scenario, f.name))
                 for f in dataclasses.fields(setup.scenario) if f.name != "source"}
     ident: dict[str, Any] = {
@@ -98,9 +102,9 @@ def identity(setup: Any) -> dict[str, Any]:
         "scenario": scenario, "machine_files": machine_files_hash(), "source": source_hash()}
     if setup.tensioner is not None:
         ident["tensioner"] = setup.tensioner.identity()
-    machine = getattr(setup, "machine", None)
-    if machine is not None and machine.name != DEFAULT_MACHINE:
-        ident["machine"] = machine_identity(machine)
+    ident["machine"] = machine_identity(setup.machine)
+    if log is not None:
+        ident["measured_log"] = {"file": log.file, "sha256": log.sha256}
     if setup.controller_file is not None:
         ident["controller_file"] = repr(setup.controller_file)
         described = setup.controller_file.description
@@ -113,14 +117,14 @@ def _hash(ident: Mapping[str, Any]) -> str:
     return hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()[:20]
 
 
-def run_key(setup: Any) -> str:
+def run_key(setup: Any, log: MeasuredLog | None = None) -> str:
     """Hash (20 hex digits) of the run's :func:`identity`: inputs and code."""
-    return _hash(identity(setup))
+    return _hash(identity(setup, log))
 
 
-def inputs_key(setup: Any) -> str:
+def inputs_key(setup: Any, log: MeasuredLog | None = None) -> str:
     """Hash (20 hex digits) of the run's inputs alone (its identity without the source)."""
-    return _hash({k: v for k, v in identity(setup).items() if k != "source"})
+    return _hash({k: v for k, v in identity(setup, log).items() if k != "source"})
 
 
 def stamped(result: Result, **keys: str) -> Result:
