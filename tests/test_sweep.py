@@ -3,9 +3,11 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import os
+import re
 
 import numpy as np
 import pytest
@@ -123,61 +125,255 @@ def test_nested_metric_tables_become_dotted_columns() -> None:
                     "energy_J.losses.orifices": 3.0, "ok": 1.0}
 
 
-def test_scattered_samples_are_plotted_per_metric(tmp_path, monkeypatch) -> None:
-    """Rows of an LHS sweep (no two points share the other key's value), one failed: a
-    figure per metric that varies across the runs that ran (not the constant wall time, not
-    the metric that is NaN everywhere), the failed row left out; labels in plain words."""
+# ----------------------------------------------------------------------------- summary
+
+INPUTS = '{"files": {}, "set": []}'
+
+
+def _row(key: str, point: int, seed: int = 0, **cells) -> dict:
+    """A results row as a sweep writes it (W1 tp nmpc/ekf, 1.5 s), ``cells`` on top."""
+    return {"run_key": key, "point": point, "scenario": "W1", "architecture": "tp",
+            "controller": "nmpc", "estimator": "ekf", "variant": "nominal", "seed": seed,
+            "duration_s": 1.5, "inputs": INPUTS, "evaluation.lowpass_cutoff_Hz": 2.0,
+            "wall_time_s": 1.0, "error": None} | cells
+
+
+def _grid_rows() -> list[dict]:
+    """A 2 x 2 grid, one seed, hand-written metrics in SI (rmse_lp_N etc.)."""
+    rows = []
+    for i, (speed, bulk, rmse, p_head, pump, solve) in enumerate([
+            (0.5, 0.8e9, 1540.0, 6.03e6, 131.9, 0.0066),
+            (0.5, 1.6e9, 877.0, 6.31e6, 126.7, 0.0009),
+            (1.5, 0.8e9, 1083.0, 6.15e6, 145.2, 0.0016),
+            (1.5, 1.6e9, 539.0, 6.58e6, 122.0, 0.0021)]):
+        rows.append(_row(f"k{i}", i, **{SPEED: speed, BULK: bulk, "rmse_lp_N": rmse,
+                                        "p_head_max_Pa": p_head, "energy_J.pump": pump,
+                                        "settling_time_lp_s": math.nan,
+                                        "solve_time_max_s": solve, "real_time_factor": 3.0,
+                                        "controller_overruns": 0.0}))
+    return rows[::-1]             # as a sweep may finish them: the table sorts
+
+
+def _table_lines(markdown: str) -> list[list[str]]:
+    """The cells of the Markdown table's lines (header, separator, rows)."""
+    return [[c.strip() for c in line.strip().strip("|").split("|")]
+            for line in markdown.splitlines() if line.startswith("|")]
+
+
+def test_the_summary_has_a_row_per_point_in_display_units() -> None:
+    """Varied keys first with their values as given and SI units, the metrics in display
+    units (1540 N -> 1.54 kN, 6.03e6 Pa -> 6.03 MPa, 131.9 J -> 0.132 kJ, 0.0066 s ->
+    6.6 ms), one seed: the plain value (no ±), diagnostics last and marked."""
+    from trackmj.study.sweep import summarize, summary_markdown
+
+    table = summarize(_grid_rows())
+    assert table.varied == (SPEED, BULK) and len(table.rows) == 4
+    head, _, *body = _table_lines(summary_markdown(table))
+    assert head[:3] == [f"{SPEED} [m/s]", f"{BULK} [Pa]", "runs"]
+    assert head[3:6] == ["RMSE lp [kN]", "p_head max [MPa]", "pump energy [kJ]"]
+    assert head[-4:] == ["diag. wall time [s]", "diag. real-time [×]", "diag. solve max [ms]",
+                         "diag. overruns"]
+    assert [row[:3] for row in body] == [["0.5", "8e+08", "1"], ["0.5", "1.6e+09", "1"],
+                                         ["1.5", "8e+08", "1"], ["1.5", "1.6e+09", "1"]]
+    assert body[0][3:6] == ["1.54", "6.03", "0.132"] and body[0][-2] == "6.6"
+    assert not any("±" in cell for row in body for cell in row)
+    assert [c.key for c in table.metrics] == ["rmse_lp_N", "p_head_max_Pa", "energy_J.pump"]
+    assert "rmse_N" in [c.key for c in table.missing]   # no value in any run
+    text = summary_markdown(table)
+    assert "tension RMSE, raw [kN]" in text.split("left out")[1]
+    assert "seed 0" in text and "2 Hz" in text
+
+
+def test_the_markdown_table_parses() -> None:
+    """Header, separator (every column, right-aligned metrics), one line per point, the same
+    number of cells in each; the lines are padded to one width."""
+    from trackmj.study.sweep import summarize, summary_markdown
+
+    markdown = summary_markdown(summarize(_grid_rows()))
+    lines = [line for line in markdown.splitlines() if line.startswith("|")]
+    cells = _table_lines(markdown)
+    assert len(lines) == 2 + 4 and len({len(row) for row in cells}) == 1
+    assert all(re.fullmatch(r"-+:?", c) for c in cells[1])
+    assert [c.endswith(":") for c in cells[1][:3]] == [False, False, True]  # numbers right
+    assert len({len(line) for line in lines}) == 1
+
+
+def test_two_seeds_give_numpys_mean_and_population_std(tmp_path) -> None:
+    """CSV (SI): mean and population std (ddof = 0) of the seeds' values as numpy computes
+    them; the Markdown cell in kN ("1.5 ± 0.5"); a seed without a value is named; a point
+    whose runs failed is counted and has no values."""
+    from trackmj.study.sweep import summarize, summary_markdown, write_summary
+
+    rmse = {(0, 0): 1000.0, (0, 1): 2000.0, (1, 0): 700.0, (1, 1): 1300.0}
+    settle = {(0, 0): 0.4, (0, 1): math.nan, (1, 0): 0.2, (1, 1): 0.3}
+    rows = [_row(f"k{p}{s}", p, s, **{BULK: bulk, "rmse_lp_N": rmse[p, s],
+                                      "settling_time_lp_s": settle[p, s]})
+            for p, bulk in enumerate((0.8e9, 1.6e9)) for s in (0, 1)]
+    rows += [_row(f"f{s}", 2, s, **{BULK: 2.4e9, "error": "PhysicsError: t = 0.2 s"})
+             for s in (0, 1)]
+    table = summarize(rows)
+    csv_path, md_path = write_summary(tmp_path, table)
+    with csv_path.open() as fh:
+        read = list(csv.DictReader(fh))
+    assert [r[f"{BULK} [Pa]"] for r in read] == ["800000000.0", "1600000000.0",
+                                                  "2400000000.0"]
+    for p in (0, 1):
+        values = [rmse[p, 0], rmse[p, 1]]
+        assert float(read[p]["rmse_lp_N_mean [N]"]) == pytest.approx(np.mean(values))
+        assert float(read[p]["rmse_lp_N_std [N]"]) == pytest.approx(np.std(values, ddof=0))
+        assert (read[p]["runs"], read[p]["failed"]) == ("2", "0")
+    assert float(read[1]["settling_time_lp_s_std [s]"]) == pytest.approx(0.05)
+    assert read[0]["settling_time_lp_s_std [s]"] == ""        # one value: no spread
+    assert (read[2]["runs"], read[2]["failed"], read[2]["rmse_lp_N_mean [N]"]) == ("0", "2", "")
+    assert "wall_time_s_mean [s] (diagnostic)" in read[0]
+    head, _, *body = _table_lines(md_path.read_text())
+    assert md_path.read_text() == summary_markdown(table)
+    col = head.index("RMSE lp [kN]")
+    assert [row[col] for row in body] == ["1.5 ± 0.5", "1 ± 0.3", "–"]
+    assert body[0][head.index("settling lp [s]")] == "0.4 (1 of 2 undefined)"
+    assert body[2][head.index("runs")] == "0 (2 failed)"
+    assert "mean ± std over the point's seeds (0, 1; population std, ddof = 0)" in \
+        " ".join(md_path.read_text().split())
+
+
+def test_a_rerun_of_a_point_and_seed_replaces_the_earlier_row(tmp_path) -> None:
+    """Results holding runs of earlier code (other run keys, same point and seed), as a
+    resumed sweep after an update leaves them: the newest row counts, once, not as a second
+    seed."""
+    from trackmj.study.campaign import read_rows
+    from trackmj.study.sweep import plot_sweep, summarize
+
+    path = tmp_path / "results.parquet"
+    write_table([_row("old0", 0, 0, **{BULK: 1e9, "rmse_lp_N": 900.0}),
+                 _row("old1", 1, 0, **{BULK: 2e9, "rmse_lp_N": 800.0})], path)
+    write_table([*read_rows(path), _row("new0", 0, 0, **{BULK: 1e9, "rmse_lp_N": 500.0})],
+                path)
+    table = summarize(read_rows(path))
+    assert [(r.seeds, r.stats("rmse_lp_N")[0]) for r in table.rows] == [((0,), 500.0),
+                                                                        ((0,), 800.0)]
+    assert table.superseded == 1
+    assert len(plot_sweep(tmp_path)) == 1
+
+
+def _drawn(monkeypatch) -> dict:
+    """Record the figures sweep_figures saves: file name -> Figure."""
+    import trackmj.results.figure_sweep as figure_sweep
+
+    drawn, save = {}, figure_sweep.save_png
+    monkeypatch.setattr(figure_sweep, "save_png",
+                        lambda fig, path: drawn.__setitem__(path.name, fig) or save(fig, path))
+    return drawn
+
+
+def _error_bars(ax) -> list:
+    from matplotlib.container import BarContainer, ErrorbarContainer
+
+    return [c for c in ax.containers if isinstance(c, ErrorbarContainer)
+            or (isinstance(c, BarContainer) and c.errorbar is not None)]
+
+
+def test_one_figure_per_swept_key_no_error_bars_with_one_seed(tmp_path, monkeypatch) -> None:
+    """Figures of a 2 x 2 grid with one seed: one per swept key, a panel per engineering
+    metric with a value, a line per value of the other key at the values in display units,
+    no error bars; no diagnostics unless asked; an earlier sweep's per-metric file goes."""
     from trackmj.study.sweep import plot_sweep
 
-    rows = [{"run_key": f"k{i}", "point": i, "scenario": "W1", "architecture": "tp",
-             "controller": "nmpc", "estimator": "ekf", "variant": "nominal", "seed": 0,
-             "duration_s": 1.5, "inputs": "{}", SPEED: 0.5 + 0.25 * i, BULK: 1e9 * (1 + i),
-             "rmse_N": 100.0 * i, "only_nan_N": math.nan, "wall_time_s": 1.0, "error": None,
-             "energy_J.friction": 3.0 * i, "friction_loss_J": 3.0 * i}
-            for i in range(5)]
-    rows[4] |= {"rmse_N": None, "error": "PhysicsError: ..."}
-    write_table(rows, tmp_path / "results.parquet")
-    import trackmj.results.figure_sweep as figures_module
-
-    drawn = []
-    original = figures_module._metric_figure
-    monkeypatch.setattr(figures_module, "_metric_figure",
-                        lambda *args: drawn.append(original(*args)) or drawn[-1])
-    figures = plot_sweep(tmp_path)      # a metric stored twice is drawn once
-    assert sorted(p.name for p in figures) == ["friction_loss_J.png", "rmse_N.png"]
-    assert all(p.read_bytes()[:4] == b"\x89PNG" for p in figures)
-    assert "the same values: energy_J.friction" in drawn[0].texts[-1].get_text()
-    ax = drawn[1].axes[0]
-    assert ax.get_ylabel() == "tension RMSE, raw [kN]"
-    assert ax.get_xlabel() == "fluid bulk modulus [MPa]"
-    plot_sweep(tmp_path, redraw=False)      # what exists is not drawn again
-    assert len(drawn) == 2
-
-
-def test_a_sweep_without_swept_keys_gets_bars_per_scenario_and_case(tmp_path,
-                                                                    monkeypatch) -> None:
-    """A controller comparison (no swept key): a figure per metric with a group of bars per
-    scenario and a bar per controller at the mean over seeds."""
-    from trackmj.study.sweep import plot_sweep
-
-    rows = [{"run_key": f"{sc}{c}{seed}", "point": 0, "scenario": sc, "architecture": "tp",
-             "controller": c, "estimator": "ekf", "variant": "nominal", "seed": seed,
-             "duration_s": 1.5, "inputs": "{}", "rmse_N": 100.0 * k + seed,
-             "wall_time_s": 1.0 + seed, "error": None}
-            for sc in ("NL1", "W1") for k, c in enumerate(("nmpc", "pid")) for seed in (0, 2)]
-    write_table(rows, tmp_path / "results.parquet")
-    import trackmj.results.figure_sweep as figures
-
-    captured, original = [], figures._case_figure
-    monkeypatch.setattr(figures, "_case_figure",
-                        lambda *args: captured.append(original(*args)) or captured[-1])
+    write_table(_grid_rows(), tmp_path / "results.parquet")
+    (tmp_path / "figures").mkdir()
+    (tmp_path / "figures" / "rmse_N.png").write_bytes(b"\x89PNG old")
+    drawn = _drawn(monkeypatch)
     figures = plot_sweep(tmp_path)
-    assert sorted(p.name for p in figures) == ["rmse_N.png", "wall_time_s.png"]
-    ax = captured[0].axes[0]
+    assert sorted(p.name for p in figures) == sorted([f"{BULK}.png", f"{SPEED}.png"])
+    assert sorted(p.name for p in (tmp_path / "figures").iterdir()) == sorted(
+        p.name for p in figures)
+    fig = drawn[f"{SPEED}.png"]
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles == ["tension RMSE, low-pass [kN]", "peak head pressure [MPa]",
+                      "pump energy [kJ]"]
+    assert not any(_error_bars(ax) for f in drawn.values() for ax in f.axes)
+    lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
+    assert sorted(lines) == ["fluid bulk modulus = 1600 MPa", "fluid bulk modulus = 800 MPa"]
+    np.testing.assert_allclose(lines["fluid bulk modulus = 800 MPa"].get_xdata(), [0.5, 1.5])
+    np.testing.assert_allclose(lines["fluid bulk modulus = 800 MPa"].get_ydata(),
+                               [1.540, 1.083])
+    assert fig.axes[-1].get_xlabel() == "track speed [m/s]"
+    np.testing.assert_allclose(drawn[f"{BULK}.png"].axes[1].get_lines()[0].get_xdata(),
+                               [800.0, 1600.0])                 # MPa
+    assert "one run per point (seed 0)" in fig.get_suptitle()
+
+    drawn.clear()
+    figures = plot_sweep(tmp_path, diagnostics=True)
+    assert sorted(p.name for p in figures) == sorted([f"{BULK}.png", f"{SPEED}.png",
+                                                      "diagnostics.png"])
+    assert [ax.get_title() for ax in drawn["diagnostics.png"].axes] == [
+        "wall time of a run [s]", "real-time factor (simulated / wall) [×]",
+        "longest controller solve [ms]", "controller overruns (solve > period)"]
+    np.testing.assert_allclose(drawn["diagnostics.png"].axes[2].get_lines()[0].get_ydata(),
+                               [6.6, 1.6])                      # ms, the 0.8 GPa line
+    plot_sweep(tmp_path)
+    assert not (tmp_path / "figures" / "diagnostics.png").exists()
+
+
+def test_error_bars_are_the_std_over_two_seeds(tmp_path, monkeypatch) -> None:
+    """Two seeds: a point's error bar spans mean ± the population std, in kN."""
+    from trackmj.study.sweep import plot_sweep
+
+    values = {(0.8e9, 0): 1000.0, (0.8e9, 1): 2000.0, (1.6e9, 0): 700.0, (1.6e9, 1): 1300.0}
+    write_table([_row(f"k{b}{s}", int(b > 1e9), s, **{BULK: b, "rmse_lp_N": v})
+                 for (b, s), v in values.items()], tmp_path / "results.parquet")
+    drawn = _drawn(monkeypatch)
+    assert [p.name for p in plot_sweep(tmp_path)] == [f"{BULK}.png"]
+    (bars,) = _error_bars(drawn[f"{BULK}.png"].axes[0])
+    spans = [seg[:, 1] for seg in bars.lines[2][0].get_segments()]
+    np.testing.assert_allclose(spans, [[1.0, 2.0], [0.7, 1.3]])   # mean ± std [kN]
+    assert "mean ± std over seeds 0, 1" in drawn[f"{BULK}.png"].get_suptitle()
+
+
+def test_a_comparison_without_swept_keys_is_one_figure_of_bars(tmp_path, monkeypatch) -> None:
+    """Scenarios x controllers, no swept key: the table's varied columns are scenario and
+    controller (built-in scenarios in their order), one figure of grouped bars, no error
+    bars with one seed."""
+    from trackmj.study.sweep import plot_sweep, summarize
+
+    rows = [_row(f"{sc}{c}", 0, 0, scenario=sc, controller=c, rmse_lp_N=100.0 * k + 10 * j)
+            for j, sc in enumerate(("NL1", "W1")) for k, c in enumerate(("nmpc", "pid"))]
+    table = summarize(rows)
+    assert table.varied == ("scenario", "controller")
+    assert [(r.case["scenario"], r.case["controller"]) for r in table.rows] == [
+        ("W1", "nmpc"), ("W1", "pid"), ("NL1", "nmpc"), ("NL1", "pid")]
+    write_table(rows, tmp_path / "results.parquet")
+    drawn = _drawn(monkeypatch)
+    assert [p.name for p in plot_sweep(tmp_path)] == ["cases.png"]
+    ax = drawn["cases.png"].axes[0]
     assert [t.get_text() for t in ax.get_xticklabels()] == ["W1", "NL1"]   # built-in order
-    assert ax.get_legend_handles_labels()[1] == ["nmpc", "pid"]
     heights = sorted(round(p.get_height(), 9) for p in ax.patches)
-    assert heights == [1e-3, 1e-3, 0.101, 0.101]          # kN: means over seeds 0 and 2
+    assert heights == [0.0, 0.01, 0.1, 0.11]                     # kN
+    assert not _error_bars(ax)
+
+
+def test_scattered_samples_are_loose_markers(tmp_path, monkeypatch) -> None:
+    """Latin hypercube samples (no two share the other key's value) are one set of
+    unjoined markers per figure, not a line per sample."""
+    from trackmj.study.sweep import plot_sweep
+
+    write_table([_row(f"k{i}", i, **{SPEED: 0.5 + 0.25 * i, BULK: 1e9 * (1 + i),
+                                     "rmse_lp_N": 100.0 * i}) for i in range(5)],
+                tmp_path / "results.parquet")
+    drawn = _drawn(monkeypatch)
+    plot_sweep(tmp_path)
+    (line,) = drawn[f"{SPEED}.png"].axes[0].get_lines()
+    assert line.get_linestyle() == "None" and len(line.get_xdata()) == 5
+
+
+def test_cli_plot_prints_and_writes_the_summary(tmp_path, capsys) -> None:
+    write_table(_grid_rows(), tmp_path / "results.parquet")
+    assert main(["sweep", "--plot", str(tmp_path), "--diagnostics"]) == 0
+    out = capsys.readouterr().out
+    assert "RMSE lp [kN]" in out and (tmp_path / "summary.md").read_text() in out
+    assert (tmp_path / "summary.csv").is_file()
+    assert (tmp_path / "figures" / "diagnostics.png").is_file()
+    assert main(["sweep", "--plot", str(tmp_path / "none")]) == 2
+    assert "no sweep results here" in capsys.readouterr().err
 
 
 def test_results_are_rewritten_at_most_every_period_and_flushed(tmp_path, monkeypatch) -> None:
@@ -260,22 +456,26 @@ def test_resume_skips_the_rows_already_written(grid, executor) -> None:
 
 
 @pytest.mark.slow
-def test_figures_per_metric_and_redraw(grid, executor) -> None:
+def test_a_sweep_writes_its_summary_and_a_figure_per_key(grid, executor) -> None:
+    """The grid's summary (one row per point, also in summary.md and summary.csv) and one
+    figure per swept key, no diagnostics; a resumed sweep keeps them, --plot redraws."""
     out, spec, summary = grid
-    names = {p.name for p in summary.figures}
-    assert {"rmse_N.png", "energy_J.pump.png", "wall_time_s.png"} <= names
-    assert "fluctuation_N.png" not in names   # NaN in a 1.5 s run (steady window from 5 s)
-    assert not names & {"mujoco_warnings.png", "evaluation.psd_max_Hz.png"}   # constants
+    assert len(summary.table.rows) == 4 and summary.table.varied == (SPEED, BULK)
+    assert sorted(p.name for p in summary.figures) == sorted([f"{SPEED}.png", f"{BULK}.png"])
+    assert sorted(p.name for p in (out / "figures").iterdir()) == sorted(
+        p.name for p in summary.figures)
     for path in summary.figures:
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    (out / "figures" / "rmse_N.png").unlink()
-    assert main(["sweep", "--plot", str(out)]) == 0
-    assert (out / "figures" / "rmse_N.png").is_file()
-    assert len(list((out / "figures").glob("*.png"))) == len(summary.figures)
+    rows = _table_lines((out / "summary.md").read_text())
+    assert len(rows) == 2 + 4 and rows[0][:2] == [f"{SPEED} [m/s]", f"{BULK} [Pa]"]
+    assert len((out / "summary.csv").read_text().splitlines()) == 1 + 4
     stamps = {p.name: p.stat().st_mtime_ns for p in (out / "figures").glob("*.png")}
     again = sweep(spec, out, executor=executor, progress=False)   # resumes: nothing to run
-    assert again.ran == 0 and len(again.figures) == len(summary.figures)
+    assert again.ran == 0 and len(again.table.rows) == 4
     assert {p.name: p.stat().st_mtime_ns for p in (out / "figures").glob("*.png")} == stamps
+    (out / "figures" / f"{SPEED}.png").unlink()
+    assert main(["sweep", "--plot", str(out)]) == 0
+    assert (out / "figures" / f"{SPEED}.png").is_file()
 
 
 def test_a_failing_run_becomes_an_error_row(executor, tmp_path) -> None:
@@ -295,6 +495,10 @@ def test_a_failing_run_becomes_an_error_row(executor, tmp_path) -> None:
     assert df["error"].isna().sum() == 1 and df.loc[-3755.0, "rmse_N"] > 0
     (kept,) = [p for p in (tmp_path / "runs").iterdir() if p.is_dir()]   # the run that ran
     assert json.loads((kept / "metrics.json").read_text())["run"]["scenario"] == "W3"
+    rows = {r.values["scenario.load_pulses.0.hitch_N"]: r for r in summary.table.rows}
+    assert (rows[-30000.0].seeds, rows[-30000.0].failed) == ((), 1)   # counted, not averaged
+    assert (rows[-3755.0].seeds, rows[-3755.0].failed) == ((0,), 0)
+    assert "0 (1 failed)" in (tmp_path / "summary.md").read_text()
     again = sweep(spec, tmp_path, executor=executor, progress=False, plot=False)
     assert (again.ran, again.skipped) == (0, 2)
 

@@ -1,15 +1,20 @@
-"""The figures of a sweep's results table (:func:`sweep_figures`, PNG): a metric against each
-swept parameter (mean ± std over seeds, a line per case), or, without swept parameters,
-grouped bars per scenario and case. Drawn without pyplot (no global figure state), each in
-the display unit of :func:`trackmj.results.columns.display_unit`."""
+"""The figures of a sweep (:func:`sweep_figures`, PNG): how each metric depends on each swept
+key. One figure per swept key, a panel per metric: the metric at each point against the
+key's value, a line per case and combination of the other keys' values, error bars (± std
+over seeds) only where a point has two seeds or more. Without swept keys (e.g. a controller
+comparison) one figure of grouped bars, a group per scenario and a bar per case. Drawn
+without pyplot (no global figure state), values in each metric's display unit.
+
+The points and panels come from the sweep's summary (:func:`trackmj.study.sweep.summarize`),
+read here through the protocols :class:`SweepPoint` and :class:`Panel`.
+"""
 
 from __future__ import annotations
 
-import io
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import matplotlib
 
@@ -18,239 +23,289 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from trackmj.io import write_bytes_atomic
-from trackmj.results.columns import (
-    column_label,
-    column_unit,
-    column_words,
-    display_unit,
-    is_key_column,
-)
-from trackmj.results.seed_stats import finite, mean_std
-from trackmj.scenarios.load import builtin_names
+from trackmj.results.columns import column_label, column_unit, column_words, display_unit
+from trackmj.results.figure_style import save_png
 
-CASE = ("scenario", "architecture", "controller", "estimator", "variant", "duration_s",
-        "inputs")
-"""Columns of a results row that make one line of a sweep figure (with the other swept
-parameters)."""
-NOT_METRICS = ("run_key", "point", "scenario", "architecture", "controller", "estimator",
-               "variant", "seed", "duration_s", "inputs", "error")
-"""Columns of a results row that are not metrics (no figure of their own)."""
-LINE_STYLES = (("-", "o"), ("--", "s"), (":", "^"), ("-.", "D"), ((0, (5, 1, 1, 1)), "v"),
-               ((0, (1, 3)), "P"))
-"""Line style and marker of the lines of one case (the other swept parameters' values)."""
-CONSTANT_REL = 1e-9
-"""A metric whose finite values differ by less than this (relative) does not vary: no
-figure."""
-MAX_LABELLED_LINES = 6
-"""More lines per case than this are drawn thin and unlabelled."""
-HATCHES = ("", "//", "..", "xx", "\\\\", "++", "oo", "--")
-"""Bar hatches, so that the cases of a bar figure read in grayscale too."""
+CASES_FIGURE = "cases.png"
+"""The figure of a sweep without swept keys."""
+DIAGNOSTICS_FIGURE = "diagnostics.png"
+"""The figure of the diagnostics (drawn only when asked)."""
+PALETTE = (("black", "-", "o"), ("#E69F00", "--", "s"), ("#0072B2", "-.", "^"),
+           ("#009E73", ":", "D"), ("#D55E00", (0, (5, 1, 1, 1)), "v"),
+           ("#56B4E9", (0, (3, 1)), "P"), ("#CC79A7", (0, (1, 1)), "X"),
+           ("#999999", (0, (5, 2)), "*"))
+"""Colour (Okabe-Ito), dash pattern and marker of each line, so that the figures read in
+grayscale too."""
+BAR_STYLES = (("#E69F00", ""), ("#56B4E9", "//"), ("#009E73", ".."), ("#0072B2", "xx"),
+              ("#D55E00", "\\\\"), ("#CC79A7", "++"), ("#999999", "oo"), ("#F0E442", "--"))
+"""Fill colour and hatch of each bar of a group (light enough for black error bars)."""
+SCATTER_TEXT = "samples (the other swept keys vary between them)"
+"""Legend text of the loose markers of scattered samples (e.g. a Latin hypercube)."""
+MAX_LABELLED_LINES = 12
+"""More lines than this are drawn thin, grey and without a legend entry each."""
+LOG_X_RATIO = 30.0
+"""A swept key whose values span more than this ratio gets a log x axis."""
+PANEL_W_IN, PANEL_H_IN = 3.5, 2.5
+"""Size of one panel [in]."""
 
 
-def varies(values: Sequence[Any]) -> bool:
-    """Whether the finite ``values`` differ by more than :data:`CONSTANT_REL` (relative)."""
-    v = finite(values)
-    return len(v) > 1 and max(v) - min(v) > CONSTANT_REL * max(abs(max(v)), abs(min(v)))
+class SweepPoint(Protocol):
+    """A point of a sweep's summary (:class:`trackmj.study.sweep.PointRow`): ``case``
+    (scenario, architecture, controller, ... -> value), ``values`` (swept key -> value, SI),
+    ``seeds`` of its finished runs and each metric's (mean, std, count) over them [SI]."""
+
+    @property
+    def case(self) -> Mapping[str, Any]: ...
+
+    @property
+    def values(self) -> Mapping[str, Any]: ...
+
+    @property
+    def seeds(self) -> tuple[int, ...]: ...
+
+    def stats(self, key: str) -> tuple[float, float, int]: ...
 
 
-def sweep_figures(rows: Sequence[Mapping[str, Any]], fig_dir: Path, *,
-                  redraw: bool = True) -> list[Path]:
-    """``fig_dir/<metric>.png`` for every metric (and the wall time) of the results ``rows``
-    (failed runs left out by the caller) that varies across them: one panel per swept
-    parameter, the metric's mean ± std over seeds at each parameter point, a line per case
-    (scenario, architecture, controller, ...) and per combination of the other swept
-    parameters (points that share none, e.g. Latin hypercube samples, stand alone). Without
-    swept parameters (e.g. a controller comparison): bars, a group per scenario, a bar per
-    case, mean ± std over seeds. Metrics with the same value in every run (a metric stored
-    twice, e.g. ``friction_loss_J`` and ``energy_J.friction``) share one figure, named after
-    the first and naming the others. ``redraw=False`` keeps a figure that exists. Returns
-    the paths of the figures."""
-    rows = [dict(r) for r in rows]
-    if not rows:
-        return []
-    swept = sorted({k for r in rows for k in r if is_key_column(k)})
+class Panel(Protocol):
+    """A metric to draw (:class:`trackmj.study.sweep.Column`): its results column ``key``,
+    ``title`` (words and display unit) and ``scale`` (display value = scale × SI value)."""
+
+    @property
+    def key(self) -> str: ...
+
+    @property
+    def title(self) -> str: ...
+
+    @property
+    def scale(self) -> float: ...
+
+
+def sweep_figures(points: Sequence[SweepPoint], panels: Sequence[Panel], fig_dir: Path, *,
+                  diagnostics: Sequence[Panel] = (), redraw: bool = True) -> list[Path]:
+    """The figures of a sweep in ``fig_dir``: ``<key>.png`` for each swept key (without
+    swept keys ``cases.png``), ``panels`` as its panels; with ``diagnostics`` also
+    ``diagnostics.png`` (against the first swept key). ``points``: the points with a
+    finished run. Other PNG files in ``fig_dir`` (an earlier sweep's) are removed, so it
+    holds these figures only. ``redraw=False`` keeps a figure that exists. Returns the
+    paths of the figures."""
+    swept = list(dict.fromkeys(k for p in points for k in p.values))
+    plans: dict[str, tuple[Sequence[Panel], str | None, str]] = {}
+    if points and panels:
+        for key in swept:
+            plans[f"{key}.png"] = (panels, key, "Engineering metrics")
+        if not swept:
+            plans[CASES_FIGURE] = (panels, None, "Engineering metrics")
+    if points and diagnostics:
+        plans[DIAGNOSTICS_FIGURE] = (diagnostics, swept[0] if swept else None,
+                                     "Diagnostics (machine-dependent)")
+    if fig_dir.is_dir():
+        for stale in fig_dir.glob("*.png"):
+            if stale.name not in plans:
+                stale.unlink()
     paths = []
-    for metric, *also in _varying_metrics(rows, swept):
-        path = fig_dir / f"{metric}.png"
+    for name, (shown, key, heading) in plans.items():
+        path = fig_dir / name
         paths.append(path)
         if path.is_file() and not redraw:
             continue
-        fig = _metric_figure(rows, metric, swept) if swept else _case_figure(rows, metric)
-        if also:
-            fig.text(0.995, 0.005, "the same values: " + ", ".join(also), ha="right",
-                     va="bottom", fontsize=9, color="0.35")
-        _save_figure(fig, path)
+        fig = (_key_figure(points, shown, key, swept, heading) if key is not None
+               else _case_figure(points, shown, heading))
+        save_png(fig, path)
     return paths
 
 
-def _varying_metrics(rows: list[dict[str, Any]], swept: list[str]) -> list[list[str]]:
-    """The metrics that vary across ``rows``, grouped by their series of values (a metric
-    stored twice is one group, top-level names first), the groups sorted."""
-    skip = set(NOT_METRICS) | set(swept)
-    metrics = sorted({k for r in rows for k in r if k not in skip
-                      and isinstance(r[k], int | float) and not isinstance(r[k], bool)})
-    same: dict[tuple, list[str]] = {}      # one figure per series of values: drawn once
-    for metric in sorted(metrics, key=lambda m: (m.count("."), m)):   # top-level names first
-        values = [r.get(metric) for r in rows]
-        if varies(values):
-            same.setdefault(tuple(None if v is None or v != v else v for v in values),
-                            []).append(metric)
-    return sorted(same.values())
+# ----------------------------------------------------------------------------- layout
+
+def _panel_grid(n: int, legend_rows: int) -> tuple[Figure, list[Axes], list[bool]]:
+    """A figure of ``n`` panels in a near-square grid (sharing x), room for a title and a
+    legend of ``legend_rows`` rows below it; (figure, panels, whether each panel is the
+    lowest of its column: it carries the x tick labels and label)."""
+    ncols = math.ceil(math.sqrt(n))
+    nrows = math.ceil(n / ncols)
+    width = max(PANEL_W_IN * ncols, 6.0)
+    height = PANEL_H_IN * nrows + 0.6 + 0.22 * legend_rows
+    fig = Figure(figsize=(width, height), layout="constrained")
+    axes = list(fig.subplots(nrows, ncols, squeeze=False, sharex=True).flat)
+    for ax in axes[n:]:
+        ax.remove()
+    lowest = [i + ncols >= n for i in range(n)]
+    for ax, low in zip(axes, lowest, strict=False):   # x tick labels where no panel is below
+        if low:
+            ax.xaxis.set_tick_params(labelbottom=True)
+    return fig, axes[:n], lowest
 
 
-def _save_figure(fig: Figure, path: Path) -> Path:
-    """A pyplot-free :class:`matplotlib.figure.Figure` as PNG at ``path``, atomically."""
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110)
-    write_bytes_atomic(path, buffer.getvalue())
-    return path
+def _legend(fig: Figure, handles: list[Any], labels: list[str]) -> None:
+    """The figure's one legend, below the panels."""
+    if handles:
+        fig.legend(handles, labels, loc="outside lower center", ncol=_legend_columns(labels),
+                   fontsize=9, frameon=False, handlelength=3.0, columnspacing=1.5)
 
 
-def scenario_order(names: Iterable[str]) -> list[str]:
-    """``names`` with the built-in scenarios first in their order (W1-W5, NL1), then the
-    others by name."""
-    builtin = builtin_names()
-    return sorted(names, key=lambda n: (builtin.index(n), "") if n in builtin
-                  else (len(builtin), n))
+def _legend_columns(labels: Sequence[str]) -> int:
+    longest = max((len(label) for label in labels), default=1)
+    return max(1, min(len(labels), 4, 110 // (longest + 6)))
 
 
-def _metric_figure(rows: list[dict[str, Any]], metric: str, swept: list[str]) -> Figure:
-    """One panel per swept key: the metric's mean ± std over seeds against the key, a
-    colour per case, a line style per combination of the other keys."""
-    cases = sorted({tuple(r.get(c) for c in CASE) for r in rows}, key=str)
-    m_scale = display_unit(column_unit(metric))[0]
-    width, height = 4.8 * len(swept) + 0.8, 4.4
-    fig = Figure(figsize=(width, height))
-    axes = fig.subplots(1, len(swept), squeeze=False, sharey=True)[0]
-    # fixed margins [in] instead of tight_layout, which draws the figure once more
-    fig.subplots_adjust(left=0.85 / width, right=1.0 - 0.2 / width, bottom=0.6 / height,
-                        top=1.0 - 0.45 / height, wspace=0.12)
-    for ax, key in zip(axes, swept, strict=True):
-        _key_panel(ax, rows, metric, key, [k for k in swept if k != key], cases, m_scale)
-    axes[0].set_ylabel(column_label(metric))
-    n_seeds = len({r["seed"] for r in rows})
-    case_text = _case_label(cases[0], cases) if len(cases) == 1 else f"{len(cases)} cases"
-    fig.suptitle(f"{column_words(metric)}: mean ± std over {n_seeds} "
-                 f"seed{'s' * (n_seeds > 1)} ({case_text})", fontsize=10)
-    return fig
+def _legend_rows(labels: Sequence[str]) -> int:
+    return math.ceil(len(labels) / _legend_columns(labels)) if labels else 0
 
 
-def _key_panel(ax: Axes, rows: list[dict[str, Any]], metric: str, key: str, others: list[str],
-               cases: list[tuple], m_scale: float) -> None:
-    """The metric [display unit, × ``m_scale``] against swept ``key``: per case a colour,
-    per combination of the ``others`` keys' values a line (log x axis over a wide range)."""
-    colors = matplotlib.colormaps["tab10"]
+def _seed_text(points: Sequence[SweepPoint]) -> str:
+    """How the points' values were made: one run each, or mean ± std over seeds."""
+    seeds = sorted({s for p in points for s in p.seeds})
+    if max(len(p.seeds) for p in points) < 2:
+        return f"one run per point (seed {', '.join(map(str, seeds))})"
+    return f"mean ± std over seeds {', '.join(map(str, seeds))} (population std)"
+
+
+def _shared_case(points: Sequence[SweepPoint]) -> tuple[str, list[str]]:
+    """(the case fields every point shares in words, the case fields that differ)."""
+    fields = list(points[0].case)
+    varied = [f for f in fields if len({str(p.case.get(f)) for p in points}) > 1]
+    case = points[0].case
+    words = []
+    for f in fields:
+        if f in varied or f == "inputs" or case.get(f) is None:
+            continue
+        value = case[f]
+        words.append(f"{value:g} s runs" if f == "duration_s" and isinstance(value, float)
+                     else str(value))
+    return ", ".join(words), varied
+
+
+def _style(j: int, labelled: bool) -> dict[str, Any]:
+    """Line ``j``'s colour, dashes and marker (thin grey when lines are too many to label)."""
+    if not labelled:
+        return dict(color="0.5", ls="-", marker="o", lw=0.6, ms=3, alpha=0.6)
+    color, dashes, marker = PALETTE[j % len(PALETTE)]
+    return dict(color=color, ls=dashes, marker=marker, lw=1.2, ms=5)
+
+
+# ----------------------------------------------------------------------------- per key
+
+def _key_value_text(key: str, value: Any) -> str:
+    """``key = value`` in words and display unit ("track speed = 1.5 m/s")."""
+    scale, unit = display_unit(column_unit(key))
+    shown = f" {unit}" if unit and unit != "1" else ""
+    return f"{column_words(key)} = {value * scale:.4g}{shown}"
+
+
+def _key_lines(points: Sequence[SweepPoint], key: str, others: list[str], varied: list[str],
+               ) -> list[tuple[str, list[SweepPoint]]]:
+    """The lines of a figure against ``key``: per case and combination of the ``others``
+    keys' values, (legend text, its points by value of ``key``). Points that share no other
+    key's values (e.g. Latin hypercube samples) are one line of loose markers per case."""
+    lines: dict[tuple, list[SweepPoint]] = {}
+    for p in points:
+        if key in p.values:
+            ident = (tuple(str(p.case.get(f)) for f in varied),
+                     tuple(p.values.get(k) for k in others))
+            lines.setdefault(ident, []).append(p)
+    scattered = len(lines) > 1 and all(len(ps) == 1 for ps in lines.values())
+    if scattered:   # e.g. Latin hypercube samples
+        merged: dict[tuple, list[SweepPoint]] = {}
+        for (case, _), ps in lines.items():
+            merged.setdefault((case, ()), []).extend(ps)
+        lines = merged
+    out = []
+    for (case, other), ps in sorted(lines.items(), key=lambda item: (
+            item[0][0], [(v is None, v if v is not None else 0.0) for v in item[0][1]])):
+        words = list(case) + [_key_value_text(k, v) for k, v in zip(others, other,
+                                                                   strict=False)
+                              if v is not None] + ([SCATTER_TEXT] if scattered else [])
+        out.append((", ".join(words) or "runs", sorted(ps, key=lambda p: p.values[key])))
+    return out
+
+
+def _key_figure(points: Sequence[SweepPoint], panels: Sequence[Panel], key: str,
+                swept: list[str], heading: str) -> Figure:
+    """``panels`` against swept ``key``: a line per case and combination of the other keys
+    (see :func:`_key_lines`), ± std error bars only where a point has 2+ seeds."""
+    shared, varied = _shared_case(points)
+    lines = _key_lines(points, key, [k for k in swept if k != key], varied)
+    labelled = len(lines) <= MAX_LABELLED_LINES
+    labels = ([text for text, _ in lines] if labelled and (len(lines) > 1 or SCATTER_TEXT
+                                                           in lines[0][0]) else [])
+    fig, axes, lowest = _panel_grid(len(panels), _legend_rows(labels) if labels else
+                                    (0 if labelled else 1))
     k_scale = display_unit(column_unit(key))[0]
-    for c, case in enumerate(cases):
-        series, scatter = _case_series(rows, case, metric, key, others)
-        labelled = len(series) <= MAX_LABELLED_LINES
-        for j, (line, points) in enumerate(series):
-            x = sorted(points)
-            stats = np.array([mean_std(points[v])[:2] for v in x])
-            style, marker = LINE_STYLES[j % len(LINE_STYLES)]
-            joined = len(x) > 1 and not scatter
-            ax.errorbar(np.array(x, dtype=float) * k_scale, stats[:, 0] * m_scale,
-                        yerr=stats[:, 1] * m_scale, color=colors(c % 10), marker=marker,
-                        ms=4, capsize=3, lw=1.0 if labelled else 0.6,
-                        ls=style if joined else "none", alpha=1.0 if labelled else 0.5,
-                        label=_series_label(case, cases, others, line)
-                        if labelled or j == 0 else None)
-    xs = [float(r[key]) for r in rows if r.get(key) is not None]
-    if min(xs) > 0 and max(xs) / min(xs) > 30:
-        ax.set_xscale("log")
-    ax.set_xlabel(column_label(key), fontsize=9)
-    ax.grid(alpha=0.3)
-    if len(ax.get_legend_handles_labels()[1]) > 1 or len(cases) > 1:
-        ax.legend(fontsize=9, loc="best")
-
-
-def _case_series(rows: list[dict[str, Any]], case: tuple, metric: str, key: str,
-                 others: list[str]) -> tuple[list[tuple[tuple, dict[Any, list[Any]]]], bool]:
-    """(series, scattered) of one case: a series per combination of the ``others`` keys'
-    values, each ``key`` value -> the metric's values (one per seed); scattered: no two
-    points share the other keys' values (e.g. LHS samples), one series of loose points."""
-    lines: dict[tuple, dict[Any, list[Any]]] = {}
-    for r in rows:
-        if tuple(r.get(n) for n in CASE) == case and key in r:
-            lines.setdefault(tuple(r.get(k) for k in others), {}).setdefault(
-                r[key], []).append(r.get(metric))
-    series = sorted(lines.items(), key=lambda item: [_sortable(v) for v in item[0]])
-    scatter = len(series) > 1 and all(len(points) == 1 for _, points in series)
-    if scatter:   # e.g. LHS samples: no two points share the other keys' values
-        series = [((), {x: ys for _, points in series for x, ys in points.items()})]
-    return series, scatter
-
-
-def _case_figure(rows: list[dict[str, Any]], metric: str) -> Figure:
-    """Grouped bars: a group per scenario, a bar per other case (architecture, controller,
-    ...: the fields that differ) with its mean ± std over seeds and its value above it."""
-    scenarios = scenario_order({r["scenario"] for r in rows})
-    cases = sorted({tuple(r.get(c) for c in CASE[1:]) for r in rows}, key=str)
-    labels = [_case_label(("", *case), [("", *c) for c in cases]).strip() for case in cases]
-    width, height = max(6.0, 1.1 * len(scenarios) * max(1, len(cases)) / 2 + 2.6), 4.4
-    fig = Figure(figsize=(width, height))
-    ax = fig.subplots()
-    fig.subplots_adjust(left=0.85 / width, right=1.0 - 1.7 / width, bottom=0.6 / height,
-                        top=1.0 - 0.45 / height)
-    measured = _case_bars(ax, rows, metric, scenarios, cases, labels)
-    for i in np.flatnonzero(~measured).tolist():    # e.g. a settling time where nothing steps
-        ax.text(i, 0.0, "no value", ha="center", va="bottom", fontsize=9, color="0.4")
-    ax.set_xticks(range(len(scenarios)), scenarios)
-    ax.set_xlim(-0.5, len(scenarios) - 0.5)      # groups without a value keep their place
-    ax.axhline(0.0, color="black", lw=0.6)
-    ax.grid(axis="y", alpha=0.3)
-    ax.set_ylabel(column_label(metric))
-    ax.set_xlabel("scenario")
-    ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
-    n_seeds = len({r["seed"] for r in rows})
-    fig.suptitle(f"{column_words(metric)}: mean ± std over {n_seeds} "
-                 f"seed{'s' * (n_seeds > 1)}", fontsize=10)
+    handles = []
+    for ax, panel, low in zip(axes, panels, lowest, strict=True):
+        for j, (text, ps) in enumerate(lines):
+            x = np.array([float(p.values[key]) for p in ps]) * k_scale
+            stats = np.array([p.stats(panel.key) for p in ps], dtype=float).reshape(-1, 3)
+            y, std = stats[:, 0] * panel.scale, stats[:, 1] * panel.scale
+            ls = "none" if len(ps) > 1 and _is_scatter(ps, swept, key) else None
+            style: dict[str, Any] = _style(j, labelled) | ({"ls": ls} if ls else {})
+            if (stats[:, 2] >= 2).any():
+                drawn = ax.errorbar(x, y, yerr=np.where(stats[:, 2] >= 2, std, 0.0),
+                                    capsize=3, label=text, **style)
+            else:
+                (drawn,) = ax.plot(x, y, label=text, **style)
+            if ax is axes[0]:
+                handles.append(drawn)
+        ax.set_title(panel.title, fontsize=9)
+        ax.tick_params(labelsize=8)
+        ax.grid(alpha=0.3)
+        xs = [float(p.values[key]) for p in points if key in p.values]
+        if min(xs) > 0 and max(xs) / min(xs) > LOG_X_RATIO:
+            ax.set_xscale("log")
+        if low:
+            ax.set_xlabel(column_label(key), fontsize=9)
+    if labels:
+        _legend(fig, handles, labels)
+    elif not labelled:
+        fig.legend(handles[:1], [f"{len(lines)} lines: one per combination of the other "
+                                 "swept keys"], loc="outside lower center", fontsize=9,
+                   frameon=False)
+    fig.suptitle(f"{heading} against {column_words(key)}\n"
+                 f"{shared + '; ' if shared else ''}{_seed_text(points)}", fontsize=10)
     return fig
 
 
-def _case_bars(ax: Axes, rows: list[dict[str, Any]], metric: str, scenarios: list[str],
-               cases: list[tuple], labels: list[str]) -> np.ndarray:
-    """A bar per case in each scenario's group at the metric's mean ± std over seeds
-    [display unit], its value above the error bar; returns which groups have a value
-    (bool, one per scenario)."""
-    colors = matplotlib.colormaps["tab10"]
-    m_scale = display_unit(column_unit(metric))[0]
-    bar = 0.8 / len(cases)
-    measured = np.zeros(len(scenarios), bool)
-    for j, (case, label) in enumerate(zip(cases, labels, strict=True)):
-        stats = np.array([mean_std([r.get(metric) for r in rows if r["scenario"] == sc
-                                    and tuple(r.get(c) for c in CASE[1:]) == case])[:2]
-                          for sc in scenarios]) * m_scale
-        measured |= np.isfinite(stats[:, 0])
-        x = np.arange(len(scenarios)) - 0.4 + bar * (j + 0.5)
-        ax.bar(x, stats[:, 0], bar, yerr=stats[:, 1], capsize=2, color=colors(j % 10),
-               hatch=HATCHES[j % len(HATCHES)], edgecolor="black", lw=0.5, label=label)
-        for xi, (value, std) in zip(x, stats, strict=True):   # above the error bar
-            if math.isfinite(value):
-                ax.text(xi, value + std if value >= 0 else value - std, f"{value:.3g}",
-                        ha="center", va="bottom" if value >= 0 else "top", fontsize=9)
-    return measured
+def _is_scatter(points: Sequence[SweepPoint], swept: list[str], key: str) -> bool:
+    """Whether a line's points differ in other keys too (loose samples, not a curve)."""
+    others = [k for k in swept if k != key]
+    return len({tuple(p.values.get(k) for k in others) for p in points}) > 1
 
 
-def _sortable(value: Any) -> tuple[int, Any]:
-    return (1, 0.0) if value is None else (0, value)
+# ----------------------------------------------------------------------------- per case
 
-
-def _series_label(case: tuple, cases: list[tuple], others: list[str], line: tuple) -> str:
-    """Legend text: the case (if there are several) and the other keys' values."""
-    parts = [_case_label(case, cases)] if len(cases) > 1 else []
-    for key, value in zip(others, line, strict=False):   # () for scattered samples
-        if value is not None:
-            scale, unit = display_unit(column_unit(key))
-            shown = f" {unit}" if unit and unit != "1" else ""
-            parts.append(f"{column_words(key)} = {value * scale:.4g}{shown}")
-    return ", ".join(parts) or _case_label(case, cases)
-
-
-def _case_label(case: tuple, cases: list[tuple]) -> str:
-    """The case fields that differ between cases (all of them if there is one case:
-    scenario, architecture, controller)."""
-    varying = [i for i in range(len(CASE)) if len({c[i] for c in cases}) > 1]
-    shown = varying or [0, 1, 2]
-    return " ".join(str(case[i]) for i in shown if CASE[i] != "inputs") or "runs"
+def _case_figure(points: Sequence[SweepPoint], panels: Sequence[Panel], heading: str) -> Figure:
+    """Grouped bars: a group per scenario, a bar per other case (the case fields that
+    differ: architecture, controller, ...), ± std error bars only with 2+ seeds."""
+    shared, varied = _shared_case(points)
+    scenarios = list(dict.fromkeys(str(p.case.get("scenario")) for p in points))
+    fields = [f for f in varied if f != "scenario"]
+    bars = list(dict.fromkeys(", ".join(str(p.case.get(f)) for f in fields) for p in points))
+    labels = bars if fields else []
+    fig, axes, _ = _panel_grid(len(panels), _legend_rows(labels))
+    width = 0.8 / len(bars)
+    handles = []
+    for ax, panel in zip(axes, panels, strict=True):
+        for j, bar in enumerate(bars):
+            stats = np.full((len(scenarios), 3), np.nan)
+            for p in points:
+                if ", ".join(str(p.case.get(f)) for f in fields) == bar:
+                    stats[scenarios.index(str(p.case.get("scenario")))] = p.stats(panel.key)
+            color, hatch = BAR_STYLES[j % len(BAR_STYLES)]
+            spread = stats[:, 2] >= 2
+            drawn = ax.bar(np.arange(len(scenarios)) - 0.4 + width * (j + 0.5),
+                           stats[:, 0] * panel.scale, width, color=color, hatch=hatch,
+                           edgecolor="black", lw=0.5, label=bar,
+                           yerr=np.where(spread, stats[:, 1], 0.0) * panel.scale
+                           if spread.any() else None, capsize=3)
+            if ax is axes[0]:
+                handles.append(drawn)
+        ax.set_xticks(range(len(scenarios)), scenarios, fontsize=8)
+        ax.set_xlim(-0.5, len(scenarios) - 0.5)
+        ax.axhline(0.0, color="black", lw=0.6)
+        ax.set_title(panel.title, fontsize=9)
+        ax.tick_params(labelsize=8)
+        ax.grid(axis="y", alpha=0.3)
+    if labels:
+        _legend(fig, handles, labels)
+    fig.suptitle(f"{heading} per scenario\n{shared + '; ' if shared else ''}"
+                 f"{_seed_text(points)}", fontsize=10)
+    return fig

@@ -1,5 +1,6 @@
 """Parameter studies (``trackmj sweep``): many runs of a TOML spec on the Dask executor,
-one row per run in ``DIR/results.parquet``, resumable, with a figure per metric.
+one row per run in ``DIR/results.parquet``, resumable, summed up in a table (one row per
+point) and a figure per swept key.
 
 Spec file (read by the one validator, :mod:`trackmj.validator`; every key but ``scenario`` /
 ``scenarios`` optional)::
@@ -49,10 +50,20 @@ Output directory ``DIR``:
   in its worker) and ``error`` (null, or ``"Type: message"`` for a run that failed).
   Each column's unit is in its Arrow field metadata (``unit``) where the name states one,
   and all of them in the schema metadata ``units`` (JSON); see :mod:`trackmj.study.campaign`.
-- ``sweep.toml``: the spec as given; ``figures/<metric>.png``: each metric against each
-  swept parameter, mean ± std over seeds (without swept parameters: bars per scenario and
-  case); ``runs/<case>/``: every run's result directory
-  with ``keep_runs``.
+- ``summary.md`` and ``summary.csv`` (:func:`summarize`, :func:`summary_markdown`,
+  :func:`summary_csv`): one row per point (case and parameter point) of the spec's runs,
+  the varied case fields and swept keys first (values as given), then the engineering
+  metrics (:data:`ENGINEERING_METRICS`) as mean ± std over seeds (population std, ddof = 0;
+  one seed: the value) in display units (the CSV: ``KEY_mean`` / ``KEY_std`` in SI), the
+  diagnostics (:data:`DIAGNOSTICS`: wall time, real-time factor, longest solve, overruns;
+  machine-dependent) last and marked. Rewritten at the end of every sweep.
+- ``figures/<key>.png`` per swept key (without swept keys ``figures/cases.png``, bars per
+  scenario and case): the engineering metrics as panels against the key, a line per case
+  and combination of the other keys, error bars (± std) only with 2+ seeds;
+  ``figures/diagnostics.png`` only with ``diagnostics`` (see
+  :mod:`trackmj.results.figure_sweep`).
+- ``sweep.toml``: the spec as given; ``runs/<case>/``: every run's result directory with
+  ``keep_runs``.
 
 Resume: a run whose ``run_key`` already has a row is skipped (a failed one too, unless
 ``retry_failed``). The key is the run's identity (:func:`trackmj.study.identity.run_key`: the
@@ -61,16 +72,19 @@ architecture, controller, estimator, seed, duration, tensioner and FMU file hash
 hash of trackmj's source); a changed file or a changed code changes it. Rows of runs the
 current spec does not ask for are kept. A ``duration_s`` that would cut off a scenario's
 step, ramp, pulse or drop moves the events the spec does not set itself inside the run
-(:func:`trackmj.scenarios.events.moved_events`). Figures are drawn for the metrics that vary
-across the runs, once: a resumed sweep that makes no run keeps the figures there are.
+(:func:`trackmj.scenarios.events.moved_events`). Figures are drawn once: a resumed sweep
+that makes no run keeps the figures there are.
 """
 
 from __future__ import annotations
 
+import csv
 import dataclasses
+import io
 import itertools
 import json
 import math
+import textwrap
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -80,7 +94,10 @@ import numpy as np
 
 from trackmj.io import write_text_atomic
 from trackmj.machines.assembly import names
-from trackmj.results.columns import key_field
+from trackmj.machines.default import DEFAULT_MACHINE
+from trackmj.results.columns import column_unit, is_key_column, key_field
+from trackmj.results.metrics import METRIC_DISPLAY, METRICS
+from trackmj.results.seed_stats import mean_std
 from trackmj.results.store import _require
 from trackmj.scenarios.events import moved_events
 from trackmj.scenarios.load import builtin_names, load_scenario
@@ -98,6 +115,7 @@ from trackmj.study.campaign import (
     run_campaign,
 )
 from trackmj.study.executor import RunSpec, overrides_tuple
+from trackmj.study.report_stats import mean_std as format_mean_std
 from trackmj.validator import (
     FILE_KINDS,
     Location,
@@ -481,13 +499,362 @@ def read_sweep(out_dir: str | Path) -> Any:
     return frame
 
 
+# ----------------------------------------------------------------------------- summary
+
+SUMMARY_CSV = "summary.csv"
+SUMMARY_MD = "summary.md"
+CASE = ("scenario", "architecture", "controller", "estimator", "variant", "duration_s",
+        "inputs")
+"""Columns of a results row that name its case; a case and the swept keys' values make a
+point of the summary (its seeds averaged)."""
+CASE_FIELDS = ("scenario", "machine", "architecture", "controller", "estimator", "variant",
+               "duration_s", "inputs")
+"""The fields of a point's case: :data:`CASE` and the machine named in ``inputs``."""
+ENGINEERING_METRICS = {
+    "rmse_lp_N": "RMSE lp", "rmse_N": "RMSE raw", "peak_error_lp_N": "peak error lp",
+    "ripple_rms_N": "ripple RMS", "overshoot_lp_N": "overshoot lp",
+    "settling_time_lp_s": "settling lp", "disturbance_peak_error_lp_N": "dist. peak lp",
+    "recovery_time_lp_s": "recovery lp", "fluctuation_N": "fluctuation ±",
+    "constraint_violation_s": "outside F limits", "p_head_max_Pa": "p_head max",
+    "energy_J.pump": "pump energy", "valve_switch_rate_Hz": "valve switching"}
+"""The engineering metrics of the summary and the figures, in this order, each with its
+short heading in the table (labels and display units from
+:data:`trackmj.results.metrics.METRIC_DISPLAY`, listed under the table)."""
+DIAGNOSTIC_MARK = "diag."
+"""Marks the diagnostics' headers in summary.md."""
+NOTE_WIDTH = 92
+"""The notes under the summary's table are wrapped at this many characters."""
+LOWPASS_COLUMN = "evaluation.lowpass_cutoff_Hz"
+"""The results column of a run's low-pass cut-off [Hz] (named under the table)."""
+
+
+@dataclass(frozen=True)
+class Column:
+    """A metric column of the summary: results column ``key`` in SI ``si_unit``, shown as
+    ``label`` (headed ``short`` in the table) in display ``unit`` (shown value = ``scale`` ×
+    SI value); ``diagnostic``: a figure of the computer that ran the sweep (wall clock,
+    load), not of the design."""
+
+    key: str
+    label: str
+    scale: float
+    unit: str
+    si_unit: str
+    short: str
+    diagnostic: bool = False
+
+    @property
+    def title(self) -> str:
+        """Label and display unit: "tension RMSE, low-pass [kN]"."""
+        return f"{self.label} [{self.unit}]" if self.unit else self.label
+
+    @property
+    def header(self) -> str:
+        """The column's heading in summary.md: short words and display unit ("RMSE lp
+        [kN]"), diagnostics marked."""
+        shown = f"{self.short} [{self.unit}]" if self.unit else self.short
+        return f"{DIAGNOSTIC_MARK} {shown}" if self.diagnostic else shown
+
+    @property
+    def csv_headers(self) -> tuple[str, str]:
+        """The headings of its mean and std columns in summary.csv (SI unit; diagnostics
+        marked)."""
+        mark = " (diagnostic)" if self.diagnostic else ""
+        return (f"{self.key}_mean [{self.si_unit}]{mark}",
+                f"{self.key}_std [{self.si_unit}]{mark}")
+
+
+def _engineering(key: str) -> Column:
+    label, scale, unit = METRIC_DISPLAY[key]
+    return Column(key, label, scale, unit, METRICS[key].unit, ENGINEERING_METRICS[key])
+
+
+DIAGNOSTICS = (
+    Column("wall_time_s", "wall time of a run", 1.0, "s", "s", "wall time", diagnostic=True),
+    Column("real_time_factor", "real-time factor (simulated / wall)", 1.0, "×", "1",
+           "real-time", diagnostic=True),
+    Column("solve_time_max_s", "longest controller solve", 1e3, "ms", "s", "solve max",
+           diagnostic=True),
+    Column("controller_overruns", "controller overruns (solve > period)", 1.0, "", "1",
+           "overruns", diagnostic=True))
+"""The diagnostics of the summary (last columns): machine-dependent, drawn only when asked."""
+
+
+@dataclass(frozen=True)
+class PointRow:
+    """One row of the summary: a sweep point of one case, its seeds averaged. ``case``: the
+    case fields (:data:`CASE_FIELDS`) -> value; ``values``: swept key -> value as given (SI, the
+    key's unit); ``seeds``: the seeds of its finished runs; ``failed``: how many of its runs
+    ended with an error; ``samples``: metric -> its value in each finished run (SI, NaN where
+    a run has none)."""
+
+    case: Mapping[str, Any]
+    values: Mapping[str, Any]
+    seeds: tuple[int, ...]
+    failed: int
+    samples: Mapping[str, tuple[float, ...]]
+
+    def stats(self, key: str) -> tuple[float, float, int]:
+        """(mean, std, count) of metric ``key`` over the point's seeds [SI]: the population
+        std (ddof = 0) of the finite values (:func:`trackmj.results.seed_stats.mean_std`)."""
+        return mean_std(self.samples.get(key, ()))
+
+
+@dataclass(frozen=True)
+class PointTable:
+    """The summary of a sweep (:func:`summarize`): ``rows``, one per point, ordered by the
+    ``varied`` columns (the case fields that differ between rows, then the swept keys);
+    ``metrics``: the engineering metrics with a value in some run; ``missing``: those with
+    none (a step metric where nothing steps); ``lowpass_Hz``: the low-pass cut-offs of the
+    runs' ``_lp`` metrics [Hz]; ``superseded``: rows left out for a newer one of the same
+    point and seed; ``diagnostics``: :data:`DIAGNOSTICS`."""
+
+    varied: tuple[str, ...]
+    rows: tuple[PointRow, ...]
+    metrics: tuple[Column, ...]
+    missing: tuple[Column, ...]
+    lowpass_Hz: tuple[float, ...] = ()
+    superseded: int = 0
+    diagnostics: tuple[Column, ...] = DIAGNOSTICS
+
+    @property
+    def columns(self) -> tuple[Column, ...]:
+        """The metric columns in table order: engineering metrics, then diagnostics."""
+        return self.metrics + self.diagnostics
+
+    @property
+    def seeds(self) -> tuple[int, ...]:
+        """Every seed of a finished run, sorted."""
+        return tuple(sorted({s for row in self.rows for s in row.seeds}))
+
+
+def _number(value: Any) -> float:
+    """A results cell as a float (NaN if absent or not a number)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return math.nan
+    return float(value)
+
+
+def _order(field: str, value: Any, builtin: Sequence[str]) -> tuple[int, float, str]:
+    """Sort key of a varied column's value: ``builtin`` scenarios in their order, numbers by
+    value, other text by name, absent values last."""
+    if value is None:
+        return (3, 0.0, "")
+    if field == "scenario" and value in builtin:
+        return (0, float(builtin.index(value)), "")
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return (1, float(value), "")
+    return (2, 0.0, str(value))
+
+
+def _case(case: tuple) -> dict[str, Any]:
+    """The case fields (:data:`CASE_FIELDS`) of a results row's :data:`CASE` values: the
+    machine is the one its ``inputs`` name (a shipped name, or a machine file's name), else
+    the default one."""
+    fields: dict[str, Any] = dict(zip(CASE, case, strict=True))
+    try:
+        files = json.loads(fields.get("inputs") or "{}").get("files", {})
+    except (json.JSONDecodeError, AttributeError):
+        files = {}
+    machine = files.get("machine") if isinstance(files, dict) else None
+    fields["machine"] = Path(machine).name if machine else DEFAULT_MACHINE
+    return {f: fields.get(f) for f in CASE_FIELDS}
+
+
+def summarize(rows: Sequence[Mapping[str, Any]]) -> PointTable:
+    """The sweep's summary from results rows (:func:`trackmj.study.campaign.read_rows`,
+    failed runs included: they are counted, not averaged): a row per case and parameter
+    point with every metric's values over its seeds. Of several rows of one point and seed
+    (runs of earlier code or file contents kept in the results) the last is used: the
+    newest, as the campaign appends new rows after the old ones of the same point and seed
+    (:func:`trackmj.study.campaign.write_table` sorts stably); they are counted in
+    ``superseded``."""
+    swept = list(dict.fromkeys(k for r in rows for k in r if is_key_column(k)))
+    groups: dict[tuple[tuple, tuple], dict[Any, Mapping[str, Any]]] = {}
+    for r in rows:
+        point = (tuple(r.get(c) for c in CASE), tuple(r.get(k) for k in swept))
+        groups.setdefault(point, {})[r.get("seed")] = r     # the newest row of each seed
+    superseded = len(rows) - sum(len(by_seed) for by_seed in groups.values())
+    cases = {case: _case(case) for case, _ in groups}
+    varied = tuple([f for f in CASE_FIELDS if len({str(c[f]) for c in cases.values()}) > 1]
+                   + swept)
+    keys = [*ENGINEERING_METRICS, *(c.key for c in DIAGNOSTICS)]
+    points = []
+    for (case, values), by_seed in groups.items():
+        runs = list(by_seed.values())
+        done = [r for r in runs if not r.get("error")]
+        points.append(PointRow(
+            cases[case], {k: v for k, v in zip(swept, values, strict=True) if v is not None},
+            tuple(sorted(int(r["seed"]) for r in done)), len(runs) - len(done),
+            {m: tuple(_number(r.get(m)) for r in done) for m in keys}))
+    builtin = builtin_names()
+    points.sort(key=lambda p: [_order(k, p.case[k] if k in p.case else p.values.get(k),
+                                      builtin) for k in varied])
+    engineering = [_engineering(k) for k in ENGINEERING_METRICS]
+    measured = [c for c in engineering if any(p.stats(c.key)[2] for p in points)]
+    cutoffs = {_number(r.get(LOWPASS_COLUMN)) for r in rows if not r.get("error")}
+    return PointTable(varied, tuple(points), tuple(measured),
+                      tuple(c for c in engineering if c not in measured),
+                      tuple(sorted(c for c in cutoffs if math.isfinite(c))), superseded)
+
+
+def _key_header(key: str) -> str:
+    """Heading of a varied column: its name, and its SI unit where it has one."""
+    unit = column_unit(key)
+    return f"{key} [{unit}]" if unit and unit != "1" else key
+
+
+def _key_cell(row: PointRow, key: str, digits: int | None = 6) -> str:
+    """A varied column's value as given (SI); ``digits`` significant (None: every digit)."""
+    value = row.case[key] if key in row.case else row.values.get(key)
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return repr(value) if digits is None else f"{value:.{digits}g}"
+    return str(value)
+
+
+def _stat_cell(row: PointRow, column: Column) -> str:
+    """"mean ± std" of a metric in display units ("–" without a value; one seed: the value;
+    "(k of n undefined)" where seeds have none)."""
+    if not row.seeds:
+        return "–"
+    return format_mean_std(row.samples[column.key], column.scale)
+
+
+def _common_case(table: PointTable) -> str:
+    """The case fields every row shares, in words ("W1, tp, nmpc/ekf, nominal, 2 s runs")."""
+    if not table.rows:
+        return ""
+    case = table.rows[0].case
+    same = [c for c in CASE_FIELDS if c not in table.varied and c != "inputs"]
+    parts = [f"{case[c]:g} s runs" if c == "duration_s" and isinstance(case[c], float)
+             else str(case[c]) for c in same if case.get(c) is not None]
+    return ", ".join(parts)
+
+
+def _aligned(head: list[str], body: list[list[str]], right_from: int) -> list[str]:
+    """A Markdown table with padded columns (numbers right-aligned from ``right_from``)."""
+    widths = [max(len(c) for c in column) for column in zip(head, *body, strict=True)]
+
+    def line(cells: list[str]) -> str:
+        return "| " + " | ".join(c.rjust(w) if i >= right_from else c.ljust(w)
+                                 for i, (c, w) in enumerate(zip(cells, widths, strict=True))
+                                 ) + " |"
+
+    rule = "|" + "|".join("-" * (w + 1) + ":" if i >= right_from else "-" * (w + 2)
+                          for i, w in enumerate(widths)) + "|"
+    return [line(head), rule, *(line(cells) for cells in body)]
+
+
+def summary_markdown(table: PointTable) -> str:
+    """The summary as Markdown: a line naming what every row shares, the table (one row per
+    point: the varied columns as given, the runs averaged, every metric's mean ± std over
+    seeds in display units, the diagnostics last) and notes on reading it."""
+    if not table.rows:
+        return "Sweep summary: no runs.\n"
+    shared = _common_case(table)
+    n = len(table.rows)
+    lines = [f"Sweep summary{f' ({shared})' if shared else ''}: {n} point{'s' * (n > 1)}",
+             ""]
+    head = [_key_header(k) for k in table.varied] + ["runs"] + [c.header for c in
+                                                                 table.columns]
+    body = [[_key_cell(row, k) for k in table.varied]
+            + [f"{len(row.seeds)}" + (f" ({row.failed} failed)" if row.failed else "")]
+            + [_stat_cell(row, c) for c in table.columns] for row in table.rows]
+    lines += _aligned(head, body, right_from=len(table.varied))
+    lines.append("")
+    lines += [textwrap.fill(f"- {note}", width=NOTE_WIDTH, subsequent_indent="  ",
+                            break_on_hyphens=False) for note in _notes(table)]
+    return "\n".join(lines) + "\n"
+
+
+def _notes(table: PointTable) -> list[str]:
+    """How to read the summary's table: the statistic, the columns' meaning, the units,
+    the diagnostics, the metrics left out."""
+    seeds = table.seeds
+    if len(seeds) > 1:
+        cell = (f"Each cell: mean ± std over the point's seeds ({_seed_list(seeds)}; "
+                "population std, ddof = 0); \"(k of n undefined)\": k seeds without a value.")
+    else:
+        cell = f"Each cell: the value of the point's one run (seed {_seed_list(seeds) or '–'})."
+    named = "; ".join(f"{c.short}: {c.label}" for c in table.columns if c.short != c.label)
+    notes = [cell, f"Columns: {named}."]
+    if table.lowpass_Hz:
+        cutoff = ", ".join(f"{c:g}" for c in table.lowpass_Hz)
+        notes.append(f"lp, low-pass: F_ten through a zero-phase 2nd-order Butterworth at "
+                     f"{cutoff} Hz; raw: the 1 kHz F_ten (see README, Metrics).")
+    notes.append(f"Swept keys as given in the spec (SI); metrics in display units "
+                 f"({SUMMARY_CSV}: SI); –: no value (no step or disturbance in the run, or a "
+                 "window it does not reach).")
+    notes.append(f"{DIAGNOSTIC_MARK}: diagnostics of the computer that ran the sweep (wall "
+                 "clock, load), not results of the design; drawn only when asked "
+                 "(--diagnostics).")
+    if table.superseded:
+        notes.append(f"{table.superseded} earlier row(s) of the same point and seed (made by "
+                     "other code or file contents) left out: the newest of each is used.")
+    if table.missing:
+        notes.append("No value in any run (left out): "
+                     + ", ".join(c.title for c in table.missing) + ".")
+    return notes
+
+
+def _seed_list(seeds: Sequence[int]) -> str:
+    return ", ".join(str(s) for s in seeds)
+
+
+def summary_csv(table: PointTable) -> str:
+    """The summary as CSV in SI units (the unit in each heading): the varied columns as
+    given, ``runs`` (finished) and ``failed``, then per metric ``KEY_mean [UNIT]`` and
+    ``KEY_std [UNIT]`` (population std over seeds, ddof = 0; empty with fewer than two
+    values), the diagnostics last and marked; empty cells where there is no value."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow([_key_header(k) for k in table.varied] + ["runs", "failed"]
+                    + [h for c in table.columns for h in c.csv_headers])
+    for row in table.rows:
+        cells = [_key_cell(row, k, digits=None) for k in table.varied]
+        cells += [str(len(row.seeds)), str(row.failed)]
+        for column in table.columns:
+            mean, std, count = row.stats(column.key)
+            cells += [repr(mean) if count else "", repr(std) if count > 1 else ""]
+        writer.writerow(cells)
+    return buffer.getvalue()
+
+
+def write_summary(out_dir: str | Path, table: PointTable) -> tuple[Path, Path]:
+    """``DIR/summary.csv`` and ``DIR/summary.md`` of ``table``, each written atomically;
+    returns their paths."""
+    out = Path(out_dir)
+    write_text_atomic(out / SUMMARY_CSV, summary_csv(table))
+    write_text_atomic(out / SUMMARY_MD, summary_markdown(table))
+    return out / SUMMARY_CSV, out / SUMMARY_MD
+
+
+def _rows(out_dir: Path, keys: set[str] | None) -> list[dict[str, Any]]:
+    """The rows of ``DIR/results.parquet`` (only those of the runs ``keys``, if given)."""
+    return [r for r in read_rows(out_dir / RESULTS) if keys is None or r["run_key"] in keys]
+
+
+def summarize_sweep(out_dir: str | Path, *, keys: set[str] | None = None) -> PointTable:
+    """The summary of the sweep in ``DIR`` (:func:`summarize` of ``DIR/results.parquet``;
+    ``keys``: only the rows of these runs), written as ``DIR/summary.csv`` and
+    ``DIR/summary.md``."""
+    out = Path(out_dir)
+    if not (out / RESULTS).is_file():
+        raise FileNotFoundError(f"{out}: no sweep results here ({RESULTS} missing)")
+    table = summarize(_rows(out, keys))
+    write_summary(out, table)
+    return table
+
+
 # ----------------------------------------------------------------------------- sweep
 
 @dataclass
 class SweepSummary:
     """What a :func:`sweep` did: ``ran`` runs executed now (``failed`` of them with an
-    error), ``skipped`` already in the results; ``results`` the parquet file;
-    ``figures`` the figures drawn."""
+    error), ``skipped`` already in the results; ``results`` the parquet file; ``table`` its
+    summary (also in ``summary.csv`` and ``summary.md``); ``figures`` the figures drawn."""
 
     out: Path
     results: Path
@@ -495,6 +862,7 @@ class SweepSummary:
     ran: int
     skipped: int
     failed: int
+    table: PointTable
     figures: list[Path]
 
     def __str__(self) -> str:
@@ -506,8 +874,8 @@ class SweepSummary:
 def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
           workers: int | None = None, scheduler: str | None = None, executor: Any = None,
           keep_runs: bool = False, retry_failed: bool = False, plot: bool = True,
-          progress: bool = True, tensioner: str | Path | None = None,
-          machine: str | None = None) -> SweepSummary:
+          diagnostics: bool = False, progress: bool = True,
+          tensioner: str | Path | None = None, machine: str | None = None) -> SweepSummary:
     """Run a parameter study (see the module docstring for the spec and the output).
 
     Parameters
@@ -528,6 +896,9 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
     plot : bool
         Draw the figures (:func:`plot_sweep`) at the end: every figure when a run was made
         now, else only the missing ones.
+    diagnostics : bool
+        Also draw the diagnostics (wall time, real-time factor, solve time, overruns) in
+        ``figures/diagnostics.png``.
     progress : bool
         Show a progress bar over the simulated seconds of the runs.
     tensioner : str or Path, optional
@@ -549,32 +920,43 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
         spec = dataclasses.replace(spec, table=dataclasses.replace(spec.table,
                                                                    machine=machine))
     runs = plan(spec)
+    keys = {r.key for r in runs}
     with Store(out, "sweep", markers=(SPEC_COPY, FIGURES)) as store:
         if spec.text:
             write_text_atomic(store.out / SPEC_COPY, spec.text)
         made = run_campaign(store, runs, executor=executor, workers=workers,
                             scheduler=scheduler, progress="sweep" if progress else None,
                             keep_runs=keep_runs, retry_failed=retry_failed)
-        figures = (plot_sweep(store.out, keys={r.key for r in runs},
-                              redraw=bool(made.outcomes)) if plot else [])
-    distinct = len({r.key for r in runs})   # LHS samples rounded onto one integer coincide
+        table = summarize(_rows(store.out, keys))
+        write_summary(store.out, table)
+        figures = (_draw(table, store.out / FIGURES, redraw=bool(made.outcomes),
+                         diagnostics=diagnostics) if plot else [])
+    distinct = len(keys)   # LHS samples rounded onto one integer coincide
     ran = len(made.outcomes)
     return SweepSummary(store.out, store.results, distinct, ran, distinct - ran,
-                        len(made.failed), figures)
+                        len(made.failed), table, figures)
 
 
 # ----------------------------------------------------------------------------- figures
 
-def plot_sweep(out_dir: str | Path, *, keys: set[str] | None = None,
-               redraw: bool = True) -> list[Path]:
-    """Draw ``DIR/figures/<metric>.png`` from ``DIR/results.parquet`` for every metric that
-    varies across the runs (:func:`trackmj.results.figure_sweep.sweep_figures`); ``keys``: only
-    the rows of these runs (default: every row); ``redraw=False`` keeps the figures that exist.
-    Returns the paths of the figures of the varying metrics (drawn now or kept)."""
-    # matplotlib (which the figure module switches to Agg) is heavy: loaded only to draw
+def plot_sweep(out_dir: str | Path, *, keys: set[str] | None = None, redraw: bool = True,
+               diagnostics: bool = False) -> list[Path]:
+    """Draw the figures of the sweep in ``DIR`` from ``DIR/results.parquet``
+    (:func:`trackmj.results.figure_sweep.sweep_figures`): ``figures/<key>.png`` per swept
+    key (without swept keys ``figures/cases.png``), the engineering metrics of
+    :func:`summarize` as panels; with ``diagnostics`` also ``figures/diagnostics.png``.
+    ``keys``: only the rows of these runs (default: every row); ``redraw=False`` keeps the
+    figures that exist. Returns the paths of the figures (drawn now or kept)."""
+    out = Path(out_dir)
+    return _draw(summarize(_rows(out, keys)), out / FIGURES, redraw=redraw,
+                 diagnostics=diagnostics)
+
+
+def _draw(table: PointTable, fig_dir: Path, *, redraw: bool, diagnostics: bool) -> list[Path]:
+    """The figures of ``table`` in ``fig_dir`` (see :func:`plot_sweep`)."""
+    # local: matplotlib (which the figure module switches to Agg) is heavy, loaded to draw
     from trackmj.results.figure_sweep import sweep_figures
 
-    out = Path(out_dir)
-    rows = [r for r in read_rows(out / RESULTS)
-            if not r.get("error") and (keys is None or r["run_key"] in keys)]
-    return sweep_figures(rows, out / FIGURES, redraw=redraw)
+    finished = [row for row in table.rows if row.seeds]
+    return sweep_figures(finished, table.metrics, fig_dir, redraw=redraw,
+                         diagnostics=table.diagnostics if diagnostics else ())
