@@ -93,12 +93,21 @@ def _machine_arg(p: argparse.ArgumentParser) -> None:
                    f"machines') or a machine file *_machine.toml (default: {DEFAULT_MACHINE})")
 
 
+def _renamed_params(text: str) -> str:
+    """``--params`` is gone: one line naming what replaced it."""
+    raise argparse.ArgumentTypeError("renamed: the model parameter TOML is --model FILE "
+                                     "(as in run); drive and model info take an MJCF file "
+                                     "as --mjcf FILE")
+
+
 def _model_args(p: argparse.ArgumentParser) -> None:
-    """Options of the commands on the bare track: machine, MJCF, model file, ``--set``."""
+    """Options of the commands on the bare track: machine, model file, MJCF, ``--set``."""
     _machine_arg(p)
-    p.add_argument("--model", help="MJCF file (default: the machine's model, generated "
-                   "and cached unless it is the committed reference)")
-    p.add_argument("--params", help="model parameter TOML (default: the machine's)")
+    p.add_argument("--model", metavar="FILE",
+                   help="model parameter TOML (default: the machine's mechanics)")
+    p.add_argument("--mjcf", metavar="FILE", help="MJCF file (default: the model's, "
+                   "generated and cached unless it is the machine's committed reference)")
+    p.add_argument("--params", type=_renamed_params, help=argparse.SUPPRESS)
     p.add_argument("--set", metavar="model.TABLE.KEY=VALUE", action="append", default=[],
                    help="override one key of the model file (repeatable), e.g. "
                         "--set model.track.link_count=80")
@@ -153,7 +162,9 @@ def _add_model(sub: Subcommands) -> None:
     gen = model_sub.add_parser("generate", help="regenerate a machine's reference MJCF "
                                "(models/lf1352.xml) from its files")
     _machine_arg(gen)
-    gen.add_argument("--params", help="model parameter TOML (default: the machine's)")
+    gen.add_argument("--model", metavar="FILE",
+                     help="model parameter TOML (default: the machine's mechanics)")
+    gen.add_argument("--params", type=_renamed_params, help=argparse.SUPPRESS)
     gen.add_argument("--set", metavar="model.TABLE.KEY=VALUE", action="append", default=[],
                      help="override one key of the model file (repeatable)")
     gen.add_argument("--out", help="output MJCF path NAME.xml, the machine part; the scene "
@@ -163,13 +174,24 @@ def _add_model(sub: Subcommands) -> None:
 
 
 def _add_drive(sub: Subcommands) -> None:
-    drive = sub.add_parser("drive", help="drive the track with the passive tensioner")
+    drive = sub.add_parser(
+        "drive", help="drive the track with the passive tensioner",
+        description="Drive the bare track (no hydraulics) with its passive tensioner or a "
+                    "--tensioner file; derailment is checked every 0.1 s (slack upper "
+                    "strand, links off their home envelope, sprocket disengaged) and the "
+                    "summary names each failing check, when it first failed and where.",
+        epilog="exit codes: 0 healthy; 1 a derailment check failed or MuJoCo warned; 2 bad "
+               "input (an option, file, key or value, or an --out it may not write; one "
+               "line names it); 3 the run left physics or an FMU tensioner failed; 130 "
+               "interrupted")
     _model_args(drive)
     drive.add_argument("--speed", type=float, default=1.5, help="sprocket pitch speed [m/s]")
     drive.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
     drive.add_argument("--preload", type=float, metavar="N",
                        help="tensioner preload [N], e.g. 12e3")
-    drive.add_argument("--out", help="directory for metrics.json and timeseries.parquet")
+    drive.add_argument("--out", metavar="DIR", help="directory for metrics.json, "
+                       "timeseries.parquet and the figure drive.png (default: "
+                       "runs/drive-MACHINE-SPEEDmps-HASH, HASH of the other inputs)")
     _tensioner_arg(drive)
     drive.set_defaults(func=cmd_drive)
 
@@ -177,8 +199,9 @@ def _add_drive(sub: Subcommands) -> None:
 def _add_run(sub: Subcommands) -> None:
     run = sub.add_parser("run", help="one closed-loop run of a scenario")
     _run_args(run, "output directory (default: runs/SCENARIO-ARCH-CONTROLLER-sSEED, with "
-                   "-VARIANT and a short hash of the inputs when they are not the scenario's "
-                   "own; a folder holding a run of other inputs is refused unless --overwrite)")
+                   "-VARIANT, -MACHINE when it is not the default one, and a short hash of "
+                   "the inputs when they are not the scenario's own or a log is compared; a "
+                   "folder holding a run of other inputs is refused unless --overwrite)")
     run.add_argument("--arch", default=REFERENCE_ARCHITECTURE, choices=choices(ARCHITECTURES),
                      help="coupling architecture")
     run.add_argument("--controller", metavar="NAME",
@@ -203,8 +226,8 @@ def _add_compare(sub: Subcommands) -> None:
     compare = sub.add_parser("compare", help="all architectures on one scenario, with each "
                              "reduced one's prediction error against "
                              f"{REFERENCE_ARCHITECTURE}")
-    _run_args(compare, "output directory (default: runs/compare-SCENARIO); runs already done "
-                       "in it are kept")
+    _run_args(compare, "output directory (default: runs/compare-SCENARIO, with -MACHINE when "
+                       "it is not the default one); runs already done in it are kept")
     compare.add_argument("--controllers", help="comma list, e.g. "
                          f"{','.join(by_name(CONTROLLERS))} (each on every architecture; "
                          "one more figure overlays the controllers)")
@@ -228,26 +251,36 @@ def _add_report(sub: Subcommands) -> None:
     _tensioner_arg(report)
     _machine_arg(report)
     _executor_args(report)
-    report.add_argument("--out", default="runs/report",
-                        help="output directory; runs already complete in it are kept")
+    report.add_argument("--out", help="output directory (default: runs/report, with -MACHINE "
+                        "when it is not the default one); runs already complete in it are "
+                        "kept")
     report.set_defaults(func=cmd_report)
 
 
 def _add_sweep(sub: Subcommands) -> None:
     sweep = sub.add_parser(
-        "sweep", help="parameter study from a TOML spec -> DIR/results.parquet, figures",
+        "sweep", help="parameter study from a TOML spec -> DIR/results.parquet, summary "
+                      "table, figures",
         description="Run every point of a sweep spec (grid or Latin hypercube over --set "
                     "keys, x scenarios x architectures x controllers x seeds) on Dask; one "
                     "row per run in DIR/results.parquet, written as runs finish; runs "
                     "already there are skipped (resume); a failed run is a row with its "
-                    "error. The spec format is in the README ('Parameter studies').")
+                    "error. At the end a table, one row per point (mean ± std over "
+                    "seeds), is printed and written to DIR/summary.md and DIR/summary.csv; "
+                    "DIR/figures holds one figure per swept key, the metrics as panels. "
+                    "The spec format is in the README ('Parameter studies').")
     sweep.add_argument("spec", nargs="?", help="sweep spec TOML file")
     sweep.add_argument("--out", metavar="DIR",
                        help="output directory, resumed if it holds a sweep "
                             "(default: runs/sweep-SPEC_NAME)")
     sweep.add_argument("--plot", metavar="DIR",
-                       help="only redraw DIR/figures from DIR/results.parquet (a resumed "
-                            "sweep that makes no run keeps the figures that exist)")
+                       help="only redraw DIR/figures and DIR/summary.{csv,md} from "
+                            "DIR/results.parquet (a resumed sweep that makes no run keeps "
+                            "the figures that exist)")
+    sweep.add_argument("--diagnostics", action="store_true",
+                       help="also draw DIR/figures/diagnostics.png: wall time, real-time "
+                            "factor, max solve time, controller overruns (machine-dependent; "
+                            "always in the summary table)")
     sweep.add_argument("--keep-runs", action="store_true",
                        help="also write each run's result directory under DIR/runs/")
     sweep.add_argument("--retry-failed", action="store_true",

@@ -11,13 +11,18 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from trackmj.cli.run_folder import refuse_other_inputs, run_folder
-from trackmj.cli.summary import measured_table, summary_table, tensioner_line
+from trackmj.cli.summary import flagged, measured_table, summary_table, tensioner_line
 from trackmj.elements.tensioner_file import load_tensioner
+from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.results.store import ResultWriter
 from trackmj.sim.controllers import CONTROLLERS
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
+
+if TYPE_CHECKING:
+    from trackmj.results.measured import MeasuredLog
 
 
 def _files(args: argparse.Namespace) -> dict:
@@ -66,26 +71,43 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_duration(setup.scenario, setup.duration_s)
     log: str | None = args.measured
     measured = None if log is None else measured_log(setup, log, args.channels)
-    key = inputs_key(setup)
+    key = inputs_key(setup, measured)
     defaults = not (args.estimator or args.duration is not None or args.set or args.model
-                    or args.hydraulics or args.control or args.tensioner)
+                    or args.hydraulics or args.control or args.tensioner or measured)
     out = Path(args.out) if args.out else run_folder(setup, key, defaults=defaults)
     refuse_other_inputs(out, key, overwrite=args.overwrite)
     with ResultWriter(out) as writer:
         result = run(setup, rrd=_staged(writer, RUN_RRD) if args.rrd else None,
                      progress=True, measured=measured, channels=args.channels)
-        result = stamped(result, inputs_key=key, run_key=run_key(setup))
+        result = stamped(result, inputs_key=key, run_key=run_key(setup, measured))
         writer.commit(result, csv=args.csv,
-                      extras={"timeseries.png": lambda path: run_figure(result, path,
-                                                                        measured)})
-    print(f"{setup.scenario.name} ({setup.scenario.title}), {result.architecture}, "
-          f"{result.controller}/{result.estimator}, seed {result.seed} -> {out}")
+                      extras={"timeseries.png": lambda path: run_figure(
+                          result, path, None if measured is None else measured.columns)})
+    print(f"{setup.scenario.name} ({setup.scenario.title}) on {setup.machine.name}, "
+          f"{result.architecture}, {result.controller}/{result.estimator}, seed "
+          f"{result.seed} -> {out}")
     if result.metrics.get("tensioner", {}).get("element") == "fmu":
         print(tensioner_line(result.metrics["tensioner"]))
+    if result.metrics.get("valve_mode_applied") is False and setup.tensioner is not None:
+        print(f"tensioner {setup.tensioner.name}: takes no valve mode, so the controller's "
+              "output acts on nothing; the valve metrics read n/a")
     print(summary_table([result], "{r.architecture}"))
-    if log is not None:
-        print(measured_table(result.metrics["prediction_vs_measured"], log))
-    return 0
+    if measured is not None:
+        print(measured_table(result.metrics["prediction_vs_measured"], measured.file))
+        print(_log_line(measured))
+    return 1 if flagged(result.metrics) else 0
+
+
+def _machine_suffix(name: str) -> str:
+    """``-NAME`` for default folder names when machine ``name`` is not the default one."""
+    return "" if name == DEFAULT_MACHINE else f"-{name}"
+
+
+def _log_line(log: MeasuredLog) -> str:
+    """The measured log's name, hash and columns: the ones compared and the ones ignored."""
+    ignored = ", ".join(log.ignored) if log.ignored else "none"
+    return (f"log {log.file} (sha256 {log.sha256[:12]}): compared "
+            f"{', '.join(log.used.values())}; ignored (no quantity of the run): {ignored}")
 
 
 def _staged(writer: ResultWriter, name: str) -> Path:
@@ -111,7 +133,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
                                                                  strict=True)]
     scenario = setups[0].scenario
     check_duration(scenario, setups[0].duration_s)
-    out = Path(args.out or f"runs/compare-{scenario.name}")
+    scenario_machine = setups[0].machine.name
+    out = Path(args.out or f"runs/compare-{scenario.name}{_machine_suffix(scenario_machine)}")
     base = _specs_base(args, str(args.scenario))
     outcome = compare(base, controllers, out, seed=args.seed,
                       workers=args.workers, scheduler=args.scheduler)
@@ -120,7 +143,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     doc = write_compare(outcome, out, scenario, setups[0].duration_s)
     print(summary_table(outcome.results, "{r.architecture} {r.controller}"))
     print(f"-> {doc}")
-    return 1 if outcome.failed else 0
+    return 1 if outcome.failed or any(flagged(r.metrics) for r in outcome.results) else 0
 
 
 def _report_choices(args: argparse.Namespace, study_archs: tuple[str, ...]
@@ -152,11 +175,11 @@ def cmd_report(args: argparse.Namespace) -> int:
     from trackmj.study.report import REPORT_ARCHS, check_report_dir, plan, run_matrix, write_report
 
     archs, baselines = _report_choices(args, REPORT_ARCHS)
-    out = check_report_dir(Path(args.out))
+    # the machine is refused here, before any run, if it is bad
+    machine = DEFAULT_MACHINE if args.machine is None else resolve(args.machine).name
+    out = check_report_dir(Path(args.out or f"runs/report{_machine_suffix(machine)}"))
     if args.tensioner is not None:
         load_tensioner(args.tensioner)   # refused here, before any run, if it is bad
-    if args.machine is not None:
-        resolve(args.machine)   # refused here, before any run, if it is bad
     specs = plan(args.scenarios.split(","), list(range(args.seeds)), args.duration, archs,
                  baselines, tensioner=args.tensioner, machine=_machine_spec(args.machine))
     matrix = run_matrix(specs, out, workers=args.workers, scheduler=args.scheduler)
@@ -170,22 +193,25 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     """``trackmj sweep``: every point of a sweep spec, resumed, or ``--plot`` to redraw its
     figures; exit code 1 if a run failed."""
     # start-up: --help and argument errors must not import MuJoCo
-    from trackmj.study.sweep import plot_sweep, sweep
+    from trackmj.study.sweep import plot_sweep, summarize_sweep, summary_markdown, sweep
 
     if args.plot is not None:
         if args.spec is not None:
             raise ValueError("give a sweep spec to run, or --plot DIR to redraw, not both")
-        figures = plot_sweep(args.plot)
-        print(f"{len(figures)} figures -> {Path(args.plot) / 'figures'}")
+        print(summary_markdown(summarize_sweep(args.plot)))
+        figures = plot_sweep(args.plot, diagnostics=args.diagnostics)
+        print(f"summary.md, summary.csv, {len(figures)} figures -> {Path(args.plot)}")
         return 0
     if args.spec is None:
         raise ValueError("sweep needs a spec file (or --plot DIR); see 'trackmj sweep -h'")
     out = Path(args.out or f"runs/sweep-{Path(args.spec).stem}")
     summary = sweep(args.spec, out, workers=args.workers, scheduler=args.scheduler,
                     keep_runs=args.keep_runs, retry_failed=args.retry_failed,
-                    tensioner=args.tensioner, machine=_machine_spec(args.machine))
+                    tensioner=args.tensioner, machine=_machine_spec(args.machine),
+                    diagnostics=args.diagnostics)
+    print(summary_markdown(summary.table))
     print(summary)
-    print(f"{len(summary.figures)} figures -> {out / 'figures'}")
+    print(f"summary.md, summary.csv, {len(summary.figures)} figures -> {out}")
     return 1 if summary.failed else 0
 
 
@@ -200,11 +226,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     runs = len(doc["runs"])
     print(f"calibrated {len(doc['estimates'])} keys on {len(args.measured)} log(s), {runs} "
           f"runs in {doc['wall_time_s']:.0f} s ({doc['optimizer']['message']})")
+    units = doc["units"]["estimates"]
     for key, value in doc["estimates"].items():
         low, high = doc["intervals"][key]
         bound = "  (at a bound)" if doc["at_bound"][key] else ""
-        print(f"  {key} = {value:.5g}   95 % [{low:.5g}, {high:.5g}]{bound}")
+        print(f"  {key} = {value:.5g} {units[key]}   95 % [{low:.5g}, {high:.5g}]{bound}")
     rms = ", ".join(f"{name} {value:.4g}" for name, value in doc["residual_rms"].items())
     print(f"  residual RMS (SI): {rms}")
+    for log in doc["logs"]:
+        ignored = ", ".join(log["columns_ignored"]) or "none"
+        print(f"  log {log['file']} (sha256 {log['sha256'][:12]}): fitted "
+              f"{', '.join(log['columns_used'].values())}; ignored: {ignored}")
     print(f"-> {out / CALIBRATION_JSON}, {out / CALIBRATION_PNG}")
     return 0
