@@ -64,8 +64,8 @@ def synthetic_result(scenario: str = "W1", architecture: str = "tp", *,
             "p_work_J": np.zeros_like(t), "mech_work_J": np.zeros_like(t),
             "chassis_acc_z_m_s2": 0.5 * np.sin(2 * np.pi * 10.0 * t) if chassis else nan,
             "closure_error_m": np.zeros_like(t)}
-    meta = run_metadata(sc.name, architecture, controller, "ekf", seed, "synthetic host", machine="lf1352",
-                        variant=variant, duration_s=duration_s)
+    meta = run_metadata(sc.name, architecture, controller, "ekf", seed, "synthetic host",
+                        machine="lf1352", variant=variant, duration_s=duration_s)
     table = make_table(cols, COLUMN_UNITS, meta)
     metrics = compute_metrics(cols, sc.metric_windows(duration_s, link_pitch_m=PITCH_M),
                               control_period_s=0.01, wall_time_s=duration_s / 2.0)
