@@ -16,6 +16,7 @@
 * :mod:`.figure_run`: the figure of one run;
 * :mod:`.figure_compare`: the figures that compare runs (overlay, spectra, variants, fit);
 * :mod:`.figure_sweep`: the figures of a sweep's results table;
+* :mod:`.figure_calibration`: the figure of a calibration (estimates, fits, residuals);
 * :mod:`.figure_drive`: the figure of a bare-track drive (forces, strands, derailment checks);
 * :mod:`.playback`: the Rerun recording of a run.
 """
