@@ -3,7 +3,7 @@ the energy breakdown stacking the ledger's terms, zooms on each condition's even
 
 from __future__ import annotations
 
-import itertools
+import re
 
 import matplotlib.pyplot as plt
 import matplotlib.text
@@ -15,6 +15,7 @@ from synthetic import energy_table, synthetic_result
 from trackmj.results import figure_compare, figure_energy, figure_panels, figure_run, figure_style
 from trackmj.results.comparison import prediction_vs_tp
 from trackmj.results.metric_windows import windows_of
+from trackmj.results.store import Result
 from trackmj.scenarios.load import load_scenario
 
 
@@ -39,22 +40,33 @@ def _runs(scenario: str = "W1", duration_s: float = 6.0) -> list:
 
 
 def _check_axes(fig: plt.Figure) -> None:
-    """Every axis with data names its unit in brackets; every legend lies outside its axes
-    (above, beside them on the right, or below); every text is at least 9 pt at the saved
-    size (the figure's own inches)."""
+    """Every axis with data names its unit in brackets (the value axis; a category axis has
+    no label); every legend lies outside its axes (above, beside them on the right, or
+    below) and clear of every other axes and title; the figure's title clear of every axes
+    with its labels and legend; every text is at least 9 pt at the saved size (the figure's
+    own inches)."""
     renderer = fig.canvas.get_renderer()
     fig.canvas.draw()
     for ax in fig.axes:
         if not (ax.lines or ax.patches or ax.collections):
             continue
-        assert "[" in ax.get_ylabel() and "]" in ax.get_ylabel(), ax.get_ylabel()
-        if ax.get_xlabel():
-            assert "[" in ax.get_xlabel(), ax.get_xlabel()
+        labels = [label for label in (ax.get_ylabel(), ax.get_xlabel()) if label]
+        assert labels and all("[" in label and "]" in label for label in labels), labels
         legend = ax.get_legend()
         if legend is not None:
-            box = legend.get_window_extent(renderer).transformed(ax.transAxes.inverted())
+            extent = legend.get_window_extent(renderer)
+            box = extent.transformed(ax.transAxes.inverted())
             assert box.y0 >= 0.99 or box.x0 >= 1.0 or box.y1 <= 0.0, (
                 f"legend of '{ax.get_ylabel()}' overlaps its data")
+            others = [o.get_window_extent(renderer) for o in fig.axes if o is not ax]
+            others += [t.get_window_extent(renderer) for o in fig.axes
+                       for t in (o.title, o._left_title, o._right_title) if t.get_text()]
+            assert not any(extent.overlaps(o) for o in others), (
+                f"legend of '{ax.get_ylabel()}' runs into another panel or title")
+    if fig.get_suptitle():
+        title = fig._suptitle.get_window_extent(renderer)
+        boxes = [ax.get_tightbbox(renderer) for ax in fig.axes]
+        assert not any(title.overlaps(b) for b in boxes if b is not None), "title overlaps"
     small = {(t.get_text()[:40], t.get_fontsize()) for t in fig.findobj(matplotlib.text.Text)
              if t.get_text().strip() and t.get_visible() and t.get_fontsize() < 9}
     assert not small, small
@@ -67,15 +79,16 @@ def test_run_figure_units_legends_and_zooms(captured) -> None:
     fig = captured[0]
     _check_axes(fig)
     titles = [ax.get_title(loc="left") for ax in fig.axes if ax.get_title(loc="left")]
-    assert titles[:-1] == ["zoom: load pulse +2 kN, onset at 6 s",
+    assert titles == ["zoom: load pulse +2 kN, onset at 6 s",
                            "zoom: load pulse +2 kN, end at 8 s",
                            "zoom: load pulse -1.5 kN, onset at 18 s",
                            "zoom: load pulse -1.5 kN, end at 20 s"]
     u_axis = next(ax for ax in fig.axes if ax.get_ylabel() == "u [-]")
     assert "controller's command" in u_axis.get_legend().get_texts()[0].get_text()
-    energy = next(ax for ax in fig.axes if ax.get_ylabel() == "energy [kJ]")
-    assert any(t.get_text().startswith("numerical (backward-Euler")
-               for t in energy.get_legend().get_texts())
+    energy = next(ax for ax in fig.axes if ax.get_xlabel().startswith("energy ["))
+    rows = [t.get_text() for t in energy.get_yticklabels()]
+    assert "numerical (solver, coupling)" in rows and "throttling (valves, restrictors)" in rows
+    assert not any("_" in row for row in rows), rows      # words, not the table's keys
     mode_axis = next(ax for ax in fig.axes if ax.get_ylabel() == "mode [-]")
     assert [t.get_text() for t in mode_axis.get_yticklabels()] == ["−1 release", "0 hold",
                                                                    "+1 pressurize"]
@@ -107,8 +120,6 @@ def test_styles_differ_in_more_than_colour() -> None:
         assert len({str(s["linestyle"]) for s in styles}) == len(group)
         assert len({s["marker"] for s in styles}) == len(group)
         assert len({to_rgb(s["color"]) for s in styles}) == len(group)
-    hatches = [h for _, h in figure_style.ENERGY_STYLES.values()]
-    assert len(set(hatches)) == len(hatches)
 
 
 def test_a_name_without_a_style_gets_a_spare_one(captured, monkeypatch) -> None:
@@ -137,32 +148,39 @@ def test_a_name_without_a_style_gets_a_spare_one(captured, monkeypatch) -> None:
 
 
 def test_energy_bars_are_a_waterfall_ending_at_the_totals() -> None:
-    """Each term's bar starts where the previous one ended (a negative term goes down); the
-    circuit's terms end at the circuit total, all of them at the pump total, where the
-    dashed and the solid tick stand."""
-    table = energy_table()
-    with_table = synthetic_result(energy=table)
+    """Each term's bar starts where the previous one ended (a negative term goes left); the
+    circuit's terms end at the circuit total, all of them at the pump total, both drawn as
+    bars from zero; the rows are the terms in words and the values stand at the bars."""
+    with_table = synthetic_result(energy=energy_table())
     without = synthetic_result()
-    fig, ax = plt.subplots()
-    figure_energy.energy_bars(ax, ["tp", "old"], [with_table, without])
-    bars = sorted((p for p in ax.patches if abs(p.get_x() + p.get_width() / 2) < 0.45),
-                  key=lambda p: p.get_x())
-    for a, b in itertools.pairwise(bars):
-        assert b.get_y() == pytest.approx(a.get_y() + a.get_height())
-    circuit_terms, supply_terms = figure_energy.energy_waterfall(with_table.metrics)
-    assert [n for n, _ in supply_terms] == ["residual", "relief"]
-    n_circuit = len([v for _, v in circuit_terms if v != 0.0])
-    end_circuit = bars[n_circuit - 1].get_y() + bars[n_circuit - 1].get_height()
-    assert end_circuit == pytest.approx(table["circuit"] / 1e3, abs=2e-3)   # residual 1 J
-    end = bars[-1].get_y() + bars[-1].get_height()
-    assert end == pytest.approx(table["pump"] / 1e3)
-    ticks = {float(seg[0][1]): c.get_linestyle() for c in ax.collections
-             for seg in c.get_segments()}
-    assert sorted(ticks) == pytest.approx(sorted([table["pump"] / 1e3, table["circuit"] / 1e3]))
-    assert any("numerical" not in t.get_text() for t in ax.get_legend().get_texts())
-    at_old = [p for p in ax.patches if abs(p.get_x() + p.get_width() / 2 - 1) < 0.45]
-    assert at_old == []      # a run without an energy table gets no bar, but a note
-    assert "old: no energy table in this run" in ax.texts[0].get_text()
+    fig = plt.figure(figsize=(10, 5))
+    ax, ax_old = figure_energy.energy_bars(fig, ["tp", "old"], [with_table, without])
+    assert ax.get_xlabel() == "energy [J]"       # 9.5 kJ at most: in J
+    rows = [t.get_text() for t in ax.get_yticklabels()]
+    bars = {rows[round(p.get_y() + p.get_height() / 2)]: (p.get_x(), p.get_width())
+            for p in ax.patches}
+    # the synthetic table [J]: throttling 1500 + 500 + 500, leakage 400, friction 300,
+    # mechanical 500, stored -200 (circuit 3501 with the 1 J residual); relief 6000, pump 9501
+    terms = ["throttling (valves, restrictors)", "seal leakage, head to rod",
+             "cylinder seal friction", "work into the track, ∫F·v dt", "Δ stored, circuit oil",
+             "= circuit total, in at P port", "residual (pump − all terms)", "relief valve",
+             "= pump total, shaft energy in"]
+    assert rows == terms
+    running = 0.0
+    for term in terms:
+        left, width = bars[term]
+        if term.startswith("="):
+            assert left == 0.0 and width == pytest.approx(running, abs=1.5)
+        else:
+            assert left == pytest.approx(running)
+            running += width
+    assert bars["Δ stored, circuit oil"][1] == pytest.approx(-200.0)
+    assert bars["= circuit total, in at P port"][1] == pytest.approx(3501.0)
+    assert bars["= pump total, shaft energy in"][1] == pytest.approx(9501.0)
+    values = [t.get_text() for t in ax.texts]
+    assert "2500" in values and "-200" in values and "9500" in values    # 3 digits
+    assert len(ax_old.patches) == 0      # a run without an energy table gets no bar, but a note
+    assert "no energy table in this run" in ax_old.texts[0].get_text()
     plt.close(fig)
 
 
@@ -196,3 +214,117 @@ def test_figures_write_png_files(tmp_path) -> None:
     for path in paths:
         data = path.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+
+
+def _on_machine(result, machine: str | None, **meta: str):
+    """``result`` as made on ``machine`` (a result that records its host too; None: an
+    older result without one), with other table metadata ``meta``."""
+    table = result.metadata | meta
+    if machine is not None:
+        table |= {"machine": machine, "host": "a test computer"}
+    return Result(result.timeseries.replace_schema_metadata(table), result.metrics)
+
+
+def test_psd_title_states_the_resolution_the_window_gives() -> None:
+    """W1's steady window starts at 5 s and the scenario asks for 0.5 Hz (2 s Welch
+    segments): a 6 s run has a 1 s window, so 1 Hz, and needs 5 + 2 = 7 s for 0.5 Hz; a 9 s
+    run's 4 s window gives the 0.5 Hz asked for."""
+    short = synthetic_result("W1", duration_s=6.0)
+    text = figure_compare.psd_resolution_text(short)
+    assert "1 Hz resolution, not 0.5 Hz" in text and "run ≥ 7 s for 0.5 Hz" in text
+    assert "(1 s)" in text and "0.5 Hz resolution" not in text
+    long = synthetic_result("W1", duration_s=9.0)
+    text = figure_compare.psd_resolution_text(long)
+    assert "0.5 Hz resolution" in text and "2 s Hann segments" in text
+    assert "shorter" not in text and "(4 s)" in text
+
+
+def test_psd_figure_title_names_machine_and_resolution(captured) -> None:
+    run = _on_machine(synthetic_result("W1", duration_s=6.0), "m113")
+    figure_compare.psd_figure([run], "unused.png")
+    title = captured[-1].get_suptitle()
+    assert "machine m113" in title and "1 Hz resolution" in title
+    _check_axes(captured[-1])
+
+
+def test_run_figure_overlays_the_measured_log_everywhere_it_is_drawn(captured) -> None:
+    """A measured log 800 N above the run: its low-passed tension is in the main panel and
+    in every zoom, 0.8 kN above the run's and inside the zoom's limits, its head pressure in
+    the pressure panel; the title names the log's file and each channel's RMSE and lag (from
+    the result's prediction_vs_measured) in kN, MPa and ms; nothing overlaps."""
+    run = synthetic_result("W3", duration_s=22.0, energy=energy_table())
+    c = run.columns()
+    measured = {"t_s": c["t_s"], "tension_N": c["tension_N"] + 800.0,
+                "p_head_Pa": c["p_head_Pa"] * 1.05}
+    run.metrics["measured_log"] = {"file": "logs/rig 2024-05-01.csv", "sha256": "ab" * 32,
+                                   "columns_used": {"tension_N": "tension [lbf]",
+                                                    "p_head_Pa": "p_head [psi]"},
+                                   "columns_ignored": ["ambient [degC]"]}
+    run.metrics["prediction_vs_measured"] = {
+        "tension_N": {"rmse_N": 1234.0, "rmse_lp_N": 812.0, "lag_s": 0.03},
+        "p_head_Pa": {"rmse_Pa": 2.5e5, "rmse_lp_Pa": 1.0e5, "lag_s": -0.012}}
+    figure_run.run_figure(_on_machine(run, "m113"), "unused.png", measured)
+    fig = captured[-1]
+    _check_axes(fig)
+    title = fig.get_suptitle()
+    assert title.startswith("W3, machine m113: tp nmpc/ekf, seed 0")
+    assert "rig 2024-05-01.csv" in title and "logs/" not in title
+    assert "F_ten: RMSE 1.23 kN (2 Hz low-pass 0.812 kN), lag 30 ms" in title
+    assert "p_head: RMSE 0.25 MPa (2 Hz low-pass 0.1 MPa), lag -12 ms" in title
+    label = "measured F_ten 2 Hz low-pass"
+    zooms = [ax for ax in fig.axes if ax.get_title(loc="left").startswith("zoom:")]
+    tension_axes = [ax for ax in fig.axes if ax.get_ylabel() == "F_ten [kN]"]
+    assert len(zooms) == 4 and len(tension_axes) == 5
+    for ax in tension_axes:
+        mine = next(line for line in ax.lines if line.get_label() == label)
+        run_lp = next(line for line in ax.lines if line.get_label() == "F_ten 2 Hz low-pass")
+        offset = np.mean(mine.get_ydata()) - np.mean(run_lp.get_ydata())
+        assert offset == pytest.approx(0.8, abs=0.02)         # kN
+        assert max(mine.get_ydata()) < ax.get_ylim()[1]
+    pressure = next(ax for ax in fig.axes if ax.get_ylabel() == "pressure [MPa]")
+    assert "measured p_head 2 Hz low-pass" in [line.get_label() for line in pressure.lines]
+
+
+def test_titles_name_the_machine(captured) -> None:
+    """The run figure and the comparison figure name the machine, also under a title given
+    by the caller; an older result (its ``machine`` was the computer) names the machine of
+    its files, and one that records none is titled without."""
+    runs = [_on_machine(r, "m113") for r in _runs()[:2]]
+    assert figure_run.run_title(runs[0]) == "W1, machine m113: tp nmpc/ekf, seed 0"
+    figure_compare.overlay_figure(runs, "unused.png", title="W1 seed 0, nmpc: architectures")
+    assert captured[-1].get_suptitle() == "W1 seed 0, nmpc: architectures, machine m113"
+    old = synthetic_result()
+    table = {k: v for k, v in old.metadata.items() if k != "host"}
+    old = Result(old.timeseries.replace_schema_metadata(
+        table | {"machine": "AMD EPYC, 2 cores", "files": '{"machine": "lf1352"}'}), old.metrics)
+    assert figure_run.run_title(old).startswith("W1, machine lf1352:")
+    older = Result(old.timeseries.replace_schema_metadata(
+        {k: v for k, v in table.items() if k != "files"} | {"machine": "AMD EPYC"}), old.metrics)
+    assert figure_run.run_title(older) == "W1: tp nmpc/ekf, seed 0"
+
+
+def test_band_labels_carry_three_significant_digits(captured) -> None:
+    """m113's band, 2/3 and 4/3 of its 20 kN nominal tension, reads 13.3–26.7 kN; a
+    tooth-passing band at 1.5 m/s over a 152 mm pitch ± 10 % (8.8816-10.855 Hz) reads
+    8.88–10.9 Hz; no text of the figures carries four decimals or more."""
+    run = synthetic_result("W1", duration_s=6.0)
+    run.metrics["evaluation"] = run.metrics["evaluation"] | {
+        "force_min_N": 2e4 * 2 / 3, "force_max_N": 2e4 * 4 / 3,
+        "tooth_passing_band_Hz": (1.5 / 0.152 * 0.9, 1.5 / 0.152 * 1.1)}
+    figure_run.run_figure(run, "unused.png")
+    figure_compare.psd_figure([run], "unused.png")
+    tension = next(ax for ax in captured[0].axes if ax.get_ylabel() == "F_ten [kN]")
+    assert "admissible band F_min–F_max, 13.3–26.7 kN" in [
+        t.get_text() for t in tension.get_legend().get_texts()]
+    assert "tooth passing 8.88–10.9 Hz" in [
+        t.get_text() for t in captured[1].axes[0].get_legend().get_texts()]
+    for fig in captured:
+        texts = [t.get_text() for t in fig.findobj(matplotlib.text.Text)]
+        assert not [t for t in texts if re.search(r"\d\.\d{4,}", t)]
+
+
+@pytest.mark.parametrize(("value", "text"), [(13.3333, "13.3"), (26.6667, "26.7"),
+                                             (20.0, "20"), (1049.7, "1050"),
+                                             (0.000123456, "0.000123"), (-0.33, "-0.33")])
+def test_numbers_in_labels(value: float, text: str) -> None:
+    assert figure_style.number(value) == text

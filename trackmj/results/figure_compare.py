@@ -1,12 +1,12 @@
-"""Figures that compare runs (PNG). Display units: kN, MPa, kJ.
+"""Figures that compare runs (PNG). Display units: kN, MPa, J or kJ.
 
 * :func:`overlay_figure`: several runs of one case overlaid (per architecture or per
-  controller), zooms, prediction error against the reference architecture, energy breakdown
-  bars.
+  controller), zooms, prediction error against the reference architecture, each run's
+  energy waterfall.
 * :func:`psd_figure`: tension and chassis-acceleration spectra with the bands marked.
 * :func:`variants_figure`: a metric per parameter variant and architecture (W5).
-* :func:`calibration_figure`: measured logs against a calibration's fitted run and its
-  start.
+
+Titles name the machine (:func:`with_machine`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.figure import Figure
+from matplotlib.figure import Figure, SubFigure
 from matplotlib.gridspec import GridSpecFromSubplotSpec
 
 from trackmj.results.figure_energy import energy_bars
@@ -31,8 +31,11 @@ from trackmj.results.figure_style import (
     BAND_COLOUR,
     STYLES,
     legend_above,
+    machines_text,
     marker_step,
+    number,
     save_png,
+    span,
     style,
 )
 from trackmj.results.metric_windows import MetricWindows, windows_of
@@ -71,7 +74,8 @@ def _bars(ax: Axes, labels: Sequence[str], series: Mapping[str, Sequence[float]]
         ax.bar_label(bars, labels=[_number(v, values) for v in values], fontsize=9,
                      padding=1)
     ax.axhline(0.0, color="black", lw=0.6)
-    ax.set_xticks(range(len(labels)), labels, rotation=20)
+    longest = max((len(line) for lab in labels for line in lab.split("\n")), default=0)
+    ax.set_xticks(range(len(labels)), labels, rotation=0 if longest <= 12 else 20)
     ax.set_ylabel(f"{ylabel} [{unit}]")
     ax.grid(axis="y", alpha=0.3)
     finite = [v for vals in series.values() for v in vals if math.isfinite(v)] or [0.0]
@@ -91,38 +95,36 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
     with ``predictions`` (label -> :func:`trackmj.results.comparison.prediction_vs_tp`) the
     prediction RMSE against the reference architecture (raw and low-passed), the
     peak-pressure error and the energy error; without, the tracking RMSE (raw and
-    low-passed); and the energy breakdown of every run."""
+    low-passed), the peak head pressure and the valve switching rate; and the energy
+    waterfall of every run. The title names the machine."""
     labels = [getattr(r, label_by) for r in results]
     runs = list(zip(labels, results, strict=True))
     w = windows_of(results[0])
     t_end = float(results[0].columns()["t_s"][-1])
     zooms = zoom_windows(w, t_end)[:4]
-    bar_axes = 4 if predictions else 2
-    fig = plt.figure(figsize=(17, 15), layout="constrained")
-    grid = fig.add_gridspec(4, 1, height_ratios=(3.0, 2.0, 2.0, 3.0))
-    ax_f = fig.add_subplot(grid[0])
+    fig = plt.figure(figsize=(17, 20), layout="constrained")
+    rows = fig.add_gridspec(2, 1, height_ratios=(15.0, 5.0), hspace=0.0)
+    top, bottom = fig.add_subfigure(rows[0]), fig.add_subfigure(rows[1])
+    grid = top.add_gridspec(4, 1, height_ratios=(3.0, 2.0, 2.0, 3.0))
+    ax_f = top.add_subplot(grid[0])
     tension_panel(ax_f, runs, w)
     ax_f.set_xlabel("time [s]")
     legend_above(ax_f, ncol=5)
-    _head_pressures(fig.add_subplot(grid[1], sharex=ax_f), runs, w, t_end)
+    _head_pressures(top.add_subplot(grid[1], sharex=ax_f), runs, w, t_end)
     zoom_grid = grid[2].subgridspec(1, len(zooms))
     for k, (name, t0, t1) in enumerate(zooms):
-        ax = fig.add_subplot(zoom_grid[k])
+        ax = top.add_subplot(zoom_grid[k])
         tension_panel(ax, runs, w, (t0, t1), legend=False, raw_as_line=True)
         ax.set_title(f"zoom: {name}", fontsize=9, loc="left")
         ax.set_xlabel("time [s]")
-    bars = grid[3].subgridspec(1, bar_axes, width_ratios=(*[1.0] * (bar_axes - 1), 2.4))
     if predictions:
-        _prediction_bars(fig, bars, labels, predictions, w)
+        _prediction_bars(top, grid[3].subgridspec(1, 3), labels, predictions, w)
     else:
-        _bars(fig.add_subplot(bars[0]), labels, {
-            "raw": [r.metrics.get("rmse_N", math.nan) / 1e3 for r in results],
-            f"{w.lowpass_cutoff_Hz:g} Hz low-pass":
-                [r.metrics.get("rmse_lp_N", math.nan) / 1e3 for r in results]},
-            "kN", "tracking RMSE")
-    energy_bars(fig.add_subplot(bars[bar_axes - 1]), labels, results)
+        _run_bars(top, grid[3].subgridspec(1, 3), labels, results, w)
+    energy_bars(bottom, labels, results)
     first = results[0]
-    fig.suptitle(title or f"{first.scenario} seed {first.seed}: " + ", ".join(labels))
+    fig.suptitle(with_machine(title or f"{first.scenario} seed {first.seed}: "
+                              + ", ".join(labels), results))
     return save_png(fig, Path(path))
 
 
@@ -148,7 +150,8 @@ def _head_pressures(ax_p: Axes, runs: Sequence[tuple[str, Result]], w: MetricWin
                  title=f"head pressure, {w.lowpass_cutoff_Hz:g} Hz low-pass")
 
 
-def _prediction_bars(fig: Figure, bars: GridSpecFromSubplotSpec, labels: Sequence[str],
+def _prediction_bars(fig: Figure | SubFigure, bars: GridSpecFromSubplotSpec,
+                     labels: Sequence[str],
                      predictions: Mapping[str, Mapping[str, Any]], w: MetricWindows) -> None:
     """Bars of each run's prediction error against the reference architecture: F_ten RMSE
     (raw and low-passed) [kN], peak head pressure [MPa], energy [%] (named by the term
@@ -170,11 +173,30 @@ def _prediction_bars(fig: Figure, bars: GridSpecFromSubplotSpec, labels: Sequenc
                                       for o in others]}, "%", f"energy error vs {ref}")
 
 
+def _run_bars(fig: Figure | SubFigure, bars: GridSpecFromSubplotSpec, labels: Sequence[str],
+              results: Sequence[Result], w: MetricWindows) -> None:
+    """Bars of each run's tracking RMSE (raw and low-passed) [kN], peak head pressure [MPa]
+    and valve switching rate [Hz] in the three cells of ``bars``."""
+    def values(key: str, scale: float) -> list[float]:
+        return [float(r.metrics.get(key, math.nan)) * scale for r in results]
+
+    _bars(fig.add_subplot(bars[0]), labels, {
+        "raw": values("rmse_N", 1e-3),
+        f"{w.lowpass_cutoff_Hz:g} Hz low-pass": values("rmse_lp_N", 1e-3)},
+        "kN", "tracking RMSE")
+    _bars(fig.add_subplot(bars[1]), labels, {"peak p_head, raw": values("p_head_max_Pa", 1e-6)},
+          "MPa", "peak head pressure")
+    _bars(fig.add_subplot(bars[2]), labels, {"valve mode changes per s": values(
+        "valve_switch_rate_Hz", 1.0)}, "Hz", "valve switching")
+
+
 def psd_figure(results: Sequence[Result], path: str | Path, *,
                label_by: str = "architecture", title: str = "") -> Path:
     """Tension and chassis vertical acceleration spectra (the runs' ``metrics["psd"]``,
     steady window) on log axes; the road's excitation band, the body-mode band and the
-    tooth-passing band marked."""
+    tooth-passing band marked. The title names the window and the resolution the spectra
+    have (:func:`psd_resolution`) and says when the window is too short for the scenario's
+    resolution."""
     w = windows_of(results[0])
     fig, axes = plt.subplots(2, 1, figsize=(12, 9), layout="constrained", sharex=True)
     quantities = (("tension_N2_Hz", 1e-6, "F_ten PSD [kN²/Hz]"),
@@ -190,11 +212,44 @@ def psd_figure(results: Sequence[Result], path: str | Path, *,
                     ha="center")
     axes[1].set_xlabel("frequency [Hz]")
     axes[1].set_xlim(0.0, w.psd_max_Hz)
-    steady = w.steady or (w.evaluation_start_s, math.nan)
     first = results[0]
-    fig.suptitle(title or f"{first.scenario} seed {first.seed}: spectra over {steady[0]:g}-"
-                 f"{steady[1]:g} s (Welch, {w.psd_resolution_Hz:g} Hz resolution)")
+    fig.suptitle(with_machine(title or f"{first.scenario} seed {first.seed}: spectra", results)
+                 + "\n" + psd_resolution_text(first))
     return save_png(fig, Path(path))
+
+
+def psd_resolution(result: Result) -> tuple[float, float, float]:
+    """(start [s], length [s], frequency resolution [Hz]) of a run's spectra: the steady
+    window up to the run's end and the bin spacing of its ``metrics["psd"]`` (Welch
+    segments of 1/resolution_Hz s, or the whole window where it is shorter:
+    :func:`trackmj.results.signals.psd`); the spacing from the window if the run has no
+    spectra."""
+    w = windows_of(result)
+    t_end = float(result.columns()["t_s"][-1])
+    start = w.steady[0] if w.steady is not None else w.evaluation_start_s
+    length = max(min(w.steady[1] if w.steady is not None else t_end, t_end) - start, 0.0)
+    f = np.asarray(result.metrics.get("psd", {}).get("f_Hz", []), dtype=float)
+    if len(f) >= 2:
+        return start, length, float(f[1] - f[0])
+    return start, length, max(w.psd_resolution_Hz, 1.0 / length if length > 0 else math.inf)
+
+
+def psd_resolution_text(result: Result) -> str:
+    """The spectra's window and resolution for a title: "Welch over 5–30 s (25 s), 2 s Hann
+    segments: 0.5 Hz resolution"; where the window is shorter than one segment of the
+    scenario's resolution, what it gives and how long a run needs to be for that:
+    "window 5–6 s is 1 s, shorter than the 2 s Welch segment: 1 Hz resolution, not
+    0.5 Hz; run ≥ 7 s for 0.5 Hz"."""
+    w = windows_of(result)
+    start, length, resolution = psd_resolution(result)
+    wanted = w.psd_resolution_Hz
+    window = f"{span(start, start + length, 's')} ({number(length, 2)} s)"
+    if resolution <= wanted * (1.0 + 1e-2):
+        return (f"Welch over {window}, {number(1.0 / wanted)} s Hann segments: "
+                f"{number(resolution, 2)} Hz resolution")
+    return (f"window {window} is shorter than the {number(1.0 / wanted)} s Welch segment: "
+            f"{number(resolution, 2)} Hz resolution, not {number(wanted)} Hz; run ≥ "
+            f"{number(start + 1.0 / wanted)} s for {number(wanted)} Hz")
 
 
 def _mark_bands(ax: Axes, w: MetricWindows) -> None:
@@ -202,20 +257,19 @@ def _mark_bands(ax: Axes, w: MetricWindows) -> None:
     tooth-passing band (where known) [Hz]."""
     if w.road_band_Hz is not None:
         ax.axvspan(*w.road_band_Hz, color=BAND_COLOUR, alpha=0.08, lw=0,
-                   label=f"road excitation {w.road_band_Hz[0]:g}-{w.road_band_Hz[1]:g} Hz")
+                   label=f"road excitation {span(*w.road_band_Hz, 'Hz')}")
     ax.axvspan(*w.body_mode_band_Hz, facecolor="none", edgecolor="0.7", hatch="//",
-               lw=0.0, label=f"body mode {w.body_mode_band_Hz[0]:g}-"
-                             f"{w.body_mode_band_Hz[1]:g} Hz")
+               lw=0.0, label=f"body mode {span(*w.body_mode_band_Hz, 'Hz')}")
     if w.tooth_passing_band_Hz is not None:
         lo, hi = w.tooth_passing_band_Hz
         ax.axvspan(lo, hi, facecolor="none", edgecolor="#F2B48A", hatch="\\\\", lw=0.0,
-                   label=f"tooth passing {lo:.3g}-{hi:.3g} Hz")
+                   label=f"tooth passing {span(lo, hi, 'Hz')}")
 
 
 def _spectra(ax: Axes, results: Sequence[Result], key: str, scale: float,
              label_by: str) -> int:
     """Each run's spectrum ``key`` × ``scale`` on a log axis (the zero frequency left out),
-    a legend entry "none" for a run without it; returns how many were drawn."""
+    a legend entry "not recorded" for a run without it; returns how many were drawn."""
     drawn = 0
     for k, res in enumerate(results):
         spectra = res.metrics.get("psd", {})
@@ -223,7 +277,7 @@ def _spectra(ax: Axes, results: Sequence[Result], key: str, scale: float,
         p = np.asarray(spectra.get(key, []), dtype=float) * scale
         label = getattr(res, label_by)
         if len(f) < 2 or not np.isfinite(p[1:]).any():
-            ax.plot([], [], label=f"{label}: none", **style(label, k))
+            ax.plot([], [], label=f"{label}: not recorded", **style(label, k))
             continue
         ax.semilogy(f[1:], p[1:], lw=1.1, markersize=4, markevery=marker_step(len(f)),
                     markerfacecolor="white", label=label, **style(label, k))
@@ -244,30 +298,8 @@ def variants_figure(variants: Sequence[str], series: Mapping[str, Mapping[str, S
     return save_png(fig, Path(path))
 
 
-def calibration_figure(t: np.ndarray, panels: Sequence[tuple[str, Mapping[str, np.ndarray],
-                                                             Mapping[str, np.ndarray],
-                                                             Mapping[str, np.ndarray]]],
-                       title: str, path: str | Path) -> Path:
-    """Measured (grey) against fitted (black) and the fit's start (dashed), one row per
-    channel, one column per log; ``panels``: (log name, measured, start, fitted), each a
-    channel -> values on ``t`` [s] (SI)."""
-    names = [c for c in CHANNEL_DISPLAY if any(c in p[1] for p in panels)]
-    fig, axes = plt.subplots(len(names), len(panels), squeeze=False, sharex=True,
-                             figsize=(8.0 * len(panels), 2.3 * len(names) + 1.4),
-                             layout="constrained")
-    for j, (name, measured, start, fitted) in enumerate(panels):
-        for i, channel in enumerate(names):
-            ax = axes[i][j]
-            label, scale = CHANNEL_DISPLAY[channel]
-            if channel in measured:
-                ax.plot(t, measured[channel] * scale, color="0.6", lw=0.5, label="measured")
-                ax.plot(t, start[channel] * scale, color="#0072B2", ls="--", lw=1.0,
-                        label="start of the fit")
-                ax.plot(t, fitted[channel] * scale, color="black", lw=1.1, label="fitted")
-            ax.set_ylabel(label)
-            ax.grid(alpha=0.3)
-        axes[0][j].set_title(f"log {name}", fontsize=10, loc="right")
-        axes[-1][j].set_xlabel("time [s]")
-    legend_above(axes[0][0], ncol=3)
-    fig.suptitle(title, fontsize=10)
-    return save_png(fig, Path(path))
+def with_machine(title: str, results: Sequence[Result]) -> str:
+    """``title`` naming the machine(s) of ``results`` (", machine m113") unless it does
+    already or no result names one."""
+    machine = machines_text(results)
+    return title if machine is None or machine in title else f"{title}, machine {machine}"

@@ -16,9 +16,11 @@ from matplotlib.axes import Axes
 from trackmj.results.figure_style import (
     BAND_COLOUR,
     EVENT_COLOUR,
+    MEASURED_COLOUR,
     RAW_COLOUR,
     envelope,
     marker_step,
+    span,
     style,
 )
 from trackmj.results.metric_windows import MetricWindows
@@ -54,8 +56,8 @@ def force_band(ax: Axes, w: MetricWindows, label: bool = True) -> None:
     """The admissible band [F_min, F_max] [kN], shaded green between dashed edges."""
     ax.axhspan(w.force_min_N / 1e3, w.force_max_N / 1e3, facecolor=(0.0, 0.62, 0.45, 0.08),
                edgecolor=BAND_COLOUR, lw=0.9, ls="--",
-               label=f"admissible [F_min, F_max] = [{w.force_min_N / 1e3:g}, "
-                     f"{w.force_max_N / 1e3:g}] kN" if label else None)
+               label=f"admissible band F_min–F_max, "
+                     f"{span(w.force_min_N / 1e3, w.force_max_N / 1e3, 'kN')}" if label else None)
 
 
 def zoom_windows(w: MetricWindows, t_end: float) -> list[tuple[str, float, float]]:
@@ -83,9 +85,11 @@ def zoom_windows(w: MetricWindows, t_end: float) -> list[tuple[str, float, float
 
 def tension_panel(ax: Axes, runs: Sequence[tuple[str, Result]], w: MetricWindows,
                   t_range: tuple[float, float] | None = None, raw_of: int = 0,
-                  legend: bool = True, raw_as_line: bool = False) -> None:
+                  legend: bool = True, raw_as_line: bool = False,
+                  measured_N: np.ndarray | None = None) -> None:
     """Low-passed F_ten of each run (styled), the raw F_ten of run ``raw_of`` as a light band
-    (or a thin line in a zoom), the reference, the force band and the events."""
+    (or a thin line in a zoom), the reference, the force band and the events; a measured
+    tension ``measured_N`` [N] on the run's grid low-passed like the run's (dashed)."""
     label0, first = runs[raw_of]
     c = first.columns()
     t = c["t_s"]
@@ -105,6 +109,10 @@ def tension_panel(ax: Axes, runs: Sequence[tuple[str, Result]], w: MetricWindows
         ax.plot(cc["t_s"][sel], lp[sel] / 1e3, lw=1.3, markersize=5, label=name,
                 markevery=marker_step(int(sel.sum())), markerfacecolor="white",
                 **style(label, k))
+    if measured_N is not None:
+        ax.plot(t[sel], lowpass(t, measured_N, w.lowpass_cutoff_Hz)[sel] / 1e3,
+                color=MEASURED_COLOUR, lw=1.3, ls="--",
+                label=f"measured F_ten {w.lowpass_cutoff_Hz:g} Hz low-pass")
     ax.plot(t[sel], c["tension_ref_N"][sel] / 1e3, color="black", lw=1.0, ls=(0, (1, 1.5)),
             label="reference F_ref")
     force_band(ax, w, label=legend)
@@ -112,8 +120,11 @@ def tension_panel(ax: Axes, runs: Sequence[tuple[str, Result]], w: MetricWindows
     ax.set_ylabel("F_ten [kN]")
     if t_range is not None:
         ax.set_xlim(*t_range)
-        lo_y = min(np.nanmin(c["tension_N"][sel]), np.nanmin(c["tension_ref_N"][sel]))
-        hi_y = max(np.nanmax(c["tension_N"][sel]), np.nanmax(c["tension_ref_N"][sel]))
+        shown = [c["tension_N"][sel], c["tension_ref_N"][sel]]
+        if measured_N is not None:
+            shown.append(measured_N[sel])
+        lo_y = min(float(np.nanmin(x)) for x in shown)
+        hi_y = max(float(np.nanmax(x)) for x in shown)
         pad = 0.08 * (hi_y - lo_y) + 50.0
         ax.set_ylim((lo_y - pad) / 1e3, (hi_y + pad) / 1e3)
     ax.grid(alpha=0.3)
