@@ -217,6 +217,15 @@ READOUT_UNITS: dict[str, str] = {name: COLUMN_UNITS[name] for name in Readout._f
 """Unit of every :class:`Readout` field."""
 
 
+def unit_suffix(column: str) -> str:
+    """The SI suffix of a column name (``p_head_Pa`` -> ``Pa``, ``stroke_velocity_m_s`` ->
+    ``m_s``, ``u`` -> '')."""
+    for suffix in ("m3_s", "m_s2", "m_s", "Pa", "N", "m", "J", "s"):
+        if column.endswith("_" + suffix):
+            return suffix
+    return ""
+
+
 class ElementLog(NamedTuple):
     """An element's per-step values after a completed step (SI, gauge Pa; NaN where the element
     has no such quantity).

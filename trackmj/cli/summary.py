@@ -13,6 +13,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from trackmj.ports import unit_suffix
+
 SUMMARY_METRICS = ("rmse_lp_N", "rmse_N", "ripple_rms_N", "ripple_band_rms_N.tooth_passing",
                    "ripple_band_rms_N.body_mode", "peak_error_lp_N", "peak_error_N",
                    "overshoot_lp_N", "settling_time_lp_s", "disturbance_peak_error_lp_N",
@@ -34,7 +36,8 @@ VALVE_METRICS = ("valve_switches", "valve_switch_rate_Hz")
 """Rows that read "n/a" for a run whose tensioner takes no valve mode
 (``valve_mode_applied`` false: a passive tensioner, an FMU without a valve_mode input)."""
 
-MEASURED_DISPLAY = {"N": (1e-3, "kN"), "Pa": (1e-6, "MPa"), "m": (1e3, "mm"), "": (1.0, "-")}
+MEASURED_DISPLAY = {"N": (1e-3, "kN"), "Pa": (1e-6, "MPa"), "m": (1e3, "mm"),
+                    "m_s": (1e3, "mm/s"), "m3_s": (6e4, "L/min"), "": (1.0, "-")}
 """Display scale and unit of a compared channel, by its SI unit."""
 
 
@@ -127,9 +130,9 @@ def measured_table(table: dict, log: str) -> str:
              "| channel | RMSE raw | RMSE low-pass | peak (sim − meas) | lag [ms] |",
              "|---|---|---|---|---|"]
     for name, row in table.items():
-        unit = name.rpartition("_")[2] if "_" in name else ""
+        unit = unit_suffix(name)
         scale, shown = MEASURED_DISPLAY.get(unit, (1.0, unit))
-        cells = [row.get(f"{k}_{unit}", float("nan")) * scale
+        cells = [row.get(f"{k}_{unit}" if unit else k, float("nan")) * scale
                  for k in ("rmse", "rmse_lp", "peak_error")]
         lines.append(f"| {name} [{shown}] | " + " | ".join(f"{v:.3g}" for v in cells)
                      + f" | {row['lag_s'] * 1e3:.0f} |")

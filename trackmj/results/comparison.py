@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from trackmj.ports import unit_suffix
 from trackmj.results.energy_terms import energy_terms, headline_energy
 from trackmj.results.metric_windows import MetricWindows
 from trackmj.results.signals import (
@@ -134,18 +135,10 @@ def prediction_vs_measured(columns: Mapping[str, np.ndarray],
         if name not in columns:
             raise ValueError(f"the measured log's column {name!r} is not a column of the run")
         y = np.asarray(columns[name], dtype=float)
-        unit = _unit_suffix(name)
+        unit = unit_suffix(name)
         values = np.asarray(values, dtype=float)
         fc = windows.lowpass_cutoff_Hz
         errors = trace_errors(t, y, values, ev, fc)
         out[name] = {f"{k}_{unit}" if unit else k: v for k, v in errors.items()}
         out[name]["lag_s"] = lag_s(t, lowpass(t, y, fc), lowpass(t, values, fc), ev)
     return out
-
-
-def _unit_suffix(column: str) -> str:
-    """The SI suffix of a column name (``p_head_Pa`` -> ``Pa``, ``u`` -> '')."""
-    for suffix in ("m3_s", "m_s2", "m_s", "Pa", "N", "m", "J", "s"):
-        if column.endswith("_" + suffix):
-            return suffix
-    return ""
