@@ -204,8 +204,8 @@ def test_calibration_log_records_its_columns_and_refuses_an_unknown_unit(tmp_pat
         path.read_bytes()).hexdigest(), "columns_used": {"valve_mode": "valve_mode",
                                                          "p_head_Pa": "p_head [psi]"},
         "columns_ignored": ["note", "p_supply_bar"]}
-    path.write_text(path.read_text().replace("p_head [psi]", "p_head [psig]"))
-    with pytest.raises(ParameterError, match=r"rig\.csv column 'p_head \[psig\]': unit 'psig' "
+    path.write_text(path.read_text().replace("p_head [psi]", "p_head [psix]"))
+    with pytest.raises(ParameterError, match=r"rig\.csv column 'p_head \[psix\]': unit 'psix' "
                                              "is not a unit pint knows"):
         load_log(path, 0.005)
 
@@ -220,3 +220,29 @@ def test_cli_refuses_an_unknown_unit_with_exit_2_naming_the_column(tmp_path, cap
     assert code == 2, err
     assert "rig.csv column 'tension_kNm': unit 'kNm'" in err and "is not a force" in err, err
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize(("header", "name", "factor"), [
+    ("tension (kN)", "tension_N", 1e3),            # parentheses as brackets
+    ("Tension [lbf]", "tension_N", LBF_N),         # a name in capitals
+    ("P_HEAD_psig", "p_head_Pa", PSI_PA),          # psig: gauge, as the run's pressures
+    ("p_head [barg]", "p_head_Pa", 1e5),
+    ("q_supply (gpm)", "q_supply_m3_s", US_GALLON_M3 / 60.0),
+])
+def test_rig_spellings_of_names_and_units(tmp_path, header, name, factor):
+    trace = read_trace(write(tmp_path, f"Time (s),{header}\n0,2\n1,3\n"))
+    np.testing.assert_allclose(trace.t_s, [0.0, 1.0])
+    np.testing.assert_allclose(trace.columns[name], [2 * factor, 3 * factor], rtol=1e-12)
+
+
+def test_one_letter_names_in_capitals_are_not_the_runs(tmp_path):
+    """``T`` and ``U`` are usually a temperature and a voltage: ignored, not read as the
+    time and the opening (and refused for their units)."""
+    trace = read_trace(write(tmp_path, "t_s,T [degC],U [V]\n0,40,12\n1,41,12\n"))
+    assert trace.columns == {} and trace.ignored == ("T [degC]", "U [V]")
+
+
+def test_an_absolute_pressure_is_refused_naming_why(tmp_path):
+    path = write(tmp_path, "t_s,p_head [psia]\n0,100\n1,110\n")
+    with pytest.raises(ParameterError, match=r"rig.csv column 'p_head \[psia\]'.*absolute"):
+        read_trace(path)

@@ -1,8 +1,10 @@
 """Measured time series: rig logs and input traces read from CSV or Parquet files, their
 column headers parsed by pint and converted to SI.
 
-A header is ``name [unit]`` (``p_head [psi]``, ``t [ms]``) or ``name_unit``, the unit a
-suffix after an underscore (``tension_kN``, ``p_head_MPa``, ``stroke_in``, ``t_ms``). The
+A header is ``name [unit]`` or ``name (unit)`` (``p_head [psi]``, ``t (ms)``) or
+``name_unit``, the unit a suffix after an underscore (``tension_kN``, ``p_head_MPa``,
+``stroke_in``, ``t_ms``); a name is matched as written, then in lower case (``Time``,
+``Tension``) unless it is one letter (``T``, ``U``: a temperature, a voltage). The
 name says which **quantity** the column holds; a rig log may hold the run's own columns
 (:data:`trackmj.ports.COLUMN_UNITS`; with ``--channels all`` the run's further ones too):
 
@@ -32,7 +34,7 @@ is converted to SI and the column renamed to its SI name (``p_head [psi]`` -> ``
 × 6894.757). pint's spellings: ``psi`` is pound-force per square inch, ``lbf`` pound-force,
 ``in`` inch, ``gal`` the US gallon, ``min`` minute, ``g0`` standard gravity (``g`` is the
 gram). Pressures are gauge, as the run's own columns, and converted by a factor alone (no
-offsets; psig, psia and barg are units pint does not know, so refused). In a suffix,
+offsets; psig and barg read as psi and bar, psia and bara are refused). In a suffix,
 underscores between unit tokens divide and a digit after a token is its power, as in the
 run's column names (``m_s2`` = m/s^2, ``L_min`` = L/min, ``m3_s`` = m^3/s, ``mm_s`` =
 mm/s; :func:`pint_spelling`, tried when pint does not read the suffix as written; ``-`` is
@@ -92,8 +94,13 @@ DIMENSIONLESS = tuple(name for name, unit in COLUMN_UNITS.items() if unit == "1"
 SI_SUFFIXES: dict[str, str] = {suffix_of(unit): unit for unit in COLUMN_UNITS.values()
                                if unit != "1"}
 """SI suffix of a column name -> its SI unit in pint's spelling (``m3_s`` -> ``m^3/s``)."""
-UNIT_ALIASES = {"-": "dimensionless"}
-"""Units written in logs that pint's parser refuses, in pint's spelling."""
+UNIT_ALIASES = {"-": "dimensionless", "psig": "psi", "barg": "bar", "gpm": "gal/min"}
+"""Units written in logs that pint's parser refuses or does not know, in pint's spelling:
+``psig``/``barg`` are gauge pressures (the run's pressures are gauge), ``gpm`` US gallons
+per minute."""
+ABSOLUTE_PRESSURES = ("psia", "bara", "kPaa", "MPaa")
+"""Absolute-pressure spellings: refused, since a log's pressures are compared with the run's
+gauge pressures and the ambient pressure at the rig is not known to trackmj."""
 UNIT_EXAMPLES: dict[str, tuple[str, str]] = {
     "s": ("time", "s, ms, min"), "N": ("force", "N, kN, lbf"),
     "Pa": ("pressure", "Pa, kPa, MPa, bar, psi"), "m": ("length", "m, mm, in, ft"),
@@ -109,7 +116,9 @@ COVER_TOLERANCE_S = 0.5 * COUPLING_STEP_S
 starts there) and ends by the duration, within half a step [s]; before its first sample
 it holds its first value."""
 
-_BRACKET = re.compile(r"^\s*(?P<name>[^\[\]]+?)\s*\[(?P<unit>[^\[\]]+)\]\s*$")
+_BRACKET = re.compile(r"^\s*(?P<name>[^\[\]()]+?)\s*(?:\[(?P<unit>[^\[\]]+)\]|"
+                      r"\((?P<paren>[^()]+)\))\s*$")
+"""``name [unit]`` or ``name (unit)``."""
 _POWER = re.compile(r"(?<=[A-Za-z])(\d+)$")
 
 
@@ -165,6 +174,10 @@ def si_factor(unit: str, si_unit: str) -> float:
     another dimension)."""
     if unit in (si_unit, suffix_of(si_unit)):
         return 1.0
+    if unit in ABSOLUTE_PRESSURES:
+        raise ValueError(f"unit {unit!r} is an absolute pressure; the run's pressures are "
+                         "gauge: log them as gauge (psig, barg, or psi, bar, Pa meaning "
+                         "gauge)")
     parsed = _parse(unit)
     if parsed is None:
         raise ValueError(f"unit {unit!r} is not a unit pint knows")
@@ -242,6 +255,15 @@ def _splits(header: str) -> list[tuple[str, str]]:
     return [(header[:i], header[i + 1:]) for i in reversed(cuts)]
 
 
+def _lookup(quantities: Mapping[str, Quantity], base: str) -> Quantity | None:
+    """The quantity a header's base name names: as written, else in lower case when it is
+    longer than one letter (``Time``, ``Tension``; ``T`` and ``U`` stay themselves, often
+    a temperature and a voltage, not the time and the opening)."""
+    if base in quantities:
+        return quantities[base]
+    return quantities.get(base.lower()) if len(base) > 1 else None
+
+
 def si_name(header: str, quantities: Mapping[str, Quantity] | None = None
             ) -> tuple[str, float] | None:
     """(SI column name, factor to SI) of a log's column header; None if it names no
@@ -264,16 +286,18 @@ def si_name(header: str, quantities: Mapping[str, Quantity] | None = None
     quantities = log_quantities() if quantities is None else quantities
     match = _BRACKET.match(header)
     if match:
-        quantity = quantities.get(match["name"].strip().replace(" ", "_"))
-        return None if quantity is None else (quantity.name,
-                                              quantity.convert(match["unit"].strip()))
-    if header in quantities:
-        return quantities[header].name, quantities[header].convert(None)
+        quantity = _lookup(quantities, match["name"].strip().replace(" ", "_"))
+        unit = match["unit"] if match["unit"] is not None else match["paren"]
+        return None if quantity is None else (quantity.name, quantity.convert(unit.strip()))
+    bare = _lookup(quantities, header)
+    if bare is not None:
+        return bare.name, bare.convert(None)
     errors = []
     for base, unit in _splits(header):
-        if base in quantities:
+        quantity = _lookup(quantities, base)
+        if quantity is not None:
             try:
-                return quantities[base].name, quantities[base].convert(unit)
+                return quantity.name, quantity.convert(unit)
             except ValueError as exc:
                 errors.append(exc)
     own = split_si(header)
