@@ -91,13 +91,20 @@ def test_replayed_valve_command_reproduces_the_run(truth_run):
 
 
 @pytest.mark.slow
-def test_calibration_recovers_off_nominal_values(noisy_log, tmp_path):
-    from trackmj.study.calibrate import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
+def test_calibration_recovers_off_nominal_values(noisy_log, tmp_path, capsys):
+    """Through the command line, as a user runs it: the estimates printed in display units
+    with their intervals, and the log named by its hash."""
+    from trackmj.cli.main import main
+    from trackmj.study.calibrate import CALIBRATION_JSON, CALIBRATION_PNG
 
     out = tmp_path / "cal"
-    done = calibrate(spec_file(tmp_path), [noisy_log], out)
+    assert main(["calibrate", str(spec_file(tmp_path)), "--measured", str(noisy_log),
+                 "--out", str(out)]) == 0
     doc = json.loads((out / CALIBRATION_JSON).read_text())
-    assert doc == json.loads(json.dumps(done.document))
+    printed = capsys.readouterr().out
+    bulk = doc["estimates"]["hydraulics.fluid.bulk_modulus_Pa"]
+    assert f"hydraulics.fluid.bulk_modulus_Pa = {bulk * 1e-6:.5g} MPa" in printed
+    assert "mm²" in printed and f"log {Path(noisy_log).name} (sha256 " in printed
     for key, truth in TRUTH.items():
         low, high = doc["intervals"][key]
         assert low <= truth <= high, (key, doc["estimates"][key], low, high)

@@ -218,6 +218,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """``trackmj calibrate``: fit a spec's keys to measured logs, with 95 % intervals."""
     # start-up: --help and argument errors must not import MuJoCo, CasADi or SciPy
+    from trackmj.results.columns import display_unit
     from trackmj.study.calibrate import CALIBRATION_JSON, CALIBRATION_PNG, calibrate
 
     out = Path(args.out)
@@ -226,11 +227,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     runs = len(doc["runs"])
     print(f"calibrated {len(doc['estimates'])} keys on {len(args.measured)} log(s), {runs} "
           f"runs in {doc['wall_time_s']:.0f} s ({doc['optimizer']['message']})")
-    units = doc["units"]["estimates"]
     for key, value in doc["estimates"].items():
+        scale, unit = display_unit(doc["units"]["estimates"][key])
+        unit = "" if unit in ("", "1") else f" {unit}"
         low, high = doc["intervals"][key]
         bound = "  (at a bound)" if doc["at_bound"][key] else ""
-        print(f"  {key} = {value:.5g} {units[key]}   95 % [{low:.5g}, {high:.5g}]{bound}")
+        print(f"  {key} = {value * scale:.5g}{unit}   95 % [{low * scale:.5g}, "
+              f"{high * scale:.5g}]{unit}{bound}")
     rms = ", ".join(f"{name} {value:.4g}" for name, value in doc["residual_rms"].items())
     print(f"  residual RMS (SI): {rms}")
     for log in doc["logs"]:
