@@ -57,12 +57,17 @@ def test_w4_supply_drop_is_rejected_and_leaves_no_offset() -> None:
 def test_reference_beyond_f_max_is_held_at_the_limit_without_stalling() -> None:
     """A ramp of 1.2 kN/s from 15 kN passes F_max = 20 kN at 6.2 s: the governor saturates it
     0.5 kN inside the band, the tension is held there (the valves keep acting, the mean
-    neither exceeds F_max nor leaks away) and the MPC does not fall back."""
-    result = simulate("W1", duration=10.5, set={"scenario.reference.initial_N": 15e3,
-                                                "scenario.reference.steps.0.time_s": 1.5,
-                                                "scenario.reference.steps.0.delta_N": 0.0,
-                                                "scenario.reference.ramps.0.start_s": 2.0,
-                                                "scenario.reference.ramps.0.rate_N_s": 1.2e3})
+    neither exceeds F_max nor leaks away) and the MPC does not fall back there: at most 2
+    fallbacks more than the same run held at 15 kN (whose start-up, the end of the speed
+    ramp at 1.1-1.4 s, takes its own: 6 SQP solves at the iteration limit)."""
+    held_at = {"scenario.reference.initial_N": 15e3,
+               "scenario.reference.steps.0.time_s": 1.5,
+               "scenario.reference.steps.0.delta_N": 0.0,
+               "scenario.reference.ramps.0.start_s": 2.0}
+    result = simulate("W1", duration=10.5,
+                      set=held_at | {"scenario.reference.ramps.0.rate_N_s": 1.2e3})
+    steady = simulate("W1", duration=10.5,
+                      set=held_at | {"scenario.reference.ramps.0.rate_N_s": 0.0})
     cols = result.columns()
     t, f = cols["t_s"], cols["tension_N"]
     mean = trailing_mean(t, f, 0.5)
@@ -71,7 +76,8 @@ def test_reference_beyond_f_max_is_held_at_the_limit_without_stalling() -> None:
     held = t >= 8.5
     assert np.mean(f[held]) == pytest.approx(F_MAX - 500.0, abs=400.0)
     assert np.count_nonzero(np.diff(cols["valve_mode"][t >= 6.5])) > 0   # still acting
-    assert result.metrics["controller_fallbacks"] <= 2
+    assert (result.metrics["controller_fallbacks"]
+            <= steady.metrics["controller_fallbacks"] + 2)
 
 
 def _late_switch_rate_and_offset(controller: str, **changes: float) -> tuple[float, float]:

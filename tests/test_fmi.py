@@ -177,7 +177,7 @@ def test_fmpy_simulate_fmu_settles_the_track_where_drive_puts_it(exported, tmp_p
 
     from trackmj.sim.drive import drive
 
-    result = simulate_fmu(str(exported["track"]), stop_time=2.0, step_size=1e-3,
+    result = simulate_fmu(str(exported["track"]), stop_time=3.0, step_size=1e-3,
                           output_interval=1e-3, output=["stroke_m", "tension_N"],
                           start_values={"force_N": 13e3, "force_dv_N_s_m": -2e4})
     passive = tmp_path / "constant.toml"

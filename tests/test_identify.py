@@ -63,19 +63,19 @@ def test_frequency_response_of_a_sampled_oscillator() -> None:
 @pytest.mark.slow
 def test_identified_idler_of_the_track() -> None:
     """The static stiffness and the dynamic fit come from separate experiments and agree;
-    the modal model describes the measured response (R² >= 0.9, the single-DOF model
-    cannot: its fitted mass, unconstrained, falls below the idler and carrier that move,
-    80 kg, so the identification floors it there); the modes are the body mode and the
-    idler mode."""
-    free_fit = identify_idler(load_plant)
-    assert free_fit.fit_r2 < 0.5 and free_fit.mass_kg < 80.0
+    the modal model describes the measured response (R² >= 0.9) better than the single-DOF
+    model (R² 0.73: the body mode at 7 Hz is not in it), whose fitted mass is at least the
+    idler and carrier that move, 80 kg (the identification's floor; with the regularised
+    ground friction the fit fell below it, R² 0.03: the friction's slip-speed regularisation
+    acted as a ~80 kN·s/m damper per pin and smeared the idler mode); the modes are the body
+    mode and the idler mode."""
     idler = identify_idler(load_plant, min_mass_kg=80.0)
     assert idler.response.coherence.mean() > 0.9
     assert idler.modal_fit_r2 >= 0.9
     assert idler.modal_fit_r2 > idler.fit_r2
     static = sum(t.compliance(np.array([0.0]))[0].real for t in idler.modes)
     assert 1.0 / static == pytest.approx(idler.stiffness_N_m, rel=0.25)
-    assert idler.mass_kg == pytest.approx(80.0) and idler.fit_r2 <= free_fit.fit_r2
+    assert idler.mass_kg >= 80.0
     assert idler.damping_N_s_m > 0.0
     frequencies = sorted(t.frequency_Hz for t in idler.modes if t.frequency_Hz > 0.0)
     assert 5.0 < frequencies[0] < 12.0 and 15.0 < frequencies[1] < 40.0

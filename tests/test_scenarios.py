@@ -257,7 +257,7 @@ MALFORMED = [
      r"0\.05 s"),
     ("W3", "start_s = 18.0\nend_s = 20.0", "start_s = 38.0\nend_s = 40.0",
      r"\[\[load_pulses\]\]\[1\]\.start_s = 38\.0 is at or after the end of the run"),
-    ("W3", "hitch_N = -3755.0", "hitch_N = -3.5e4",
+    ("W3", "hitch_N = -3197.0", "hitch_N = -3.5e4",
      r"\[\[load_pulses\]\]\[0\]\.hitch_N = -35000\.0 is outside the allowed range "
      r"\[-30000, 30000\] N"),
     ("W1", "[scenario]", "load_pulses = 5\n[scenario]",

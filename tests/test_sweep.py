@@ -484,7 +484,7 @@ def test_a_failing_run_becomes_an_error_row(executor, tmp_path) -> None:
     spec = {"sweep": {"scenario": "W3", "duration_s": DURATION_S, "set": [
         "scenario.load_pulses.0.start_s=0.5", "scenario.load_pulses.0.end_s=1.4"],
         "parameters": [{"key": "scenario.load_pulses.0.hitch_N",
-                        "values": [-3755.0, -30000.0]}]}}
+                        "values": [-3197.0, -30000.0]}]}}
     summary = sweep(spec, tmp_path, executor=executor, progress=False, plot=False,
                     keep_runs=True)
     assert (summary.ran, summary.failed) == (2, 1)
@@ -492,12 +492,12 @@ def test_a_failing_run_becomes_an_error_row(executor, tmp_path) -> None:
     assert math.isnan(df.loc[-30000.0, "rmse_N"]) and df.loc[-30000.0, "wall_time_s"] > 0
     assert df.loc[-30000.0, "error"].startswith("PhysicsError: t = ")
     assert "below vacuum" in df.loc[-30000.0, "error"]
-    assert df["error"].isna().sum() == 1 and df.loc[-3755.0, "rmse_N"] > 0
+    assert df["error"].isna().sum() == 1 and df.loc[-3197.0, "rmse_N"] > 0
     (kept,) = [p for p in (tmp_path / "runs").iterdir() if p.is_dir()]   # the run that ran
     assert json.loads((kept / "metrics.json").read_text())["run"]["scenario"] == "W3"
     rows = {r.values["scenario.load_pulses.0.hitch_N"]: r for r in summary.table.rows}
     assert (rows[-30000.0].seeds, rows[-30000.0].failed) == ((), 1)   # counted, not averaged
-    assert (rows[-3755.0].seeds, rows[-3755.0].failed) == ((0,), 0)
+    assert (rows[-3197.0].seeds, rows[-3197.0].failed) == ((0,), 0)
     assert "0 (1 failed)" in (tmp_path / "summary.md").read_text()
     again = sweep(spec, tmp_path, executor=executor, progress=False, plot=False)
     assert (again.ran, again.skipped) == (0, 2)

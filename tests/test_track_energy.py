@@ -64,7 +64,7 @@ def test_free_fall_loses_the_integrators_known_energy() -> None:
     gravity = m.opt.gravity.copy()
     m.opt.gravity[:] = 0.0
     element = PassiveTensioner.from_params(plant.params)
-    plant.run(element, 2.0)
+    plant.run(element, 4.0)   # the released pins ring down (2 s left 5e-6 of the loss)
     m.opt.gravity[:] = gravity
     ledger = TrackEnergyLedger(plant)
     duration = 0.5

@@ -63,7 +63,8 @@ class MachineFiles(TypedDict):
 
 
 TrackState = tuple[Any, ...]
-"""A saved track: MjData copy, actuator bias parameters, clock, last force law, speed
+"""A saved track: MjData copy, actuator bias parameters, the ground's memory (shear
+displacements, contact history), clock, last force law, speed
 command, hitch flag (opaque to the importer)."""
 
 PlantState = tuple[TrackState, "HydraulicTensioner", "Sensors", "int | None", dict[str, Any]]
@@ -143,13 +144,15 @@ class _Base(Fmi2Slave):
             self.closure_error_m = plant.closure_error_m
 
     def _track_state(self, plant: TrackPlant) -> TrackState:
-        return (copy.copy(plant.data), plant.model.actuator_biasprm.copy(), plant.time_s,
-                plant.last_law, plant._speed_command, plant._hitch_loaded)
+        return (copy.copy(plant.data), plant.model.actuator_biasprm.copy(),
+                plant.foundation.memory.copy(), plant.time_s, plant.last_law,
+                plant._speed_command, plant._hitch_loaded)
 
     def _restore_track(self, plant: TrackPlant, state: TrackState) -> None:
-        data, biasprm, plant.time_s, plant.last_law, speed, loaded = state
+        data, biasprm, memory, plant.time_s, plant.last_law, speed, loaded = state
         mujoco.mj_copyData(plant.data, plant.model, data)
         plant.model.actuator_biasprm[:] = biasprm
+        plant.foundation.memory[:] = memory
         plant._speed_command, plant._hitch_loaded = speed, loaded
 
 

@@ -62,7 +62,7 @@ class BuiltMechanics:
 
 SETTLED_KEPT = 4
 """Settled track states kept per process (see :func:`settled_track`)."""
-_settled: dict[tuple, tuple[mujoco.MjData, np.ndarray, ForceLaw | None]] = {}
+_settled: dict[tuple, tuple[mujoco.MjData, np.ndarray, np.ndarray, ForceLaw | None]] = {}
 
 
 def settled_track(setup: MechanicsSetup, force_N: float) -> TrackPlant:
@@ -72,7 +72,8 @@ def settled_track(setup: MechanicsSetup, force_N: float) -> TrackPlant:
     The settled state is kept per process for the same MJCF, contact scale, force and model
     parameters (runs that differ only in hydraulics, control, controller, or the seed on
     flat ground): a later run restores it (every MjData buffer, the tensioner's bias
-    parameters, the last force law) instead of settling again, bit for bit the same."""
+    parameters, the ground's shear displacements and contact history, the last force law)
+    instead of settling again, bit for bit the same."""
     text = setup.track_mjcf()
     plant = TrackPlant(mujoco.MjModel.from_xml_string(text), setup.model)
     scale = setup.contact_stiffness_scale
@@ -85,11 +86,12 @@ def settled_track(setup: MechanicsSetup, force_N: float) -> TrackPlant:
         if len(_settled) >= SETTLED_KEPT:
             del _settled[next(iter(_settled))]
         _settled[key] = (copy.copy(plant.data), plant.model.actuator_biasprm.copy(),
-                         plant.last_law)
+                         plant.foundation.memory.copy(), plant.last_law)
     else:
-        data, biasprm, plant.last_law = kept
+        data, biasprm, memory, plant.last_law = kept
         mujoco.mj_copyData(plant.data, plant.model, data)
         plant.model.actuator_biasprm[:] = biasprm
+        plant.foundation.memory[:] = memory
     plant.time_s = 0.0
     return plant
 

@@ -40,7 +40,7 @@ import mujoco
 import numpy as np
 from numba import njit
 
-from trackmj.track.foundation import S_DELTA, S_N, foundation_penetration, foundation_work
+from trackmj.track.foundation import S_DELTA, S_NA, S_ON, foundation_penetration, foundation_work
 from trackmj.track.plant import TrackPlant
 
 PARTNERS = ("ground", "ground_friction", "sprocket", "road_wheels", "idler",
@@ -230,7 +230,7 @@ def _book_foundation(state: np.ndarray, jac: np.ndarray, pins: np.ndarray, dofs:
         rate = 0.0
         for c in range(pins[i, 3]):
             rate += jac[i, 0, c] * dq[dofs[i, c]]
-        pending[i, 0] = max(state[i, S_N], 0.0)
+        pending[i, 0] = state[i, S_NA] if state[i, S_ON] > 0.0 else 0.0
         pending[i, 1], pending[i, 2] = rate, state[i, S_DELTA]
 
 

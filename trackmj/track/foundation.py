@@ -13,27 +13,43 @@ ground (from g towards c) and t = (n_z, −n_x) the tangent (+x on flat ground),
                                        the line (negative below it)
     p   = c − r·n                      contact point on the pin; v = J_p·q̇ its velocity,
                                        v_n = n·v, v_t = t·v [m/s]
-    N   = max(0, K·δ − B·v_n)          normal force [N]: the foundation pushes, never pulls
-    F_t = −μ·K·δ·v_t / sqrt(v_t² + s²) regularised Coulomb friction [N] while N > 0
+    N   = max(0, K·δ − B_δ·v_n)        normal force [N]: the foundation pushes, never pulls;
+                                       B_δ = B·min(1, δ/δ_B) [N·s/m]
+    F_t = −μ·N·(j + τ·v_t)/K_j         friction [N] while N > 0 and |F_t| < μ·N (stick),
+                                       j the shear displacement of the contact along t
+                                       [m], dj/dt = v_t; else F_t = ∓μ·N, j = ±K_j (slide)
 
-(K, B = ``[ground]`` stiffness and damping, μ = ``[track].ground_friction``, s =
-``[ground].friction_slip_m_s``), applied at p as the force N·n + F_t·t through the pin
-body's row of ``xfrc_applied`` (a wrench at its centre of mass). The stated K and B are
-thus the simulated ones by construction, for any terrain, and a soft-soil law would
-replace the two lines above.
+(K, B, δ_B = ``[ground]`` stiffness, damping and damping onset, μ =
+``[track].ground_friction``, K_j = ``[ground].shear_modulus_m``, τ = B/K), applied at p as
+the force N·n + F_t·t through the pin body's row of ``xfrc_applied`` (a wrench at its centre
+of mass). The stated K and B are thus the simulated ones by construction (B for a pin sunk
+δ_B or more), for any terrain, and a soft-soil law would replace the lines above. The
+damping grows from zero at touchdown to B at δ_B, as Hunt and Crossley (1975) argued contact
+damping must: a damper at full strength from the first micrometre pushes a pin that merely
+grazes the ground (measured: pins carrying ~30 N, δ = 15 µm, switched between pushing and
+lifted off every few steps at mm/s of vertical velocity, which B·v_n = 40 N decides). The
+friction is Janosi–Hanamoto's shear law τ = τ_max·(1 − e^(−j/K_j)) (Wong, *Theory of Ground
+Vehicles*, ch. 2) by its initial tangent, capped at Coulomb's μ·N: an
+elastic–perfectly-plastic tangential spring, as Cundall and Strack's (1979) for granular
+contacts, with the retardation time τ = B/K of the normal Kelvin–Voigt element (assumed: the
+soil's shear damping is not published; it damps a 3.5 kg link on its shear spring at ~0.8 of
+critical). Below the limit a pin shears j = K_j·F_t/(μ·N) and then holds: a parked machine
+does not creep; sliding, the friction is Coulomb's exactly. j starts at 0 when a pin touches
+down and is forgotten when it lifts off.
 
 Integration. MuJoCo's ``implicitfast`` step is semi-implicit Euler: the spring K·δ is
-explicit, as it is for MuJoCo's own soft contacts (stable while h²·K/4 stays below the
-mass at the pin; the model file's validator refuses K above 4·m/h² with m a third of a
-link, the mass at one end of a link pivoting about the other). The two velocity
-derivatives, C_n = B along n and C_t = μ·K·δ·s²/(v_t² + s²)^{3/2} along t (while N > 0), are
-implicit: :meth:`Foundation.apply` runs between ``mj_step1`` and ``mj_step2`` and adds
+explicit, as it is for MuJoCo's own soft contacts (stable while h²·K/4 stays below the mass
+at the pin; the model file's validator refuses K above 4·m/h² with m a third of a link, the
+mass at one end of a link pivoting about the other). The damping and the shear spring are
+implicit, with C_n = B_δ along n and C_t = (h + τ)·μ·N_ref/K_j along t while sticking (0
+sliding): :meth:`Foundation.apply` runs between ``mj_step1`` and ``mj_step2`` and adds
 h·(C_n·J_nᵀJ_n + C_t·J_tᵀJ_t) = h·D to MuJoCo's mass matrix, which ``mj_factorM`` then
 refactors, so that the constraint solver and the integrator both use M + h·D:
 
     M·(v₁ − v₀) = h·(f + J_pᵀ·F(v₀)) − h·D·(v₁ − v₀),
 
-the force law linearised at the end-of-step velocity (as the tensioner's F0 + Z·v).
+so that the force applied over the step is the law at the end-of-step velocity, N = K·δ
+− B_δ·v_n1 and F_t = −μ·N_ref·(j₀ + (h + τ)·v_t1)/K_j (as the tensioner's F0 + Z·v).
 :meth:`Foundation.finish` puts the true mass matrix back after ``mj_step2`` (its factor
 ``qLD`` stays that of M + h·D until the next step) and adds the implicit part −C·J·Δv to
 the pins' wrenches, so that ``xfrc_applied`` then holds what the foundation applied over
@@ -43,16 +59,26 @@ it out of the constraint solve, which then passes the explicit −B·v₀ throug
 connects to links the damper does not slow (measured on the LF1352: divergence within
 60 ms even at B = 200 N·s/m).
 
-Friction is bounded by the elastic part K·δ of the normal force, not by N: the damping
-part's dependence on v_n would pass into F_t explicitly (∂F_t/∂v_n = μ·B·sign(v_t), 1.6e4
-N·s/m on the LF1352, against 3.5 kg links; M + h·D must stay symmetric for MuJoCo's
-factorisation, so it cannot carry that term), and a hard start (1.5 m/s commanded from
-rest) diverged within 0.23 s with it. The two agree in a steady contact (v_n = 0); below
-the Coulomb limit friction creeps at v_t ≈ s·F_t/(μ·K·δ).
+Active set. Which pins push, which stick and the normal force N_ref that bounds friction are
+chosen before the step (from v_n extrapolated over it, N_ref = the predicted N) but known
+only after it, so :func:`step` checks every pin against the law at v₁: a pin whose applied
+normal pulls is taken as lifted off, one the law would push as touching (unless it pulled
+touching in an earlier attempt of the step: then it stays off, never pulled), one whose
+friction exceeds μ·N applied takes that N as N_ref, one whose stick force passed μ·N_ref
+slides; the step is then taken again from its saved start with that choice (``mj_step2``
+only), at most :data:`MAX_ATTEMPTS` times — a semi-smooth Newton iteration on the
+complementarity of each pin, the rows MuJoCo's own solver would carry for a hard contact.
+N_ref cannot follow v_n1 inside one solve: ∂F_t/∂v_n = μ·B·j/K_j would make M + h·D
+unsymmetric, which MuJoCo's factorisation cannot take. On the LF1352 driven at 1.5 m/s about
+1 step in 27 is taken again (pins touching down and lifting off). Applied forces therefore
+keep N ≥ −:data:`TOLERANCE_N` and |F_t| ≤ μ·N + :data:`TOLERANCE_N`.
 
 State per pin after :meth:`Foundation.apply` (columns of :attr:`Foundation.state`, SI):
-penetration δ [m], normal (n_x, n_z) [-], v_n, v_t [m/s], N, F_t [N], C_n, C_t [N·s/m],
-contact point (p_x, p_z) [m]; :attr:`Foundation.jac` holds J_n·, J_t· over each pin's dofs.
+penetration δ [m], normal (n_x, n_z) [-], v_n, v_t at the step's start [m/s], explicit
+N, F_t [N], C_n, C_t [N·s/m], contact point (p_x, p_z) [m], pushing (1/0), sliding
+direction (±1, 0 sticking), N_ref [N], and after :meth:`Foundation.finish` the applied N,
+F_t [N]; :attr:`Foundation.jac` holds J_n·, J_t· over each pin's dofs and
+:attr:`Foundation.memory` what a step leaves for the next (j [m], v_n [m/s], touching).
 """
 
 from __future__ import annotations
@@ -70,30 +96,47 @@ if TYPE_CHECKING:
     from trackmj.track.mechanics import ModelParams
 
 # columns of Foundation.state
-S_DELTA, S_NX, S_NZ, S_VN, S_VT, S_N, S_FT, S_CN, S_CT, S_PX, S_PZ = range(11)
-N_STATE = 11
+(S_DELTA, S_NX, S_NZ, S_VN, S_VT, S_N, S_FT, S_CN, S_CT, S_PX, S_PZ, S_ON, S_SLIDE, S_NREF,
+ S_NA, S_FA) = range(16)
+N_STATE = 16
 # entries of the law array
-L_H, L_K, L_B, L_MU, L_SLIP = range(5)
+L_H, L_K, L_B, L_ONSET, L_MU, L_SHEAR = range(6)
+# columns of Foundation.memory (what a step leaves for the next) and Foundation.choice
+# (the active set of an attempt: 0 predict; normal ±1 closed/open, slide ±1 its direction,
+# reference the normal force friction is bound by, 0 for the predicted one; the reference
+# and applied normal force of the attempt before)
+M_SHEAR, M_VN, M_TOUCHING = range(3)
+C_NORMAL, C_SLIDE, C_REFERENCE, C_TRIED_REFERENCE, C_TRIED_APPLIED = range(5)
+LIFTED_FOR_GOOD = -2.0
+"""Active-set choice of a pin that pulled after an attempt had it touch down: it stays off
+for the step (the applied force 0, the law's push at v₁ missed; never a pull)."""
+TOLERANCE_N = 0.1
+"""Force [N] by which an attempt's applied forces may miss the law before it is redone."""
+MAX_ATTEMPTS = 5
+"""Attempts of a step before the last one is kept (:attr:`Foundation.unresolved` counts)."""
 
 
 @dataclass(frozen=True)
 class FoundationLaw:
-    """Kelvin–Voigt foundation with regularised Coulomb friction (module docstring).
+    """Kelvin–Voigt foundation with a shear-displacement friction law (module docstring).
 
-    stiffness_N_m K and damping_N_s_m B per pin contact; friction μ [-]; slip_m_s s [m/s].
+    stiffness_N_m K and damping_N_s_m B per pin contact, the damping reached at the
+    penetration damping_onset_m δ_B [m]; friction μ [-]; shear_modulus_m K_j [m], the shear
+    displacement that mobilises the full friction μ·N.
     """
 
     stiffness_N_m: float
     damping_N_s_m: float
+    damping_onset_m: float
     friction: float
-    slip_m_s: float
+    shear_modulus_m: float
 
     @classmethod
     def from_params(cls, params: ModelParams) -> FoundationLaw:
         """The law of a model's ``[ground]`` table and ``[track].ground_friction``."""
         g = params.ground
-        return cls(g.stiffness_N_m, g.damping_N_s_m, params.track.ground_friction,
-                   g.friction_slip_m_s)
+        return cls(g.stiffness_N_m, g.damping_N_s_m, g.damping_onset_m,
+                   params.track.ground_friction, g.shear_modulus_m)
 
 
 def ground_line(model: mujoco.MjModel, geom: str = "ground") -> np.ndarray:
@@ -198,17 +241,21 @@ def foundation_apply(geom_xpos: np.ndarray, xipos: np.ndarray, cdof: np.ndarray,
                      xfrc: np.ndarray, pins: np.ndarray, dofs: np.ndarray,
                      mass_index: np.ndarray, radius: np.ndarray, law: np.ndarray,
                      line: np.ndarray, state: np.ndarray, jac: np.ndarray,
-                     saved_mass: np.ndarray, saved_qvel: np.ndarray) -> int:
+                     saved_mass: np.ndarray, saved_qvel: np.ndarray,
+                     memory: np.ndarray, choice: np.ndarray) -> int:
     """Foundation forces of every pin at the start of the step into its body's row of
     ``xfrc`` (MuJoCo's ``xfrc_applied``; the pins' rows overwritten) and h·D into ``mass``
     (MuJoCo's sparse M); M and qvel are saved first. Returns the pins in contact.
 
     pins: (n, 4) int: geom id, body id, root body id, dof count; dofs: (n, D) int, the
     pin body's dof chain; mass_index: (n, D, D) int, address in ``mass`` of (row dof a,
-    column dof b) for b <= a, else −1; radius: (n,) [m]; law: (h, K, B, μ, s); line: ground
-    (x, z) (m, 2); state (n, N_STATE) and jac (n, 2, D) are written (module docstring).
+    column dof b) for b <= a, else −1; radius: (n,) [m]; law: (h, K, B, μ, K_j); line:
+    ground (x, z) (m, 2); memory (n, M_SIZE): what the last step left (shear displacement,
+    v_n, touching); choice (n, 5): the active set of this attempt (C_* columns; 0 =
+    predict); state (n, N_STATE) and jac (n, 2, D) are written (module docstring).
     """
-    h, k, b, mu, slip = law[L_H], law[L_K], law[L_B], law[L_MU], law[L_SLIP]
+    h, k, b, mu, shear = law[L_H], law[L_K], law[L_B], law[L_MU], law[L_SHEAR]
+    onset, retardation = law[L_ONSET], b / k
     saved_mass[:] = mass
     saved_qvel[:] = qvel
     for i in range(pins.shape[0]):
@@ -221,8 +268,8 @@ def foundation_apply(geom_xpos: np.ndarray, xipos: np.ndarray, cdof: np.ndarray,
         dist, nx, nz = _closest(line, cx, cz, r)
         delta = r - dist
         st = state[i]
+        st[:] = 0.0
         st[S_DELTA], st[S_NX], st[S_NZ] = delta, nx, nz
-        st[S_VN] = st[S_VT] = st[S_N] = st[S_FT] = st[S_CN] = st[S_CT] = 0.0
         if delta <= 0.0:
             continue
         px, pz = cx - r * nx, cz - r * nz
@@ -242,14 +289,32 @@ def foundation_apply(geom_xpos: np.ndarray, xipos: np.ndarray, cdof: np.ndarray,
             jac[i, 0, c], jac[i, 1, c] = jn, jt
             vn += jn * qvel[j]
             vt += jt * qvel[j]
-        normal = k * delta - b * vn
         st[S_VN], st[S_VT] = vn, vt
-        if normal <= 0.0:
+        # the normal's active set: chosen by an earlier attempt, else predicted from the
+        # velocity extrapolated over the step
+        predicted = vn + (vn - memory[i, M_VN]) if memory[i, M_TOUCHING] > 0.0 else vn
+        damping = b * min(1.0, delta / onset)
+        pushing = k * delta - damping * predicted
+        if choice[i, C_NORMAL] != 0.0:
+            closed = choice[i, C_NORMAL] > 0.0
+        else:
+            closed = pushing > 0.0
+        if not closed:
             continue
-        root_s = math.sqrt(vt * vt + slip * slip)
-        elastic = k * delta
-        friction = -mu * elastic * vt / root_s
-        cn, ct = b, mu * elastic * slip * slip / (root_s * root_s * root_s)
+        reference = choice[i, C_REFERENCE] if choice[i, C_REFERENCE] > 0.0 else max(pushing,
+                                                                                      0.0)
+        # shear: stick on the spring μ·N_ref/K_j unless the step would pass K_j (slide)
+        stiffness = mu * reference / shear
+        trial = memory[i, M_SHEAR] + (h + retardation) * vt
+        slide = choice[i, C_SLIDE]
+        if slide == 0.0 and abs(trial) > shear:
+            slide = 1.0 if trial > 0.0 else -1.0
+        if slide != 0.0:
+            friction, ct = -mu * reference * slide, 0.0
+        else:
+            friction, ct = -stiffness * trial, (h + retardation) * stiffness
+        normal, cn = k * delta - damping * vn, damping
+        st[S_ON], st[S_SLIDE], st[S_NREF] = 1.0, slide, reference
         st[S_N], st[S_FT], st[S_CN], st[S_CT] = normal, friction, cn, ct
         active += 1
         _add_wrench(xfrc, xipos, body, px, pz, normal * nx + friction * tx,
@@ -264,17 +329,42 @@ def foundation_apply(geom_xpos: np.ndarray, xipos: np.ndarray, cdof: np.ndarray,
 
 
 @njit(cache=True)
+def _next_reference(choice: np.ndarray, reference: float, applied: float) -> float:
+    """The N_ref [N] to try next for a pin whose friction exceeded μ·N applied: the applied N
+    of this attempt, or, after an earlier attempt, the fixed point N_ref = N(N_ref) of the
+    secant through both (exact where the step is linear in the pin's forces)."""
+    tried, tried_applied = choice[C_TRIED_REFERENCE], choice[C_TRIED_APPLIED]
+    if tried <= 0.0 or abs(reference - tried) < 1e-9:
+        return applied
+    slope = (applied - tried_applied) / (reference - tried)
+    if slope >= 0.9:
+        return applied
+    return (tried_applied - slope * tried) / (1.0 - slope)
+
+
+@njit(cache=True)
 def foundation_finish(qvel: np.ndarray, mass: np.ndarray, xipos: np.ndarray,
                       xfrc: np.ndarray, pins: np.ndarray, dofs: np.ndarray,
-                      state: np.ndarray, jac: np.ndarray, saved_mass: np.ndarray,
-                      saved_qvel: np.ndarray) -> None:
-    """After the step: the true M back into ``mass``, and each pin's implicit force
-    −C·J·(v₁ − v₀) added to its body's row of ``xfrc``, which then holds the force the
-    foundation applied over the step (what ``mj_rnePostConstraint`` and readers see)."""
+                      law: np.ndarray, state: np.ndarray, jac: np.ndarray,
+                      saved_mass: np.ndarray, saved_qvel: np.ndarray, memory: np.ndarray,
+                      choice: np.ndarray, final: bool, advance: bool) -> int:
+    """After the step: the true M back into ``mass``; each pin's applied force (explicit
+    part plus the implicit −C·J·(v₁ − v₀)) into ``state`` (S_NA, S_FA) and added to its
+    body's row of ``xfrc``, which then holds the force the foundation applied over the
+    step (what ``mj_rnePostConstraint`` and readers see). Then the active set is checked
+    against the law at the end-of-step velocity: a closed contact whose applied normal
+    pulls opens, an open one the law would push closes, a friction above μ·N applied
+    takes that N as its reference, a stick that passed K_j slides; the changes go into
+    ``choice`` for the next attempt. Returns the number of pins that changed (0: the step
+    is consistent); a consistent or ``final`` attempt is committed
+    (:func:`foundation_commit`, with ``advance``)."""
+    h, k, b, mu, shear = law[L_H], law[L_K], law[L_B], law[L_MU], law[L_SHEAR]
+    onset, retardation = law[L_ONSET], b / k
     mass[:] = saved_mass
+    changed = 0
     for i in range(pins.shape[0]):
         st = state[i]
-        if st[S_N] <= 0.0:
+        if st[S_DELTA] <= 0.0:
             continue
         jn_dv = jt_dv = 0.0
         for c in range(pins[i, 3]):
@@ -282,10 +372,67 @@ def foundation_finish(qvel: np.ndarray, mass: np.ndarray, xipos: np.ndarray,
             dv = qvel[j] - saved_qvel[j]
             jn_dv += jac[i, 0, c] * dv
             jt_dv += jac[i, 1, c] * dv
+        if st[S_ON] == 0.0:
+            if (choice[i, C_NORMAL] != LIFTED_FOR_GOOD
+                    and k * st[S_DELTA] - b * min(1.0, st[S_DELTA] / onset)
+                    * (st[S_VN] + jn_dv) > TOLERANCE_N):
+                choice[i, C_NORMAL] = 1.0
+                changed += 1
+            continue
         fn, ft = -st[S_CN] * jn_dv, -st[S_CT] * jt_dv
         nx, nz = st[S_NX], st[S_NZ]
         _add_wrench(xfrc, xipos, pins[i, 1], st[S_PX], st[S_PZ], fn * nx + ft * nz,
                     fn * nz - ft * nx)
+        applied_n, applied_t = st[S_N] + fn, st[S_FT] + ft
+        st[S_NA], st[S_FA] = applied_n, applied_t
+        if applied_n < -TOLERANCE_N:
+            # lifted off; for good if an earlier attempt had it touch down (a cycle)
+            choice[i, C_NORMAL] = LIFTED_FOR_GOOD if choice[i, C_NORMAL] > 0.0 else -1.0
+            changed += 1
+            continue
+        if abs(applied_t) > mu * applied_n + TOLERANCE_N:
+            choice[i, C_NORMAL] = 1.0
+            choice[i, C_REFERENCE] = max(_next_reference(choice[i], st[S_NREF], applied_n),
+                                         1e-9)
+            choice[i, C_TRIED_REFERENCE], choice[i, C_TRIED_APPLIED] = st[S_NREF], applied_n
+            changed += 1
+        if st[S_SLIDE] == 0.0:
+            end = memory[i, M_SHEAR] + (h + retardation) * (st[S_VT] + jt_dv)
+            if abs(end) > shear:
+                choice[i, C_NORMAL] = 1.0
+                choice[i, C_SLIDE] = 1.0 if end > 0.0 else -1.0
+                changed += 1
+    if changed == 0 or final:
+        foundation_commit(qvel, pins, dofs, law, state, jac, memory, choice, advance)
+    return changed
+
+
+@njit(cache=True)
+def foundation_commit(qvel: np.ndarray, pins: np.ndarray, dofs: np.ndarray, law: np.ndarray,
+                      state: np.ndarray, jac: np.ndarray, memory: np.ndarray,
+                      choice: np.ndarray, advance: bool) -> None:
+    """The step is taken: each pin's memory (shear displacement j [m] along the ground's
+    tangent, v_n at the step's end [m/s], touching) from the end-of-step velocity, and the
+    active set back to 'predict'. Without ``advance`` (a reset) j is kept."""
+    h, shear = law[L_H], law[L_SHEAR]
+    for i in range(pins.shape[0]):
+        st = state[i]
+        choice[i, :] = 0.0
+        if st[S_ON] == 0.0:
+            memory[i, :] = 0.0
+            continue
+        vn = vt = 0.0
+        for c in range(pins[i, 3]):
+            j = dofs[i, c]
+            vn += jac[i, 0, c] * qvel[j]
+            vt += jac[i, 1, c] * qvel[j]
+        memory[i, M_VN], memory[i, M_TOUCHING] = vn, 1.0
+        if not advance:
+            continue
+        if st[S_SLIDE] != 0.0:
+            memory[i, M_SHEAR] = st[S_SLIDE] * shear
+        else:
+            memory[i, M_SHEAR] = min(shear, max(-shear, memory[i, M_SHEAR] + h * vt))
 
 
 @njit(cache=True)
@@ -293,22 +440,19 @@ def foundation_work(state: np.ndarray, jac: np.ndarray, pins: np.ndarray, dofs: 
                     qvel0: np.ndarray, qvel1: np.ndarray, h: float,
                     out: np.ndarray) -> None:
     """Work [J] the foundation did over the step as integrated, added to ``out`` =
-    (normal, friction): Σ (F(v₀) − C·J·Δv)·(J·Δq) with Δv = v₁ − v₀, Δq = h·v₁ (module
-    docstring), per direction."""
+    (normal, friction): Σ F_applied·(J·Δq) with Δq = h·v₁ (module docstring), per
+    direction."""
     for i in range(pins.shape[0]):
         st = state[i]
-        if st[S_N] <= 0.0:
+        if st[S_ON] == 0.0:
             continue
-        jn_dv = jn_dq = jt_dv = jt_dq = 0.0
+        jn_dq = jt_dq = 0.0
         for c in range(pins[i, 3]):
             j = dofs[i, c]
-            dv = qvel1[j] - qvel0[j]
-            jn_dv += jac[i, 0, c] * dv
-            jt_dv += jac[i, 1, c] * dv
             jn_dq += jac[i, 0, c] * h * qvel1[j]
             jt_dq += jac[i, 1, c] * h * qvel1[j]
-        out[0] += (st[S_N] - st[S_CN] * jn_dv) * jn_dq
-        out[1] += (st[S_FT] - st[S_CT] * jt_dv) * jt_dq
+        out[0] += st[S_NA] * jn_dq
+        out[1] += st[S_FA] * jt_dq
 
 
 @njit(cache=True)
@@ -339,7 +483,7 @@ class Foundation:
     pin_geoms : sequence of int
         The pin spheres, one per link, in pin order.
     law : FoundationLaw
-        Stiffness, damping, friction and slip speed.
+        Stiffness, damping, friction and shear modulus.
     """
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData,
@@ -387,18 +531,26 @@ class Foundation:
                     self.mass_index[i, c, c2] = model.M_rowadr[a] + int(at[0])
         self.radius = model.geom_size[np.asarray(pin_geoms), 0].copy()
         self.law_array = np.array([model.opt.timestep, law.stiffness_N_m, law.damping_N_s_m,
-                                   law.friction, law.slip_m_s])
+                                   law.damping_onset_m, law.friction, law.shear_modulus_m])
         self.state = np.zeros((n, N_STATE))
         self.jac = np.zeros((n, 2, width))
+        self.memory = np.zeros((n, 3))
+        self.choice = np.zeros((n, 5))
         self.active = 0
+        self.redone = 0
+        """Steps taken more than once since construction (an attempt missed the law)."""
+        self.unresolved = 0
+        """Steps kept after :data:`MAX_ATTEMPTS` attempts still missed the law."""
         saved_mass, saved_qvel = np.zeros(model.nM), np.zeros(model.nv)
         # views into data's buffers (they live as long as data): the kernels' arguments
         self._apply_args = (data.geom_xpos, data.xipos, data.cdof, data.subtree_com,
                             data.qvel, data.M, data.xfrc_applied, self.pins, self.dofs,
                             self.mass_index, self.radius, self.law_array, self.line,
-                            self.state, self.jac, saved_mass, saved_qvel)
+                            self.state, self.jac, saved_mass, saved_qvel, self.memory,
+                            self.choice)
         self._finish_args = (data.qvel, data.M, data.xipos, data.xfrc_applied, self.pins,
-                             self.dofs, self.state, self.jac, saved_mass, saved_qvel)
+                             self.dofs, self.law_array, self.state, self.jac, saved_mass,
+                             saved_qvel, self.memory, self.choice)
 
     def scale_stiffness(self, scale: float) -> None:
         """Multiply the foundation stiffness K by ``scale`` [-] (W5's perturbation)."""
@@ -409,35 +561,81 @@ class Foundation:
         """The foundation stiffness in force [N/m] (the stated one times any scale)."""
         return float(self.law_array[L_K])
 
+    def forget(self) -> None:
+        """Forget what earlier steps left (shear displacements, contact history): a reset."""
+        self.memory[:] = 0.0
+        self.choice[:] = 0.0
+
     def apply(self) -> None:
         """Forces and implicit terms of the step (after ``mj_step1``, before ``mj_step2``)."""
         self.active = foundation_apply(*self._apply_args)
 
-    def finish(self) -> None:
-        """After ``mj_step2``: the true mass matrix back into the data's ``M``, and the
-        force applied over the step into ``xfrc_applied``."""
-        foundation_finish(*self._finish_args)
+    def finish(self, final: bool = True, advance: bool = True) -> int:
+        """After ``mj_step2``: the true mass matrix back into the data's ``M``, the force
+        applied over the step into ``xfrc_applied`` and :attr:`state`; returns the pins
+        whose active set the law contradicts (0: the step is kept and committed, as a
+        ``final`` attempt is; the shear displacements advance unless not ``advance``)."""
+        return foundation_finish(*self._finish_args, final, advance)
 
     @property
     def normal_forces_N(self) -> np.ndarray:
-        """Normal force N of every pin over the last step [N], shape (n,)."""
-        return self.state[:, S_N]
+        """Normal force N each pin received over the last step [N], shape (n,), ≥ 0."""
+        return self.state[:, S_NA]
 
     @property
     def friction_forces_N(self) -> np.ndarray:
-        """Friction force F_t of every pin over the last step [N], shape (n,), along the
-        ground's tangent (+x on flat ground)."""
-        return self.state[:, S_FT]
+        """Friction force F_t each pin received over the last step [N], shape (n,), along
+        the ground's tangent (+x on flat ground); |F_t| ≤ μ·N."""
+        return self.state[:, S_FA]
+
+    def applied_forces_N(self) -> np.ndarray:
+        """(N, F_t) each pin received over the last step [N], shape (n, 2)."""
+        return self.state[:, [S_NA, S_FA]]
+
+    @property
+    def start_velocity(self) -> np.ndarray:
+        """MuJoCo's qvel at the start of the last step [SI], shape (nv,)."""
+        return self._apply_args[16]
+
+    @property
+    def shear_displacement_m(self) -> np.ndarray:
+        """Shear displacement j of every pin's contact [m], shape (n,), along the ground's
+        tangent; 0 out of contact, ±K_j while sliding."""
+        return self.memory[:, M_SHEAR]
 
 
-def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation) -> None:
-    """One MuJoCo step with the foundation bound to ``data`` (see :class:`Foundation`)."""
+def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
+         saved: np.ndarray | None = None) -> None:
+    """One MuJoCo step with the foundation bound to ``data`` (see :class:`Foundation`),
+    its ``mj_step2`` taken again while the law contradicts an attempt's active set, at most
+    :data:`MAX_ATTEMPTS` times, from what the integration changed (kept in ``saved``, of
+    ``mj_stateSize`` of :data:`REDO_STATE`, allocated here if not given; ``mj_step1``'s
+    results stay valid: they depend on positions and velocities only)."""
+    if saved is None:
+        saved = np.zeros(mujoco.mj_stateSize(model, REDO_STATE))
     mujoco.mj_step1(model, data)
-    foundation.apply()
-    mujoco.mj_factorM(model, data)
-    mujoco.mj_step2(model, data)
-    foundation.finish()
+    mujoco.mj_getState(model, data, saved, REDO_STATE)
+    for attempt in range(MAX_ATTEMPTS):
+        foundation.apply()
+        mujoco.mj_factorM(model, data)
+        mujoco.mj_step2(model, data)
+        final = attempt == MAX_ATTEMPTS - 1
+        if not foundation.finish(final):
+            return
+        if final:
+            foundation.unresolved += 1
+            return
+        if attempt == 0:
+            foundation.redone += 1
+        mujoco.mj_setState(model, data, saved, REDO_STATE)
 
 
-__all__ = ["Foundation", "FoundationLaw", "foundation_apply", "foundation_finish",
-           "foundation_penetration", "foundation_work", "ground_line", "step"]
+REDO_STATE = int(mujoco.mjtState.mjSTATE_QPOS | mujoco.mjtState.mjSTATE_QVEL
+                 | mujoco.mjtState.mjSTATE_ACT | mujoco.mjtState.mjSTATE_TIME
+                 | mujoco.mjtState.mjSTATE_WARMSTART)
+"""What ``mj_step2``'s integration changes, restored before a step is taken again."""
+
+
+__all__ = ["REDO_STATE", "Foundation", "FoundationLaw", "foundation_apply",
+           "foundation_commit", "foundation_finish", "foundation_penetration",
+           "foundation_work", "ground_line", "step"]

@@ -133,10 +133,12 @@ class GroundParams(Parameters):
 
     stiffness_N_m: float = param(1e3, 1e10, doc="Kelvin-Voigt stiffness per pin contact [N/m]")
     damping_N_s_m: float = param(0.0, 1e8, doc="Kelvin-Voigt damping per pin contact [N·s/m]")
-    friction_slip_m_s: float = param(
-        1e-4, 1.0, default=0.01,
-        doc="slip speed of the regularised Coulomb friction: mu·N·v/sqrt(v² + s²) [m/s]; "
-            "optional: 0.01")
+    damping_onset_m: float = param(
+        1e-6, 0.05, doc="penetration at which the damping reaches damping_N_s_m, growing "
+                        "from 0 at touchdown (Hunt & Crossley 1975) [m]")
+    shear_modulus_m: float = param(
+        1e-4, 0.1, doc="shear displacement that mobilises the full friction mu·N "
+                       "(Janosi-Hanamoto's K, its initial tangent capped at Coulomb) [m]")
 
 
 @dataclass(frozen=True)
