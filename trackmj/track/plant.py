@@ -250,6 +250,10 @@ class TrackPlant:
         self.foundation = Foundation(m, self.data, self._pin_geom,
                                      FoundationLaw.from_params(params))
         self._saved_state = np.zeros(mujoco.mj_stateSize(m, REDO_STATE))
+        # the step's start velocity (the foundation keeps it) and the chassis' z dof, for
+        # the per-step acceleration readout
+        self._start_qvel, self._timestep = self.foundation.start_velocity, m.opt.timestep
+        self._chassis_vz = int(self._chassis_v[1])
         self._chassis_body = m.body("chassis").id
         # strands in the chassis frame (ride height, upper level; the sprocket's lower run:
         # x from, to, level): 5 cm above the higher of sprocket and idler centres; between
@@ -384,7 +388,8 @@ class TrackPlant:
         """Vertical chassis acceleration the last step produced [m/s²]: Δv_z/h (``qacc`` is
         the constraint solve's, before the foundation's implicit terms and MuJoCo's implicit
         update; it read 2–8 % high in RMS)."""
-        return float(self.chassis_acceleration[1])
+        dof = self._chassis_vz
+        return float(self._qvel[dof] - self._start_qvel[dof]) / self._timestep
 
     @property
     def chassis_pose(self) -> np.ndarray:
