@@ -249,10 +249,11 @@ def foundation_apply(geom_xpos: np.ndarray, xipos: np.ndarray, cdof: np.ndarray,
 
     pins: (n, 4) int: geom id, body id, root body id, dof count; dofs: (n, D) int, the
     pin body's dof chain; mass_index: (n, D, D) int, address in ``mass`` of (row dof a,
-    column dof b) for b <= a, else −1; radius: (n,) [m]; law: (h, K, B, μ, K_j); line:
-    ground (x, z) (m, 2); memory (n, M_SIZE): what the last step left (shear displacement,
-    v_n, touching); choice (n, 5): the active set of this attempt (C_* columns; 0 =
-    predict); state (n, N_STATE) and jac (n, 2, D) are written (module docstring).
+    column dof b) for b <= a, else −1; radius: (n,) [m]; law: (h, K, B, δ_B, μ, K_j), the
+    L_* entries; line: ground (x, z) (m, 2); memory (n, 3): what the last step left (M_*
+    columns: shear displacement, v_n, touching); choice (n, 5): the active set of this
+    attempt (C_* columns; 0 = predict); state (n, N_STATE) and jac (n, 2, D) are written
+    (module docstring).
     """
     h, k, b, mu, shear = law[L_H], law[L_K], law[L_B], law[L_MU], law[L_SHEAR]
     onset, retardation = law[L_ONSET], b / k
@@ -354,7 +355,8 @@ def foundation_finish(qvel: np.ndarray, mass: np.ndarray, xipos: np.ndarray,
     step (what ``mj_rnePostConstraint`` and readers see). Then the active set is checked
     against the law at the end-of-step velocity: a closed contact whose applied normal
     pulls opens, an open one the law would push closes, a friction above μ·N applied
-    takes that N as its reference, a stick that passed K_j slides; the changes go into
+    takes that N as its reference (:func:`_next_reference`), a stick whose force passed
+    μ·N_ref slides; the changes go into
     ``choice`` for the next attempt. Returns the number of pins that changed (0: the step
     is consistent); a consistent or ``final`` attempt is committed
     (:func:`foundation_commit`, with ``advance``)."""
