@@ -214,7 +214,6 @@ class TrackPlant:
         # views into the MjData/MjModel buffers, kept to spare the bindings' attribute
         # look-ups in the 1 kHz loop (the buffers live as long as data and model)
         self._qpos, self._qvel, self._ctrl = self.data.qpos, self.data.qvel, self.data.ctrl
-        self._qacc = self.data.qacc
         self._biasprm = m.actuator_biasprm
         self._stroke_offset_m = params.idler.stroke_at_layout_m
         self._slide_q = int(m.jnt_qposadr[m.joint("idler_slide").id])
