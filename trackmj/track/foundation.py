@@ -77,8 +77,9 @@ State per pin after :meth:`Foundation.apply` (columns of :attr:`Foundation.state
 penetration δ [m], normal (n_x, n_z) [-], v_n, v_t at the step's start [m/s], explicit
 N, F_t [N], C_n, C_t [N·s/m], contact point (p_x, p_z) [m], pushing (1/0), sliding
 direction (±1, 0 sticking), N_ref [N], and after :meth:`Foundation.finish` the applied N,
-F_t [N]; :attr:`Foundation.jac` holds J_n·, J_t· over each pin's dofs and
-:attr:`Foundation.memory` what a step leaves for the next (j [m], v_n [m/s], touching).
+F_t [N] and v_n, v_t at the step's end [m/s]; :attr:`Foundation.jac` holds J_n·, J_t· over
+each pin's dofs and :attr:`Foundation.memory` what a step leaves for the next (j [m], v_n
+[m/s], touching).
 """
 
 from __future__ import annotations
@@ -97,8 +98,8 @@ if TYPE_CHECKING:
 
 # columns of Foundation.state
 (S_DELTA, S_NX, S_NZ, S_VN, S_VT, S_N, S_FT, S_CN, S_CT, S_PX, S_PZ, S_ON, S_SLIDE, S_NREF,
- S_NA, S_FA) = range(16)
-N_STATE = 16
+ S_NA, S_FA, S_VN1, S_VT1) = range(18)
+N_STATE = 18
 # entries of the law array
 L_H, L_K, L_B, L_ONSET, L_MU, L_SHEAR = range(6)
 # columns of Foundation.memory (what a step leaves for the next) and Foundation.choice
@@ -374,10 +375,11 @@ def foundation_finish(qvel: np.ndarray, mass: np.ndarray, xipos: np.ndarray,
             dv = qvel[j] - saved_qvel[j]
             jn_dv += jac[i, 0, c] * dv
             jt_dv += jac[i, 1, c] * dv
+        st[S_VN1], st[S_VT1] = st[S_VN] + jn_dv, st[S_VT] + jt_dv
         if st[S_ON] == 0.0:
             if (choice[i, C_NORMAL] != LIFTED_FOR_GOOD
                     and k * st[S_DELTA] - b * min(1.0, st[S_DELTA] / onset)
-                    * (st[S_VN] + jn_dv) > TOLERANCE_N):
+                    * st[S_VN1] > TOLERANCE_N):
                 choice[i, C_NORMAL] = 1.0
                 changed += 1
             continue
@@ -399,42 +401,37 @@ def foundation_finish(qvel: np.ndarray, mass: np.ndarray, xipos: np.ndarray,
             choice[i, C_TRIED_REFERENCE], choice[i, C_TRIED_APPLIED] = st[S_NREF], applied_n
             changed += 1
         if st[S_SLIDE] == 0.0:
-            end = memory[i, M_SHEAR] + (h + retardation) * (st[S_VT] + jt_dv)
+            end = memory[i, M_SHEAR] + (h + retardation) * st[S_VT1]
             if abs(end) > shear:
                 choice[i, C_NORMAL] = 1.0
                 choice[i, C_SLIDE] = 1.0 if end > 0.0 else -1.0
                 changed += 1
     if changed == 0 or final:
-        foundation_commit(qvel, pins, dofs, law, state, jac, memory, choice, advance)
+        foundation_commit(law, state, memory, choice, advance)
     return changed
 
 
 @njit(cache=True)
-def foundation_commit(qvel: np.ndarray, pins: np.ndarray, dofs: np.ndarray, law: np.ndarray,
-                      state: np.ndarray, jac: np.ndarray, memory: np.ndarray,
+def foundation_commit(law: np.ndarray, state: np.ndarray, memory: np.ndarray,
                       choice: np.ndarray, advance: bool) -> None:
     """The step is taken: each pin's memory (shear displacement j [m] along the ground's
-    tangent, v_n at the step's end [m/s], touching) from the end-of-step velocity, and the
-    active set back to 'predict'. Without ``advance`` (a reset) j is kept."""
+    tangent, v_n at the step's end [m/s], touching) from the end-of-step velocities
+    :func:`foundation_finish` left in ``state``, and the active set back to 'predict'.
+    Without ``advance`` (a reset) j is kept."""
     h, shear = law[L_H], law[L_SHEAR]
-    for i in range(pins.shape[0]):
+    for i in range(state.shape[0]):
         st = state[i]
         choice[i, :] = 0.0
         if st[S_ON] == 0.0:
             memory[i, :] = 0.0
             continue
-        vn = vt = 0.0
-        for c in range(pins[i, 3]):
-            j = dofs[i, c]
-            vn += jac[i, 0, c] * qvel[j]
-            vt += jac[i, 1, c] * qvel[j]
-        memory[i, M_VN], memory[i, M_TOUCHING] = vn, 1.0
+        memory[i, M_VN], memory[i, M_TOUCHING] = st[S_VN1], 1.0
         if not advance:
             continue
         if st[S_SLIDE] != 0.0:
             memory[i, M_SHEAR] = st[S_SLIDE] * shear
         else:
-            memory[i, M_SHEAR] = min(shear, max(-shear, memory[i, M_SHEAR] + h * vt))
+            memory[i, M_SHEAR] = min(shear, max(-shear, memory[i, M_SHEAR] + h * st[S_VT1]))
 
 
 @njit(cache=True)
@@ -544,6 +541,7 @@ class Foundation:
         self.unresolved = 0
         """Steps kept after :data:`MAX_ATTEMPTS` attempts still missed the law."""
         saved_mass, saved_qvel = np.zeros(model.nM), np.zeros(model.nv)
+        self._saved_qvel = saved_qvel
         # views into data's buffers (they live as long as data): the kernels' arguments
         self._apply_args = (data.geom_xpos, data.xipos, data.cdof, data.subtree_com,
                             data.qvel, data.M, data.xfrc_applied, self.pins, self.dofs,
@@ -597,7 +595,7 @@ class Foundation:
     @property
     def start_velocity(self) -> np.ndarray:
         """MuJoCo's qvel at the start of the last step [SI], shape (nv,)."""
-        return self._apply_args[16]
+        return self._saved_qvel
 
     @property
     def shear_displacement_m(self) -> np.ndarray:
