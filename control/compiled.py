@@ -229,7 +229,8 @@ class CompiledFunction:
     """``fn`` compiled (see the module docstring) and bound to the input arrays ``args``
     and to result arrays (``res`` or new zero vectors), each holding the nonzeros of its
     input/output in column-major order; the same contract as ``BufferedFunction``: keep
-    the bound arrays (update them in place, never rebind them). A result may be bound to an
+    the bound arrays (update them in place, never rebind them). ``call`` holds this object,
+    so keeping ``call`` alone keeps the arrays it points at alive. A result may be bound to an
     input array (updated in place: every input is read before the first result is written).
 
     ``call()`` (or the instance) evaluates in place and returns None.
@@ -259,6 +260,9 @@ class CompiledFunction:
         kernel = _module(fn, rows, in_place).kernel
         kernel.compile((types.Array(types.int64, 1, "C"),))   # now, not at the first call
         self.call = functools.partial(kernel, self.addresses)
+        # the kernel reads raw addresses: whoever keeps only ``call`` keeps every array too
+        # (the constants would otherwise be freed with this object, and the memory reused)
+        self.call.bound = self  # pyright: ignore[reportAttributeAccessIssue]
 
     def __call__(self) -> None:
         self.call()
