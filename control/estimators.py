@@ -1,5 +1,6 @@
 """State estimators (EKF, UKF) for X = [p_head Pa, p_rod Pa, y m, y_dot m/s, y0 m] from
-z = [p_head Pa, p_rod Pa, y m] sampled every dt [s] (1 ms).
+z = [p_head Pa, p_rod Pa, y m] sampled every dt [s] (1 ms), with the measured sprocket drive
+torque z[3] [N·m] (when given) as a known input.
 
 The fifth state is a disturbance state: y0, the stroke at which the equivalent idler is
 unloaded, as a random walk. The reduced model's idler is a linear spring
@@ -10,6 +11,16 @@ is what makes the MPC offset-free (it takes ŷ0 as its online parameter) and let
 load disturbance on the idler as such (the input-disturbance model of offset-free MPC,
 e.g. Pannocchia & Rawlings 2003, with the disturbance entering as an idler load
 k·Δy0).
+
+The drive torque is a measured disturbance, not estimated: its idler load L [N]
+(:func:`~trackmj.control.model.drive_load_N`) moves the model's unloaded stroke to
+y0 − L/k_eq, so a traction change is explained by the torque and y0 keeps only what the
+torque does not explain. The torque is low-passed first (first order,
+``drive_torque_filter_s``): a speed-servoed sprocket's torque swings by several times its
+mean at tooth engagement (M113 at 1.5 m/s: 160 ± 470 N·m, peaks 2.2 kN·m), which neither
+the valves nor a strand's tension over a controller period follow, and the load law's
+max(σT, 0) would rectify into a bias. ``period_mean`` appends the period's mean L for the
+controllers.
 
 Process model: the reduced model (:mod:`trackmj.control.model`) with y0 constant,
 discretised by one linearly-implicit trapezoidal step x+ = x + (I − h/2·J)⁻¹·h·f(x, u),
@@ -31,18 +42,21 @@ functions evaluated on the filter's own arrays, compiled to machine code
 from __future__ import annotations
 
 import functools
+import math
 
 import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control.compiled import Bound, bind
-from trackmj.control.model import ReducedModel, _rhs_generic
+from trackmj.control.model import ReducedModel, _rhs_generic, drive_load_N
 from trackmj.control.params import EstimatorParams, PlantParams
 
 N_STATE = 5
 """Estimated state: p_head [Pa], p_rod [Pa], y [m], ẏ [m/s], y0 [m]."""
 N_MEAS = 3
+N_INPUT = 3
+"""Known inputs of a step: valve opening u [-], supply pressure p_s [Pa], drive load L [N]."""
 
 
 SCALE = np.array((1e6, 1e6, 1e-3, 0.1, 1e-3))
@@ -51,11 +65,13 @@ solves are done on the scaled system, whose entries are O(1-10); unscaled (Pa ne
 the elimination loses the y0 row to round-off (measured: F's y0 row off by 1e-3)."""
 
 
-def _trapezoid_sx(plant: PlantParams, x: ca.SX, u: ca.SX, p_s: ca.SX,
+def _trapezoid_sx(plant: PlantParams, x: ca.SX, u: ca.SX, p_s: ca.SX, load: ca.SX,
                   h: float) -> tuple[ca.SX, ca.SX]:
-    """One linearly-implicit trapezoidal step of the augmented model: (x+, F)."""
+    """One linearly-implicit trapezoidal step of the augmented model with the drive's idler
+    load ``load`` [N] held: (x+, F)."""
+    k = plant.stiffness_N_m
     f = ca.vertcat(*_rhs_generic(plant, [x[i] for i in range(4)], u, p_s,
-                                 plant.stiffness_N_m, x[4], ca.sqrt), 0)
+                                 k, x[4] - load / k, ca.sqrt), 0)
     scale, inv = ca.diag(ca.DM(SCALE)), ca.diag(ca.DM(1.0 / SCALE))
     jac = ca.mtimes([inv, ca.jacobian(f, x), scale])       # d(f/scale)/d(x/scale)
     m = ca.SX.eye(N_STATE) - 0.5 * h * jac
@@ -95,19 +111,20 @@ def _update_function() -> ca.Function:
 
 @functools.cache
 def _propagate_function(plant: PlantParams, dt: float) -> ca.Function:
-    """(x, (u, p_s)) -> x+: one trapezoidal step (the UKF's sigma-point propagation)."""
-    x, ups = ca.SX.sym("x", N_STATE), ca.SX.sym("u_ps", 2)
-    return ca.Function("propagate", [x, ups], [_trapezoid_sx(plant, x, ups[0], ups[1], dt)[0]])
+    """(x, (u, p_s, L)) -> x+: one trapezoidal step (the UKF's sigma-point propagation)."""
+    x, ups = ca.SX.sym("x", N_STATE), ca.SX.sym("u_ps_load", N_INPUT)
+    return ca.Function("propagate", [x, ups],
+                       [_trapezoid_sx(plant, x, ups[0], ups[1], ups[2], dt)[0]])
 
 
 @functools.cache
 def _ekf_function(plant: PlantParams, dt: float) -> ca.Function:
-    """One EKF step (x, P, z, (u, p_s), Q, r, s) -> (x+, P+, innovation, S^-1, s + x+):
+    """One EKF step (x, P, z, (u, p_s, L), Q, r, s) -> (x+, P+, innovation, S^-1, s + x+):
     the last output accumulates the posteriors for :meth:`_KalmanBase.period_mean`."""
     x, P, z, r = _symbols()
-    ups, Q = ca.SX.sym("u_ps", 2), ca.SX.sym("Q", N_STATE, N_STATE)
+    ups, Q = ca.SX.sym("u_ps_load", N_INPUT), ca.SX.sym("Q", N_STATE, N_STATE)
     total = ca.SX.sym("sum", N_STATE)
-    x_pred, F = _trapezoid_sx(plant, x, ups[0], ups[1], dt)
+    x_pred, F = _trapezoid_sx(plant, x, ups[0], ups[1], ups[2], dt)
     P_pred = ca.mtimes([F, P, F.T]) + Q
     outs = [ca.densify(v) for v in _update_sx(x_pred, P_pred, z, r)]
     return ca.Function("ekf_step", [x, P, z, ups, Q, r, total], [*outs, total + outs[0]])
@@ -141,17 +158,44 @@ class _KalmanBase:
         self._outputs = [self._x_out, self._P_out, self.innovation, self._s_inv]
         self._sum = np.zeros(N_STATE)
         self._count = 0
+        self._inputs = np.zeros(N_INPUT)   # (u, p_s, L) of the step
+        self._load_sum = 0.0
+        self._torque_lag = dt / (params.drive_torque_filter_s + dt)
+        self._torque_N_m: float | None = None   # the filtered drive torque [N·m]
+
+    def _set_inputs(self, z: NDArray[np.float64], u: float, p_s: float) -> None:
+        """The step's measurement z[:3] and known inputs (u, p_s and the drive load of the
+        filtered torque z[3], 0 without one); the load joins the period's sum."""
+        self._z[:] = z[:3]
+        load = 0.0
+        if len(z) > 3 and math.isfinite(z[3]):
+            torque = self._torque_N_m
+            torque = float(z[3]) if torque is None else (
+                torque + self._torque_lag * (float(z[3]) - torque))
+            self._torque_N_m = torque
+            load = drive_load_N(self.model.p, torque)
+        inputs = self._inputs
+        inputs[0] = u
+        inputs[1] = p_s
+        inputs[2] = load
+        self._load_sum += load
 
     def period_mean(self) -> NDArray[np.float64]:
-        """Mean posterior state (5,) over the steps since the last call (decimation filter).
+        """Mean posterior state (5,) and mean drive load L [N] over the steps since the last
+        call, (6,) (decimation filter).
 
         The controller runs every 10 samples; the boxcar mean of the 1 kHz posteriors is the
         anti-aliasing filter before that downsampling. With the study's large Q the posterior
         tension is nearly as noisy as the sensors (~340 N rms); the mean over one period cuts
-        it ~3x for ~half a period of lag. Returns the current state if no step was taken.
+        it ~3x for ~half a period of lag. Returns the current state (and no load) if no step
+        was taken.
         """
-        mean = self._sum / self._count if self._count else self.x.copy()
+        if self._count:
+            mean = np.append(self._sum / self._count, self._load_sum / self._count)
+        else:
+            mean = np.append(self.x, 0.0)
         self._sum[:] = 0.0
+        self._load_sum = 0.0
         self._count = 0
         return mean
 
@@ -176,8 +220,9 @@ class _KalmanBase:
 
 
 class ExtendedKalmanFilter(_KalmanBase):
-    """EKF; ``step(z, u, p_s)`` predicts over dt with applied opening u and supply p_s [Pa],
-    then updates with z (3,). Returns the posterior state (5,) (a view; do not modify).
+    """EKF; ``step(z, u, p_s)`` predicts over dt with applied opening u, supply p_s [Pa] and
+    the drive load of the torque z[3] (if z has it), then updates with z[:3]. Returns the
+    posterior state (5,) (a view; do not modify).
 
     Parameters
     ----------
@@ -195,18 +240,14 @@ class ExtendedKalmanFilter(_KalmanBase):
         self, model: ReducedModel, params: EstimatorParams, dt: float, x0: NDArray[np.float64]
     ) -> None:
         super().__init__(model, params, dt, x0)
-        self._u_ps = np.zeros(2)
         # x, P and the period sum are updated in place by the one evaluation
         self._step = bind(
             _ekf_function(model.p, dt),
-            [self.x, self.P, self._z, self._u_ps, self.Q, self._r, self._sum],
+            [self.x, self.P, self._z, self._inputs, self.Q, self._r, self._sum],
             [self.x, self.P, self.innovation, self._s_inv, self._sum]).call
 
     def step(self, z: NDArray[np.float64], u: float, p_s: float) -> NDArray[np.float64]:
-        self._z[:] = z
-        u_ps = self._u_ps
-        u_ps[0] = u
-        u_ps[1] = p_s
+        self._set_inputs(z, u, p_s)
         self._step()
         self._count += 1
         return self.x
@@ -244,9 +285,9 @@ class UnscentedKalmanFilter(_KalmanBase):
         self.wc = self.wm.copy()
         self.wm[0] = lam / (n + lam)
         self.wc[0] = self.wm[0] + 1.0 - a * a + b
-        self._point, self._u_ps, self._point_next = np.zeros(n), np.zeros(2), np.zeros(n)
+        self._point, self._point_next = np.zeros(n), np.zeros(n)
         self._propagate = bind(_propagate_function(model.p, dt),
-                               [self._point, self._u_ps], [self._point_next])
+                               [self._point, self._inputs], [self._point_next])
         self._update = bind(
             _update_function(), [self.x, self.P, self._z, self._r], self._outputs)
 
@@ -257,7 +298,7 @@ class UnscentedKalmanFilter(_KalmanBase):
         pts[0] = self.x
         pts[1:n + 1] = self.x + L.T
         pts[n + 1:] = self.x - L.T
-        self._u_ps[0], self._u_ps[1] = u, p_s
+        self._set_inputs(z, u, p_s)
         prop = np.empty_like(pts)
         for i, point in enumerate(pts):
             self._point[:] = point
@@ -266,6 +307,5 @@ class UnscentedKalmanFilter(_KalmanBase):
         self.x[:] = self.wm @ prop
         d = prop - self.x
         self.P[:] = (d.T * self.wc) @ d + self.Q
-        self._z[:] = z
         self._finish(self._update)
         return self.x

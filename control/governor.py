@@ -14,6 +14,16 @@ still feeds the heads at a useful rate (with the turbulent law the flow at Δp i
 sqrt(Δp/Δp_0) of the flow at Δp_0). If the supply cannot even reach lo, the governed
 reference is hi: the controller holds the most the supply gives. Areas are the lumped ones of
 the reduced model [m²], pressures gauge [Pa].
+
+A measured drive load L [N] on the idler (the tight side's extra tension,
+:func:`~trackmj.control.model.drive_load_N`) is rejected only as far as the band can take
+its end: rejecting L means letting the carrier in, and when the load goes the tension drops
+by the share s·L the trapped oil takes (``ReducedModel.hold_load_share``). So the tension is
+let ride :func:`drive_load_allowance` above the reference, the part of s·L that would take it
+below lo when the load ends. W3's pulses (s·L ≈ 2 kN against 4.5 kN to lo on LF1352) are
+rejected whole; a heavy machine's start-up traction (M113: s·L ≈ 13 kN against 2.1 kN)
+mostly rides on the tight side, as it must: a tensioner cannot take a tight side's tension
+away, only slacken the other side.
 """
 
 from __future__ import annotations
@@ -38,3 +48,11 @@ def govern(preview: NDArray[np.float64], band: tuple[float, float]) -> NDArray[n
     """``preview`` [N] saturated to ``band``; the upper bound wins if they cross."""
     lo, hi = band
     return np.minimum(np.maximum(preview, lo), hi)
+
+
+def drive_load_allowance(reference_N: NDArray[np.float64], band_low_N: float,
+                         held_load_N: float) -> NDArray[np.float64]:
+    """Tension [N] let ride above each reference value under a drive load whose held share
+    is ``held_load_N`` (s·L): max(0, s·L − (F_ref − lo)), lo = ``band_low_N`` (see the module
+    docstring); 0 for no load."""
+    return np.maximum(0.0, held_load_N - (reference_N - band_low_N))

@@ -19,6 +19,12 @@ regularised turbulent law Q = Cq A sqrt(2/rho) dp / (dp^2 + p_cr^2)^(1/4).
 
 The same expression is built for CasADi SX (NMPC/LMPC, EKF/UKF) and for Python floats
 (the reduced plant).
+
+Drive load (the measured disturbance): a sprocket torque T [N·m] loads the idler by
+L = g·max(σ·T, 0) [N] at held stroke (:func:`drive_load_N`; g and σ derived from the
+machine's layout, ``trackmj.machines.drive_load``), so the idler holds
+F_ten = k_eq (y − y0) + L. It enters the model as the unloaded stroke moved in by L/k_eq:
+y0_eff = y0 − L/k_eq, the online parameter the controllers and estimators already carry.
 """
 
 from __future__ import annotations
@@ -67,6 +73,15 @@ def _rhs_generic(
     return dph, dpr, v, acc
 
 
+def drive_load_N(p: PlantParams, torque_N_m: float) -> float:
+    """Idler load L [N] (> 0 pulls the idler in) of the sprocket torque ``torque_N_m`` [N·m]
+    at held stroke: g·max(σ·T, 0), the tight side's extra tension on the idler's strands
+    (``drive_load_gain_1_m`` g, ``drive_tight_sign`` σ); a NaN torque (no drive measured)
+    gives 0."""
+    tight = p.drive_tight_sign * torque_N_m
+    return p.drive_load_gain_1_m * tight if tight > 0.0 else 0.0
+
+
 class ReducedModel:
     """Reduced model with numpy/float evaluation and a CasADi twin."""
 
@@ -103,6 +118,15 @@ class ReducedModel:
         ph = (force_N + pr * p.area_rod_m2) / p.area_head_m2
         y = p.free_position_m + force_N / p.stiffness_N_m
         return np.array((ph, pr, y, 0.0))
+
+    def hold_load_share(self, force_N: float) -> float:
+        """Share [-] of an idler load step the tension takes in hold (heads trapped, rod at
+        tank) at tension ``force_N`` [N]: the oil spring k_h = β·A_h²/V_h in series with the
+        idler's k_eq, ΔF_ten/ΔL = k_h/(k_h + k_eq)."""
+        p = self.p
+        v_h = p.dead_volume_head_m3 + p.area_head_m2 * self.equilibrium(force_N)[2]
+        k_oil = p.bulk_modulus_Pa * p.area_head_m2 ** 2 / v_h
+        return k_oil / (k_oil + p.stiffness_N_m)
 
     def tension_rate_gain(self, force_N: float, p_s: float | None = None) -> float:
         """Quasi-static dF/dt per unit opening [N/s] at tension force_N (u = +1, rod at tank).

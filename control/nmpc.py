@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackmj.control import mpc_kernels
-from trackmj.control.governor import feasible_band, govern
+from trackmj.control.governor import drive_load_allowance, feasible_band, govern
 from trackmj.control.model import ReducedModel
 from trackmj.control.ocp import X_SCALE, Ocp, build_ocp, initial_guess, parameter_vector
 from trackmj.control.params import ControllerParams, MpcParams
@@ -114,11 +114,15 @@ class _MpcBase:
     def __call__(
         self, estimate: NDArray[np.float64], reference_preview: NDArray[np.float64], t: float
     ) -> ControlOutput:
-        """Opening u for the coming period from the state estimate (4,) or (5,) and the
+        """Opening u for the coming period from the state estimate (4,) to (6,) and the
         reference preview F_ref(t + i Ts), i = 0..N (N+1,) [N].
 
         A fifth estimate entry is the estimated free position y0 [m] (the estimators'
-        disturbance state); it becomes the model's online y0. The preview is saturated by
+        disturbance state); it becomes the model's online y0. A sixth is the measured drive
+        torque's idler load L [N] (:func:`~trackmj.control.model.drive_load_N`), fed
+        forward as the unloaded stroke moved in by L/k_eq (held over the horizon), and
+        rejected only as far as the band takes its end
+        (:func:`~trackmj.control.governor.drive_load_allowance`). The preview is saturated by
         the reference governor (:mod:`trackmj.control.governor`) at the current supply.
         A solve that fails is still used if its plan is finite (counted as a fallback), so
         the controller keeps acting; otherwise the previous plan is shifted on.
@@ -126,6 +130,10 @@ class _MpcBase:
         n, lb = self.mpc.horizon_steps, self.mpc.block_steps
         if len(estimate) > 4:
             self.theta[2] = float(estimate[4])
+            if len(estimate) > 5 and estimate[5] > 0.0:
+                load = float(estimate[5])
+                self.theta[2] -= load / self.theta[1]
+                reference_preview = self._with_drive_load(reference_preview, load)
         w0, p = self._problem(estimate, reference_preview)
         t0 = time.perf_counter()
         try:
@@ -153,6 +161,14 @@ class _MpcBase:
             self.fallbacks += 1
         self.u_prev = u
         return ControlOutput(u, ok and not overrun, dt, iters, not (ok and not overrun))
+
+    def _with_drive_load(self, reference_preview: NDArray[np.float64], load_N: float
+                         ) -> NDArray[np.float64]:
+        """The preview [N] raised by the drive load's allowance for load ``load_N`` [N]."""
+        preview = np.asarray(reference_preview, dtype=float)
+        band = feasible_band(self.ctrl, self.model.p, float(self.theta[0]))
+        held = self.model.hold_load_share(float(preview[0])) * load_N
+        return preview + drive_load_allowance(preview, band[0], held)
 
     def _problem(self, estimate: NDArray[np.float64], reference_preview: NDArray[np.float64]
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -199,7 +215,7 @@ class _MpcBase:
 class NonlinearMpc(_MpcBase):
     """Nonlinear MPC on the reduced model (see the module docstring).
 
-    ``controller(estimate (4,), reference_preview (N+1,) [N], t [s]) -> ControlOutput``;
+    ``controller(estimate (4,)-(6,), reference_preview (N+1,) [N], t [s]) -> ControlOutput``;
     the supply pressure, stiffness, unloaded stroke and pressure limit can be updated
     online with ``set_parameters``.
 

@@ -94,6 +94,12 @@ class PlantParams(Parameters):
     damping_N_s_m: float = param(0.0, 1e7, doc="equivalent idler damping c")
     free_position_m: float = param(-1.0, None, doc="stroke y0 at which the idler spring is "
                                    "unloaded (<= stroke_m)")
+    drive_load_gain_1_m: float = param(0.0, 1e3, unit="1/m", doc="idler load per sprocket "
+                                       "torque while the idler's strands are the drive's "
+                                       "tight side, G/r (trackmj.machines.drive_load)")
+    drive_tight_sign: float = param(-1.0, 1.0, unit="1", doc="sign of the sprocket torque "
+                                    "that makes the idler's strands the tight side: +1 "
+                                    "sprocket at the front, -1 at the rear")
 
     def cross_check(self, at: Location) -> None:
         if self.area_rod_m2 >= self.area_head_m2:
@@ -102,6 +108,8 @@ class PlantParams(Parameters):
         if self.free_position_m > self.stroke_m:
             raise at.error("free_position_m", self.free_position_m,
                            f"must be <= stroke_m = {self.stroke_m!r}")
+        if self.drive_tight_sign not in (-1.0, 1.0):
+            raise at.error("drive_tight_sign", self.drive_tight_sign, "must be -1 or +1")
 
     def replace(self, **changes: float) -> PlantParams:
         """Copy with some fields changed (validated again)."""
@@ -110,7 +118,8 @@ class PlantParams(Parameters):
 
 @dataclass(frozen=True, slots=True)
 class SensorParams(Parameters):
-    """Sensors for p_head, p_rod [Pa] and stroke y [m]: Gaussian noise, bias, quantum."""
+    """Sensors for p_head, p_rod [Pa], stroke y [m] (Gaussian noise, bias, quantum) and the
+    sprocket drive torque [N·m] (Gaussian noise)."""
 
     sample_period_s: float = param(0.0, 1.0, open_low=True, doc="sampling period")
     pressure_noise_std_Pa: float = param(0.0, 1e7, doc="pressure noise standard deviation")
@@ -119,6 +128,8 @@ class SensorParams(Parameters):
     stroke_quantum_m: float = param(0.0, 0.01, doc="stroke quantisation step (0: off)")
     pressure_bias_Pa: float = param(-1e7, 1e7, doc="pressure sensor bias")
     stroke_bias_m: float = param(-0.1, 0.1, doc="stroke sensor bias")
+    drive_torque_noise_std_N_m: float = param(0.0, 1e5, unit="N·m", doc="sprocket drive "
+                                              "torque measurement noise standard deviation")
 
 
 @dataclass(frozen=True, slots=True)
@@ -148,6 +159,9 @@ class EstimatorParams(Parameters):
         "y0 (the stroke at which the equivalent idler is unloaded)")
     free_position_initial_std_m: float = param(0.0, 0.1, open_low=True,
                                                doc="initial std of y0")
+    drive_torque_filter_s: float = param(0.0, 10.0, doc="time constant of the first-order "
+                                         "low-pass on the measured drive torque before its "
+                                         "idler load enters the model")
     ukf_alpha: float = param(0.1, 1.0, unit="1", doc="UKF sigma-point spread alpha")
     ukf_beta: float = param(0.0, 10.0, unit="1", doc="UKF prior-distribution beta")
     ukf_kappa: float = param(-3.0, 10.0, unit="1", doc="UKF secondary scaling kappa")

@@ -20,6 +20,14 @@ output is hysteretic: it leaves 0 only when |v| >= ``output_on`` and returns to 
 |v| < ``output_off``. The integral runs only while |error| <= ``integration_band_N``
 (conditional integration): with integration during the whole rise the step overshot ~4 %
 and settled in 1.8-2.5 s.
+
+Feed-forward of the drive load (the estimate's sixth entry L [N], the measured sprocket
+torque's idler load, :func:`~trackmj.control.model.drive_load_N`): in hold a load step ΔL
+moves the tension by s·ΔL at once (s the reduced model's ``hold_load_share``), and the
+integrating valve plant takes that back with the opening u_ff = −s·ΔL/(k'·dt) held over one
+period. L goes through the same measurement filter as the tension (its torque is noisy).
+Like the MPCs, the PID lets the tension ride the part of the load the band cannot take when
+it ends (:func:`~trackmj.control.governor.drive_load_allowance`).
 """
 
 from __future__ import annotations
@@ -29,7 +37,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from trackmj.control.governor import feasible_band, govern
+from trackmj.control.governor import drive_load_allowance, feasible_band, govern
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControllerParams, PidParams, resolved
 from trackmj.ports import ControllerStatistics, ControlOutput
@@ -37,7 +45,7 @@ from trackmj.ports import ControllerStatistics, ControlOutput
 
 class PidController:
     """PID on the estimated tension (see the module docstring):
-    ``controller(estimate (4,), reference_preview (1,) [N], t [s]) -> ControlOutput``.
+    ``controller(estimate (4,)-(6,), reference_preview (1,) [N], t [s]) -> ControlOutput``.
 
     Parameters
     ----------
@@ -63,6 +71,8 @@ class PidController:
         self.supply_pressure_Pa = model.p.supply_pressure_Pa
         self.horizon_steps = 0  # the PID acts on the current reference only
         k_rate = model.tension_rate_gain(operating_force_N)  # [N/s per unit u]
+        # opening per unit drive-load change over one period [1/N] (module docstring)
+        self.feed_forward_gain = model.hold_load_share(operating_force_N) / (k_rate * self.dt)
         theta = pid.dead_time_s + pid.measurement_filter_s   # a lag counts as dead time
         lam = pid.closed_loop_time_s + theta
         self.kc = 1.0 / (k_rate * lam)  # [1/N]
@@ -73,6 +83,7 @@ class PidController:
         self.integral = 0.0
         self.f_measured: float | None = None   # the tension through measurement_filter_s
         self.f_filtered: float | None = None   # ... and through the derivative filter Tf
+        self.load_measured: float | None = None   # the drive load through the filter [N]
         self.u = 0.0
 
     def set_parameters(self, *, supply_pressure_Pa: float | None = None) -> None:
@@ -92,11 +103,24 @@ class PidController:
             return x
         return previous + self.dt / (tau_s + self.dt) * (x - previous)
 
+    def _feed_forward(self, estimate: NDArray) -> float:
+        """u_ff [-] of the filtered drive load's change over the period (0 without one)."""
+        if len(estimate) < 6:
+            return 0.0
+        previous = self.load_measured
+        self.load_measured = load = self._lag(previous, float(estimate[5]),
+                                              self.pid.measurement_filter_s)
+        return 0.0 if previous is None else -self.feed_forward_gain * (load - previous)
+
     def __call__(self, estimate: NDArray, reference_preview: NDArray, t: float) -> ControlOutput:
         self.f_measured = f = self._lag(self.f_measured, self.model.force(estimate),
                                         self.pid.measurement_filter_s)
         band = feasible_band(self.ctrl, self.model.p, self.supply_pressure_Pa)
-        e_raw = float(govern(np.asarray(reference_preview[:1], float), band)[0]) - f
+        reference = np.asarray(reference_preview[:1], float)
+        if len(estimate) > 5 and estimate[5] > 0.0:   # the drive load the band cannot take
+            held = self.model.hold_load_share(float(reference[0])) * float(estimate[5])
+            reference = reference + drive_load_allowance(reference, band[0], held)
+        e_raw = float(govern(reference, band)[0]) - f
         e = math.copysign(max(abs(e_raw) - resolved(self.pid, "error_dead_band_N"), 0.0), e_raw)
         # conditional integration: the valve->tension plant is integrating, so the integral
         # is only needed against slow disturbances (leakage, supply), not to reach a step
@@ -105,7 +129,7 @@ class PidController:
         f_prev = f if self.f_filtered is None else self.f_filtered
         self.f_filtered = self._lag(f_prev, f, self.tf)
         deriv = -self.kc * self.td * (self.f_filtered - f_prev) / self.dt
-        v = self.kc * e + self.integral + deriv
+        v = self.kc * e + self.integral + deriv + self._feed_forward(estimate)
         u_sat = min(self.ctrl.u_max, max(self.ctrl.u_min, v))
         self.integral += self.dt * (self.kc * e_int / self.ti + (u_sat - v) / self.tt)
         threshold = self.pid.output_off if self.u != 0.0 else self.pid.output_on

@@ -1,4 +1,5 @@
-"""Sensors: 1 kHz samples of z = [p_head Pa, p_rod Pa, y m] with noise, bias and quantisation."""
+"""Sensors: 1 kHz samples of z = [p_head Pa, p_rod Pa, y m] with noise, bias and quantisation,
+and of the sprocket drive torque [N·m] with noise."""
 
 from __future__ import annotations
 
@@ -11,12 +12,15 @@ from trackmj.control.params import SensorParams
 
 
 class Sensors:
-    """Measurement model z = quantise(H X + bias + noise), H = [I3 0] on X = [p_h, p_r, y, v].
+    """Measurement model z = quantise(H X + bias + noise), H = [I3 0] on X = [p_h, p_r, y, v],
+    and the drive torque T + noise (a fourth entry of the true values; NaN stays NaN).
 
     Noise is Gaussian with the standard deviations of ``params`` drawn from a seeded
     ``numpy.random.Generator``; quantisation (step > 0) rounds to the nearest multiple.
     ``block`` samples' noise is drawn at a time: the same numbers in the same order as one
-    draw per sample, so use block > 1 only when nothing else draws from ``rng``.
+    draw per sample, so use block > 1 only when nothing else draws from ``rng``. The torque's
+    noise comes from a stream spawned from ``rng`` (so the first three channels draw the
+    same numbers with or without a torque).
     """
 
     def __init__(
@@ -41,6 +45,10 @@ class Sensors:
         self._bias = tuple(self.bias.tolist())
         self._std = tuple(self.std.tolist())
         self._quanta = tuple((i, q) for i, q in enumerate(self.quantum.tolist()) if q > 0.0)
+        self._torque_std = params.drive_torque_noise_std_N_m
+        self._torque_rng = self.rng.spawn(1)[0]
+        self._torque_noise: list[float] = []
+        self._torque_next = 0
 
     @property
     def dt(self) -> float:
@@ -48,8 +56,9 @@ class Sensors:
         return self.p.sample_period_s
 
     def measure(self, x: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:
-        """Noisy sample z (3,) of the true state x (its first three entries: p_head, p_rod,
-        y); Python scalars per channel (cheaper than small-array numpy at 1 kHz)."""
+        """Noisy sample z of the true values x: (3,) from p_head, p_rod, y; (4,) when x has a
+        fourth entry, the drive torque. Python scalars per channel (cheaper than small-array
+        numpy at 1 kHz)."""
         i = self._next
         if i == len(self._noise):
             self._noise = self.rng.standard_normal((self.block, 3)).tolist()
@@ -61,4 +70,15 @@ class Sensors:
         if self._quanta:
             for i, q in self._quanta:
                 z[i] = round(z[i] / q) * q  # half to even, like np.round
+        if len(x) > 3:
+            z.append(x[3] + self._torque_std * self._next_torque_noise())
         return np.array(z)
+
+    def _next_torque_noise(self) -> float:
+        """The next standard normal of the torque's own stream (drawn 1000 at a time)."""
+        i = self._torque_next
+        if i == len(self._torque_noise):
+            self._torque_noise = self._torque_rng.standard_normal(1000).tolist()
+            i = 0
+        self._torque_next = i + 1
+        return self._torque_noise[i]

@@ -383,7 +383,7 @@ class _Plant:
         self.u.append(command.u)
         self.t += COUPLING_STEP_S
         return Readout(self.t, 12e3, 5e6, 0.0, 16e6, 0.05, 0.0, 0.0, 0.0, 0.0, 0.0,
-                       math.nan, 0.0)
+                       math.nan, 0.0, math.nan)
 
 
 class _Scripted:

@@ -26,7 +26,8 @@ HOLD = Command(0, 0.0, ControlOutput(0.0))
 
 
 def _readout(**changes: float) -> Readout:
-    base = Readout(1.234, 15e3, 6e6, 0.2e6, 12e6, 0.05, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e-4)
+    base = Readout(1.234, 15e3, 6e6, 0.2e6, 12e6, 0.05, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e-4,
+                   150.0)
     return base._replace(**changes)
 
 

@@ -161,16 +161,6 @@ def test_chordal_frequency_is_v_over_pitch_without_a_revolution_component(driven
     assert _amplitude(t, y, revolution) <= 0.10 * amplitudes.max()
 
 
-W1_START_UP_FAILS = {"m113": (
-    "front sprocket: W1's 1 s start ramp (1.5 m/s² on the 5.5 t side, ~8 kN of traction) "
-    "loads the tight upper strand and the idler to 25 kN; the NMPC releases, and when the "
-    "acceleration ends the 0.5 s mean falls to 10.8 kN, below F_min = 13.3 kN (in band, "
-    "15.2-20.7 kN, with a 3 s ramp: test_w1_with_a_gentler_start_stays_in_the_band)")}
-"""Machines whose W1 start-up leaves the band (a strict xfail: it reports when fixed)."""
-GENTLE_RAMP_S = 3.0
-"""Start ramp [s] under which those machines' W1 must stay in the band."""
-
-
 @pytest.fixture(scope="module")
 def w1(machine: str) -> tuple[float, dict, str]:
     nominal = machines.mechanics(machines.resolve(machine)).nominal_tension_N
@@ -178,24 +168,17 @@ def w1(machine: str) -> tuple[float, dict, str]:
 
 
 @pytest.mark.slow
-def test_w1_closed_loop_stays_in_the_machines_band(w1, request) -> None:
-    """The band is [2/3, 4/3] x the machine's nominal tension (10-20 kN on LF1352)."""
-    nominal, metrics, machine = w1
-    if machine in W1_START_UP_FAILS:
-        request.applymarker(pytest.mark.xfail(reason=W1_START_UP_FAILS[machine], strict=True))
+def test_w1_closed_loop_stays_in_the_machines_band(w1) -> None:
+    """The band is [2/3, 4/3] x the machine's nominal tension (10-20 kN on LF1352), with the
+    study's 1 s start ramp. On M113 (front sprocket) the ramp's traction loads the tight
+    upper strand and the idler by ~13 kN in hold: the controllers feed the measured drive
+    torque forward and let the tension ride what the band could not take back when the
+    traction ends (control/governor.py); rejecting it all, the 0.5 s mean fell to 9-10 kN
+    after the ramp, below F_min = 13.3 kN."""
+    nominal, metrics, _ = w1
     acc = metrics["acceptance"]
     low, high = 2.0 * nominal / 3.0, 4.0 * nominal / 3.0
     assert low <= acc["mean_min_N"] and acc["mean_max_N"] <= high, acc
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("machine", sorted(W1_START_UP_FAILS))
-def test_w1_with_a_gentler_start_stays_in_the_band(machine: str) -> None:
-    """What the xfail above claims: the band is lost to the start-up's traction alone."""
-    nominal = machines.mechanics(machines.resolve(machine)).nominal_tension_N
-    acc = simulate("W1", duration=W1_S, machine=machine,
-                   set={"scenario.track.ramp_s": GENTLE_RAMP_S}).metrics["acceptance"]
-    assert 2.0 * nominal / 3.0 <= acc["mean_min_N"] and acc["mean_max_N"] <= 4.0 * nominal / 3.0
 
 
 def test_w1_energy_table_closes(w1) -> None:

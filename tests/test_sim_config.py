@@ -11,6 +11,7 @@ import pytest
 from trackmj.control.model import ReducedModel, ReducedPlant
 from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
 from trackmj.io import file_sha256
+from trackmj.machines.drive_load import drive_load
 from trackmj.machines.identify import identify_packaged_idler
 from trackmj.machines.idler import (
     EquivalentIdler,
@@ -20,7 +21,7 @@ from trackmj.machines.idler import (
     write_idler_file,
 )
 from trackmj.sim.control_plant import nominal_plant_params, packaged_control, reduced_plant_params
-from trackmj.track.mechanics import default_xml_path
+from trackmj.track.mechanics import default_xml_path, load_model_params
 from trackmj.validator import ParameterError
 
 REGENERATE = ("models/lf1352_idler.toml differs from a fresh identification by more than CPU "
@@ -150,6 +151,6 @@ def test_derived_plant_follows_the_hydraulic_file() -> None:
     hyd = load_hydraulic_params(overrides={"fluid.bulk_modulus_Pa": 1.2e9,
                                            "metering.head_branch_area_m2": 3e-8})
     p = reduced_plant_params(hyd, load_idler(), packaged_control(), supply_pressure_Pa=9e6,
-                             free_position_m=0.04)
+                             free_position_m=0.04, drive=drive_load(load_model_params()))
     assert p.bulk_modulus_Pa == 1.2e9 and p.supply_pressure_Pa == 9e6
     assert p.valve_area_head_m2 == pytest.approx(6e-8, rel=1e-5)

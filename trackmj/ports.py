@@ -170,7 +170,8 @@ class Readout(NamedTuple):
     supply node [Pa gauge]; stroke_m [m], stroke_velocity_m_s [m/s]; q_supply_m3_s: flow
     out of the supply through the main valve [m³/s]; e_supply_J, p_work_J (∫Σp·A·v dt),
     mech_work_J (∫F·v dt): cumulative energies [J]; chassis_acc_z_m_s2 [m/s²];
-    closure_error_m: track loop closure gap [m].
+    closure_error_m: track loop closure gap [m]; drive_torque_N_m: the sprocket drive's torque
+    over the step [N·m], > 0 driving the vehicle forward.
     """
 
     t_s: float
@@ -186,6 +187,7 @@ class Readout(NamedTuple):
     mech_work_J: float
     chassis_acc_z_m_s2: float
     closure_error_m: float
+    drive_torque_N_m: float
 
 
 COLUMN_UNITS: dict[str, str] = {
@@ -205,6 +207,7 @@ COLUMN_UNITS: dict[str, str] = {
     "mech_work_J": "J",
     "chassis_acc_z_m_s2": "m/s^2",
     "closure_error_m": "m",
+    "drive_torque_N_m": "N·m",
 }
 """The one column -> unit table of a closed-loop run's timeseries, in the contract's order
 ("1": dimensionless): the :class:`Readout` fields, the command's ``valve_mode`` and ``u``
@@ -219,8 +222,8 @@ READOUT_UNITS: dict[str, str] = {name: COLUMN_UNITS[name] for name in Readout._f
 
 def unit_suffix(column: str) -> str:
     """The SI suffix of a column name (``p_head_Pa`` -> ``Pa``, ``stroke_velocity_m_s`` ->
-    ``m_s``, ``u`` -> '')."""
-    for suffix in ("m3_s", "m_s2", "m_s", "Pa", "N", "m", "J", "s"):
+    ``m_s``, ``drive_torque_N_m`` -> ``N_m``, ``u`` -> '')."""
+    for suffix in ("m3_s", "m_s2", "m_s", "N_m", "Pa", "N", "m", "J", "s"):
         if column.endswith("_" + suffix):
             return suffix
     return ""
@@ -310,7 +313,8 @@ class Mechanics(Protocol):
     ``apply(inputs)`` sets the step's scenario inputs, ``step(element)`` advances one
     coupling step through the tensioner port and returns the law applied; the named
     readouts are attributes (stroke [m], stroke velocity [m/s], idler force [N] of the
-    last step, chassis vertical acceleration [m/s²], closure error [m], time [s]).
+    last step, chassis vertical acceleration [m/s²], closure error [m], the sprocket drive's
+    torque [N·m] (NaN without a sprocket), time [s]).
     """
 
     time_s: float
@@ -330,6 +334,9 @@ class Mechanics(Protocol):
     @property
     def closure_error_m(self) -> float: ...
 
+    @property
+    def drive_torque_N_m(self) -> float: ...
+
     def apply(self, inputs: StepInputs) -> None: ...
 
     def step(self, element: TensionerElement) -> ForceLaw: ...
@@ -344,13 +351,17 @@ class Plant(Protocol):
 
 
 class Sensors(Protocol):
-    """Measurement z = (p_head [Pa], p_rod [Pa], stroke [m]) of the true values, noisy."""
+    """Measurement z = (p_head [Pa], p_rod [Pa], stroke [m], drive torque [N·m]) of the true
+    values, noisy (NaN stays NaN: a plant without a sprocket drive)."""
 
     def measure(self, x: Sequence[float]) -> NDArray[np.float64]: ...
 
 
 class Estimator(Protocol):
-    """State estimate X = (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s]) from 1 kHz samples."""
+    """State estimate from 1 kHz samples z (4,) (:class:`Sensors`): ``period_mean()`` gives
+    X = (p_head [Pa], p_rod [Pa], y [m], ẏ [m/s], y0 [m], L [N]) averaged over the controller
+    period, y0 the estimated unloaded stroke, L the idler load the measured drive torque
+    makes (the measured disturbance the controllers feed forward)."""
 
     def step(self, z: NDArray[np.float64], mode: float, p_s: float) -> NDArray[np.float64]: ...
 
@@ -358,9 +369,10 @@ class Estimator(Protocol):
 
 
 class Controller(Protocol):
-    """``controller(estimate (4,), reference preview F_ref(t + i·period), i = 0..N [N], t [s])
-    -> ControlOutput``, told the supply pressure [Pa] each period by ``set_parameters``;
-    ``statistics()`` gives its counts at the end of a run."""
+    """``controller(estimate (4,) to (6,) (:class:`Estimator`), reference preview
+    F_ref(t + i·period), i = 0..N [N], t [s]) -> ControlOutput``, told the supply pressure
+    [Pa] each period by ``set_parameters``; ``statistics()`` gives its counts at the end of a
+    run."""
 
     period_s: float
     horizon_steps: int

@@ -44,14 +44,14 @@ if TYPE_CHECKING:
 
 TRACK_INPUTS = ("force_N", "force_dv_N_s_m", "track_speed_m_s", "hitch_pull_N", "hitch_down_N")
 TRACK_OUTPUTS = ("stroke_m", "velocity_m_s", "tension_N", "chassis_acc_z_m_s2",
-                 "upper_strand_tension_N", "lower_strand_tension_N",
+                 "drive_torque_N_m", "upper_strand_tension_N", "lower_strand_tension_N",
                  "max_envelope_excursion_m", "closure_error_m")
 DERAILMENT_OUTPUTS = ("sprocket_disengaged", "links_off_envelope", "slack_strand",
                       "derailed")
 PLANT_INPUTS = ("track_speed_m_s", "hitch_pull_N", "hitch_down_N")
 PLANT_OUTPUTS = ("p_head_measured_Pa", "p_rod_measured_Pa", "stroke_measured_m",
-                 "tension_N", "p_head_Pa", "p_rod_Pa", "p_supply_Pa", "stroke_m",
-                 "velocity_m_s", "chassis_acc_z_m_s2")
+                 "drive_torque_measured_N_m", "tension_N", "p_head_Pa", "p_rod_Pa",
+                 "p_supply_Pa", "stroke_m", "velocity_m_s", "chassis_acc_z_m_s2")
 
 
 class MachineFiles(TypedDict):
@@ -131,6 +131,7 @@ class _Base(Fmi2Slave):
         self.velocity_m_s = plant.stroke_velocity_m_s
         self.tension_N = plant.idler_force_N
         self.chassis_acc_z_m_s2 = plant.chassis_acc_z_m_s2
+        self.drive_torque_N_m = plant.drive_torque_N_m
         if derailment:
             strands = plant.strand_tensions_N()
             self.upper_strand_tension_N = strands.upper_N
@@ -249,7 +250,8 @@ class PlantSlave(_Base):
         _, p_head_l, p_head_r, p_rod, p_supply = asm.element.node_pressures()
         self._read(Readout(0.0, setup.force0_N, 0.5 * (p_head_l + p_head_r), p_rod, p_supply,
                            track.stroke_m, track.stroke_velocity_m_s, 0.0, 0.0, 0.0, 0.0,
-                           track.chassis_acc_z_m_s2, track.closure_error_m))
+                           track.chassis_acc_z_m_s2, track.closure_error_m,
+                           track.drive_torque_N_m))
 
     def _inputs(self) -> StepInputs:
         supply = self.supply_pressure_set_Pa
@@ -257,8 +259,9 @@ class PlantSlave(_Base):
                           supply if supply > 0.0 else self._nominal_supply_Pa)
 
     def _read(self, r: Readout) -> None:
-        z = self.sensors.measure((r.p_head_Pa, r.p_rod_Pa, r.stroke_m))
-        self.p_head_measured_Pa, self.p_rod_measured_Pa, self.stroke_measured_m = z.tolist()
+        z = self.sensors.measure((r.p_head_Pa, r.p_rod_Pa, r.stroke_m, r.drive_torque_N_m))
+        (self.p_head_measured_Pa, self.p_rod_measured_Pa, self.stroke_measured_m,
+         self.drive_torque_measured_N_m) = z.tolist()
         self.tension_N, self.p_head_Pa, self.p_rod_Pa = r.tension_N, r.p_head_Pa, r.p_rod_Pa
         self.p_supply_Pa, self.stroke_m = r.p_supply_Pa, r.stroke_m
         self.velocity_m_s, self.chassis_acc_z_m_s2 = r.stroke_velocity_m_s, r.chassis_acc_z_m_s2

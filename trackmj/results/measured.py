@@ -82,8 +82,9 @@ if TYPE_CHECKING:
 
 
 def suffix_of(unit: str) -> str:
-    """The column-name suffix of an SI unit in pint's spelling (``m^3/s`` -> ``m3_s``)."""
-    return unit.replace("^", "").replace("/", "_")
+    """The column-name suffix of an SI unit in pint's spelling (``m^3/s`` -> ``m3_s``,
+    ``N·m`` -> ``N_m``: a run's torque column, named like the files' torque keys)."""
+    return unit.replace("^", "").replace("/", "_").replace("·", "_")
 
 
 TIME = "t_s"

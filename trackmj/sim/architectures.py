@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from trackmj.control.model import ReducedModel
 from trackmj.control.params import ControlConfig
 from trackmj.elements.context import ElementContext
+from trackmj.machines.drive_load import drive_load
 from trackmj.ports import Element, Mechanics
 from trackmj.results.store import Result
 from trackmj.sim.control_plant import reduced_plant_params
@@ -90,13 +91,15 @@ def assemble(setup: RunSetup, tp_result: Result | None = None) -> Assembly:
 
 def control_and_model(setup: RunSetup, free_position_m: float
                       ) -> tuple[ControlConfig, ReducedModel]:
-    """Control configuration with the reduced plant derived from the hydraulics and the
-    identified idler, valve logic without its own solenoid delay (the plugin applies it),
-    and no wall-clock budget (every finished solve is applied; overruns are counted)."""
+    """Control configuration with the reduced plant derived from the hydraulics, the
+    identified idler and the layout's drive load, valve logic without its own solenoid
+    delay (the plugin applies it), and no wall-clock budget (every finished solve is
+    applied; overruns are counted)."""
     cfg = setup.control
     plant = reduced_plant_params(setup.hydraulics, setup.idler, cfg,
                                  supply_pressure_Pa=setup.supply0_Pa,
-                                 free_position_m=free_position_m)
+                                 free_position_m=free_position_m,
+                                 drive=drive_load(setup.model))
     cfg = dataclasses.replace(
         cfg, valves=dataclasses.replace(cfg.valves, solenoid_delay_s=0.0),
         mpc=dataclasses.replace(cfg.mpc, time_budget_s=10.0))

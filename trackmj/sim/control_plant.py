@@ -2,9 +2,10 @@
 
 The reduced model (:class:`~trackmj.control.params.PlantParams`) has no file of its own:
 :func:`reduced_plant_params` lumps the two cylinders of the hydraulic parameters into one,
-puts each valve edge in series with its restrictor, adds line B to the rod node, and takes
+puts each valve edge in series with its restrictor, adds line B to the rod node, takes
 k, M, c from the equivalent idler identified on the MuJoCo track
-(:mod:`trackmj.machines.idler`).
+(:mod:`trackmj.machines.idler`) and the drive torque's idler load from the machine's layout
+(:mod:`trackmj.machines.drive_load`).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 from trackmj.control.params import ControlConfig, PlantParams, load_config
 from trackmj.hydraulics.components import series_area
 from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
+from trackmj.machines.drive_load import DriveLoad, drive_load
 from trackmj.machines.idler import EquivalentIdler, load_idler
 from trackmj.track.mechanics import load_model_params
 
@@ -30,7 +32,7 @@ def packaged_control(overrides: dict[str, object] | None = None) -> ControlConfi
 
 def reduced_plant_params(hydraulics: HydraulicParams, idler: EquivalentIdler,
                          control_config: ControlConfig, *, supply_pressure_Pa: float,
-                         free_position_m: float) -> PlantParams:
+                         free_position_m: float, drive: DriveLoad) -> PlantParams:
     """The controller's reduced model from the hydraulic circuit and the equivalent idler.
 
     The two identical cylinders act as one with twice the areas, volumes and seal leakage;
@@ -52,6 +54,8 @@ def reduced_plant_params(hydraulics: HydraulicParams, idler: EquivalentIdler,
         Nominal supply pressure of the model [Pa gauge].
     free_position_m : float
         Stroke y0 [m] at which the idler spring is unloaded.
+    drive : DriveLoad
+        The idler load of the sprocket torque (gain [1/m] and the tight side's sign).
 
     Returns
     -------
@@ -80,6 +84,8 @@ def reduced_plant_params(hydraulics: HydraulicParams, idler: EquivalentIdler,
         stiffness_N_m=idler.stiffness_N_m,
         damping_N_s_m=idler.damping_N_s_m,
         free_position_m=free_position_m,
+        drive_load_gain_1_m=drive.gain_1_m,
+        drive_tight_sign=drive.tight_sign,
     )
 
 
@@ -90,7 +96,8 @@ def nominal_plant_params(hydraulics: HydraulicParams | None = None,
                          supply_pressure_Pa: float = NOMINAL_SUPPLY_PA) -> PlantParams:
     """The reduced plant of the packaged files at an operating point: ``force_N`` [N] at mid
     stroke (y0 = stroke_max/2 − F/k) and ``supply_pressure_Pa`` [Pa]; defaults 15 kN and
-    12 MPa. The control unit tests run on it; a coupled run sets y0 from the settled track.
+    12 MPa; the drive load of the packaged machine's layout. The control unit tests run on
+    it; a coupled run sets y0 from the settled track.
 
     Parameters
     ----------
@@ -110,4 +117,5 @@ def nominal_plant_params(hydraulics: HydraulicParams | None = None,
     control_config = packaged_control() if control_config is None else control_config
     y0 = 0.5 * hydraulics.cylinder.stroke_max_m - force_N / idler.stiffness_N_m
     return reduced_plant_params(hydraulics, idler, control_config,
-                                supply_pressure_Pa=supply_pressure_Pa, free_position_m=y0)
+                                supply_pressure_Pa=supply_pressure_Pa, free_position_m=y0,
+                                drive=drive_load(load_model_params()))

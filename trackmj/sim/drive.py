@@ -49,7 +49,8 @@ from trackmj.track.plant import DerailmentStatus, PassiveTensioner, TrackPlant
 STEP_UNITS: dict[str, str] = {
     "t_s": "s", "idler_force_N": "N", "stroke_m": "m", "stroke_velocity_m_s": "m/s",
     "track_speed_m_s": "m/s", "vehicle_speed_m_s": "m/s", "upper_strand_tension_N": "N",
-    "lower_strand_tension_N": "N", "max_pin_gap_m": "m",
+    "lower_strand_tension_N": "N", "max_pin_gap_m": "m", "drive_torque_N_m": "N·m",
+    "hitch_pull_N": "N",
 }
 """Columns of ``timeseries.parquet`` recorded every step, and their units."""
 DERAILMENT_UNITS: dict[str, str] = {
@@ -70,6 +71,9 @@ DRIVE_FIGURE = "drive.png"
 
 MAX_SPEED_M_S = 5.0
 MAX_DURATION_S = 3600.0
+MAX_HITCH_N = 1e6
+"""Largest hitch load ``trackmj drive`` takes [N] (a bound on typing errors: the track's
+traction gives out far below it)."""
 DERAILMENT_CHECK_S = 0.1
 """Interval of the derailment check [s]."""
 
@@ -104,27 +108,31 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
           mjcf: str | Path | None = None, preload_N: float | None = None,
           out_dir: str | Path | None = None,
           tensioner: str | Path | None = None, machine: str | Path | None = None,
-          overrides: dict[str, Any] | None = None) -> DriveResult:
+          overrides: dict[str, Any] | None = None, hitch_pull_N: float = 0.0) -> DriveResult:
     """Drive the track at ``speed_m_s`` [m/s] (ramped over min(1 s, duration/4)) for
     ``duration_s`` [s] with the passive tensioner (its ``preload_N`` [N] if given) or the
     ``tensioner`` file's, book the energy ledger from rest and check derailment every
     :data:`DERAILMENT_CHECK_S`; write ``out_dir`` (metrics, timeseries, figure) if given.
+    ``hitch_pull_N`` [N]: a horizontal load on the rear hitch, rearward (a towed load: the
+    sprocket drives harder) or, < 0, forward (a push: it brakes), ramped up over twice the
+    speed ramp.
     ``machine``, ``model`` (a model parameter TOML replacing the machine's mechanics),
     ``overrides`` (``{dotted key: value}`` of the model file) and ``mjcf`` (an MJCF file)
     as in :func:`trackmj.machines.track_plant.load_plant`.
 
-    Raises ValueError for a speed outside [−5, 5] m/s or a duration outside (0, 3600] s,
+    Raises ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s or a
+    hitch load outside ±:data:`MAX_HITCH_N`,
     ParameterError for a bad tensioner file (before any work), PhysicsError if the track
     leaves physics, PhysicsError or FmuError if an FMU tensioner leaves physics or fails.
     """
-    _check_drive(speed_m_s, duration_s, tensioner, preload_N)
+    _check_drive(speed_m_s, duration_s, tensioner, preload_N, hitch_pull_N)
     plant = load_plant(mjcf, model, machine=machine, overrides=overrides)
     element, described, passive_preload_N = _drive_tensioner(plant, tensioner, preload_N)
     ramp_s = min(1.0, duration_s / 4.0)
     steps = round(duration_s / COUPLING_STEP_S)
     ledger = TrackEnergyLedger(plant)
     series, checks, wall, plant_wall = _drive_loop(plant, element, ledger, speed_m_s,
-                                                   ramp_s, steps)
+                                                   ramp_s, steps, hitch_pull_N)
     rows = [row for row, _ in checks]
     statuses = [status for _, status in checks]
     series |= derailment_columns(rows, statuses, steps)
@@ -133,6 +141,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     energy = ledger.finish()
     metrics = {
         "speed_m_s": speed_m_s, "duration_s": duration_s, "ramp_s": ramp_s,
+        "hitch_pull_N": hitch_pull_N,
         "machine": resolve(machine).name,
         "model_file": None if model is None else str(model),
         "mjcf_file": None if mjcf is None else str(mjcf),
@@ -155,14 +164,17 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
 
 
 def _check_drive(speed_m_s: float, duration_s: float, tensioner: str | Path | None,
-                 preload_N: float | None) -> None:
-    """ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s or both
-    a preload and a tensioner file."""
+                 preload_N: float | None, hitch_pull_N: float) -> None:
+    """ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s, a hitch
+    load outside ±:data:`MAX_HITCH_N` or both a preload and a tensioner file."""
     if not (math.isfinite(speed_m_s) and abs(speed_m_s) <= MAX_SPEED_M_S):
         raise ValueError(f"speed {speed_m_s!r} m/s: allowed [-{MAX_SPEED_M_S}, "
                          f"{MAX_SPEED_M_S}]")
     if not (math.isfinite(duration_s) and 0.0 < duration_s <= MAX_DURATION_S):
         raise ValueError(f"duration {duration_s!r} s: allowed (0, {MAX_DURATION_S}]")
+    if not (math.isfinite(hitch_pull_N) and abs(hitch_pull_N) <= MAX_HITCH_N):
+        raise ValueError(f"hitch pull {hitch_pull_N!r} N: allowed [-{MAX_HITCH_N:g}, "
+                         f"{MAX_HITCH_N:g}]")
     if tensioner is not None and preload_N is not None:
         raise ValueError("give a preload or a tensioner file, not both")
 
@@ -184,10 +196,11 @@ def _drive_tensioner(plant: TrackPlant, tensioner: str | Path | None, preload_N:
 
 
 def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnergyLedger,
-                speed_m_s: float, ramp_s: float, steps: int
+                speed_m_s: float, ramp_s: float, steps: int, hitch_pull_N: float
                 ) -> tuple[dict[str, np.ndarray], list[tuple[int, DerailmentStatus]], float,
                            float]:
-    """``steps`` coupling steps at the ramped sprocket speed, booking ``ledger``; returns
+    """``steps`` coupling steps at the ramped sprocket speed and hitch load, booking
+    ``ledger``; returns
     the time series (column -> (steps,), :data:`STEP_UNITS`), the derailment checks (row,
     status) every :data:`DERAILMENT_CHECK_S`, the loop's and the plant steps' wall times
     [s]. PhysicsError if the track leaves physics (non-finite velocities)."""
@@ -198,6 +211,9 @@ def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnerg
     start = time.perf_counter()
     for k in range(steps):
         plant.set_track_speed(speed_m_s * min(1.0, plant.time_s / ramp_s))
+        pull = hitch_pull_N * min(1.0, plant.time_s / (2.0 * ramp_s))
+        if hitch_pull_N:
+            plant.set_hitch_force(pull, 0.0)
         before = time.perf_counter()
         plant.step(element)
         plant_wall += time.perf_counter() - before
@@ -205,7 +221,7 @@ def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnerg
         strands = plant.strand_tensions_N()
         row = (plant.time_s, plant.idler_force_N, plant.stroke_m, plant.stroke_velocity_m_s,
                plant.track_speed_m_s, float(plant.chassis_velocity[0]), strands.upper_N,
-               strands.lower_N, plant.closure_error_m)
+               strands.lower_N, plant.closure_error_m, plant.drive_torque_N_m, pull)
         for column, value in zip(series.values(), row, strict=True):
             column[k] = value
         if (k + 1) % check_every == 0:
@@ -313,7 +329,8 @@ def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStat
 
 
 def _steady_means(series: dict[str, np.ndarray], from_s: float) -> dict[str, float]:
-    """Mean, min and max of the force and tension columns from ``from_s`` [s] on."""
+    """Mean, min and max of the force and tension columns, and the means of speeds, stroke
+    and drive torque, from ``from_s`` [s] on."""
     keep = series["t_s"] >= from_s
     out: dict[str, float] = {"from_s": from_s}
     for name in ("idler_force_N", "upper_strand_tension_N", "lower_strand_tension_N"):
@@ -322,6 +339,8 @@ def _steady_means(series: dict[str, np.ndarray], from_s: float) -> dict[str, flo
                 f"{name[:-2]}_min_N": float(values.min()),
                 f"{name[:-2]}_max_N": float(values.max())}
     out["vehicle_speed_mean_m_s"] = float(series["vehicle_speed_m_s"][keep].mean())
+    out["stroke_mean_m"] = float(series["stroke_m"][keep].mean())
+    out["drive_torque_mean_N_m"] = float(series["drive_torque_N_m"][keep].mean())
     out["track_speed_mean_m_s"] = float(series["track_speed_m_s"][keep].mean())
     return out
 

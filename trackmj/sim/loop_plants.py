@@ -36,7 +36,7 @@ NAN = math.nan
 _readout = positional(Readout, (
     "t_s", "tension_N", "p_head_Pa", "p_rod_Pa", "p_supply_Pa", "stroke_m",
     "stroke_velocity_m_s", "q_supply_m3_s", "e_supply_J", "p_work_J", "mech_work_J",
-    "chassis_acc_z_m_s2", "closure_error_m"))
+    "chassis_acc_z_m_s2", "closure_error_m", "drive_torque_N_m"))
 """Readout from its values in field order, checked against its fields at import."""
 # the order CoupledPlant.step unpacks an element's log in, checked at import
 check_order(ElementLog, ("t_s", "p_head_Pa", "p_rod_Pa", "p_supply_Pa", "q_supply_m3_s",
@@ -66,7 +66,7 @@ class CoupledPlant:
         return _readout(Readout, (t, mech.idler_force_N, p_head, p_rod, p_supply,
                                   mech.stroke_m, mech.stroke_velocity_m_s, q_supply, supply,
                                   piston, work, mech.chassis_acc_z_m_s2,
-                                  mech.closure_error_m))
+                                  mech.closure_error_m, mech.drive_torque_N_m))
 
 
 class EquivalentIdlerMechanics:
@@ -75,13 +75,15 @@ class EquivalentIdlerMechanics:
     ``load_N`` holds the track load d_k [N] acting over each step k, shape (steps,).
     Integrated like MuJoCo (semi-implicit Euler, the affine law and c implicit), so the
     tensioner port behaves the same: v_{k+1} solves M(v_{k+1} − v_k)/h = F0 + Z·v_{k+1}
-    − k(y_k − y0) − c·v_{k+1} − d_k, then y_{k+1} = y_k + h·v_{k+1}. There is no chassis
-    and no loop closure (their readouts are NaN) and no MuJoCo (no warnings).
+    − k(y_k − y0) − c·v_{k+1} − d_k, then y_{k+1} = y_k + h·v_{k+1}. There is no chassis,
+    no loop closure and no sprocket drive (their readouts are NaN: the drive's load is in
+    the replayed d_k) and no MuJoCo (no warnings).
     """
 
     warning_count = 0
     chassis_acc_z_m_s2 = NAN
     closure_error_m = NAN
+    drive_torque_N_m = NAN
 
     def __init__(self, idler: EquivalentIdler, y0_m: float, stroke_m: float,
                  load_N: NDArray[np.float64]) -> None:
@@ -115,7 +117,7 @@ class ReducedLoopPlant:
     the applied valve mode is its opening, the step's supply set value its supply.
 
     Readout pressures, stroke and velocity are the true model state; the tension is
-    F_ten = p_h·A_h − p_r·A_r; no supply node, energies, chassis or closure (NaN).
+    F_ten = p_h·A_h − p_r·A_r; no supply node, energies, chassis, closure or drive (NaN).
     """
 
     def __init__(self, params: PlantParams, x0: NDArray[np.float64]) -> None:
@@ -132,4 +134,4 @@ class ReducedLoopPlant:
                        p_rod_Pa=float(x[1]), p_supply_Pa=inputs.supply_set_Pa,
                        stroke_m=float(x[2]), stroke_velocity_m_s=float(x[3]),
                        q_supply_m3_s=NAN, e_supply_J=NAN, p_work_J=NAN, mech_work_J=NAN,
-                       chassis_acc_z_m_s2=NAN, closure_error_m=NAN)
+                       chassis_acc_z_m_s2=NAN, closure_error_m=NAN, drive_torque_N_m=NAN)

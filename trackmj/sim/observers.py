@@ -205,7 +205,7 @@ class PhysicsGuard:
     def on_step(self, k: int, readout: Readout, command: Command) -> None:
         if self.warnings:
             self._fail(readout, f"MuJoCo warning: {self.warnings[0]}")
-        _, tension, p_head, p_rod, _, stroke, velocity, _, _, _, _, _, closure = readout
+        _, tension, p_head, p_rod, _, stroke, velocity, _, _, _, _, _, closure, _ = readout
         if not math.isfinite(tension + p_head + p_rod + stroke + velocity):
             fields = readout._asdict()
             bad = [f"{name} = {fields[name]!r}" for name in _STATE

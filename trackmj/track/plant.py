@@ -225,6 +225,9 @@ class TrackPlant:
                                     for n in ("chassis_x", "chassis_z", "chassis_pitch")])
         self._tensioner = m.actuator("tensioner").id
         self._drive = m.actuator("sprocket_drive").id
+        self._drive_gain = float(m.actuator_gainprm[self._drive, 0])   # kv [N·m·s/rad], gear 1
+        self._drive_limit = (float(m.actuator_forcerange[self._drive, 1])
+                             if m.actuator_forcelimited[self._drive] else math.inf)
         n = params.track.link_count
         self.link_count = n
         self._link_body = np.array([m.body(link_name(k)).id for k in range(n)])
@@ -327,6 +330,16 @@ class TrackPlant:
     @property
     def sprocket_speed_rad_s(self) -> float:
         return float(self.data.qvel[self._sprocket_v])
+
+    @property
+    def drive_torque_N_m(self) -> float:
+        """Torque of the sprocket drive on the sprocket over the last step [N·m], > 0 driving
+        the vehicle forward: the velocity servo's kv·(ω_cmd − ω) at the end-of-step speed
+        (what ``implicitfast`` integrates), within the drive's torque limit. What a drive
+        measures (motor pressure × displacement × gear ratio, or a torque shaft)."""
+        torque = self._drive_gain * (self._ctrl[self._drive] - self._qvel[self._sprocket_v])
+        limit = self._drive_limit
+        return float(min(max(torque, -limit), limit))
 
     @property
     def track_speed_m_s(self) -> float:

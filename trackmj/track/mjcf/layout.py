@@ -253,6 +253,31 @@ def _closing_idler_x(p: ModelParams, lo: float, hi: float) -> float:
     return root
 
 
+def idler_strand_directions(p: ModelParams, idler_x: float
+                            ) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Unit vectors (x, z) along the two straight strands that leave the idler's wrap,
+    pointing away from the idler, with the idler at ``idler_x`` [m]: the loop's common
+    tangents from the idler to its neighbours (the top strand's sprocket or roller, the
+    bottom strand's end road wheel), first the one the loop (clockwise in the x–z view)
+    arrives on."""
+    circles = _circles(p, idler_x)
+    cx, cz, radius = circles[1]
+    path = _hull_path(circles)
+    sagitta = radius * (1.0 - math.cos(math.pi / HULL_SAMPLES))
+    on_idler = np.abs(np.hypot(path[:, 0] - cx, path[:, 1] - cz) - radius) <= sagitta + 1e-9
+    following = np.roll(on_idler, -1)
+    arrive = np.flatnonzero(~on_idler & following)     # the last point before the wrap
+    leave = np.flatnonzero(on_idler & ~following)      # the wrap's last point
+    if len(arrive) != 1 or len(leave) != 1:
+        raise ValueError("the idler does not wrap the loop once (it is inside the hull)")
+    i, j = int(arrive[0]), int(leave[0])
+    n = len(path)
+    first = path[i] - path[(i + 1) % n]
+    second = path[(j + 1) % n] - path[j]
+    e1, e2 = first / np.linalg.norm(first), second / np.linalg.norm(second)
+    return (float(e1[0]), float(e1[1])), (float(e2[0]), float(e2[1]))
+
+
 def compute_layout(p: ModelParams) -> Layout:
     """Lay the pins on a closed loop around sprocket, rollers, idler and road wheels,
     moving the idler along its slide until the last chord closes the loop exactly."""
