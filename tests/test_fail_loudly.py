@@ -81,8 +81,7 @@ def test_w3_push_beyond_what_the_tensioner_holds_stops_with_the_reason(tmp_path,
     below vacuum, writes no result and leaves no MuJoCo log in the working directory."""
     monkeypatch.chdir(tmp_path)
     path = _scenario_file(tmp_path, "W3", lambda s: s.replace(
-        "start_s = 6.0\nend_s = 8.0", "start_s = 2.0\nend_s = 4.0").replace(
-        "hitch_N = -3197.0", "hitch_N = -30000.0"))
+        "start_s = 6.0\nend_s = 8.0", "start_s = 2.0\nend_s = 4.0\nhitch_N = -30000.0"))
     out = tmp_path / "out"
     assert main(["run", path, "--duration", "20.5", "--out", str(out)]) == 3
     err = capsys.readouterr().err

@@ -11,6 +11,8 @@ import pytest
 from trackmj.scenarios import load
 from trackmj.scenarios.load import builtin_names, load_scenario, scenario_path
 from trackmj.scenarios.schema import NOMINAL
+from trackmj.sim.setup import prepare
+from trackmj.sim.w3_hitch import calibrated_setup
 from trackmj.track.terrain import band_rms_m
 from trackmj.validator import ParameterError, parse_overrides
 
@@ -88,12 +90,14 @@ def test_zero_transition_drop_is_a_step_for_the_plugin() -> None:
 
 
 def test_w3_load_pulses() -> None:
-    s = load_scenario("W3")
+    """The pulses' targets are the study's at LF1352's 15 kN; their hitch forces, calibrated
+    for the machine (LF1352's committed), enter along the 30° chain."""
+    s = calibrated_setup(prepare("W3")).scenario
     t = np.array([5.9, 6.05, 7.9, 8.05, 12.0, 18.5, 20.5])
     assert [(p.start_s, p.end_s, p.delta_N) for p in s.load_pulses] == [
         (6.0, 8.0, 2e3), (18.0, 20.0, -1.5e3)]
     pull, down = s.hitch_force_N(t)
-    push, tow = s.load_pulses[0].hitch_N, s.load_pulses[1].hitch_N
+    push, tow = s.pulse_hitch_N(0), s.pulse_hitch_N(1)
     assert push < 0.0 < tow            # braking pulse pushes, drive pulse tows
     cos30, sin30 = np.cos(np.radians(30.0)), 0.5
     np.testing.assert_allclose(pull, [0, push * cos30 / 2, push * cos30, push * cos30 / 2, 0,
@@ -101,6 +105,16 @@ def test_w3_load_pulses() -> None:
     np.testing.assert_allclose(down, pull * sin30 / cos30)
     assert s.track_speed_m_s(0.5) == pytest.approx(0.75) and s.track_speed_m_s(9.0) == 1.5
     assert s.metric_windows().disturbances == ((6.0, 8.0), (18.0, 20.0))
+    with pytest.raises(RuntimeError, match="load pulse 0 has no hitch_N"):
+        load_scenario("W3").hitch_force_N(t)      # not calibrated for a machine yet
+
+
+def test_w3_targets_scale_with_the_machines_nominal_tension() -> None:
+    """+2/15 and -1.5/15 of the nominal tension: m113's 20 kN gives +2.67 / -2.0 kN, and the
+    reference is its nominal."""
+    s = load_scenario("W3", nominal_tension_N=20e3)
+    np.testing.assert_allclose([p.delta_N for p in s.load_pulses], [20e3 * 2 / 15, -2e3])
+    assert s.reference_N(0.0) == 20e3
     assert load_scenario("W1").hitch_force_N(7.0) == (0.0, 0.0)
 
 
@@ -257,7 +271,7 @@ MALFORMED = [
      r"0\.05 s"),
     ("W3", "start_s = 18.0\nend_s = 20.0", "start_s = 38.0\nend_s = 40.0",
      r"\[\[load_pulses\]\]\[1\]\.start_s = 38\.0 is at or after the end of the run"),
-    ("W3", "hitch_N = -3197.0", "hitch_N = -3.5e4",
+    ("W3", "pull_angle_deg = 30.0", "hitch_N = -3.5e4\npull_angle_deg = 30.0",
      r"\[\[load_pulses\]\]\[0\]\.hitch_N = -35000\.0 is outside the allowed range "
      r"\[-30000, 30000\] N"),
     ("W1", "[scenario]", "load_pulses = 5\n[scenario]",
@@ -342,12 +356,18 @@ def test_relative_values_scale_with_the_machine_and_limits_default_to_its_band()
     assert (lf.limits.force_min_N, lf.limits.force_max_N) == (10e3, 20e3)
 
 
-def test_w3_applies_to_lf1352_only_with_the_reason() -> None:
-    s = load_scenario("W3")
-    s.check_machine("lf1352")
-    with pytest.raises(ParameterError, match=r"^W3\.toml: scenario W3 applies to lf1352 only, "
-                       r"not m113: its hitch forces are calibrated on the LF1352 track"):
-        s.check_machine("m113")
+def test_w3_applies_to_every_machine_and_a_restriction_names_its_reason(tmp_path) -> None:
+    """W3's targets are relative and its hitch forces calibrated per machine, so it has no
+    [scenario].machines; a file that restricts itself is refused on another machine with its
+    reason."""
+    for machine in ("lf1352", "m113", "compact3"):
+        load_scenario("W3").check_machine(machine)
+    only = load_scenario(_bad(tmp_path, 'estimator = "ekf"', 'estimator = "ekf"\nmachines = '
+                              '["lf1352"]\nmachines_reason = "measured there"', "W3"))
+    only.check_machine("lf1352")
+    with pytest.raises(ParameterError, match=r"^bad\.toml: scenario W3 applies to lf1352 only, "
+                       r"not m113: measured there$"):
+        only.check_machine("m113")
 
 
 def test_custom_file_with_every_table_loads(tmp_path) -> None:

@@ -1,39 +1,160 @@
-"""W3's physical load pulses: the calibrated rear-hitch loads change the hold-mode idler
-load by the scenario's targets (+2 kN braking, -1.5 kN drive), measured on the tp plant."""
+"""W3's physical load pulses on each shipped machine: the hitch forces calibrated for the
+machine change its hold-mode idler load by the scenario's targets (+2/15 and -1.5/15 of its
+nominal tension), measured on the tp plant; a target no hitch force within the drawbar
+capacity reaches is refused; the committed calibration belongs to the shipped files; and in
+closed loop the tension recovers after each pulse edge."""
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
-from trackmj.scenarios.load import load_scenario
-from trackmj.study.w3_hitch import calibration_pulse, idler_force_history, load_change_N
+from trackmj.io import cache_dir
+from trackmj.machines.assembly import names
+from trackmj.sim.run import simulate
+from trackmj.sim.setup import RunSetup, prepare
+from trackmj.sim.w3_hitch import (
+    Rig,
+    calibrated_setup,
+    calibration_pulse,
+    committed_entries,
+    drawbar_capacity_N,
+    idler_force_history,
+    input_hashes,
+    load_change_N,
+    side_weight_N,
+)
+from trackmj.validator import ParameterError
+
+DRIVE_PULSE_GIVEN = {"scenario.load_pulses.1.hitch_N": 0.0}
+"""compact3's drive pulse is refused (see below); W3 there with the braking pulse alone."""
 
 
-@pytest.fixture(scope="module")
-def w3():
-    scenario = load_scenario("W3")
-    angle, rise = scenario.load_pulses[0].pull_angle_deg, scenario.load_pulses[0].rise_s
-    reference = idler_force_history(scenario, calibration_pulse(0.0, angle, rise, 2.0))
-    return scenario, reference
+def _calibrated(machine: str = "lf1352", overrides: dict | None = None) -> RunSetup:
+    """W3 prepared on ``machine`` with its hitch forces calibrated (as a run does)."""
+    return calibrated_setup(prepare("W3", machine=machine, overrides=overrides))
 
 
-@pytest.mark.parametrize("index", [0, 1])
-def test_calibrated_hitch_pulse_gives_target_idler_load_change(w3, index: int) -> None:
-    scenario, reference = w3
-    pulse = scenario.load_pulses[index]
-    change = load_change_N(scenario, pulse.hitch_N, pulse.pull_angle_deg, plateau_s=2.0,
-                           rise_s=pulse.rise_s, reference=reference)
+def _change_of_calibrated_pulse(setup: RunSetup, index: int) -> float:
+    """The hold-mode idler-load change [N] of pulse ``index`` with its calibrated force."""
+    sc, rig = setup.scenario, Rig(setup)
+    pulse = sc.load_pulses[index]
+    reference = idler_force_history(
+        sc, calibration_pulse(0.0, pulse.pull_angle_deg, pulse.rise_s), rig)
+    return load_change_N(sc, rig, sc.pulse_hitch_N(index), pulse.pull_angle_deg,
+                         rise_s=pulse.rise_s, reference=reference)
+
+
+@pytest.mark.parametrize(("machine", "index"), [("lf1352", 0), ("lf1352", 1), ("m113", 0),
+                                                ("m113", 1), ("compact3", 0)])
+def test_calibrated_hitch_pulse_gives_target_idler_load_change(machine: str,
+                                                               index: int) -> None:
+    """Each committed force, applied in a fresh hold-mode run against a pulse-free one,
+    changes the idler load by +2/15 (braking) or -1.5/15 (drive) of the nominal."""
+    setup = _calibrated(machine, DRIVE_PULSE_GIVEN if machine == "compact3" else None)
+    assert setup.scenario.hitch_calibration is not None
+    assert setup.scenario.hitch_calibration.origin == "committed"
+    target = setup.scenario.load_pulses[index].delta_N
+    assert target == pytest.approx(setup.model.nominal_tension_N * (2.0 if index == 0
+                                                                    else -1.5) / 15.0)
     # the calibration hit the target within 2 %; 10 % leaves room for model-level drift
     # while still catching a broken path (sign, hitch geometry, force application)
-    assert change == pytest.approx(pulse.delta_N, rel=0.10)
+    assert _change_of_calibrated_pulse(setup, index) == pytest.approx(target, rel=0.10)
+
+
+def test_front_sprocket_tows_for_the_rise_the_rear_sprocket_pushes_for() -> None:
+    """On the front-sprocket m113 a drive (tow) tightens the top strand over the idler, so
+    the braking pulse's +2/15 rise takes a tow there and a push on the rear-sprocket
+    LF1352 and compact3."""
+    assert _calibrated("m113").scenario.pulse_hitch_N(0) > 0.0
+    assert _calibrated().scenario.pulse_hitch_N(0) < 0.0
+    assert _calibrated("compact3", DRIVE_PULSE_GIVEN).scenario.pulse_hitch_N(0) < 0.0
+
+
+def test_compact3_drive_pulse_is_refused_naming_the_drawbar_capacity() -> None:
+    """compact3's rollers are bolted to its frame (no suspension), so a tow does not shorten
+    the track path as on LF1352: even at the drawbar capacity mu W along the 30° chain the
+    hold-mode idler load does not fall by 1.3 kN, and W3 is refused with that reason."""
+    with pytest.raises(ParameterError, match=r"W3 load pulse 1 \(-1\.300 kN\) on machine "
+                       r"compact3 \(drawbar capacity mu W = 0\.8 x 14\.77 kN"):
+        _calibrated("compact3")
+    setup = _calibrated("compact3", DRIVE_PULSE_GIVEN)
+    rig = Rig(setup)
+    weight = side_weight_N(rig)
+    assert weight == pytest.approx(1500.0 * 9.81, rel=0.01)   # the 3 t class, one side
+    tow = drawbar_capacity_N(rig.params, weight) / math.cos(math.radians(30.0))
+    assert load_change_N(setup.scenario, rig, tow, 30.0) > -1.3e3
+
+
+@pytest.mark.parametrize("machine", names())
+def test_committed_calibration_is_for_the_shipped_files(machine: str) -> None:
+    """The committed entry holds the hashes of the machine's own validated mechanics and
+    hydraulics and of each W3 pulse: an edit of either makes it stale (refresh with
+    experiments/calibrate_w3.py)."""
+    own = prepare("W3", machine=machine)        # its own files, nothing calibrated yet
+    hashes = input_hashes(own.scenario, Rig(own))
+    entry = committed_entries()[machine]
+    assert (entry.mechanics_sha256, entry.hydraulics_sha256) == (hashes.mechanics,
+                                                                 hashes.hydraulics)
+    assert all(entry.lookup(hashes, i) is not None for i in (0, 1))
+
+
+def test_overridden_machine_is_calibrated_on_first_use_and_cached(capsys) -> None:
+    """A --set model.* override (here a visual-only key) makes LF1352's committed entry
+    not apply: the forces are calibrated again (stderr says why), land within 2 % of the
+    target and are cached in the user cache directory for the next process."""
+    setup = _calibrated(overrides={"model.chassis.length_m": 3.0})
+    err = capsys.readouterr().err
+    assert "W3 on machine lf1352: the committed one (W3_calibration.toml [machine.lf1352]) " \
+           "is stale or for other inputs (mechanics differ" in err
+    cal = setup.scenario.hitch_calibration
+    assert cal is not None and cal.origin == "calibrated"
+    assert list(cache_dir().glob("lf1352-*-w3-hitch.json"))
+    # the calibration's own tolerance: the re-run repeats its deterministic hold-mode run
+    assert _change_of_calibrated_pulse(setup, 0) == pytest.approx(2e3, rel=0.02)
 
 
 @pytest.mark.slow
-def test_pushing_raises_and_towing_lowers_the_idler_load(w3) -> None:
-    """Physics of the two paths at equal magnitude: a push (brake torque, tight top strand)
-    moves the idler load more than a tow (drive torque, tight ground strand)."""
-    scenario, reference = w3
-    push = load_change_N(scenario, -3e3, 30.0, reference=reference)
-    tow = load_change_N(scenario, 3e3, 30.0, reference=reference)
+def test_pushing_raises_and_towing_lowers_the_idler_load_on_lf1352() -> None:
+    """Physics of the two paths at equal magnitude on the rear-sprocket LF1352: a push (brake
+    torque, tight top strand) moves the idler load more than a tow (drive torque, tight
+    ground strand)."""
+    setup = _calibrated()
+    rig = Rig(setup)
+    reference = idler_force_history(setup.scenario, calibration_pulse(0.0, 30.0, 0.1), rig)
+    push = load_change_N(setup.scenario, rig, -3e3, 30.0, reference=reference)
+    tow = load_change_N(setup.scenario, rig, 3e3, 30.0, reference=reference)
     assert push > 0.0 > tow
     assert abs(push) > abs(tow)
+
+
+RECOVERY_NOT_MET = {
+    "m113": ("issue 32's floor, not met (edges 6/8/18/20 s: 1.32/1.01/never/3.23 s, the "
+             "0.5 s mean up to 27.2 kN against F_max = 26.7 kN): with the sprocket at the "
+             "front, braking leaves the idler on the slack side, so the -10 % drive pulse "
+             "needs a 14.9 kN push, 28 % of the side's weight, whose release rings the "
+             "sprocket servo by +-3.8 kN·m"),
+    "compact3": ("issue 32's floor, not met: its oil column takes only 16 % of an idler "
+                 "load step in hold, so the +13 % braking pulse needs a 5.2 kN push, 35 % of "
+                 "the side's weight; the release it asks for pulls the carrier in faster "
+                 "than the rod feed fills, and the run leaves physics at 6.77 s (rod node "
+                 "-0.104 MPa gauge)"),
+}
+"""Machines on which W3's recovery floor is not met yet (strict xfails: they report when
+met)."""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("machine", "overrides"), [
+    pytest.param("m113", None, marks=pytest.mark.xfail(reason=RECOVERY_NOT_MET["m113"],
+                                                        strict=True)),
+    pytest.param("compact3", DRIVE_PULSE_GIVEN,
+                 marks=pytest.mark.xfail(reason=RECOVERY_NOT_MET["compact3"], strict=True))])
+def test_w3_recovers_within_one_second_after_each_edge(machine: str, overrides) -> None:
+    """W3 in closed loop (tp, nmpc, seed 0, 30 s): after each pulse edge the 0.5 s mean of
+    F_ten is back within ±5 % of the reference within 1.0 s (acceptance metrics)."""
+    result = simulate("W3", machine=machine, seed=0, set=overrides)
+    recovery = result.metrics["acceptance"]["edge_recovery_s"]
+    assert set(recovery) == {"6", "8", "18", "20"}
+    assert all(r <= 1.0 for r in recovery.values()), recovery

@@ -53,6 +53,20 @@ def _edge(t: np.ndarray, t0: float, rise_s: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class HitchCalibration:
+    """Hitch forces calibrated for one machine (:mod:`trackmj.sim.w3_hitch`): the
+    machine's name, per load pulse the hitch force [N] (None for a pulse whose file gives
+    hitch_N), where the forces came from ("committed": ``experiments/W3_calibration.toml``;
+    "cache": the user's cache directory; "calibrated": measured in this process) and the
+    hash of the inputs that determine them."""
+
+    machine: str
+    hitch_N: tuple[float | None, ...]
+    origin: str
+    inputs_sha256: str
+
+
+@dataclass(frozen=True)
 class Scenario:
     """One operating condition (the file layout: :mod:`trackmj.scenarios.schema`); built by
     :func:`~trackmj.scenarios.load.load_scenario`, checked again on construction
@@ -79,6 +93,10 @@ class Scenario:
     nominal_tension_N: float | None = None
     """The nominal tension the relative values were resolved with [N] (None: all absolute)."""
     hitch: Hitch | None = None
+    hitch_calibration: HitchCalibration | None = None
+    """The hitch forces of the pulses that give none, calibrated for the run's machine
+    (set by :func:`trackmj.sim.w3_hitch.calibrated_setup`, which a run calls; None
+    before)."""
     signals: Mapping[str, InputSignal] = dataclasses.field(init=False, compare=False,
                                                            repr=False)
     """The from_file inputs ("reference", "supply", "track", "hitch"), read on construction."""
@@ -89,6 +107,21 @@ class Scenario:
             "reference": self.reference, "supply": self.supply, "track": self.track,
             "hitch": self.hitch}))
         self.check_inputs(self.duration_s)
+
+    def pulse_hitch_N(self, index: int) -> float:
+        """Hitch force [N] of load pulse ``index``: the file's hitch_N, else the one
+        calibrated for the machine; RuntimeError if neither (the scenario did not pass
+        through :func:`trackmj.sim.w3_hitch.calibrated_setup`, which calibrates them)."""
+        given = self.load_pulses[index].hitch_N
+        if given is not None:
+            return given
+        cal = self.hitch_calibration
+        calibrated = cal.hitch_N[index] if cal is not None and index < len(cal.hitch_N) else None
+        if calibrated is not None:
+            return calibrated
+        raise RuntimeError(f"{self.name}: load pulse {index} has no hitch_N and no hitch "
+                           "force calibrated for a machine (trackmj.sim.w3_hitch."
+                           "calibrated_setup calibrates it)")
 
     def _check_tables(self) -> None:
         """The file's checks on the tables as held (ParameterError naming the scenario)."""
@@ -197,9 +230,11 @@ class Scenario:
 
     def hitch_force_N(self, t_s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Rear-hitch load (pull rearward [N], push down [N]) in the chassis frame that
-        applies the load pulses; each of shape of t_s."""
-        pull = self._pulses(t_s, lambda p: p.hitch_N * math.cos(math.radians(p.pull_angle_deg)))
-        down = self._pulses(t_s, lambda p: p.hitch_N * math.sin(math.radians(p.pull_angle_deg)))
+        applies the load pulses (:meth:`pulse_hitch_N`); each of shape of t_s."""
+        pull = self._pulses(t_s, lambda i, p: self.pulse_hitch_N(i)
+                            * math.cos(math.radians(p.pull_angle_deg)))
+        down = self._pulses(t_s, lambda i, p: self.pulse_hitch_N(i)
+                            * math.sin(math.radians(p.pull_angle_deg)))
         if "hitch" in self.signals:
             load = self.signals["hitch"](t_s)
             angle = math.radians(present(self.hitch, "hitch").pull_angle_deg)
@@ -207,11 +242,12 @@ class Scenario:
         return pull, down
 
     def _pulses(self, t_s: np.ndarray | float,
-                amplitude: Callable[[LoadPulse], float]) -> np.ndarray:
+                amplitude: Callable[[int, LoadPulse], float]) -> np.ndarray:
         t = np.asarray(t_s, dtype=float)
         f = np.zeros(t.shape)
-        for p in self.load_pulses:
-            f = f + amplitude(p) * (_edge(t, p.start_s, p.rise_s) - _edge(t, p.end_s, p.rise_s))
+        for i, p in enumerate(self.load_pulses):
+            f = f + amplitude(i, p) * (_edge(t, p.start_s, p.rise_s)
+                                       - _edge(t, p.end_s, p.rise_s))
         return f
 
     def terrain_profile(self, seed: int, duration_s: float | None = None) -> RoadProfile | None:

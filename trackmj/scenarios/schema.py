@@ -22,7 +22,8 @@ them)::
     [terrain]     kind; for kind = "iso8608" also road_class, n_min_cycles_m, n_max_cycles_m,
                   dx_m, x_start_m, flat_until_m, taper_m, margin_m (for "flat" they are
                   optional and unused, so ``--set scenario.terrain.kind=flat`` works on W2)
-    [[load_pulses]] start_s, end_s, delta_N | delta_rel, hitch_N, pull_angle_deg, rise_s
+    [[load_pulses]] start_s, end_s, delta_N | delta_rel, pull_angle_deg, rise_s,
+                  hitch_N (optional: calibrated for the machine)
     [[variants]]  name, bulk_modulus_scale, friction_scale, contact_stiffness_scale,
                   pretension_scale (each scale optional, default 1: a variant names only
                   what it changes; if variants are listed one must be "nominal")
@@ -62,6 +63,8 @@ NAME_PATTERN = r"[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 """Scenario and variant names: they become parts of run directory names."""
 REFERENCE_MAX_N = 50e3
 """F_ref must stay within [0, REFERENCE_MAX_N] over the run [N]."""
+HITCH_LIMIT_N = 30e3
+"""A load pulse's hitch force stays within ±HITCH_LIMIT_N [N]."""
 
 _T = TypeVar("_T")
 
@@ -326,14 +329,19 @@ class LoadPulse(Parameters):
     physically as a force hitch_N [N] on the rear hitch along a line pull_angle_deg [deg]
     below the horizontal, rearward (> 0: a towed load, the sprocket drives harder and the
     rear is loaded; < 0: a pushing load, the sprocket brakes and the rear is unloaded; see
-    :meth:`~trackmj.track.plant.TrackPlant.set_hitch_force`). delta_N [N] is the change of the
-    hold-mode idler load the pulse is calibrated to (``experiments/calibrate_w3.py``)."""
+    :meth:`~trackmj.track.plant.TrackPlant.set_hitch_force`). delta_N [N] (or delta_rel x
+    the nominal tension) is the change of the hold-mode idler load the pulse is calibrated
+    to. Without hitch_N the hitch force is calibrated for the run's machine
+    (:mod:`trackmj.sim.w3_hitch`: committed for the shipped machines, cached for others);
+    a hitch_N given is applied as it is, on any machine."""
 
     start_s: float = param(0.0, None, doc="start of the rising edge")
     end_s: float = param(0.0, None, doc="start of the falling edge")
-    hitch_N: float = param(-30e3, 30e3, doc="hitch force (> 0 tow, < 0 push)")
     pull_angle_deg: float = param(0.0, 60.0, doc="line of the hitch force below horizontal")
     rise_s: float = param(0.0, 1.0, doc="duration of each linear edge")
+    hitch_N: float | None = param(-HITCH_LIMIT_N, HITCH_LIMIT_N, default=None,
+                                  doc="hitch force (> 0 tow, < 0 push); optional: "
+                                  "calibrated for the machine to the target delta")
     delta_N: float | None = param(-20e3, 20e3, default=None,
                                   doc="target change of the hold-mode idler load (absolute)")
     delta_rel: float | None = param(-1.0, 1.0, default=None, unit="1",

@@ -9,5 +9,7 @@ blocks and stepped by the one loop.
 * :mod:`.loop`: the one closed loop, controller -> valves -> plant -> sensors -> estimator
   -> observers; :mod:`.observers`: the recorder, the physics guard, progress;
 * :mod:`.run`: :func:`~trackmj.sim.run.simulate`; :mod:`.reduced`: the loop on the
-  controller's own model; :mod:`.drive`: the bare track with its passive tensioner.
+  controller's own model; :mod:`.drive`: the bare track with its passive tensioner;
+* :mod:`.w3_hitch`: W3's hitch loads calibrated per machine against the idler load (hold-mode
+  runs a W3 run needs before it starts; committed for the shipped machines, else cached).
 """

@@ -21,7 +21,7 @@ runs without its own delay so the delay is not counted twice (dp-b has no soleno
 
 W3's load pulses enter physically: a load on the rear hitch (a towed or pushing load along a
 chain below the horizontal) while the sprocket servo holds the track speed, so the track
-sees sprocket drive/brake torque pulses and a pitch load (:mod:`trackmj.study.w3_hitch`);
+sees sprocket drive/brake torque pulses and a pitch load (:mod:`trackmj.sim.w3_hitch`);
 dp-a sees them through the replayed tp track load.
 """
 

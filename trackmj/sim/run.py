@@ -54,6 +54,7 @@ from trackmj.sim.observers import (
 )
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 from trackmj.sim.setup import Overrides, RunSetup, prepare
+from trackmj.sim.w3_hitch import calibrated_setup
 from trackmj.validator import ParameterError
 
 if TYPE_CHECKING:
@@ -66,7 +67,7 @@ FRAME_EVERY_STEPS = 20
 
 def schedule(setup: RunSetup, horizon_steps: int, period_s: float) -> Schedule:
     """The scenario's per-step inputs and per-period reference previews for ``setup``."""
-    sc, h, steps = setup.scenario, COUPLING_STEP_S, setup.steps
+    sc, h, steps = calibrated_setup(setup).scenario, COUPLING_STEP_S, setup.steps
     scale = setup.variant.pretension_scale
     t_end = h * np.arange(1, steps + 1)        # end of each step
     t_start = t_end - h
@@ -195,6 +196,7 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
     """Run a prepared setup (see :func:`simulate` for the arguments and the result;
     ``measured``: a log from :func:`measured_log`)."""
     _check_channels(channels)
+    setup = calibrated_setup(setup)
     if ARCHITECTURES[setup.architecture].replays_tp and tp_result is None:
         tp_result = run(dataclasses.replace(setup, architecture=REFERENCE_ARCHITECTURE))
     with capture_mujoco_warnings() as warnings:

@@ -6,6 +6,5 @@
 * :mod:`.compare`, :mod:`.report`, :mod:`.sweep`: ``trackmj compare``, ``report``, ``sweep``
   (the report's parts in ``report_*`` and the study's figures in :mod:`.study_numbers`);
 * :mod:`.calibrate`: ``trackmj calibrate``, parameter keys fitted to measured logs (its
-  spec file in :mod:`.calibrate_spec`);
-* :mod:`.w3_hitch`: W3's hitch load calibrated against the idler load.
+  spec file in :mod:`.calibrate_spec`).
 """
