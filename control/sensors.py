@@ -13,7 +13,7 @@ from trackmj.control.params import SensorParams
 
 class Sensors:
     """Measurement model z = quantise(H X + bias + noise), H = [I3 0] on X = [p_h, p_r, y, v],
-    and the drive torque T + noise (a fourth entry of the true values; NaN stays NaN).
+    and, when given, the drive torque T + noise (NaN stays NaN).
 
     Noise is Gaussian with the standard deviations of ``params`` drawn from a seeded
     ``numpy.random.Generator``; quantisation (step > 0) rounds to the nearest multiple.
@@ -55,10 +55,11 @@ class Sensors:
         """Sample period [s]."""
         return self.p.sample_period_s
 
-    def measure(self, x: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:
-        """Noisy sample z of the true values x: (3,) from p_head, p_rod, y; (4,) when x has a
-        fourth entry, the drive torque. Python scalars per channel (cheaper than small-array
-        numpy at 1 kHz)."""
+    def measure(self, x: Sequence[float] | NDArray[np.float64],
+                drive_torque_N_m: float | None = None) -> NDArray[np.float64]:
+        """Noisy sample z of the true values: (3,) from x's first three entries (p_head,
+        p_rod, y), (4,) with the drive torque [N·m] when it is given. Python scalars per
+        channel (cheaper than small-array numpy at 1 kHz)."""
         i = self._next
         if i == len(self._noise):
             self._noise = self.rng.standard_normal((self.block, 3)).tolist()
@@ -70,8 +71,8 @@ class Sensors:
         if self._quanta:
             for i, q in self._quanta:
                 z[i] = round(z[i] / q) * q  # half to even, like np.round
-        if len(x) > 3:
-            z.append(x[3] + self._torque_std * self._next_torque_noise())
+        if drive_torque_N_m is not None:
+            z.append(drive_torque_N_m + self._torque_std * self._next_torque_noise())
         return np.array(z)
 
     def _next_torque_noise(self) -> float:

@@ -105,13 +105,15 @@ def test_torque_sensor_noise_is_its_own_stream() -> None:
     they were without it (the same seed draws the same pressure and stroke noise)."""
     cfg = packaged_control().sensors
     with_torque, without = Sensors(cfg, 7), Sensors(cfg, 7)
-    samples = np.array([with_torque.measure((1e6, 0.0, 0.05, 800.0)) for _ in range(20000)])
+    samples = np.array([with_torque.measure((1e6, 0.0, 0.05), 800.0) for _ in range(20000)])
     plain = np.array([without.measure((1e6, 0.0, 0.05)) for _ in range(20000)])
     np.testing.assert_array_equal(samples[:, :3], plain)
     # sample std of 20000 normals: relative standard error 1/sqrt(2·20000) = 0.5 %
     assert samples[:, 3].std() == pytest.approx(cfg.drive_torque_noise_std_N_m, rel=0.025)
     assert samples[:, 3].mean() == pytest.approx(800.0, abs=5 * 50.0 / math.sqrt(20000))
-    assert math.isnan(Sensors(cfg, 7).measure((1e6, 0.0, 0.05, math.nan))[3])
+    assert math.isnan(Sensors(cfg, 7).measure((1e6, 0.0, 0.05), math.nan)[3])
+    # a plant state's fourth entry (its velocity) is no torque
+    assert len(Sensors(cfg, 7).measure((1e6, 0.0, 0.05, 0.1))) == 3
 
 
 def test_estimator_explains_a_torque_step_by_the_torque() -> None:
@@ -133,7 +135,7 @@ def test_estimator_explains_a_torque_step_by_the_torque() -> None:
         applied = torque if k >= 300 else 0.0
         x = truth.step(0.0, plant.supply_pressure_Pa, y0=y0 - drive_load_N(plant, applied)
                        / plant.stiffness_N_m)
-        z = sensors.measure((*x[:3], applied))
+        z = sensors.measure(x, applied)
         if k == 1490:
             told.period_mean()                  # the last period's mean starts here
         told.step(z, 0.0, plant.supply_pressure_Pa)

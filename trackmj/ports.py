@@ -351,10 +351,11 @@ class Plant(Protocol):
 
 
 class Sensors(Protocol):
-    """Measurement z = (p_head [Pa], p_rod [Pa], stroke [m], drive torque [N·m]) of the true
-    values, noisy (NaN stays NaN: a plant without a sprocket drive)."""
+    """Measurement z = (p_head [Pa], p_rod [Pa], stroke [m]) of the true values x and, when
+    given, the drive torque [N·m], noisy (NaN stays NaN: a plant without a sprocket drive)."""
 
-    def measure(self, x: Sequence[float]) -> NDArray[np.float64]: ...
+    def measure(self, x: Sequence[float],
+                drive_torque_N_m: float | None = None) -> NDArray[np.float64]: ...
 
 
 class Estimator(Protocol):

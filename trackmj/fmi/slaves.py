@@ -259,7 +259,7 @@ class PlantSlave(_Base):
                           supply if supply > 0.0 else self._nominal_supply_Pa)
 
     def _read(self, r: Readout) -> None:
-        z = self.sensors.measure((r.p_head_Pa, r.p_rod_Pa, r.stroke_m, r.drive_torque_N_m))
+        z = self.sensors.measure((r.p_head_Pa, r.p_rod_Pa, r.stroke_m), r.drive_torque_N_m)
         (self.p_head_measured_Pa, self.p_rod_measured_Pa, self.stroke_measured_m,
          self.drive_torque_measured_N_m) = z.tolist()
         self.tension_N, self.p_head_Pa, self.p_rod_Pa = r.tension_N, r.p_head_Pa, r.p_rod_Pa

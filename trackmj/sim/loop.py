@@ -87,8 +87,8 @@ def run_loop(schedule: Schedule, *, controller: Controller, valves: ValveLogic, 
         mode = valve_step(u)
         command = _command(Command, (mode, u, solved))
         readout = plant_step(command, inputs)
-        z = measure((readout.p_head_Pa, readout.p_rod_Pa, readout.stroke_m,
-                     readout.drive_torque_N_m))
+        z = measure((readout.p_head_Pa, readout.p_rod_Pa, readout.stroke_m),
+                    readout.drive_torque_N_m)
         estimate(z, float(mode), inputs.supply_set_Pa)
         for on_step in watchers:
             on_step(k, readout, command)
