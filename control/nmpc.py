@@ -146,8 +146,10 @@ class _MpcBase:
         plan = self._plan_buffer
         finite = mpc_kernels.finish(w, lam_g, self.ocp.n_blocks, lb, plan, not overrun)
         ok = ok and finite
-        if finite:
+        if ok:
             self._w, self._lam_g = w, lam_g   # the next solve continues from this iterate
+        else:   # a failed iterate is no start: from it the truncated SQP kept failing
+            self._w = self._lam_g = None
         if finite and not overrun:
             self._plan = plan    # w[:n_blocks], each value repeated block_steps times
             self._plan_age = 0
