@@ -1,0 +1,99 @@
+"""The conditions × machines table of the README: each condition's acceptance on each machine,
+from the result folders of ``trackmj report --machine NAME`` (one per machine).
+
+Acceptance, as the scenario files state it (assumed engineering requirements, not the
+study's): the 0.5 s mean of F_ten stays in the machine's band [2/3, 4/3] × its nominal
+tension, is back within ±5 % of the reference 2 s after each disturbance edge, and no steady
+5 s window's mean error reaches 2 %. A cell gives the verdict over the condition's runs (its
+seeds, and W5's parameter variants: every run must pass), the lowest and highest 0.5 s mean
+[kN], and the low-pass tension RMSE [kN] as mean ± std over the runs; a run that failed is
+counted and its reason shortened.
+
+Run: ``python experiments/machines_table.py lf1352=runs/report m113=runs/report-m113 ...``
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from trackmj.machines.assembly import mechanics, resolve
+
+RECOVERY_S = 2.0
+"""An edge's 0.5 s mean must be back within ±5 % of the reference within this [s]."""
+STEADY_REL = 0.02
+"""No steady 5 s window's mean error may reach this share of the reference [-]."""
+ORDER = ("W1", "W2", "W3", "W4", "W5", "NL1")
+"""The built-in conditions' order in the table (others follow by name)."""
+
+
+def cell(rows: dict[str, np.ndarray], nominal_N: float) -> str:
+    """One condition on one machine: verdict, 0.5 s mean range [kN], low-pass RMSE [kN]."""
+    error = rows["error"]
+    failed = [str(e) for e in error if isinstance(e, str) and e]
+    ok = np.array([not (isinstance(e, str) and e) for e in error])
+    if not ok.any():
+        return f"**fails**: {len(failed)} of {len(error)} runs failed ({failed[0][:80]}...)"
+    low, high = 2.0 * nominal_N / 3.0, 4.0 * nominal_N / 3.0
+    mean_min = float(np.min(rows["acceptance.mean_min_N"][ok]))
+    mean_max = float(np.max(rows["acceptance.mean_max_N"][ok]))
+    reasons = []
+    if mean_min < low or mean_max > high:
+        reasons.append("band")
+    # the condition's edges: the edge columns some run of it filled (the table holds every
+    # condition's); recovery_max_s is NaN where an edge's mean never came back
+    has_edges = any(np.isfinite(rows[name][ok]).any() for name in rows
+                    if name.startswith("acceptance.edge_recovery_s."))
+    recovery = rows["acceptance.recovery_max_s"][ok]
+    if has_edges and not (np.isfinite(recovery).all() and recovery.max() <= RECOVERY_S):
+        reasons.append("recovery")
+    if float(np.max(rows["acceptance.steady_offset_max_rel"][ok])) >= STEADY_REL:
+        reasons.append("steady offset")
+    if failed:
+        reasons.append(f"{len(failed)} of {len(error)} runs failed: {failed[0][:60]}...")
+    rmse = rows["rmse_lp_N"][ok] / 1e3
+    verdict = "holds" if not reasons else "**fails** (" + "; ".join(reasons) + ")"
+    return (f"{verdict}; {mean_min / 1e3:.1f}–{mean_max / 1e3:.1f} kN; "
+            f"RMSE {rmse.mean():.2f} ± {rmse.std(ddof=1) if len(rmse) > 1 else 0.0:.2f} kN")
+
+
+def table(folders: dict[str, Path]) -> str:
+    """Markdown table, conditions down, machines across."""
+    cells: dict[str, dict[str, str]] = {}
+    for name, folder in folders.items():
+        nominal = mechanics(resolve(name)).nominal_tension_N
+        data = pq.read_table(folder / "results.parquet").to_pydict()
+        columns = {k: np.asarray(v, dtype=object if k == "error" else float)
+                   for k, v in data.items()
+                   if k == "error" or k == "rmse_lp_N" or k.startswith("acceptance.")}
+        scenario = np.array(data["scenario"])
+        for condition in sorted(set(scenario), key=lambda c: (c not in ORDER,
+                                                                ORDER.index(c) if c in ORDER
+                                                                else 0, c)):
+            keep = scenario == condition
+            rows = {k: v[keep] for k, v in columns.items()}
+            if "error" not in rows:
+                rows["error"] = np.full(int(keep.sum()), None, dtype=object)
+            cells.setdefault(condition, {})[name] = cell(rows, nominal)
+    names = list(folders)
+    lines = ["| condition | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
+    for condition, by_machine in cells.items():
+        lines.append(f"| {condition} | "
+                     + " | ".join(by_machine.get(n, "not run") for n in names) + " |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str]) -> int:
+    if not argv or any("=" not in a for a in argv):
+        print(__doc__.strip().splitlines()[-1], file=sys.stderr)
+        return 2
+    folders = {a.split("=", 1)[0]: Path(a.split("=", 1)[1]) for a in argv}
+    print(table(folders))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
