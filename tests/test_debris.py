@@ -409,7 +409,7 @@ class _Still:
     def period_mean(self):
         return np.zeros(4)
 
-    def measure(self, x):
+    def measure(self, x, drive_torque_N_m=None):
         return np.asarray(x, dtype=float)
 
 
