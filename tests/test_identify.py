@@ -8,6 +8,9 @@ import numpy as np
 import pytest
 
 from trackmj.machines.identify import (
+    MAX_DAMPING_N_S_M,
+    IdentificationError,
+    check_single_dof,
     fit_modal,
     fit_single_dof,
     frequency_response,
@@ -79,3 +82,23 @@ def test_identified_idler_of_the_track() -> None:
     assert idler.damping_N_s_m > 0.0
     frequencies = sorted(t.frequency_Hz for t in idler.modes if t.frequency_Hz > 0.0)
     assert 5.0 < frequencies[0] < 12.0 and 15.0 < frequencies[1] < 40.0
+
+
+def test_a_response_no_mass_spring_damper_fits_is_refused() -> None:
+    """A single mode k, M, c is fitted back from its own response (1-50 Hz) and passes the
+    check; a carrier held by a damper ten times stiffer than the fit's bound
+    (1/(k + i·1e9·ω)) drives c onto the bound and is refused with the numbers."""
+    freq = np.linspace(1.0, 50.0, 99)
+    omega = 2.0 * np.pi * freq
+    k, m, c = 4.4e6, 100.0, 1.6e4
+    mode = 1.0 / (k - m * omega ** 2 + 1j * c * omega)
+    mass, damping = fit_single_dof(freq, mode, k)
+    assert mass == pytest.approx(m, rel=1e-4) and damping == pytest.approx(c, rel=1e-4)
+    check_single_dof(mass, damping, r2(1.0 / (k - mass * omega ** 2 + 1j * damping * omega),
+                                       mode), (1.0, 50.0))
+    held = 1.0 / (k + 1j * 1e9 * omega)
+    mass, damping = fit_single_dof(freq, held, k)
+    assert damping == pytest.approx(MAX_DAMPING_N_S_M)
+    fitted = 1.0 / (k - mass * omega ** 2 + 1j * damping * omega)
+    with pytest.raises(IdentificationError, match=r"no mass-spring-damper.*c = 1e\+08"):
+        check_single_dof(mass, damping, r2(fitted, held), (1.0, 50.0))

@@ -46,6 +46,7 @@ from trackmj.machines.track_plant import load_plant
 from trackmj.ports import COUPLING_STEP_S
 from trackmj.track.mechanics import load_model_params, models_dir
 from trackmj.track.plant import TrackPlant
+from trackmj.validator import ParameterError
 
 
 def multisine(duration_s: float, band_Hz: tuple[float, float], amplitude_N: float,
@@ -80,6 +81,10 @@ def r2(model: np.ndarray, measured: np.ndarray) -> float:
     return float(1.0 - np.sum(np.abs(model - measured) ** 2) / spread)
 
 
+class IdentificationError(ParameterError):
+    """An identification that cannot stand for the track (a clear one-line refusal)."""
+
+
 def fit_single_dof(freq_Hz: np.ndarray, compliance: np.ndarray,
                    stiffness_N_m: float, min_mass_kg: float = 1e-3) -> tuple[float, float]:
     """(M [kg], c [N·s/m]) of 1/(k − Mω² + icω) fitted to ``compliance`` with k given
@@ -98,7 +103,7 @@ def fit_single_dof(freq_Hz: np.ndarray, compliance: np.ndarray,
         for f0 in (10.0, 20.0, 30.0, 45.0):
             mass = max(stiffness_N_m / (2.0 * math.pi * f0) ** 2, low_kg)
             trial = least_squares(residual, x0=[mass, 0.4 * math.sqrt(stiffness_N_m * mass)],
-                                  bounds=([low_kg, 0.0], [1e5, 1e8]))
+                                  bounds=([low_kg, 0.0], [MAX_MASS_KG, MAX_DAMPING_N_S_M]))
             if best is None or trial.cost < best.cost:
                 best = trial
         return best.x
@@ -107,6 +112,27 @@ def fit_single_dof(freq_Hz: np.ndarray, compliance: np.ndarray,
     if x[0] < min_mass_kg:
         x = fit(min_mass_kg)
     return float(x[0]), float(x[1])
+
+
+MAX_MASS_KG, MAX_DAMPING_N_S_M = 1e5, 1e8
+"""Upper bounds of the single-mode fit's M and c: a fit that ends on one explains nothing."""
+
+
+def check_single_dof(mass_kg: float, damping_N_s_m: float, fit_r2: float,
+                     band_Hz: tuple[float, float]) -> None:
+    """IdentificationError unless the single-mode fit (M [kg], c [N·s/m], its R² [-]) is
+    one: off its bounds and better than the response's mean (R² > 0). A layout whose idler
+    is no mass-spring-damper over the band is refused here, with the numbers, instead of as
+    an out-of-range parameter of the controller's model later."""
+    at_bound = mass_kg >= (1.0 - 1e-9) * MAX_MASS_KG or (
+        damping_N_s_m >= (1.0 - 1e-9) * MAX_DAMPING_N_S_M)
+    if at_bound or not fit_r2 > 0.0:
+        raise IdentificationError(
+            f"the idler's stroke response over {band_Hz[0]:g}-{band_Hz[1]:g} Hz is no "
+            f"mass-spring-damper: the single-mode fit gives M = {mass_kg:.4g} kg, "
+            f"c = {damping_N_s_m:.4g} N·s/m (bounds {MAX_MASS_KG:g} kg, "
+            f"{MAX_DAMPING_N_S_M:g} N·s/m), R² = {fit_r2:.2f}; the controllers' reduced "
+            "model cannot be built on it (look at the layout's idler wrap and slide)")
 
 
 def fit_modal(freq_Hz: np.ndarray, compliance: np.ndarray) -> tuple[ModalTerm, ...]:
@@ -153,7 +179,8 @@ def identify_idler(make_plant: Callable[[], TrackPlant], force_low_N: float = 12
                    excitation_s: float = 8.0, band_Hz: tuple[float, float] = (1.0, 50.0),
                    amplitude_N: float = 1_500.0, seed: int = 0,
                    min_mass_kg: float = 1e-3) -> EquivalentIdler:
-    """Identify the equivalent idler on a standing track (sprocket held at 0 rad/s).
+    """Identify the equivalent idler on a standing track (sprocket held at 0 rad/s);
+    IdentificationError if the single-mode fit is none (:func:`check_single_dof`).
 
     make_plant: returns a fresh ``TrackPlant`` at its home keyframe. The multisine of
     ``amplitude_N`` [N] (rms amplitude/√2) runs about the mean of the two force levels;
@@ -172,6 +199,7 @@ def identify_idler(make_plant: Callable[[], TrackPlant], force_low_N: float = 12
     mass, damping = fit_single_dof(freq, compliance, stiffness, min_mass_kg)
     omega = 2.0 * math.pi * freq
     single = 1.0 / (stiffness - mass * omega ** 2 + 1j * damping * omega)
+    check_single_dof(mass, damping, r2(single, compliance), band_Hz)
     modes = fit_modal(freq, compliance)
     return EquivalentIdler(
         stiffness_N_m=stiffness, mass_kg=mass, damping_N_s_m=damping,
