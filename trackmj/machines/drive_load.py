@@ -25,6 +25,7 @@ them to that.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 from trackmj.track.mechanics import ModelParams
@@ -35,26 +36,20 @@ from trackmj.track.mjcf.layout import compute_layout, idler_strand_directions, s
 class DriveLoad:
     """Idler load of the drive torque: ``gain_1_m`` g = G/r [N per N·m = 1/m] while the
     idler's strands are the tight side, ``tight_sign`` σ (+1 sprocket at the front, −1 at
-    the rear), ``strand_factor`` G [-] and the sprocket's pitch radius [m]."""
+    the rear). The law itself is the controllers' :func:`trackmj.control.model.drive_load_N`
+    (these two values become the reduced model's parameters)."""
 
     gain_1_m: float
     tight_sign: float
-    strand_factor: float
-    pitch_radius_m: float
-
-    def load_N(self, torque_N_m: float) -> float:
-        """Idler load [N] (> 0 pulls the carrier in) at held stroke for a sprocket torque
-        [N·m] (> 0 driving forward)."""
-        return self.gain_1_m * max(self.tight_sign * torque_N_m, 0.0)
 
 
+@functools.cache
 def drive_load(p: ModelParams) -> DriveLoad:
-    """The drive load of the machine ``p`` at its layout (see the module docstring)."""
+    """The drive load of the machine ``p`` at its layout (see the module docstring); cached
+    per parameters: laying the loop out again takes ~0.1 s, and every run asks."""
     layout = compute_layout(p)
     (e1x, e1z), (e2x, e2z) = idler_strand_directions(p, layout.idler_x_m)
     sx, sz = slide_axis(p)
     factor = -((e1x + e2x) * sx + (e1z + e2z) * sz)
-    radius = p.sprocket_pitch_radius_m
-    front = p.sprocket.x_m > p.idler.x_m
-    return DriveLoad(gain_1_m=factor / radius, tight_sign=1.0 if front else -1.0,
-                     strand_factor=factor, pitch_radius_m=radius)
+    return DriveLoad(gain_1_m=factor / p.sprocket_pitch_radius_m,
+                     tight_sign=1.0 if p.sprocket.x_m > p.idler.x_m else -1.0)
