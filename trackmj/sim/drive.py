@@ -40,7 +40,7 @@ from trackmj.errors import PhysicsError
 from trackmj.host import machine as host_machine
 from trackmj.machines.assembly import resolve
 from trackmj.machines.track_plant import load_plant
-from trackmj.ports import COUPLING_STEP_S, TensionerElement
+from trackmj.ports import COUPLING_STEP_S, StepInputs, TensionerElement
 from trackmj.results.figure_drive import drive_figure
 from trackmj.results.store import ResultWriter, parquet_bytes
 from trackmj.track.energy import TrackEnergyLedger
@@ -210,10 +210,9 @@ def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnerg
     plant_wall = 0.0
     start = time.perf_counter()
     for k in range(steps):
-        plant.set_track_speed(speed_m_s * min(1.0, plant.time_s / ramp_s))
         pull = hitch_pull_N * min(1.0, plant.time_s / (2.0 * ramp_s))
-        if hitch_pull_N:
-            plant.set_hitch_force(pull, 0.0)
+        plant.apply(StepInputs(speed_m_s * min(1.0, plant.time_s / ramp_s), pull, 0.0,
+                               math.nan))   # no supply: the tensioner is passive or a file's
         before = time.perf_counter()
         plant.step(element)
         plant_wall += time.perf_counter() - before
