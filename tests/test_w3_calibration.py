@@ -111,12 +111,12 @@ def test_overridden_machine_is_calibrated_on_first_use_and_cached(capsys) -> Non
            "is stale or for other inputs (mechanics differ" in err
     cal = setup.scenario.hitch_calibration
     assert cal is not None and cal.origin == "calibrated"
-    cached = list(cache_dir().glob("lf1352-*-w3-hitch.json"))
-    assert cached
+    cached = cache_dir() / f"lf1352-{cal.inputs_sha256[:32]}-w3-hitch.json"
+    assert cached.is_file()
     # a run gets the same forces whether it calibrated them or read them from the cache
     # (the in-process ones were unrounded, the cached ones to 0.1 N: a W3 run on an unseen
     # layout differed in its third digit between the two)
-    record = json.loads(cached[0].read_text())
+    record = json.loads(cached.read_text())
     assert [cal.hitch_N[i] for i in record["pulse_index"]] == record["hitch_N"]
     # the calibration's own tolerance: the re-run repeats its deterministic hold-mode run
     assert _change_of_calibrated_pulse(setup, 0) == pytest.approx(2e3, rel=0.02)
