@@ -552,6 +552,16 @@ class Foundation:
                              self.dofs, self.law_array, self.state, self.jac, saved_mass,
                              saved_qvel, self.memory, self.choice)
 
+    def configuration(self) -> dict[str, np.ndarray]:
+        """What a port of the kernels needs (the native FMU's engine, trackmj/fmi/native):
+        pins (n, 4), dof chains (n, D), mass-matrix addresses (n, D, D), radii (n,) [m],
+        the law (h, K, B, δ_B, μ, K_j) and the ground line (m, 2) [m], as the kernels take
+        them."""
+        return {"foundation_pins": self.pins, "foundation_width": np.array([self.dofs.shape[1]]),
+                "foundation_dofs": self.dofs, "foundation_mass_index": self.mass_index,
+                "foundation_radius": self.radius, "foundation_law": self.law_array,
+                "ground_line": self.line}
+
     def scale_stiffness(self, scale: float) -> None:
         """Multiply the foundation stiffness K by ``scale`` [-] (W5's perturbation)."""
         self.law_array[L_K] *= scale

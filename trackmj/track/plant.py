@@ -582,6 +582,43 @@ class TrackPlant:
             min_upper_strand_pin=slackest,
         )
 
+    def configuration(self) -> dict[str, np.ndarray]:
+        """Indices, geometry and thresholds a port of :meth:`step` and the readouts needs
+        (the native FMU's engine, trackmj/fmi/native/engine.c), by name; the foundation's
+        arrays included (:meth:`Foundation.configuration`). Sign conventions and units as
+        this class's."""
+        m = self.model
+        return {
+            "substeps": np.array([self.substeps]), "pins": np.array([self.link_count]),
+            "slide_q": np.array([self._slide_q]), "slide_v": np.array([self._slide_v]),
+            "sprocket_v": np.array([self._sprocket_v]), "chassis_q": self._chassis_q,
+            "chassis_v": self._chassis_v, "tensioner": np.array([self._tensioner]),
+            "drive": np.array([self._drive]), "hitch_site": np.array([self._hitch_site]),
+            "chassis_body": np.array([self._chassis_body]),
+            "sprocket_body": np.array([self._sprocket_body]),
+            "drive_gain": np.array([self._drive_gain]),
+            "drive_limit": np.array([self._drive_limit]),
+            "stroke_offset_m": np.array([self._stroke_offset_m]),
+            "pitch_radius_m": np.array([self.params.sprocket_pitch_radius_m]),
+            "ride_height_m": np.array([self.params.chassis.ride_height_m]),
+            "strand_bounds": self._strand_bounds,
+            "envelope_threshold_m": np.array([self.ENVELOPE_THRESHOLD_M]),
+            "seat_tolerance_m": np.array([self.SEAT_TOLERANCE_M]),
+            "slack_tension_N": np.array([self.SLACK_TENSION_N]),
+            "min_seated_pins": np.array([self.MIN_SEATED_PINS]),
+            "link_body": self._link_body, "pin_geom": self._pin_geom,
+            "connect_of_pin": self._connect_of_pin, "pins_per_connect": self._pins_per_connect,
+            "home_envelope": self._envelope, "timestep_s": np.array([m.opt.timestep]),
+            **self.foundation.configuration(),
+        }
+
+    def hitch_kinematics(self) -> np.ndarray:
+        """What the next step resolves the hitch load with (:meth:`set_hitch_force`): the
+        chassis rotation matrix (9, row-major), the hitch site and the chassis centre of
+        mass (3 each, world) [m], as MjData holds them now, shape (15,)."""
+        d, body = self.data, self._chassis_body
+        return np.concatenate([d.xmat[body], d.site_xpos[self._hitch_site], d.xipos[body]])
+
     # ------------------------------------------------------------------ stepping
     def step(self, element: TensionerElement) -> ForceLaw:
         """Advance one 1 ms coupling step with ``element`` acting on the idler carrier.
