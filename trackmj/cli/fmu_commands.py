@@ -1,5 +1,6 @@
-"""FMI commands: ``fmu export`` writes trackmj's track, or track + hydraulics, as an FMI 2.0
-co-simulation FMU (importing FMUs is ``--tensioner`` and ``--controller fmu:FILE``)."""
+"""FMI commands: ``fmu export`` writes trackmj's track as a native FMU (FMI 2.0 or 3.0
+co-simulation), or track + hydraulics as a Python-hosted FMI 2.0 one (importing FMUs is
+``--tensioner`` and ``--controller fmu:FILE``)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,25 @@ from trackmj.fmi.export import export
 
 def cmd_fmu_export(args: argparse.Namespace) -> int:
     """``trackmj fmu export KIND -o FILE.fmu``: the FMU written, with its notes."""
+    if args.kind == "track":
+        # start-up: --help and argument errors must not import MuJoCo (the exporter settles
+        # the track)
+        from trackmj.fmi.native.export import export_track
+
+        native = export_track(args.out, fmi_version=args.fmi, machine=args.machine,
+                              terrain=args.terrain, seed=args.seed, force_N=args.force,
+                              platforms=tuple(args.platform or ("linux", "win64")))
+        print(f"wrote {native.path}")
+        for note in native.notes:
+            print(f"  {note}")
+        return 0
+    track_only = [f"--{name}" for name, default in (("fmi", 2), ("machine", None),
+                                                    ("terrain", "flat"), ("seed", 0),
+                                                    ("force", None), ("platform", None))
+                  if getattr(args, name) != default]
+    if track_only:
+        raise ValueError(f"{', '.join(track_only)}: options of the track FMU; the plant FMU "
+                         "takes its machine, terrain and seed as FMU parameters")
     exported = export(args.kind, args.out)
     print(f"wrote {exported.path}")
     for note in exported.notes:

@@ -331,11 +331,26 @@ def _add_fmu(sub: Subcommands) -> None:
     fmu = sub.add_parser("fmu", help="FMI: export trackmj as an FMU (import: --tensioner, "
                          "--controller fmu:FILE)")
     fmu_sub = fmu.add_subparsers(dest="fmu_command", required=True)
-    export = fmu_sub.add_parser("export", help="write an FMI 2.0 co-simulation FMU")
-    export.add_argument("kind", choices=("track", "plant"), help="track: the tensioner port "
-                        "as inputs; plant: track + built-in hydraulics, valve command in, "
-                        "sensor signals out")
+    export = fmu_sub.add_parser("export", help="write a co-simulation FMU")
+    export.add_argument("kind", choices=("track", "plant"), help="track: a native FMU (C and "
+                        "MuJoCo inside, no Python on the host), the tensioner port as inputs; "
+                        "plant: track + built-in hydraulics through trackmj's Python, valve "
+                        "command in, sensor signals out")
     export.add_argument("-o", "--out", required=True, metavar="FILE.fmu", help="FMU to write")
+    native = export.add_argument_group("track only (fixed in the FMU)")
+    native.add_argument("--fmi", type=int, choices=(2, 3), default=2,
+                        help="FMI version of the track FMU (default 2)")
+    native.add_argument("--machine", metavar="NAME|FILE", help="a shipped machine or a "
+                        f"machine file *_machine.toml (default: {DEFAULT_MACHINE})")
+    native.add_argument("--terrain", default="flat", metavar="flat|SCENARIO",
+                        help="flat, or a scenario whose road the track stands on (default "
+                        "flat)")
+    native.add_argument("--seed", type=int, default=0, help="seed of the terrain's road")
+    native.add_argument("--force", type=float, metavar="N", help="tensioner force the track "
+                        "is settled under [N] (default: the machine's W1 initial tension)")
+    native.add_argument("--platform", action="append", choices=("linux", "win64"),
+                        help="build only these platforms (repeatable; default: both, each "
+                        "where it can be built)")
     export.set_defaults(func=cmd_fmu_export)
 
 

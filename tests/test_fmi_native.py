@@ -1,0 +1,398 @@
+"""The native track FMU (trackmj/fmi/native): one physics with the Python plant, FMI's error
+contract, state save and restore, and hosts no one in this project wrote (fmpy) or without
+Python at all (a C host under ``env -i`` in an empty folder; the Windows build under Wine).
+
+The FMU's engine steps the same MuJoCo library as the Python plant with a C port of the
+foundation's kernels, in the same order of operations; compiled without FMA contraction,
+the two agree to the last bit on this machine, so the comparisons below hold them to
+1e-9 relative (another CPU or compiler may round differently; 1e-9 still bounds a port
+that is right, a wrong line shows at 1e-3 within a second).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import subprocess
+import sys
+import threading
+import zipfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import fmpy
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
+from fmpy.validation import validate_fmu
+from wine import require, run_under_wine, windows_path, wine_available
+
+from trackmj.elements.prescribed import ConstantForce
+from trackmj.fmi.fmu import FmuLog, fmi2_callbacks
+from trackmj.fmi.native import toolchain
+from trackmj.fmi.native.export import export_track
+from trackmj.ports import StepInputs
+from trackmj.sim.mechanics import settled_track
+from trackmj.sim.setup import prepare
+
+HERE = Path(__file__).resolve().parent
+FORCE_N = 13e3
+DAMPING_N_S_M = 2.0e4
+"""The W1-like law F = F0(t) − c·v the comparisons drive: F0 swinging ±1 kN at 1 Hz about
+13 kN, c = 20 kN·s/m (the order of the hydraulic port's Z in W1)."""
+VR = {"force_N": 1, "force_dv_N_s_m": 2, "track_speed_m_s": 3, "hitch_pull_N": 4,
+      "stroke_m": 10, "velocity_m_s": 11, "tension_N": 12, "upper_strand_tension_N": 15,
+      "ground_friction": 34, "derailed": 23}
+
+
+def force_at(t_s: float) -> float:
+    """F0 of the comparison's law at time ``t_s`` [s] [N]."""
+    return FORCE_N + 1e3 * math.sin(2.0 * math.pi * t_s)
+
+
+@pytest.fixture(scope="session")
+def native(tmp_path_factory) -> dict[str, Path]:
+    """LF1352's track as native FMUs: flat ground FMI 2.0 and 3.0, W2's ISO road FMI 2.0."""
+    d = tmp_path_factory.mktemp("native")
+    return {
+        "fmi2": export_track(d / "flat2.fmu", fmi_version=2, force_N=FORCE_N).path,
+        "fmi3": export_track(d / "flat3.fmu", fmi_version=3, force_N=FORCE_N).path,
+        "road": export_track(d / "road2.fmu", fmi_version=2, force_N=FORCE_N, terrain="W2",
+                             platforms=("linux",)).path,
+    }
+
+
+class Slave:
+    """fmpy's FMI 2.0 or 3.0 co-simulation slave of a native FMU, with its log."""
+
+    def __init__(self, path: Path, name: str = "test") -> None:
+        self.md = fmpy.read_model_description(str(path))
+        self.dir = fmpy.extract(str(path))
+        self.fmi3 = self.md.fmiVersion.startswith("3")
+        self.log = FmuLog()
+        identifier = self.md.coSimulation.modelIdentifier
+        if self.fmi3:
+            self.fmu: Any = FMU3Slave(guid=self.md.instantiationToken, unzipDirectory=self.dir,
+                                      modelIdentifier=identifier, instanceName=name)
+            self.fmu.instantiate(logMessage=self.log.fmi3)
+        else:
+            self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.dir,
+                                 modelIdentifier=identifier, instanceName=name)
+            self._callbacks = fmi2_callbacks(self.log)
+            self.fmu.instantiate(callbacks=self._callbacks)
+        self.t = 0.0
+
+    def start(self, **parameters: float) -> None:
+        if not self.fmi3:
+            self.fmu.setupExperiment(startTime=0.0)
+        self.fmu.enterInitializationMode()
+        for name, value in parameters.items():
+            self.set(name, value)
+        self.fmu.exitInitializationMode()
+
+    def set(self, name: str, value: float) -> None:
+        (self.fmu.setFloat64 if self.fmi3 else self.fmu.setReal)([VR[name]], [value])
+
+    def get(self, name: str) -> float:
+        return (self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)([VR[name]])[0]
+
+    def step(self, h_s: float = 1e-3) -> None:
+        self.fmu.doStep(self.t, h_s)
+        self.t += h_s
+
+    def close(self) -> None:
+        self.fmu.terminate()
+        self.fmu.freeInstance()
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+    def errors(self) -> str:
+        return " | ".join(text for status, _, text in self.log.messages if status >= 3)
+
+
+@contextmanager
+def slave(path: Path, name: str = "test") -> Iterator[Slave]:
+    s = Slave(path, name)
+    try:
+        yield s
+    finally:
+        shutil.rmtree(s.dir, ignore_errors=True)
+
+
+def python_plant(terrain: str = "flat") -> Any:
+    setup = prepare("W1" if terrain == "flat" else terrain)
+    return settled_track(setup, FORCE_N)
+
+
+def drive(step: Callable[[float, float], tuple[float, float, float]], seconds: float,
+          speed_m_s: float = 1.5) -> np.ndarray:
+    """(stroke, velocity, tension) after every 1 ms step of ``step(F0, speed)``."""
+    rows = [step(force_at(k * 1e-3), speed_m_s) for k in range(round(seconds / 1e-3))]
+    return np.array(rows)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("which", ["fmi2", "road"])
+def test_the_fmu_steps_as_the_python_plant(native, which) -> None:
+    """5 s at 1.5 m/s under the W1-like law, flat ground and W2's ISO road: stroke,
+    velocity and tension equal the Python plant's to 1e-9 relative."""
+    plant = python_plant("flat" if which == "fmi2" else "W2")
+
+    def python_step(force: float, speed: float) -> tuple[float, float, float]:
+        plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))
+        plant.step(ConstantForce(force, DAMPING_N_S_M))
+        return plant.stroke_m, plant.stroke_velocity_m_s, plant.idler_force_N
+
+    with slave(native[which]) as fmu:
+        fmu.start()
+        fmu.set("force_dv_N_s_m", -DAMPING_N_S_M)
+
+        def fmu_step(force: float, speed: float) -> tuple[float, float, float]:
+            fmu.set("force_N", force)
+            fmu.set("track_speed_m_s", speed)
+            fmu.step()
+            return fmu.get("stroke_m"), fmu.get("velocity_m_s"), fmu.get("tension_N")
+
+        ours = drive(fmu_step, 5.0)
+        fmu.close()
+    theirs = drive(python_step, 5.0)
+    scale = np.abs(theirs).max(axis=0)
+    assert np.abs(ours - theirs).max(axis=0) / scale == pytest.approx(0.0, abs=1e-9)
+    assert theirs[:, 1].std() > 1e-3   # the comparison saw a moving idler
+
+
+def test_both_exports_pass_fmpy_validation(native) -> None:
+    for which in ("fmi2", "fmi3"):
+        assert validate_fmu(str(native[which])) == [], which
+
+
+def test_no_file_in_the_fmu_names_a_path_of_this_machine(native) -> None:
+    """The FMU is self-contained: no byte string of the exporting environment's paths (the
+    interpreter's environment and installation, this checkout, the export's build folder;
+    not the home folder alone: MuJoCo's own library names its build machine's /root)."""
+    marks = {os.fsencode(p) for p in (sys.prefix, sys.base_prefix, str(HERE.parent),
+                                      "trackmj-fmu-")}
+    with zipfile.ZipFile(native["fmi2"]) as z:
+        for info in z.infolist():
+            data = z.read(info)
+            leaked = [m.decode() for m in marks if m in data]
+            assert not leaked, f"{info.filename} names {leaked}"
+        names = z.namelist()
+    assert "resources/track.mjb" in names and "resources/track.cfg" in names
+
+
+def test_no_binary_needs_libpython(native) -> None:
+    with zipfile.ZipFile(native["fmi2"]) as z:
+        binaries = [n for n in z.namelist() if n.startswith("binaries/")]
+        folder = Path(native["fmi2"]).with_suffix(".unzipped")
+        z.extractall(folder)
+    assert any(n.endswith(".so") for n in binaries)
+    for name in binaries:
+        if name.endswith((".so", ".dll")) or ".so." in name:
+            imports = toolchain.imported_libraries(folder / name)
+            assert not [lib for lib in imports if "python" in lib.lower()], (name, imports)
+    shutil.rmtree(folder)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_a_c_host_without_python_in_an_empty_folder_matches_the_python_plant(
+        native, which, tmp_path) -> None:
+    """The floor: a C host (tests/fmus), ``env -i``, the FMU alone in an empty folder, 2 s
+    at 13 kN: the stroke equals the Python plant's within 0.01 mm."""
+    fmi3 = which == "fmi3"
+    host = _host("cc", "c_importer3.c" if fmi3 else "c_importer.c", tmp_path / "host")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    shutil.copy(native[which], empty / "track.fmu")
+    with zipfile.ZipFile(empty / "track.fmu") as z:
+        z.extractall(empty / "track")
+    md = fmpy.read_model_description(str(empty / "track.fmu"))
+    token = md.instantiationToken if fmi3 else md.guid
+    binary = (empty / "track" / "binaries" / ("x86_64-linux" if fmi3 else "linux64")
+              / "TrackmjTrack.so")
+    resources = empty / "track" / "resources"
+    done = subprocess.run(
+        ["env", "-i", str(host), str(binary), token,
+         str(resources) + "/" if fmi3 else resources.as_uri(),
+         str(VR["force_N"]), str(FORCE_N), str(VR["stroke_m"]), "2000"],
+        cwd=empty, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    stroke = float(done.stdout.split()[-1])
+    plant = python_plant()
+    for _ in range(2000):
+        plant.step(ConstantForce(FORCE_N))
+    assert stroke == pytest.approx(plant.stroke_m, abs=1e-5)
+
+
+def _host(compiler: str, source: str, out: Path) -> Path:
+    """The tests' C FMI host ``source`` (tests/fmus) built with ``compiler`` into ``out``."""
+    libraries = [] if out.suffix == ".exe" else ["-ldl"]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    subprocess.run([compiler, "-O1", "-I", str(HERE / "fmus" / "reference_fmus" / "include"),
+                    str(HERE / "fmus" / source), "-o", str(out), *libraries], check=True)
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_the_windows_binary_under_wine_steps_as_the_linux_one(native, which,
+                                                              tmp_path) -> None:
+    """The win64 DLL, loaded by a plain C host in another folder under Wine, imports only
+    Windows' own DLLs (MuJoCo's is delay-loaded from beside it) and gives the Linux
+    binary's stroke after 0.5 s at 13 kN within 0.01 mm (Windows' C runtime may round its
+    maths functions differently)."""
+    require(wine_available(), "Wine cannot run Windows programs here")
+    found = toolchain.win64_toolchain()
+    require(not isinstance(found, toolchain.Missing), getattr(found, "reason", ""))
+    assert isinstance(found, toolchain.Toolchain)
+    fmi3 = which == "fmi3"
+    with zipfile.ZipFile(native[which]) as z:
+        z.extractall(tmp_path / "fmu")
+    md = fmpy.read_model_description(str(native[which]))
+    token = md.instantiationToken if fmi3 else md.guid
+    folder = "x86_64-windows" if fmi3 else "win64"
+    dll = tmp_path / "fmu" / "binaries" / folder / "TrackmjTrack.dll"
+    imports = toolchain.imported_libraries(dll)
+    assert {name.lower() for name in imports} <= {"kernel32.dll", "msvcrt.dll"}, imports
+    source = "c_importer3.c" if fmi3 else "c_importer.c"
+    host = _host(found.compiler, source, tmp_path / "host" / "host.exe")
+    resources = tmp_path / "fmu" / "resources"
+    where = (windows_path(resources) + "\\" if fmi3
+             else "file:///" + windows_path(resources).replace("\\", "/"))
+    args = [str(VR["force_N"]), str(FORCE_N), str(VR["stroke_m"]), "500"]
+    run = run_under_wine(host, [windows_path(dll), token, where, *args], timeout=300)
+    assert run.returncode == 0, run.stderr
+    linux_host = _host("cc", source, tmp_path / "linux_host")
+    linux_where = str(resources) + "/" if fmi3 else resources.as_uri()
+    folder = "x86_64-linux" if fmi3 else "linux64"
+    done = subprocess.run([str(linux_host), str(tmp_path / "fmu" / "binaries" / folder
+                                                / "TrackmjTrack.so"), token, linux_where,
+                           *args], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert float(run.stdout.split()[-1]) == pytest.approx(float(done.stdout.split()[-1]),
+                                                          abs=1e-5)
+
+
+def test_a_bad_parameter_is_an_error_naming_it_and_its_range(native) -> None:
+    with slave(native["fmi2"]) as fmu:
+        fmu.fmu.setupExperiment(startTime=0.0)
+        fmu.fmu.enterInitializationMode()
+        with pytest.raises(FMICallException, match="status 3"):
+            fmu.set("ground_friction", 5.0)
+        assert "ground_friction" in fmu.errors() and "[0, 2]" in fmu.errors()
+        fmu.fmu.freeInstance()
+
+
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_a_nan_input_is_an_error_naming_it(native, which) -> None:
+    with slave(native[which]) as fmu:
+        fmu.start()
+        with pytest.raises(FMICallException, match="status 3"):
+            fmu.set("force_N", math.nan)
+        assert "force_N = nan" in fmu.errors() and "finite" in fmu.errors()
+        fmu.fmu.freeInstance()
+
+
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_a_blow_up_is_an_error_with_its_time_and_a_fresh_instance_runs_after(
+        native, which) -> None:
+    """1e7 N on the idler tears the track apart: doStep returns Error (never OK) with the
+    time and the quantity; a new instance in the same process then steps normally."""
+    with slave(native[which], "blown") as fmu:
+        fmu.start()
+        fmu.set("force_N", 1e7)
+        with pytest.raises(FMICallException, match="status 3"):
+            for _ in range(2000):
+                fmu.step()
+        assert "left physics" in fmu.errors() and "t = " in fmu.errors()
+        fmu.fmu.freeInstance()
+    with slave(native[which], "fresh") as fresh:
+        fresh.start()
+        for _ in range(100):
+            fresh.step()
+        assert math.isfinite(fresh.get("stroke_m"))
+        fresh.close()
+
+
+def test_a_step_that_is_not_a_multiple_of_1_ms_or_at_another_time_is_an_error(
+        native) -> None:
+    with slave(native["fmi2"]) as fmu:
+        fmu.start()
+        with pytest.raises(FMICallException, match="status 3"):
+            fmu.fmu.doStep(0.0, 1.5e-3)
+        assert "1.5e-03" in fmu.errors() or "0.0015" in fmu.errors()
+        fmu.fmu.freeInstance()
+    with slave(native["fmi2"]) as fmu:
+        fmu.start()
+        fmu.step(4e-3)   # a multiple: four internal steps
+        with pytest.raises(FMICallException, match="status 3"):
+            fmu.fmu.doStep(0.5, 1e-3)
+        assert "0.5" in fmu.errors()
+        fmu.fmu.freeInstance()
+
+
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_state_restored_or_deserialized_replays_bit_for_bit(native, which) -> None:
+    with slave(native[which]) as fmu:
+        fmu.start()
+        fmu.set("track_speed_m_s", 1.5)
+        fmu.set("hitch_pull_N", 3e3)
+        for _ in range(300):
+            fmu.step()
+        state = fmu.fmu.getFMUState()
+        t_saved = fmu.t
+        serialize = fmu.fmu.serializeFMUState if fmu.fmi3 else fmu.fmu.serializeFMUstate
+        blob = serialize(state)
+        first = []
+        for _ in range(200):
+            fmu.step()
+            first.append(fmu.get("stroke_m"))
+        fmu.fmu.setFMUState(state)
+        fmu.t = t_saved
+        again = []
+        for _ in range(200):
+            fmu.step()
+            again.append(fmu.get("stroke_m"))
+        assert again == first
+        with slave(native[which], "other") as other:
+            other.start()
+            other.set("track_speed_m_s", 1.5)
+            other.set("hitch_pull_N", 3e3)
+            deserialize = (other.fmu.deserializeFMUState if other.fmi3
+                           else other.fmu.deSerializeFMUstate)
+            other.fmu.setFMUState(deserialize(blob))
+            other.t = t_saved
+            third = []
+            for _ in range(200):
+                other.step()
+                third.append(other.get("stroke_m"))
+            other.close()
+        assert third == first
+        fmu.close()
+
+
+@pytest.mark.slow
+def test_two_instances_on_two_threads_agree_with_one(native) -> None:
+    def run(out: list[float], name: str) -> None:
+        with slave(native["fmi2"], name) as fmu:
+            fmu.start()
+            fmu.set("track_speed_m_s", 1.5)
+            for _ in range(500):
+                fmu.step()
+            out.append(fmu.get("stroke_m"))
+            fmu.close()
+
+    alone: list[float] = []
+    run(alone, "alone")
+    results: list[list[float]] = [[], []]
+    threads = [threading.Thread(target=run, args=(results[i], f"t{i}")) for i in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert results[0] == alone and results[1] == alone
