@@ -3,14 +3,13 @@
 
 The FMUs are built once per session: the gas-charged cylinder from C (tests/fmus, the
 Reference FMUs framework, cc), the built-in hydraulic plugin and a P controller wrapped by
-pythonfmu, and the exported track and plant."""
+pythonfmu, and the exported plant (the native track FMU has its own tests,
+test_fmi_native.py)."""
 
 from __future__ import annotations
 
 import re
-import subprocess
 import sys
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -154,79 +153,200 @@ def test_c_fmu_gas_cylinder_as_the_drive_tensioner(fmus, tmp_path, fmu, interfac
 
 
 @pytest.fixture(scope="session")
-def exported(tmp_path_factory) -> dict[str, Path]:
+def plant_fmu(tmp_path_factory) -> Path:
     from trackmj.fmi.export import export
 
-    d = tmp_path_factory.mktemp("exported")
-    return {kind: export(kind, d / f"{kind}.fmu").path for kind in ("track", "plant")}
+    return export("plant", tmp_path_factory.mktemp("exported") / "plant.fmu").path
 
 
-def test_exported_fmus_pass_fmpy_validation(exported) -> None:
+FMI2_ERROR = 3
+"""fmi2Error (FMI 2.0's fmi2Status)."""
+
+
+class PlantInstance:
+    """One instance of the exported plant through fmpy's FMU2Slave, its messages collected
+    by trackmj's FMI 2.0 logger (logging off, as hosts run by default); ``call`` returns
+    the FMI status of a call and the message it logged ("" for none)."""
+
+    def __init__(self, fmu: Path, unzipped: Path) -> None:
+        from fmpy import read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        from trackmj.fmi.fmu import FmuLog, fmi2_callbacks
+
+        md = read_model_description(str(fmu))
+        self.vr = {v.name: v.valueReference for v in md.modelVariables}
+        self.log = FmuLog()
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(unzipped),
+                             modelIdentifier=md.coSimulation.modelIdentifier,
+                             instanceName="plant")
+        self.fmu.instantiate(callbacks=fmi2_callbacks(self.log), loggingOn=False)
+
+    def call(self, name: str, *args) -> tuple[int, str]:
+        from fmpy.fmi1 import FMICallException
+
+        before = self.log.count
+        try:
+            getattr(self.fmu, name)(*args)
+            status = 0
+        except FMICallException as exc:
+            status = exc.status
+        messages = list(self.log.messages)[len(self.log.messages) - (self.log.count - before):]
+        return status, " | ".join(text for _, _, text in messages)
+
+    def initialize(self, start_s: float = 0.0) -> PlantInstance:
+        self.fmu.setupExperiment(startTime=start_s)
+        self.fmu.enterInitializationMode()
+        self.fmu.exitInitializationMode()
+        return self
+
+    def real(self, *names: str) -> list[float]:
+        return self.fmu.getReal([self.vr[n] for n in names])
+
+
+@pytest.fixture
+def plant(plant_fmu, tmp_path):
+    """A factory of plant instances on one unzipped copy; all freed at the end."""
+    from fmpy import extract
+
+    unzipped = Path(extract(str(plant_fmu), str(tmp_path / "plant")))
+    made: list[PlantInstance] = []
+
+    def make() -> PlantInstance:
+        made.append(PlantInstance(plant_fmu, unzipped))
+        return made[-1]
+
+    yield make
+    for instance in made:
+        instance.fmu.freeInstance()
+
+
+UNIT_SUFFIXES = {"_Pa": {"kg": 1, "m": -1, "s": -2}, "_m": {"m": 1}, "_m_s": {"m": 1, "s": -1},
+                 "_m_s2": {"m": 1, "s": -2}, "_N": {"kg": 1, "m": 1, "s": -2},
+                 "_N_m": {"kg": 1, "m": 2, "s": -2}}
+"""trackmj's name suffix -> SI base-unit exponents (the dimension the name promises)."""
+
+
+def test_the_plant_fmu_declares_si_units_descriptions_and_no_direct_feedthrough(
+        plant_fmu) -> None:
+    """fmpy validates the plant FMU; every variable has a description; every Real a unit
+    whose SI base-unit exponents are the dimension its name's suffix promises; the outputs
+    depend on no input (they change only in doStep) and are the initial unknowns; the
+    generation tool is trackmj and the state can be serialised."""
+    from fmpy import read_model_description
     from fmpy.validation import validate_fmu
 
-    for path in exported.values():
-        assert validate_fmu(str(path)) == []
+    assert validate_fmu(str(plant_fmu)) == []
+    md = read_model_description(str(plant_fmu))
+    units = {u.name: u.baseUnit for u in md.unitDefinitions}
+    for v in md.modelVariables:
+        assert v.description, v.name
+        if v.type == "Real":
+            suffix = max((s for s in UNIT_SUFFIXES if v.name.endswith(s)), key=len)
+            base = units[v.unit]
+            assert {k: getattr(base, k) for k in ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+                    if getattr(base, k)} == UNIT_SUFFIXES[suffix], v.name
+    outputs = [v for v in md.modelVariables if v.causality == "output"]
+    assert [u.variable for u in md.outputs] == outputs
+    assert all(u.dependencies == [] for u in md.outputs)
+    assert [u.variable for u in md.initialUnknowns] == outputs
+    assert md.generationTool.startswith("trackmj ") and md.license and md.author
+    assert md.coSimulation.canSerializeFMUstate
 
 
-@pytest.mark.slow
-def test_fmpy_simulate_fmu_settles_the_track_where_drive_puts_it(exported, tmp_path) -> None:
-    """fmpy.simulate_fmu runs the track FMU standing with a constant 13 kN force (2e4 N·s/m
-    of damping through force_dv): its stroke settles within 0.5 mm of where trackmj drive
-    puts it with the same force as a tensioner file's spring-damper (k = 0)."""
-    from fmpy import simulate_fmu
-
-    from trackmj.sim.drive import drive
-
-    result = simulate_fmu(str(exported["track"]), stop_time=3.0, step_size=1e-3,
-                          output_interval=1e-3, output=["stroke_m", "tension_N"],
-                          start_values={"force_N": 13e3, "force_dv_N_s_m": -2e4})
-    passive = tmp_path / "constant.toml"
-    passive.write_text('[passive]\nsource = "tests: a constant force"\npreload_N = 13000.0\n'
-                       'stiffness_N_m = 0.0\ndamping_N_s_m = 2.0e4\nstroke_ref_m = 0.05\n'
-                       'travel_m = [-0.005, 0.105]\n')
-    driven = drive(0.0, 3.0, tensioner=passive).timeseries
-    fmu_stroke, drive_stroke = float(result["stroke_m"][-1]), float(driven["stroke_m"][-1])
-    print(f"settled stroke: FMU {fmu_stroke * 1e3:.3f} mm, drive {drive_stroke * 1e3:.3f} mm")
-    assert abs(result["stroke_m"][-1] - result["stroke_m"][-200]) < 1e-5   # settled
-    assert abs(fmu_stroke - drive_stroke) < 0.5e-3
-    assert np.allclose(result["tension_N"][1:], 13e3, atol=2e4 * 0.01)
+def test_the_plant_fmu_reads_the_initial_state_in_initialization_mode(plant) -> None:
+    """Outputs read in initialization mode are W1's initial state (the tension its
+    scenario starts from, a stroke inside the travel), the same after initialization; the
+    measured head pressure is the true one plus the sensor's noise."""
+    fmu = plant()
+    fmu.fmu.setupExperiment(startTime=0.0)
+    fmu.fmu.enterInitializationMode()
+    names = ("tension_N", "stroke_m", "p_head_Pa", "p_head_measured_Pa")
+    during = fmu.real(*names)
+    fmu.fmu.exitInitializationMode()
+    assert fmu.real(*names) == during
+    tension, stroke, p_head, measured = during
+    assert tension == pytest.approx(prepare("W1").force0_N, rel=1e-12)
+    assert -0.005 < stroke < 0.105
+    assert measured != p_head and abs(measured - p_head) < 0.05 * p_head
 
 
-@pytest.mark.slow
-def test_a_c_importer_without_python_steps_the_track_fmu(exported, tmp_path) -> None:
-    """A C program (no Python in its process, an empty environment, as Simulink would load
-    it) loads the track FMU's binary, steps it 2 s at 1 ms and reads a finite stroke."""
-    from fmpy import read_model_description
+def test_the_plant_fmu_refuses_bad_values_with_fmi2_error_and_a_message(plant) -> None:
+    """A bad parameter, a non-finite input, a valve mode outside {-1, 0, 1}, a step that is
+    no positive multiple of 1 ms and a doStep at another time than the FMU's each return
+    fmi2Error (not Fatal), with a message naming the variable and the allowed values; the
+    instance keeps running and a fresh one in the same process runs afterwards."""
+    fmu = plant()
+    for name, setter, value, allowed in (
+            ("machine", "setString", "nosuch", "lf1352"),
+            ("scenario", "setString", "W9", "W1"),
+            ("seed", "setInteger", -1, ">= 0")):
+        status, message = fmu.call(setter, [fmu.vr[name]], [value])
+        assert status == FMI2_ERROR and name in message and allowed in message, message
+    fmu.initialize()
+    for args, expected in (
+            (("setReal", [fmu.vr["track_speed_m_s"]], [float("nan")]),
+             "track_speed_m_s = nan m/s: allowed a finite value"),
+            (("setReal", [fmu.vr["hitch_pull_N"]], [float("inf")]),
+             "hitch_pull_N = inf N: allowed a finite value"),
+            (("setInteger", [fmu.vr["valve_mode"]], [2]), "valve_mode = 2: allowed -1"),
+            (("doStep", 0.0, 1.5e-3), "allowed a positive integer multiple of 0.001 s"),
+            (("doStep", 0.0, 0.0), "allowed a positive integer multiple of 0.001 s"),
+            (("doStep", 0.005, 1e-3), "doStep at t = 0.005 s: the FMU is at t = 0 s")):
+        status, message = fmu.call(*args)
+        assert status == FMI2_ERROR and expected in message, (args, message)
+    assert fmu.call("doStep", 0.0, 2e-3) == (0, "")
+    fresh = plant().initialize()
+    assert fresh.call("doStep", 0.0, 1e-3) == (0, "")
 
-    host = tmp_path / "c_importer"
-    subprocess.run(["cc", "-O2", f"-I{HERE / 'fmus' / 'reference_fmus' / 'include'}",
-                    str(HERE / "fmus" / "c_importer.c"), "-o", str(host), "-ldl"],
-                   check=True)
-    unzipped = tmp_path / "track"
-    with zipfile.ZipFile(exported["track"]) as zf:
-        zf.extractall(unzipped)
-    md = read_model_description(str(exported["track"]))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    binary = unzipped / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
-    run = subprocess.run([str(host), str(binary), md.guid, (unzipped / "resources").as_uri(),
-                          str(vr["force_N"]), "13000", str(vr["stroke_m"]), "2000"],
-                         capture_output=True, text=True, env={}, timeout=300)
-    assert run.returncode == 0, run.stderr
-    stroke = float(run.stdout)
-    assert np.isfinite(stroke) and -0.005 < stroke < 0.105
+
+def test_a_physics_stop_is_an_error_and_a_restored_state_replays_bit_identically(
+        plant) -> None:
+    """A 10 MN load pushing the hitch down leaves physics in the first step: fmi2Error
+    naming the time and the quantity, and every doStep after it too. A state saved before,
+    serialised to bytes and deserialised, restores the instance: with the load removed it
+    replays the same 50 ms as before bit for bit (sensor noise included); bytes that are no
+    state are refused with fmi2Error."""
+    fmu = plant().initialize()
+    for k in range(10):
+        fmu.fmu.doStep(k * 1e-3, 1e-3)
+    saved = fmu.fmu.serializeFMUstate(fmu.fmu.getFMUstate())
+    fmu.fmu.doStep(0.010, 0.050)
+    names = ("stroke_m", "tension_N", "p_head_measured_Pa", "stroke_measured_m")
+    reference = fmu.real(*names)
+    fmu.fmu.setReal([fmu.vr["hitch_down_N"]], [1e7])
+    status, message = fmu.call("doStep", 0.060, 1e-3)
+    assert status == FMI2_ERROR
+    assert re.search(r"t = 0\.061 s: .*(pressure|stroke|MuJoCo|closure)", message), message
+    assert fmu.call("doStep", 0.060, 1e-3)[0] == FMI2_ERROR
+    status, message = fmu.call("setFMUstate", fmu.fmu.deSerializeFMUstate(b"not a state"))
+    assert status == FMI2_ERROR and "no state this FMU serialised" in message
+    fmu.fmu.setFMUstate(fmu.fmu.deSerializeFMUstate(saved))
+    fmu.fmu.setReal([fmu.vr["hitch_down_N"]], [0.0])
+    assert fmu.call("doStep", 0.010, 0.050) == (0, "")
+    assert fmu.real(*names) == reference
 
 
-def test_the_plant_fmu_raises_the_tension_when_pressurized(exported) -> None:
+def test_the_plant_fmu_raises_the_tension_when_pressurized(plant_fmu) -> None:
     """The plant FMU (track + built-in hydraulics): 1 s of valve mode +1 raises the true
     tension and the measured head pressure; the sensors are noisy around the truth."""
     from fmpy import simulate_fmu
 
-    r = simulate_fmu(str(exported["plant"]), stop_time=1.0, step_size=1e-3,
+    r = simulate_fmu(str(plant_fmu), stop_time=1.0, step_size=1e-3,
                      output_interval=1e-3, start_values={"valve_mode": 1},
                      output=["tension_N", "p_head_Pa", "p_head_measured_Pa"])
     assert r["tension_N"][-1] > r["tension_N"][0] + 2e3
     noise = r["p_head_measured_Pa"] - r["p_head_Pa"]
     assert 0.0 < np.std(noise) < 1e6
+
+
+def test_the_track_is_not_exported_through_pythonfmu(tmp_path) -> None:
+    """``export("track")`` points to the native exporter and writes nothing."""
+    from trackmj.fmi.export import export
+
+    with pytest.raises(ValueError, match="native"):
+        export("track", tmp_path / "track.fmu")
+    assert not (tmp_path / "track.fmu").exists()
 
 
 BAD = {

@@ -8,6 +8,7 @@
   strongly (co-simulation with state roll-back, or model exchange integrated implicitly
   with the mechanics) or weakly (co-simulation without roll-back).
 * :mod:`trackmj.fmi.controller_fmu`: an FMU as the controller (``ports.Controller``).
-* :mod:`trackmj.fmi.export`: trackmj's track, or track + hydraulics, as an FMU.
-* :mod:`trackmj.fmi.slaves`: the slave classes those FMUs run in the importing tool.
+* :mod:`trackmj.fmi.export`: trackmj's plant (track + built-in hydraulics and sensors) as
+  a pythonfmu FMU that runs trackmj in the importing tool's embedded Python (Linux).
+* :mod:`trackmj.fmi.slaves`: the slave class that FMU runs in the importing tool.
 """
