@@ -26,9 +26,12 @@ from typing import Any
 import fmpy
 import numpy as np
 import pytest
+from fmpy.container_fmu.cli import create_container_fmu
+from fmpy.container_fmu.config import Component, Configuration
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
+from fmpy.model_description import CoSimulation, ModelDescription, ModelVariable
 from fmpy.validation import validate_fmu
 from wine import require, run_under_wine, windows_path, wine_available
 
@@ -165,6 +168,18 @@ def test_the_fmu_steps_as_the_python_plant(native, which) -> None:
     assert theirs[:, 1].std() > 1e-3   # the comparison saw a moving idler
 
 
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_fmpy_simulate_fmu_settles_where_the_python_plant_does(native, which) -> None:
+    """fmpy's own simulation loop (its defaults: output every step) on the FMU, 0.5 s at
+    13 kN standing: the stroke the Python plant reaches."""
+    result = fmpy.simulate_fmu(str(native[which]), stop_time=0.5, step_size=1e-3,
+                               start_values={"force_N": FORCE_N}, output=["stroke_m"])
+    plant = python_plant()
+    for _ in range(500):
+        plant.step(ConstantForce(FORCE_N))
+    assert result["stroke_m"][-1] == pytest.approx(plant.stroke_m, abs=1e-9)
+
+
 def test_both_exports_pass_fmpy_validation(native) -> None:
     for which in ("fmi2", "fmi3"):
         assert validate_fmu(str(native[which])) == [], which
@@ -276,6 +291,64 @@ def test_the_windows_binary_under_wine_steps_as_the_linux_one(native, which,
     assert done.returncode == 0, done.stderr
     assert float(run.stdout.split()[-1]) == pytest.approx(float(done.stdout.split()[-1]),
                                                           abs=1e-5)
+
+
+def _container(component: Path, folder: Path) -> Path:
+    """fmpy's container FMU (FMI 3.0; its C binary, written by fmpy's authors, imports the
+    components natively) around ``component``, exposing ``force_N`` and ``stroke_m``."""
+    md = ModelDescription()
+    md.fmiVersion, md.modelName = "3.0", "container"
+    md.instantiationToken = "{7d3c6a9e-1f0b-4c1e-9d8a-2b5e4f6a7c81}"
+    md.coSimulation = CoSimulation()
+    md.coSimulation.modelIdentifier = "container_fmu"
+    md.coSimulation.fixedInternalStepSize = 1e-3
+    inner = fmpy.read_model_description(str(component))
+    track = Component(name="track", filename=component, modelDescription=inner)
+    by_name = {v.name: v for v in inner.modelVariables}
+    mappings = {}
+    # the container keeps value reference 0 for the time and numbers the mapped variables
+    # from 1 in this order: force_N 1, stroke_m 2
+    for name, causality in (("time", "independent"), ("force_N", "input"),
+                            ("stroke_m", "output")):
+        variable = ModelVariable(name=name, causality=causality)
+        variable.type, variable.variability, variable.valueReference = "Float64", \
+            "continuous", 0
+        if causality == "input":
+            variable.start = str(FORCE_N)
+        md.modelVariables.append(variable)
+        if name != "time":
+            mappings[variable] = [(track, by_name[name])]
+    unzipped = folder / "container"
+    unzipped.mkdir(parents=True)
+    create_container_fmu(Configuration(parallelDoStep=False, modelDescription=md,
+                                       components=[track], connections=[],
+                                       variableMappings=mappings),
+                         unzipped, folder / "container.fmu")
+    return folder / "container.fmu"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_fmpys_c_container_imports_the_fmu_in_a_c_host_without_python(native, which,
+                                                                      tmp_path) -> None:
+    """An importer no one in this project wrote, in C: fmpy's container FMU holding the
+    track FMU (FMI 2.0 or 3.0), run by the tests' C host under ``env -i``; 0.5 s at
+    13 kN: the Python plant's stroke."""
+    container = _container(native[which], tmp_path)
+    with zipfile.ZipFile(container) as z:
+        z.extractall(tmp_path / "run")
+    token = fmpy.read_model_description(str(container)).instantiationToken
+    host = _host("cc", "c_importer3.c", tmp_path / "host")
+    done = subprocess.run(
+        ["env", "-i", str(host),
+         str(tmp_path / "run" / "binaries" / "x86_64-linux" / "container_fmu.so"), token,
+         str(tmp_path / "run" / "resources") + "/", "1", str(FORCE_N), "2", "500"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    plant = python_plant()
+    for _ in range(500):
+        plant.step(ConstantForce(FORCE_N))
+    assert float(done.stdout.split()[-1]) == pytest.approx(plant.stroke_m, abs=1e-9)
 
 
 def test_a_bad_parameter_is_an_error_naming_it_and_its_range(native) -> None:
