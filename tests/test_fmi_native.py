@@ -180,6 +180,21 @@ def test_fmpy_simulate_fmu_settles_where_the_python_plant_does(native, which) ->
     assert result["stroke_m"][-1] == pytest.approx(plant.stroke_m, abs=1e-9)
 
 
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_outputs_read_the_settled_track_in_initialization_mode(native, which) -> None:
+    """InitialUnknowns: in initialization mode the outputs are the settled track's, as the
+    Python plant has it after settling (stroke, and the tension it was settled under)."""
+    plant = python_plant()
+    with slave(native[which]) as fmu:
+        if not fmu.fmi3:
+            fmu.fmu.setupExperiment(startTime=0.0)
+        fmu.fmu.enterInitializationMode()
+        assert fmu.get("stroke_m") == plant.stroke_m
+        assert fmu.get("tension_N") == pytest.approx(plant.idler_force_N, abs=1e-9)
+        fmu.fmu.exitInitializationMode()
+        fmu.close()
+
+
 def test_both_exports_pass_fmpy_validation(native) -> None:
     for which in ("fmi2", "fmi3"):
         assert validate_fmu(str(native[which])) == [], which
