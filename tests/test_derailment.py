@@ -5,6 +5,7 @@ timeseries, summary and figure; ``--model`` is the model parameter TOML in ``dri
 from __future__ import annotations
 
 import json
+import math
 import re
 import tomllib
 from pathlib import Path
@@ -15,7 +16,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from trackmj.cli.main import main
-from trackmj.sim.drive import derailment_columns, derailment_table
+from trackmj.elements.prescribed import ConstantForce
+from trackmj.ports import Command, Readout
+from trackmj.sim.drive import DerailmentChecks, derailment_columns, derailment_table
 from trackmj.track.plant import DerailmentStatus
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -250,3 +253,45 @@ def test_drive_writes_its_figure_by_default_one_folder_per_input(tmp_path, monke
     for folder in folders:
         assert (tmp_path / "runs" / folder / "drive.png").is_file()
     assert "wrote runs/drive-lf1352-1mps-" in capsys.readouterr().out
+
+
+def test_a_closed_loop_run_checks_derailment_as_drive_does(tmp_path, capsys) -> None:
+    """``trackmj run`` (W1, LF1352, 16 s) checks the track every 0.1 s as ``drive`` does:
+    160 checks in metrics.json, none failing in a healthy run, each check's worst sample
+    inside its limit (the upper strand above 1 kN, no pin 100 mm off its envelope, at least
+    two pins seated), and the summary says so."""
+    out = tmp_path / "run"
+    code = main(["run", "W1", "--duration", "16", "--out", str(out)])
+    printed = capsys.readouterr().out
+    metrics = json.loads((out / "metrics.json").read_text())["metrics"]
+    assert code == 0
+    assert metrics["derailment_checks"] == 160
+    assert metrics["derailment_checks_failed"] == 0
+    table = metrics["derailment"]
+    assert set(table) == set(CHECKS)
+    assert table["slack_strand"]["worst"]["tension_N"] > table["slack_strand"]["threshold"]
+    assert (table["links_off_envelope"]["worst"]["excursion_m"]
+            < table["links_off_envelope"]["threshold"])
+    assert (table["sprocket_disengaged"]["worst"]["seated_pins"]
+            >= table["sprocket_disengaged"]["threshold"])
+    assert "derailment         0 of 160 checks failed (every 0.1 s)" in printed
+
+
+def _readout(t_s: float) -> Readout:
+    """A readout at ``t_s`` [s] (the observer reads only the time)."""
+    return Readout(t_s, *([math.nan] * (len(Readout._fields) - 1)))
+
+
+def test_the_closed_loop_observer_sees_a_track_go_slack(plant) -> None:
+    """The run's observer on a standing track whose tensioner pushes 300 N: the upper strand
+    hangs on its own weight, below the 1 kN slack limit, and its checks say so from the
+    first on."""
+    checks = DerailmentChecks(plant)
+    element = ConstantForce(300.0, 2e4)
+    for k in range(1000):
+        plant.step(element)
+        checks.on_step(k, _readout(plant.time_s), Command(0, 0.0, None))
+    metrics = checks.metrics()
+    assert metrics["derailment_checks"] == 10
+    slack = metrics["derailment"]["slack_strand"]
+    assert slack["failing_checks"] >= 5 and slack["worst"]["tension_N"] < 1000.0

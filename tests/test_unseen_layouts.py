@@ -14,7 +14,6 @@ model, and that a layout the model refuses comes with the reason.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -23,15 +22,13 @@ from hypothesis import HealthCheck, Phase, example, given, settings
 from layouts import Variant, base_params, close, layouts, overrides, sprocket_at_front, variants
 
 from trackmj.errors import PhysicsError
-from trackmj.ports import COUPLING_STEP_S, Command, Readout
+from trackmj.ports import COUPLING_STEP_S
 from trackmj.results.metric_windows import windows_of
 from trackmj.results.signals import trailing_mean
-from trackmj.sim import run as run_module
-from trackmj.sim.drive import DERAILMENT_CHECK_S, DERAILMENT_CHECKS, derailment_table
+from trackmj.sim.drive import DERAILMENT_CHECKS
 from trackmj.sim.run import simulate
 from trackmj.track.mechanics import ModelParams
 from trackmj.track.mjcf.layout import CLEARANCE_M, compute_layout
-from trackmj.track.plant import DerailmentStatus, TrackPlant
 from trackmj.validator import ParameterError
 
 W1_S = 16.0
@@ -41,34 +38,6 @@ BAND_REL = (2.0 / 3.0, 4.0 / 3.0)
 
 
 # ----------------------------------------------------------------------------- the runs
-
-@dataclass
-class _DerailmentChecks:
-    """An observer of the closed loop: the track's derailment indicators every
-    DERAILMENT_CHECK_S, as ``trackmj drive`` checks them."""
-
-    track: TrackPlant
-    times_s: list[float] = field(default_factory=list)
-    statuses: list[DerailmentStatus] = field(default_factory=list)
-
-    def on_step(self, k: int, readout: Readout, command: Command) -> None:
-        if (k + 1) % round(DERAILMENT_CHECK_S / COUPLING_STEP_S) == 0:
-            self.times_s.append(round(readout.t_s, 6))
-            self.statuses.append(self.track.derailment())
-
-
-def _watching_derailment(checks: list[_DerailmentChecks]) -> Any:
-    """``trackmj.sim.run._watch`` with a :class:`_DerailmentChecks` on the run's track
-    appended to its observers (a closed-loop run records no derailment checks itself)."""
-    watch = run_module._watch
-
-    def watched(setup, asm, *args, **kwargs):
-        out = watch(setup, asm, *args, **kwargs)
-        checks.append(_DerailmentChecks(asm.track))
-        out.all.append(checks[-1])
-        return out
-    return watched
-
 
 def _band_failures(result: Any, low: float, high: float) -> list[str]:
     """The band's failures of ``result``, each with by how much and when: the 0.5 s mean's
@@ -102,20 +71,17 @@ def w1_failures(machine: str, sets: dict[str, Any]) -> tuple[dict[str, Any], lis
     not refused)."""
     nominal = base_params(machine).nominal_tension_N
     low, high = BAND_REL[0] * nominal, BAND_REL[1] * nominal
-    checks: list[_DerailmentChecks] = []
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(run_module, "_watch", _watching_derailment(checks))
-        try:
-            result = simulate("W1", architecture="tp", controller="nmpc", seed=0,
-                              duration=W1_S, machine=machine, set=sets)
-        except PhysicsError as exc:
-            return {}, [f"physics guard: {exc}"]
-        except ParameterError as exc:    # the layout passed the model's checks: the run's
-            return {}, [f"run refused: {exc}"]   # refusal (e.g. its identified idler) fails
+    try:
+        result = simulate("W1", architecture="tp", controller="nmpc", seed=0, duration=W1_S,
+                          machine=machine, set=sets)
+    except PhysicsError as exc:
+        return {}, [f"physics guard: {exc}"]
+    except ParameterError as exc:    # the layout passed the model's checks: the run's
+        return {}, [f"run refused: {exc}"]   # refusal (e.g. its identified idler) fails
     failures = _band_failures(result, low, high)
     if result.metrics["mujoco_warnings"]:
         failures.append(f"MuJoCo warnings: {result.metrics['mujoco_warnings']:g}")
-    table = derailment_table(checks[0].times_s, checks[0].statuses)
+    table = result.metrics["derailment"]   # the run's own checks, every 0.1 s
     failures += [f"derailment: {check} ({entry['fails_when']}) failed "
                  f"{entry['failing_checks']} times from {entry['first_s']:.2f} to "
                  f"{entry['last_s']:.2f} s, first {entry['at_first']}"

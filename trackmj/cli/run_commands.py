@@ -14,7 +14,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from trackmj.cli.run_folder import refuse_other_inputs, run_folder
-from trackmj.cli.summary import flagged, measured_table, summary_table, tensioner_line
+from trackmj.cli.summary import (
+    derailment_lines,
+    flagged,
+    measured_table,
+    summary_table,
+    tensioner_line,
+)
 from trackmj.elements.tensioner_file import load_tensioner
 from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.results.store import ResultWriter
@@ -92,6 +98,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"tensioner {setup.tensioner.name}: takes no valve mode, so the controller's "
               "output acts on nothing; the valve metrics read n/a")
     print(summary_table([result], "{r.architecture}"))
+    if "derailment" in result.metrics:
+        print("\n".join(derailment_lines(result.metrics)))
     if measured is not None:
         print(measured_table(result.metrics["prediction_vs_measured"], measured.file))
         print(_log_line(measured))

@@ -14,7 +14,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from trackmj.cli.summary import tensioner_line
+from trackmj.cli.summary import derailment_lines, tensioner_line
 from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.validator import ParameterError, parse_overrides
 
@@ -271,66 +271,3 @@ def _drive_folder(args: argparse.Namespace) -> str:
     machine = args.machine or DEFAULT_MACHINE
     digest = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:8]
     return f"runs/drive-{Path(machine).stem}-{args.speed:g}mps-{digest}"
-
-
-CHECK_WORDS = {"slack_strand": "slack strand", "links_off_envelope": "links off envelope",
-               "sprocket_disengaged": "sprocket disengaged"}
-"""The derailment checks in the drive summary's words, in the order of its table."""
-
-
-def derailment_lines(metrics: dict) -> list[str]:
-    """The drive summary's derailment lines from its metrics (display units kN, mm): how
-    many checks failed and the first failure, then one line per check, the failing ones
-    first in the order they first failed: when and where it first failed, how often, its
-    worst; a passing check's worst value (its margin)."""
-    table = metrics["derailment"]
-    failed, checks = metrics["derailment_checks_failed"], metrics["derailment_checks"]
-    order = sorted(CHECK_WORDS, key=lambda c: (table[c]["first_s"] is None,
-                                               table[c]["first_s"] or 0.0))
-    head = (f"derailment         {failed} of {checks} checks failed (every "
-            f"{metrics['derailment_check_interval_s']:g} s)")
-    if failed:
-        first = order[0]
-        head += f"; first: {CHECK_WORDS[first]} at {table[first]['first_s']:.2f} s"
-    lines = [head]
-    width = max(len(w) for w in CHECK_WORDS.values()) + 2
-    for check in order:
-        row, limit = table[check], _limit_text(check, table[check]["threshold"])
-        worst = row["worst"]
-        if worst is None:
-            text = "not checked (a run shorter than the check interval)"
-        elif row["failing_checks"]:
-            text = (f"FAILED first at {row['first_s']:.2f} s: "
-                    f"{_where_text(check, row['at_first'])} ({limit}); "
-                    f"{_checks(row['failing_checks'])}, last at {row['last_s']:.2f} s; worst "
-                    f"{_where_text(check, worst)} at {worst['t_s']:.2f} s")
-        else:
-            text = (f"passed; closest {_where_text(check, worst)} at {worst['t_s']:.2f} s "
-                    f"({limit})")
-        lines.append(f"  {CHECK_WORDS[check]:<{width}}{text}")
-    return lines
-
-
-def _checks(n: int) -> str:
-    return f"{n} check" if n == 1 else f"{n} checks"
-
-
-def _limit_text(check: str, threshold: float) -> str:
-    """When ``check`` fails, in display units."""
-    if check == "slack_strand":
-        return f"fails below {threshold / 1e3:.2f} kN"
-    if check == "links_off_envelope":
-        return f"fails above {threshold * 1e3:.0f} mm"
-    return f"fails below {threshold:.0f} pins"
-
-
-def _where_text(check: str, where: dict) -> str:
-    """What ``check`` measured and where (an ``at_first`` or ``worst`` entry)."""
-    if check == "slack_strand":
-        if where["pin"] is None:
-            return "no pin in the upper strand"
-        return f"upper-strand min tension {where['tension_N'] / 1e3:.2f} kN at pin {where['pin']}"
-    if check == "links_off_envelope":
-        return (f"pin {where['pin']}, {where['strand']}, {where['excursion_m'] * 1e3:.0f} mm "
-                f"outside (chassis frame x {where['x_m']:.2f} m, z {where['z_m']:.2f} m)")
-    return f"{where['seated_pins']} pins seated"

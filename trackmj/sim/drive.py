@@ -27,7 +27,7 @@ import json
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,7 @@ from trackmj.errors import PhysicsError
 from trackmj.host import machine as host_machine
 from trackmj.machines.assembly import resolve
 from trackmj.machines.track_plant import load_plant
-from trackmj.ports import COUPLING_STEP_S, StepInputs, TensionerElement
+from trackmj.ports import COUPLING_STEP_S, Command, Readout, StepInputs, TensionerElement
 from trackmj.results.figure_drive import drive_figure
 from trackmj.results.store import ResultWriter, parquet_bytes
 from trackmj.track.energy import TrackEnergyLedger
@@ -154,10 +154,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
         "steady": _steady_means(series, ramp_s + 1.0 if duration_s > ramp_s + 1.0 else 0.0),
         "max_pin_gap_m": float(series["max_pin_gap_m"].max()),
         "mujoco_warnings": plant.warning_count,
-        "derailment_check_interval_s": DERAILMENT_CHECK_S,
-        "derailment_checks": len(checks),
-        "derailment_checks_failed": table["derailed"]["failing_checks"],
-        "derailment": table,
+        **derailment_metrics(table, len(checks)),
     }
     out = write_drive(out_dir, metrics, series) if out_dir is not None else None
     return DriveResult(metrics, series, out)
@@ -298,6 +295,35 @@ def _thresholds() -> dict[str, tuple[str, float | None]]:
         "sprocket_disengaged": (f"seated sprocket pins < {p.MIN_SEATED_PINS}",
                                 float(p.MIN_SEATED_PINS)),
         "derailed": ("any of the other checks fails", None)}
+
+
+def derailment_metrics(table: dict[str, dict[str, Any]], checks: int) -> dict[str, Any]:
+    """The derailment entries of metrics.json: the check interval [s], how many checks were
+    made and how many had any failure, and the ``table`` (:func:`derailment_table`)."""
+    return {"derailment_check_interval_s": DERAILMENT_CHECK_S, "derailment_checks": checks,
+            "derailment_checks_failed": table["derailed"]["failing_checks"],
+            "derailment": table}
+
+
+@dataclass
+class DerailmentChecks:
+    """An observer of the closed loop (``trackmj.sim.loop.run_loop``): the track's
+    derailment indicators every :data:`DERAILMENT_CHECK_S`, as ``trackmj drive`` checks
+    them, at the end of the step they fall on; :meth:`metrics` gives metrics.json's
+    derailment entries (:func:`derailment_metrics`)."""
+
+    track: TrackPlant
+    times_s: list[float] = field(default_factory=list)
+    statuses: list[DerailmentStatus] = field(default_factory=list)
+
+    def on_step(self, k: int, readout: Readout, command: Command) -> None:
+        if (k + 1) % round(DERAILMENT_CHECK_S / COUPLING_STEP_S) == 0:
+            self.times_s.append(round(readout.t_s, 6))
+            self.statuses.append(self.track.derailment())
+
+    def metrics(self) -> dict[str, Any]:
+        return derailment_metrics(derailment_table(self.times_s, self.statuses),
+                                  len(self.statuses))
 
 
 def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStatus]

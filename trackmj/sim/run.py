@@ -41,6 +41,7 @@ from trackmj.results.store import Result, run_metadata
 from trackmj.scenarios.resolved import Scenario
 from trackmj.sim.architectures import Assembly, assemble
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
+from trackmj.sim.drive import DerailmentChecks
 from trackmj.sim.loop import Schedule, run_loop
 from trackmj.sim.observers import (
     CHANNEL_SETS,
@@ -214,6 +215,8 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
     result = Result(watch.recorder.table(meta, watch.extra), {})
     result.metrics = _run_metrics(setup, asm, result, watch.recorder, controller, wall,
                                   measured)
+    if watch.derailment is not None:
+        result.metrics |= watch.derailment.metrics()
     if watch.playback is not None:
         watch.playback.log_timeseries(result)
         watch.playback.close()
@@ -236,25 +239,31 @@ def _blocks(setup: RunSetup, asm: Assembly) -> tuple[Controller, Estimator, Sens
 @dataclass(frozen=True)
 class _Watch:
     """The loop's observers in calling order (``all``), and those the run reads afterwards:
-    the recorder, the extra channels (``channels="all"``), the progress bar and the Rerun
-    recording (None when not asked for)."""
+    the recorder, the extra channels (``channels="all"``), the progress bar, the Rerun
+    recording (None when not asked for) and the derailment checks (None without a MuJoCo
+    track)."""
 
     all: list[Observer]
     recorder: Recorder
     extra: ChannelRecorder | None
     bar: Progress | None
     playback: PlaybackRecorder | None
+    derailment: DerailmentChecks | None
 
 
 def _watch(setup: RunSetup, asm: Assembly, sched: Schedule, warnings: list[str], *,
            channels: str, progress: bool, rrd: str | Path | None) -> _Watch:
-    """The recorder and the physics guard, then as asked the extra channels, the progress
-    bar and the Rerun recording (track architectures)."""
+    """The recorder, the physics guard and, on a MuJoCo track, the derailment checks; then
+    as asked the extra channels, the progress bar and the Rerun recording (track
+    architectures)."""
     recorder = Recorder(sched)
     element = asm.element
     guard = PhysicsGuard(physics_limits(setup, element.stroke_range_m), warnings,
                          element.node_pressures, element.pressure_nodes)
     observers: list[Observer] = [recorder, guard]
+    derailment = DerailmentChecks(asm.track) if asm.track is not None else None
+    if derailment is not None:
+        observers.append(derailment)
     extra = (ChannelRecorder(sched, asm.element, asm.track) if channels == "all"
              else None)
     if extra is not None:
@@ -270,7 +279,7 @@ def _watch(setup: RunSetup, asm: Assembly, sched: Schedule, warnings: list[str],
 
         playback = PlaybackRecorder(asm.track, rrd)
         observers.append(PlaybackFrames(playback, FRAME_EVERY_STEPS))
-    return _Watch(observers, recorder, extra, bar, playback)
+    return _Watch(observers, recorder, extra, bar, playback, derailment)
 
 
 def _run_watched(sched: Schedule, asm: Assembly, controller: Controller, estimator: Estimator,
