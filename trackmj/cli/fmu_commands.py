@@ -5,6 +5,7 @@ co-simulation), or track + hydraulics as a Python-hosted FMI 2.0 one (importing 
 from __future__ import annotations
 
 import argparse
+import sys
 
 from trackmj.fmi.export import export
 
@@ -16,9 +17,13 @@ def cmd_fmu_export(args: argparse.Namespace) -> int:
         # the track)
         from trackmj.fmi.native.export import export_track
 
-        native = export_track(args.out, fmi_version=args.fmi, machine=args.machine,
-                              terrain=args.terrain, seed=args.seed, force_N=args.force,
-                              platforms=tuple(args.platform or ("linux", "win64")))
+        try:
+            native = export_track(args.out, fmi_version=args.fmi, machine=args.machine,
+                                  terrain=args.terrain, seed=args.seed, force_N=args.force,
+                                  platforms=tuple(args.platform or ("linux", "win64")))
+        except RuntimeError as exc:   # no platform built, or a compiler error: not the input
+            print(f"trackmj: the FMU was not written: {exc}", file=sys.stderr)
+            return 1
         print(f"wrote {native.path}")
         for note in native.notes:
             print(f"  {note}")
