@@ -9,6 +9,7 @@ they read are SI.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -152,6 +153,11 @@ CHECK_WORDS = {"slack_strand": "slack strand", "links_off_envelope": "links off 
 """The derailment checks in the summaries' words (drive, run), in the order of the table."""
 
 
+def _missing(value: Any) -> bool:
+    """No value: None (a drive's metrics) or NaN (a run's, read back from metrics.json)."""
+    return value is None or (isinstance(value, float) and math.isnan(value))
+
+
 def derailment_lines(metrics: dict) -> list[str]:
     """The derailment lines of a drive's or a run's summary from its metrics (display units
     kN, mm): how many checks failed and the first failure, then one line per check, the
@@ -159,8 +165,9 @@ def derailment_lines(metrics: dict) -> list[str]:
     often, its worst; a passing check's worst value (its margin)."""
     table = metrics["derailment"]
     failed, checks = metrics["derailment_checks_failed"], metrics["derailment_checks"]
-    order = sorted(CHECK_WORDS, key=lambda c: (table[c]["first_s"] is None,
-                                               table[c]["first_s"] or 0.0))
+    order = sorted(CHECK_WORDS, key=lambda c: (_missing(table[c]["first_s"]),
+                                               0.0 if _missing(table[c]["first_s"])
+                                               else table[c]["first_s"]))
     head = (f"derailment         {failed} of {checks} checks failed (every "
             f"{metrics['derailment_check_interval_s']:g} s)")
     if failed:
@@ -171,7 +178,7 @@ def derailment_lines(metrics: dict) -> list[str]:
     for check in order:
         row, limit = table[check], _limit_text(check, table[check]["threshold"])
         worst = row["worst"]
-        if worst is None:
+        if _missing(worst):
             text = "not checked (a run shorter than the check interval)"
         elif row["failing_checks"]:
             text = (f"FAILED first at {row['first_s']:.2f} s: "

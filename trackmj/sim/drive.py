@@ -310,7 +310,8 @@ class DerailmentChecks:
     """An observer of the closed loop (``trackmj.sim.loop.run_loop``): the track's
     derailment indicators every :data:`DERAILMENT_CHECK_S`, as ``trackmj drive`` checks
     them, at the end of the step they fall on; :meth:`metrics` gives metrics.json's
-    derailment entries (:func:`derailment_metrics`)."""
+    derailment entries (:func:`derailment_metrics`) with NaN where the drive's have None
+    (a run's metrics.json reads null back as NaN, so the run's result round-trips)."""
 
     track: TrackPlant
     times_s: list[float] = field(default_factory=list)
@@ -322,8 +323,19 @@ class DerailmentChecks:
             self.statuses.append(self.track.derailment())
 
     def metrics(self) -> dict[str, Any]:
-        return derailment_metrics(derailment_table(self.times_s, self.statuses),
-                                  len(self.statuses))
+        return _none_as_nan(derailment_metrics(derailment_table(self.times_s, self.statuses),
+                                               len(self.statuses)))
+
+
+def _none_as_nan(value: Any) -> Any:
+    """``value`` with every None in its dicts and lists replaced by NaN."""
+    if value is None:
+        return math.nan
+    if isinstance(value, dict):
+        return {k: _none_as_nan(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_none_as_nan(v) for v in value]
+    return value
 
 
 def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStatus]
