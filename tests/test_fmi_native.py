@@ -44,6 +44,8 @@ from trackmj.sim.mechanics import settled_track
 from trackmj.sim.setup import prepare
 
 HERE = Path(__file__).resolve().parent
+FMI_HEADERS = Path(toolchain.__file__).parent / "include"
+"""The FMI headers the package ships (trackmj/fmi/native/include), for the tests' C hosts."""
 FORCE_N = 13e3
 DAMPING_N_S_M = 2.0e4
 """The W1-like law F = F0(t) − c·v the comparisons drive: F0 swinging ±1 kN at 1 Hz about
@@ -263,7 +265,7 @@ def _host(compiler: str, source: str, out: Path) -> Path:
     """The tests' C FMI host ``source`` (tests/fmus) built with ``compiler`` into ``out``."""
     libraries = [] if out.suffix == ".exe" else ["-ldl"]
     out.parent.mkdir(parents=True, exist_ok=True)
-    subprocess.run([compiler, "-O1", "-I", str(HERE / "fmus" / "reference_fmus" / "include"),
+    subprocess.run([compiler, "-O1", "-I", str(FMI_HEADERS),
                     str(HERE / "fmus" / source), "-o", str(out), *libraries], check=True)
     return out
 

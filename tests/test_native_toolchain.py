@@ -81,8 +81,8 @@ def _system_dll(name: str) -> bool:
 @pytest.fixture(scope="module")
 def linux() -> toolchain.Toolchain:
     found = toolchain.linux_toolchain()
-    if isinstance(found, toolchain.Missing):
-        pytest.skip(found.reason)
+    require(not isinstance(found, toolchain.Missing), getattr(found, "reason", ""))
+    assert isinstance(found, toolchain.Toolchain)
     return found
 
 
@@ -180,8 +180,8 @@ def test_a_win64_build_using_mujocos_variables_is_refused_naming_them(win64,
 ])
 def test_a_wrong_win64_wheel_is_missing_with_its_reason_and_caches_nothing(
         wheel, reason, tmp_path, monkeypatch) -> None:
-    if shutil.which(toolchain.MINGW_GCC) is None:
-        pytest.skip("the wheel is read only with MinGW-w64 present")
+    require(shutil.which(toolchain.MINGW_GCC), "the wheel is read only with MinGW-w64 "
+            "present")
     path = tmp_path / wheel
     with zipfile.ZipFile(path, "w") as zf:
         zf.writestr("mujoco/__init__.py", "")

@@ -9,8 +9,13 @@ import subprocess
 import zipfile
 from pathlib import Path
 
+import trackmj.fmi.native
+
 HERE = Path(__file__).resolve().parent
 FRAMEWORK = HERE / "reference_fmus"
+FMI_HEADERS = Path(trackmj.fmi.native.__file__).parent / "include"
+"""The FMI 2.0 and 3.0 headers (the package ships them for its native FMU; the framework and
+the tests' C hosts take them from there)."""
 GAS = HERE / "gas_cylinder"
 TOKEN = "{6f1c2a52-3c1d-4c55-9d4e-2f0b9a7e1c11}"
 
@@ -114,7 +119,7 @@ def build_gas_cylinder(out: Path, *, version: int = 2, directional: bool = True,
     library = work / "GasCylinder.so"
     flags = ["-DDISABLE_PREFIX", *(["-DGET_PARTIAL_DERIVATIVE"] if directional else [])]
     subprocess.run(["cc", "-shared", "-fPIC", "-O2", *flags, f"-I{GAS}",
-                    f"-I{FRAMEWORK / 'include'}", f"-I{FRAMEWORK / 'src'}",
+                    f"-I{FRAMEWORK / 'include'}", f"-I{FMI_HEADERS}", f"-I{FRAMEWORK / 'src'}",
                     str(work / "all.c"), "-o", str(library), "-lm"], check=True,
                    capture_output=True)
     folder = ("linux64" if version == 2 else "x86_64-linux") if platform_binary else \
