@@ -168,7 +168,7 @@ def derailment_lines(metrics: dict) -> list[str]:
     order = sorted(CHECK_WORDS, key=lambda c: (_missing(table[c]["first_s"]),
                                                0.0 if _missing(table[c]["first_s"])
                                                else table[c]["first_s"]))
-    head = (f"derailment         {failed} of {checks} checks failed (every "
+    head = (f"derailment         {failed:.0f} of {checks:.0f} checks failed (every "
             f"{metrics['derailment_check_interval_s']:g} s)")
     if failed:
         first = order[0]
@@ -192,8 +192,8 @@ def derailment_lines(metrics: dict) -> list[str]:
     return lines
 
 
-def _checks(n: int) -> str:
-    return f"{n} check" if n == 1 else f"{n} checks"
+def _checks(n: float) -> str:
+    return f"{n:.0f} check" if n == 1 else f"{n:.0f} checks"
 
 
 def _limit_text(check: str, threshold: float) -> str:
@@ -208,10 +208,11 @@ def _limit_text(check: str, threshold: float) -> str:
 def _where_text(check: str, where: dict) -> str:
     """What ``check`` measured and where (an ``at_first`` or ``worst`` entry)."""
     if check == "slack_strand":
-        if where["pin"] is None:
+        if _missing(where["pin"]):
             return "no pin in the upper strand"
-        return f"upper-strand min tension {where['tension_N'] / 1e3:.2f} kN at pin {where['pin']}"
+        return (f"upper-strand min tension {where['tension_N'] / 1e3:.2f} kN at pin "
+                f"{where['pin']:.0f}")
     if check == "links_off_envelope":
-        return (f"pin {where['pin']}, {where['strand']}, {where['excursion_m'] * 1e3:.0f} mm "
+        return (f"pin {where['pin']:.0f}, {where['strand']}, {where['excursion_m'] * 1e3:.0f} mm "
                 f"outside (chassis frame x {where['x_m']:.2f} m, z {where['z_m']:.2f} m)")
-    return f"{where['seated_pins']} pins seated"
+    return f"{where['seated_pins']:.0f} pins seated"

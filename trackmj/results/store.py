@@ -253,11 +253,13 @@ def _json_ready(value: Any) -> Any:
     return number if math.isfinite(number) else None
 
 
-def _json_read(value: Any) -> Any:
+def metrics_as_read(value: Any) -> Any:
+    """Metrics as :func:`read_result` reads them from JSON: null (a non-finite number, or
+    None) -> NaN, numbers -> float, tables recursively."""
     if isinstance(value, dict):
-        return {k: _json_read(v) for k, v in value.items()}
+        return {k: metrics_as_read(v) for k, v in value.items()}
     if isinstance(value, list):
-        return [_json_read(v) for v in value]
+        return [metrics_as_read(v) for v in value]
     if value is None:
         return math.nan
     return float(value) if isinstance(value, int | float) and not isinstance(value, bool) \
@@ -517,4 +519,4 @@ def read_result(run_dir: str | Path) -> Result:
                                 "directory")
     doc = json.loads((run_dir / METRICS).read_text())
     table = pq.read_table(run_dir / TIMESERIES)
-    return Result(timeseries=table, metrics=_json_read(doc["metrics"]))
+    return Result(timeseries=table, metrics=metrics_as_read(doc["metrics"]))

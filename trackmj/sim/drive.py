@@ -42,7 +42,7 @@ from trackmj.machines.assembly import resolve
 from trackmj.machines.track_plant import load_plant
 from trackmj.ports import COUPLING_STEP_S, Command, Readout, StepInputs, TensionerElement
 from trackmj.results.figure_drive import drive_figure
-from trackmj.results.store import ResultWriter, parquet_bytes
+from trackmj.results.store import ResultWriter, metrics_as_read, parquet_bytes
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.plant import DerailmentStatus, PassiveTensioner, TrackPlant
 
@@ -310,8 +310,9 @@ class DerailmentChecks:
     """An observer of the closed loop (``trackmj.sim.loop.run_loop``): the track's
     derailment indicators every :data:`DERAILMENT_CHECK_S`, as ``trackmj drive`` checks
     them, at the end of the step they fall on; :meth:`metrics` gives metrics.json's
-    derailment entries (:func:`derailment_metrics`) with NaN where the drive's have None
-    (a run's metrics.json reads null back as NaN, so the run's result round-trips)."""
+    derailment entries (:func:`derailment_metrics`) as a run's metrics.json reads them back
+    (:func:`trackmj.results.store.metrics_as_read`: NaN where the drive's have None), so the
+    run's result round-trips."""
 
     track: TrackPlant
     times_s: list[float] = field(default_factory=list)
@@ -323,19 +324,8 @@ class DerailmentChecks:
             self.statuses.append(self.track.derailment())
 
     def metrics(self) -> dict[str, Any]:
-        return _none_as_nan(derailment_metrics(derailment_table(self.times_s, self.statuses),
-                                               len(self.statuses)))
-
-
-def _none_as_nan(value: Any) -> Any:
-    """``value`` with every None in its dicts and lists replaced by NaN."""
-    if value is None:
-        return math.nan
-    if isinstance(value, dict):
-        return {k: _none_as_nan(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_none_as_nan(v) for v in value]
-    return value
+        return metrics_as_read(derailment_metrics(
+            derailment_table(self.times_s, self.statuses), len(self.statuses)))
 
 
 def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStatus]
