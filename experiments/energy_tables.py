@@ -44,7 +44,7 @@ def _sum(*keys: str) -> Callable[[dict[str, Any]], float]:
     return value
 
 
-NUMERICAL = _sum("numerical.circuit", "numerical.volume_term", "numerical.interface")
+NUMERICAL = _sum("numerical.volume_term", "numerical.interface")
 RESTRICTORS = _sum("throttling.rod_feed_restrictor", "throttling.head_restrictor_L",
                    "throttling.head_restrictor_R")
 ROWS: tuple[tuple[str, Callable[[dict[str, Any]], float]], ...] = (
@@ -66,7 +66,7 @@ ROWS: tuple[tuple[str, Callable[[dict[str, Any]], float]], ...] = (
     ("  leakage", _sum("leakage")),
     ("  return line", _sum("return_line")),
     ("  stored: circuit oil", _sum("stored_change.circuit_oil")),
-    ("  numerical: circuit + volume term + interface", NUMERICAL),
+    ("  numerical: volume term + interface", NUMERICAL),
     ("  friction (+ end stop)", _sum("friction", "endstop")),
     ("  mechanical (into the track)", _sum("mechanical")),
 )
@@ -94,7 +94,7 @@ def shares(runs: list[Run]) -> str:
         c = e["circuit"]
         parts.append(f"{scenario}: main valve {100 * _sum('throttling.main_valve')(e) / c:.0f}"
                      f", restrictors {100 * RESTRICTORS(e) / c:.0f}"
-                     f", numerical {100 * NUMERICAL(e) / c:.0f}")
+                     f", numerical {100 * NUMERICAL(e) / c:.2f}")
     return "; ".join(parts)
 
 

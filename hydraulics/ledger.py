@@ -5,8 +5,17 @@ the prime mover to the track::
 
     pump      = pump_volumetric + pump_mechanical + unloaded + delivered
     delivered = relief + Δ(oil_supply + gas) + numerical_supply + circuit
-    circuit   = to_tank + throttle_* + leakage + Δoil + numerical + volume_term + piston
+    circuit   = to_tank + throttle_* + leakage + Δoil + volume_term + piston
     piston    = friction + endstop + mech_work + interface_residual
+
+The circuit's terms are booked at each node's mean pressure over the step,
+p̄ = (p_k + p_{k+1})/2 (per sub-step in the multi-rate coupling): a backward-Euler
+step conserves the oil volume, V·(p_{k+1} − p_k)/β = h·ΣQ − ΔV, so the oil energy
+V·p²/(2β) changes by exactly h·p̄·ΣQ − p̄·ΔV + volume_term, and the circuit needs no
+numerical term. Booked at p_{k+1} instead, each node would show ½·(V/β)·Δp² per step as
+``numerical``: the orifice loss of a transient faster than the step (which ``p̄`` books on
+the edges that carry its flow) and a damping of the oil spring under the piston (which the
+piston force at ``p̄`` does not apply; kernels module docstring).
 
 ``balance_error_J`` is ``pump`` minus every right-hand term, with the stored energies
 evaluated from the state (p²V/(2β) per node, accumulator gas energy), not from the flows.
@@ -51,20 +60,21 @@ class EnergyLedger:
         share a loss in proportion to 1/A² (exact for the turbulent orifice law).
     leakage_J: Δp·Q of the internal head->rod leakage.
     friction_J / endstop_J: friction work and end-stop work absorbed (F·v·h, ≥ 0 for friction).
-    numerical_supply_J / numerical_J: backward-Euler dissipation V(Δp)²/(2β) (+ accumulator
-        part) of the supply node / of the circuit nodes (≥ 0).
+    numerical_supply_J: backward-Euler dissipation V(Δp)²/(2β) of the supply node (booked
+        at its end-of-step pressure, as the pump's and the relief's energies are) and the
+        accumulator's part (gas energy against ∫p·dV_oil of the step) (≥ 0).
     volume_term_J: −Σ (V_{k+1}−V_k)·p_k²/(2β): the constant-β chamber model has no exact
         energy function when V changes (p²V/(2β) grows with V at constant p); this is its
         small defect, ~p/(2β) of the piston work.
-    piston_work_J: Σ p·A·v·h over the four chambers (hydraulics -> piston).
+    piston_work_J: Σ p̄·A·v·h over the four chambers (hydraulics -> piston).
     mech_work_J: ForceLaw.at(v)·v·h received by the track.
     interface_residual_J: piston work − friction − end stop − mech work.
     oil_supply_energy_J / oil_energy_J / gas_energy_J: stored energies now (supply node;
         circuit nodes: line A, heads with their hoses, rod node; accumulator gas);
         *_start_J at the ledger start.
 
-    The terms live in ``terms``, a float64 array of length 30 in ``kernels.LEDGER_FIELDS``
-    order (the first 24 are the flow terms that ``add`` accumulates). ``EnergyLedger.view``
+    The terms live in ``terms``, a float64 array of length 29 in ``kernels.LEDGER_FIELDS``
+    order (the first 23 are the flow terms that ``add`` accumulates). ``EnergyLedger.view``
     wraps an existing array: the tensioner's ledgers are views of its state array, so they
     show the current values at any time.
     """
@@ -107,7 +117,6 @@ class EnergyLedger:
     friction_J = _term(k.L_FRICTION)
     endstop_J = _term(k.L_ENDSTOP)
     numerical_supply_J = _term(k.L_NUMERICAL_SUPPLY)
-    numerical_J = _term(k.L_NUMERICAL)
     volume_term_J = _term(k.L_VOLUME_TERM)
     piston_work_J = _term(k.L_PISTON_WORK)
     mech_work_J = _term(k.L_MECH_WORK)
@@ -154,7 +163,7 @@ class EnergyLedger:
         from the pump shaft to the piston [J]."""
         return (self.pump_losses_J + self.relief_J + self.to_tank_J + self.throttle_J
                 + self.leakage_J + self.friction_J + self.endstop_J + self.numerical_supply_J
-                + self.numerical_J + self.volume_term_J)
+                + self.volume_term_J)
 
     @property
     def supply_balance_error_J(self) -> float:

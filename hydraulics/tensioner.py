@@ -52,7 +52,9 @@ class StepRecord:
     a chamber to ∂F/∂p (A_head or −A_rod); dv_dQ_1_m2 maps it to ∂v/∂Q for flow INTO that chamber
     (1/A_head, −1/A_rod), per cylinder. newton_iterations: corrections (Newton, or chord in
     a strong complete_step) of the last solve; newton_backtracks: line-search halvings in
-    all solves of the step.
+    all solves of the step. Pressures, volumes and flows are those at the step's end;
+    force_N and piston_force_N [N] are over the step, at the pressures' mean over it (what
+    the track received; kernels module docstring, "Losses where they happen").
     """
 
     t_s: float
@@ -175,7 +177,8 @@ class HydraulicTensioner:
     Output: ``record`` builds the full StepRecord of the last completed step on access
     (~7 µs); ``log()`` returns the per-step logging values as a ``trackmj.ports.ElementLog``
     (~0.4 µs: p_head the mean of the two heads, q_supply the flow S->A + S->rod node,
-    force the cylinder force = StepRecord.force_N, supply_J = ``EnergyLedger.pump_J``);
+    force the cylinder force over the step = StepRecord.force_N,
+    supply_J = ``EnergyLedger.pump_J``);
     ``ledger`` (cumulative) and ``step_ledger`` (last step) are EnergyLedger views of the
     state array, so a held reference always shows the current values.
 

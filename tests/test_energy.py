@@ -59,8 +59,7 @@ def test_energy_table_accounts_for_the_pump_energy(runs, case) -> None:
     # both halves of the chain: the source side delivers the circuit energy
     assert _source_side(e) == pytest.approx(e["circuit"], abs=5e-3 * e["pump"])
     losses = [*e["pump_losses"].values(), *e["throttling"].values(), e["relief"], e["makeup"],
-              e["leakage"], e["return_line"], e["friction"], e["numerical"]["supply"],
-              e["numerical"]["circuit"]]
+              e["leakage"], e["return_line"], e["friction"], e["numerical"]["supply"]]
     assert min(losses) >= 0.0
 
 
@@ -147,11 +146,10 @@ def test_ideal_actuator_draws_one_half_stroke_against_a_ripple_and_the_compressi
     assert ramp.work_J == 0.0
 
 
-def _valve_cycle_dissipation(h: float) -> tuple[float, float]:
-    """(numerical, throttling) dissipation [J] of the circuit over a 2 s valve cycle
-    (pressurize, hold, release, hold, 60 ms each) on the identified idler (90.6 kg,
-    4.4e6 N/m, 3.55e4 N·s/m) whose spring end carries a 0.3 mm, 20 Hz track ripple, at
-    step h [s]."""
+def _valve_cycle_energies(h: float) -> dict[str, float]:
+    """The circuit ledger [J] over a 2 s valve cycle (pressurize, hold, release, hold, 60 ms
+    each) on the identified idler (90.6 kg, 4.4e6 N/m, 3.55e4 N·s/m) whose spring end
+    carries a 0.3 mm, 20 Hz track ripple, at step h [s]."""
     import numpy as np
 
     from trackmj.hydraulics import HydraulicTensioner
@@ -170,19 +168,25 @@ def _valve_cycle_dissipation(h: float) -> tuple[float, float]:
         v = (v + h * (law.force_N - k * (s - end)) / m) / (1 - h * (law.damping_N_s_m - c) / m)
         s += h * v
         tensioner.complete_step(t + h, s, v)
-    return tensioner.ledger.numerical_J, tensioner.ledger.throttle_J
+    led = tensioner.ledger
+    return {"main": led.throttle_main_J, "rod restrictor": led.throttle_rod_restrictor_J,
+            "head restrictors": led.throttle_head_restrictor_L_J
+            + led.throttle_head_restrictor_R_J,
+            "throttling": led.throttle_J, "piston": led.piston_work_J,
+            "circuit": led.circuit_J}
 
 
-def test_numerical_term_is_the_orifice_loss_of_transients_faster_than_the_step() -> None:
-    """The circuit's ``numerical`` term, V·Δp²/(2β) per backward-Euler step, is what a node
-    loses when its pressure moves within one step; the real circuit loses that energy in
-    the orifices feeding the node (charging a capacitance through any resistance dissipates
-    ½·C·ΔU²). Refining the step moves it into ``throttling``: the numerical term falls
-    roughly with h while the total dissipation stays (measured: throttling 96.7 J +
-    numerical 15.7 J = 112.5 J at 1 ms, 109.8 + 2.4 = 112.2 J at 0.1 ms)."""
-    coarse = _valve_cycle_dissipation(COUPLING_STEP_S)
-    fine = _valve_cycle_dissipation(COUPLING_STEP_S / 10)
-    assert fine[0] < 0.25 * coarse[0]
-    assert fine[1] > coarse[1]                     # throttling takes over the transient
-    assert sum(coarse) == pytest.approx(sum(fine), rel=0.01)
-    assert coarse[0] < 0.15 * sum(fine)
+def test_valve_transients_are_booked_on_the_edges_that_throttle_them() -> None:
+    """A main-valve edge cracking open charges line A (50 mL) within ~0.05 ms, far inside
+    the 1 ms step; charging a capacitance through any resistance loses ½·C·ΔU² in it. Booked
+    at each node's mean pressure over the step, the 1 ms ledger puts that loss on the edges
+    (no numerical term) and gives each edge's throttling and the piston work of the 0.1 ms
+    run within 2 % of the circuit energy (measured: main valve, restrictors and piston work
+    within 0.6 %; booked at the end-of-step pressures, 1 ms put 15.7 J of 112 J in a
+    numerical term, and the main valve's 21.8 J stood against 36.5 J at 0.01 ms)."""
+    coarse = _valve_cycle_energies(COUPLING_STEP_S)
+    fine = _valve_cycle_energies(COUPLING_STEP_S / 10)
+    print("1 ms:", {k: round(v, 3) for k, v in coarse.items()})
+    print("0.1 ms:", {k: round(v, 3) for k, v in fine.items()})
+    for term in ("main", "rod restrictor", "head restrictors", "throttling", "piston"):
+        assert abs(coarse[term] - fine[term]) <= 0.02 * fine["circuit"], term

@@ -74,7 +74,7 @@ def _check_axes(fig: plt.Figure) -> None:
 
 def test_run_figure_units_legends_and_zooms(captured) -> None:
     tp = _runs("W3", duration_s=22.0)[0]
-    tp.metrics["energy_J"]["numerical"] = {"circuit": 20.0, "interface": 5.0}
+    tp.metrics["energy_J"]["numerical"] = {"volume_term": 20.0, "interface": 5.0}
     figure_run.run_figure(tp, "unused.png")
     fig = captured[0]
     _check_axes(fig)

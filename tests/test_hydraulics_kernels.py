@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from trackmj.hydraulics import HydraulicTensioner, PressureProfile, load_hydraulic_params
+from trackmj.hydraulics import kernels as k
 
 _P = load_hydraulic_params()
 STIFF = dataclasses.replace(_P, cylinder=dataclasses.replace(_P.cylinder,
@@ -108,12 +109,13 @@ def test_compiled_kernels_match_their_python_source() -> None:
     print(f"compiled vs Python source: worst difference {worst:.2e} of each column's scale")
     assert worst <= 1e-12
     # the scenario did reach the branches it is meant to cover
-    ledgers = compiled[:, 20:50]
-    assert compiled[:, 51].max() > 0  # line-search halvings
+    end = 20 + k.N_LEDGER   # _sample's columns: law 2, pressures 5, flows 13, ledger, 4 more
+    ledgers = compiled[:, 20:end]
+    assert compiled[:, end + 1].max() > 0  # line-search halvings
     assert np.abs(compiled[:, 14:17]).max() > 0.0  # make-up flows
-    assert np.abs(ledgers[:, 17]).max() > 0.0 and ledgers[:, 5].max() > 0.0  # end stop, relief
+    assert np.abs(ledgers[:, k.L_ENDSTOP]).max() > 0.0 and ledgers[:, k.L_RELIEF].max() > 0.0
     assert compiled[:, 2:6].min() < _P.cavitation.floor_Pa + _P.cavitation.band_Pa  # limiter
-    displacement, loaded = compiled[:, 52], compiled[:, 53]
+    displacement, loaded = compiled[:, end + 2], compiled[:, end + 3]
     # destroking after the drop (target clipped at 0), stroking up after the restore (target
     # clipped at 1, 3 MPa below the setting); the standby displacement is 0.05
     assert displacement.min() < 0.01 and displacement.max() > 0.5

@@ -1,6 +1,8 @@
 """trackmj's built-in hydraulic tensioner as a co-simulation FMU (pythonfmu): the round-trip
 test's FMU. Inputs: end-of-step stroke [m], the step's velocity [m/s], valve mode
-(+1/0/−1); outputs: the cylinder force [N], mean head, rod and supply pressure [Pa gauge].
+(+1/0/−1); outputs: the cylinder force at the communication point [N] (at the end-of-step
+pressures), the cylinder force over the step just taken [N] (at the pressures' mean over
+it, what the built-in plugin hands the track), mean head, rod and supply pressure [Pa gauge].
 Each doStep is one backward-Euler step of the plugin at the given velocity (its weak
 coupling's completion: Newton from the last pressures); its state can be saved and
 restored (a copy of the plugin's state array and solenoids; its ledger views are not
@@ -25,6 +27,7 @@ class HydraulicTensionerFmu(Fmi2Slave):
         self.velocity_m_s = 0.0
         self.valve_mode = 0
         self.force_N = 0.0
+        self.step_force_N = 0.0
         self.p_head_Pa = 0.0
         self.p_rod_Pa = 0.0
         self.p_supply_Pa = 0.0
@@ -36,7 +39,7 @@ class HydraulicTensionerFmu(Fmi2Slave):
             self.register_variable(Real(name, causality=Fmi2Causality.input))
         self.register_variable(Integer("valve_mode", causality=Fmi2Causality.input,
                                        variability=Fmi2Variability.discrete))
-        for name in ("force_N", "p_head_Pa", "p_rod_Pa", "p_supply_Pa"):
+        for name in ("force_N", "step_force_N", "p_head_Pa", "p_rod_Pa", "p_supply_Pa"):
             self.register_variable(Real(name, causality=Fmi2Causality.output))
         self.register_variable(Real("head_pressure_Pa", causality=Fmi2Causality.parameter,
                                     variability=Fmi2Variability.tunable))
@@ -52,7 +55,7 @@ class HydraulicTensionerFmu(Fmi2Slave):
         self._set_mode()
         _, p_hl, p_hr, p_b, p_s = self.ht.pressures
         ht = self.ht
-        self.force_N = ht.Ah * (p_hl + p_hr) - 2.0 * ht.Ar * p_b
+        self.force_N = self.step_force_N = ht.Ah * (p_hl + p_hr) - 2.0 * ht.Ar * p_b
         self.p_head_Pa, self.p_rod_Pa, self.p_supply_Pa = 0.5 * (p_hl + p_hr), p_b, p_s
 
     def _set_mode(self):
@@ -65,8 +68,12 @@ class HydraulicTensionerFmu(Fmi2Slave):
         self._set_mode()
         ht.force_law(current_time, ht.s, ht.v)
         ht.complete_step(current_time + step_size, self.stroke_m, self.velocity_m_s)
+        rec = ht.record
+        self.step_force_N = rec.force_N
+        self.force_N = (ht.Ah * (rec.p_head_L_Pa + rec.p_head_R_Pa) - 2.0 * ht.Ar * rec.p_rod_L_Pa
+                        - rec.friction_N + rec.endstop_N)
         row = ht.log()
-        self.force_N, self.p_head_Pa = row.force_N, row.p_head_Pa
+        self.p_head_Pa = row.p_head_Pa
         self.p_rod_Pa, self.p_supply_Pa = row.p_rod_Pa, row.p_supply_Pa
         return True
 
@@ -74,11 +81,12 @@ class HydraulicTensionerFmu(Fmi2Slave):
         ht = copy.copy(self.ht)
         ht._state = self.ht._state.copy()
         ht.main, ht.vl, ht.vr = copy.deepcopy((self.ht.main, self.ht.vl, self.ht.vr))
-        return (ht, self._mode, self.force_N, self.p_head_Pa, self.p_rod_Pa,
-                self.p_supply_Pa)
+        return (ht, self._mode, self.force_N, self.step_force_N, self.p_head_Pa,
+                self.p_rod_Pa, self.p_supply_Pa)
 
     def _set_fmu_state(self, state):
-        saved, self._mode, self.force_N, self.p_head_Pa, self.p_rod_Pa, self.p_supply_Pa = state
+        (saved, self._mode, self.force_N, self.step_force_N, self.p_head_Pa, self.p_rod_Pa,
+         self.p_supply_Pa) = state
         ht = copy.copy(saved)
         ht._state = saved._state.copy()
         ht.main, ht.vl, ht.vr = copy.deepcopy((saved.main, saved.vl, saved.vr))

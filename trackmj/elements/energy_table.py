@@ -8,7 +8,7 @@ chain from the prime mover to the track (:class:`~trackmj.hydraulics.EnergyLedge
     pump    = Σ pump_losses + relief + stored_change.supply_oil + stored_change.accumulator
               + numerical.supply + circuit
     circuit = Σ throttling + makeup + leakage + return_line + stored_change.circuit_oil
-              + numerical.circuit + numerical.volume_term + friction + endstop
+              + numerical.volume_term + friction + endstop
               + numerical.interface + mechanical
 
 ``residual`` = pump − every term but ``circuit`` (both lines together): a check of the
@@ -30,8 +30,10 @@ state). Keys:
 - ``friction``: cylinder seal friction; ``endstop``: end-stop contact work;
 - ``stored_change``: ``supply_oil``, ``accumulator`` (gas), ``circuit_oil`` (line A, heads
   with their hoses' compliance, rod node), end minus start;
-- ``numerical``: backward-Euler dissipation of the ``supply`` and ``circuit`` nodes, the
-  chamber model's ``volume_term`` and the coupling's ``interface`` residual;
+- ``numerical``: backward-Euler dissipation of the ``supply`` node, the chamber model's
+  ``volume_term`` and the coupling's ``interface`` residual (the circuit nodes' flows are
+  booked at their mean pressure over each step, which closes their energy without a
+  numerical term: :class:`~trackmj.hydraulics.EnergyLedger`);
 - ``mechanical``: work into the track, ∫F·v dt;
 - ``residual``: pump − every term above.
 
@@ -87,8 +89,7 @@ def energy_table(ledger: EnergyLedger, supply_model: str, t_end_s: float) -> dic
             "supply_oil": led.oil_supply_energy_J - led.oil_supply_energy_start_J,
             "accumulator": led.gas_energy_J - led.gas_energy_start_J,
             "circuit_oil": led.oil_energy_J - led.oil_energy_start_J},
-        "numerical": {"supply": led.numerical_supply_J, "circuit": led.numerical_J,
-                      "volume_term": led.volume_term_J,
+        "numerical": {"supply": led.numerical_supply_J, "volume_term": led.volume_term_J,
                       "interface": led.interface_residual_J},
         "mechanical": led.mech_work_J,
     }
