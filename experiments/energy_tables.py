@@ -64,6 +64,7 @@ ROWS: tuple[tuple[str, Callable[[dict[str, Any]], float]], ...] = (
                                             "throttling.head_restrictor_R")),
     ("  makeup", _sum("makeup")),
     ("  leakage", _sum("leakage")),
+    ("  cavitation (air out of solution)", _sum("cavitation")),
     ("  return line", _sum("return_line")),
     ("  stored: circuit oil", _sum("stored_change.circuit_oil")),
     ("  numerical: volume term + interface", NUMERICAL),

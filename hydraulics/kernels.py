@@ -60,6 +60,8 @@ C_ROD_FEED, C_HEAD_BRANCH  restrictors in series: rod feed P->B, each head branc
 C_CQ, C_SQRT_RHO      discharge coefficient [-], sqrt(density) [sqrt(kg/m^3)]
 C_TWO                 2.0, the loss-share exponent (read at run time, so the square is
                       libm's pow(x, 2) as in Python, not folded into x·x)
+C_AIR, C_AIR_BAND     air released below atmospheric: volume fraction α [-] at
+                      p → −∞ of ``released_air``'s r(x)/p_abs law; onset band [Pa]
 ====================  ===========================================================
 
 ``state`` layout (offset, length: content [unit]):
@@ -96,8 +98,8 @@ REC, 6                 last completed step: t [s], stroke [m], velocity [m/s], f
                        pressures' mean over the step, ``_commit``)
 LOG, 9                 ElementLog of the last completed step, LOG_FIELDS order
                        (``trackmj.ports.ElementLog``)
-STEP_LEDGER, 29        energy terms of the last step [J], LEDGER_FIELDS order
-LEDGER, 29             cumulative energy terms [J], LEDGER_FIELDS order
+STEP_LEDGER, 30        energy terms of the last step [J], LEDGER_FIELDS order
+LEDGER, 30             cumulative energy terms [J], LEDGER_FIELDS order
 AREAS, 4               edge areas the gains were computed for [m^2]: main at rest
                        (P->A, B->T), main energised (P->B, A->T), V_L, V_R
 AREAS_SET, 1           1.0 once AREAS holds areas
@@ -137,6 +139,11 @@ Pump shaft energy per step (from the prime mover): fixed pump h·p_out·Q_d/(η_
 p_out = p_S loaded and p_unloaded unloaded; variable pump h·p_S·Q_g/η_hm with the geometric
 flow Q_g = Q_pump + k_L·p_S; an ideal source h·p_S·(Q_PA + Q_PB).
 
+Air out of solution (circuit nodes A, HL, HR, B): below atmospheric each node holds
+V_g(p, V) of free air (``released_air``); its residual carries −(V_g(p_{k+1}) − V_g(p_k))/h
+and its Jacobian diagonal −dV_g/dp/h, both evaluated at the node's end-of-step volume, and
+the ledger books the liquid's work on the air, −p̄·ΔV_g, as ``cavitation``.
+
 Losses where they happen (every coupling). Each (sub-)step books a circuit node's flows at
 its mean pressure over the step, p̄ = (p_k + p_{k+1})/2 (``_commit``): backward Euler
 conserves the oil volume, V·(p_{k+1} − p_k)/β = h·ΣQ − ΔV, so the oil energy V·p²/(2β)
@@ -167,8 +174,8 @@ from numba import njit
  C_ES_C, C_TOL, C_MAX_ITER, C_V_CORR, C_MAX_CORR, C_PRESCRIBED, C_MODEL, C_ACC, C_QG_MAX,
  C_DROOP, C_TAU, C_K_PUMP_LEAK, C_ETA_V, C_ETA_HM, C_P_UNLOADED, C_CUT_IN_REL,
  C_MV_OVERLAP, C_MV_LEAK, C_MV_OPEN, C_SV_OVERLAP, C_SV_LEAK, C_SV_OPEN, C_ROD_FEED,
- C_HEAD_BRANCH, C_CQ, C_SQRT_RHO, C_TWO) = range(56)
-N_CONST = 56
+ C_HEAD_BRANCH, C_CQ, C_SQRT_RHO, C_TWO, C_AIR, C_AIR_BAND) = range(58)
+N_CONST = 58
 MODEL_PRESCRIBED, MODEL_FIXED_RELIEF, MODEL_COMPENSATED, MODEL_UNLOADING = 0.0, 1.0, 2.0, 3.0
 MODEL_CODES = {"prescribed": MODEL_PRESCRIBED, "fixed_relief": MODEL_FIXED_RELIEF,
                "compensated": MODEL_COMPENSATED, "unloading": MODEL_UNLOADING}
@@ -178,7 +185,7 @@ LEDGER_FIELDS = ("pump_J", "pump_volumetric_J", "pump_mechanical_J", "unloaded_J
                  "delivered_J", "relief_J", "circuit_J", "to_tank_J", "throttle_main_J",
                  "throttle_rod_restrictor_J", "throttle_VL_J", "throttle_VR_J",
                  "throttle_head_restrictor_L_J", "throttle_head_restrictor_R_J",
-                 "throttle_makeup_J", "leakage_J", "friction_J", "endstop_J",
+                 "throttle_makeup_J", "leakage_J", "cavitation_J", "friction_J", "endstop_J",
                  "numerical_supply_J", "volume_term_J", "piston_work_J",
                  "mech_work_J", "interface_residual_J", "oil_supply_energy_J", "oil_energy_J",
                  "gas_energy_J", "oil_supply_energy_start_J", "oil_energy_start_J",
@@ -187,21 +194,21 @@ LEDGER_FIELDS = ("pump_J", "pump_volumetric_J", "pump_mechanical_J", "unloaded_J
 (L_PUMP, L_PUMP_VOLUMETRIC, L_PUMP_MECHANICAL, L_UNLOADED, L_DELIVERED, L_RELIEF, L_CIRCUIT,
  L_TO_TANK, L_THROTTLE_MAIN, L_THROTTLE_ROD_RESTRICTOR, L_THROTTLE_VL, L_THROTTLE_VR,
  L_THROTTLE_HEAD_RESTRICTOR_L, L_THROTTLE_HEAD_RESTRICTOR_R, L_THROTTLE_MAKEUP, L_LEAKAGE,
- L_FRICTION, L_ENDSTOP, L_NUMERICAL_SUPPLY, L_VOLUME_TERM, L_PISTON_WORK,
+ L_CAVITATION, L_FRICTION, L_ENDSTOP, L_NUMERICAL_SUPPLY, L_VOLUME_TERM, L_PISTON_WORK,
  L_MECH_WORK, L_INTERFACE_RESIDUAL, L_OIL_SUPPLY_ENERGY, L_OIL_ENERGY, L_GAS_ENERGY,
- L_OIL_SUPPLY_ENERGY_START, L_OIL_ENERGY_START, L_GAS_ENERGY_START) = range(29)
-N_LEDGER = 29
-N_FLOW_TERMS = 23
+ L_OIL_SUPPLY_ENERGY_START, L_OIL_ENERGY_START, L_GAS_ENERGY_START) = range(30)
+N_LEDGER = 30
+N_FLOW_TERMS = 24
 
 P, VOL, VOIL, GAIN, FRAC, SET_NEXT, PUMP_X, LOADED = 0, 5, 10, 11, 17, 20, 21, 22
 V_PREV, CARRY, LAW, CORRECTION, P_STAR, DPDV, V_STAR, JAC = 23, 24, 25, 27, 28, 33, 38, 39
 FLOWS, ITERS, BACKTRACKS, STEP_BACKTRACKS, BACKTRACKS_TOTAL, LAST_DP = 57, 70, 71, 72, 73, 74
-REC, LOG, STEP_LEDGER, LEDGER, AREAS, AREAS_SET, TWINS = 75, 81, 90, 119, 148, 152, 153
-PISTON_IMPULSE = 154
+REC, LOG, STEP_LEDGER, LEDGER, AREAS, AREAS_SET, TWINS = 75, 81, 90, 120, 150, 154, 155
+PISTON_IMPULSE = 156
 LOG_FIELDS = ("t_s", "p_head_Pa", "p_rod_Pa", "p_supply_Pa", "q_supply_m3_s", "force_N",
               "supply_J", "piston_work_J", "mech_work_J")
 """What ``state[LOG + i]`` holds, i = 0..8 (the kernel writes them in this order)."""
-N_STATE = 155
+N_STATE = 157
 (S_POS, S_CMD, S_EFF, S_MOVING, S_DELAY, S_TAU, S_HEAD, S_COUNT, S_AT_VALID, S_AT_T, S_AT_H,
  S_AT_X, S_AT_EFF) = range(13)
 N_SOL = 13
@@ -314,6 +321,37 @@ def _makeup(const: np.ndarray, p: float) -> tuple[float, float]:
 
 
 @njit(cache=True)
+def released_air(p_Pa: float, volume_m3: float, alpha: float, band_Pa: float,
+                 p_atm_Pa_abs: float) -> tuple[float, float]:
+    """Free air in a chamber of volume_m3 [m^3] at gauge pressure p_Pa below atmospheric:
+    (V_g [m^3], dV_g/dp [m^3/Pa] ≤ 0); 0 at and above atmospheric.
+
+    Gaseous cavitation as MapleSim's and Simscape's hydraulic chambers approximate it (a
+    liquid with a small gas content that expands isothermally as the pressure falls), with
+    the gas out of solution only below atmospheric, where the oil in a vented tank is
+    saturated: V_g = α·V·r(x)/p_abs, x = −p the depth below atmospheric, p_abs = p_atm − x,
+    r(x) = x − b/2 beyond the onset band b and x²/(2b) inside it (so V_g and dV_g/dp are
+    continuous at p = 0). V_g grows without bound as p_abs → 0: the liquid never goes into
+    tension, the chamber fills with air instead."""
+    x = -p_Pa
+    if x <= 0.0 or alpha == 0.0:
+        return 0.0, 0.0
+    if x < band_Pa:
+        r, dr = 0.5 * x * x / band_Pa, x / band_Pa
+    else:
+        r, dr = x - 0.5 * band_Pa, 1.0
+    q = max(p_atm_Pa_abs - x, 1e-3 * p_atm_Pa_abs)   # p_abs, kept > 0 for Newton's trials
+    g = alpha * volume_m3 / q
+    return g * r, -g * (dr + r / q)
+
+
+@njit(cache=True)
+def _air(const: np.ndarray, p: float, volume_m3: float) -> tuple[float, float]:
+    """``released_air`` with the circuit's constants: (V_g [m^3], dV_g/dp [m^3/Pa])."""
+    return released_air(p, volume_m3, const[C_AIR], const[C_AIR_BAND], const[C_P_ATM])
+
+
+@njit(cache=True)
 def _friction(const: np.ndarray, v: float) -> tuple[float, float]:
     """Friction of both cylinders [N] (opposes motion) and its dF/dv [N·s/m]."""
     f, d = friction_force(v, const[C_FRIC_C], const[C_FRIC_VS], const[C_FRIC_B])
@@ -410,6 +448,22 @@ def _evaluate(const: np.ndarray, state: np.ndarray, h: float, c: tuple, v: float
     rHL = cHL * (pHL - state[P + 1]) - qVL + qlL - qmL + Ahv
     rHR = cHR * (pHR - state[P + 2]) - qVR + qlR - qmR + Ahv
     rB = cB * (pB - state[P + 3]) - qPB + qBT - qlL - qlR - qmB - Arv2
+    # air out of solution below atmospheric: −ΔV_g/h per node, V = c·β·h
+    gA = gHL = gHR = gB = 0.0
+    if min(pA, pHL, pHR, pB, state[P], state[P + 1], state[P + 2], state[P + 3]) < 0.0:
+        bh, ih = const[C_BETA] * h, 1.0 / h
+        for i, pi in enumerate((pA, pHL, pHR, pB)):
+            Vi = c[i] * bh
+            vg1, dvg = _air(const, pi, Vi)
+            r_air, g_air = (_air(const, state[P + i], Vi)[0] - vg1) * ih, -dvg * ih
+            if i == 0:
+                rA, gA = rA + r_air, g_air
+            elif i == 1:
+                rHL, gHL = rHL + r_air, g_air
+            elif i == 2:
+                rHR, gHR = rHR + r_air, g_air
+            else:
+                rB, gB = rB + r_air, g_air
     qrel = qpump = 0.0
     if prescribed:
         rS, JSS, JSA, JSB = 0.0, 1.0, 0.0, 0.0
@@ -436,9 +490,9 @@ def _evaluate(const: np.ndarray, state: np.ndarray, h: float, c: tuple, v: float
               - qpump + qPA + qPB + qrel)
         JSS = cS + dvoil * ih + aPA_S + aPB_S + drel - dpump
         JSA, JSB = aPA_A, aPB_B
-    J = (cA - aPA_A + aAT_A + aVL_A + aVR_A, aVL_H, aVR_H, -aPA_S,
-         -aVL_A, cHL - aVL_H - dmL + leak, -aVR_A, cHR - aVR_H - dmR + leak,
-         cB - aPB_B + aBT_B - dmB + 2.0 * leak, -aPB_S, JSS, JSA, JSB)
+    J = (cA + gA - aPA_A + aAT_A + aVL_A + aVR_A, aVL_H, aVR_H, -aPA_S,
+         -aVL_A, cHL + gHL - aVL_H - dmL + leak, -aVR_A, cHR + gHR - aVR_H - dmR + leak,
+         cB + gB - aPB_B + aBT_B - dmB + 2.0 * leak, -aPB_S, JSS, JSA, JSB)
     return ((rA, rHL, rHR, rB, rS), J,
             (qPA, qAT, qPB, qBT, qVL, qVR, qrel, qmL, qmR, qmB, qlL, qlR, qpump))
 
@@ -695,6 +749,12 @@ def _commit(const: np.ndarray, state: np.ndarray, p1: tuple, V1: tuple, flows: t
     _enter(state, sl + L_THROTTLE_HEAD_RESTRICTOR_R, (1.0 - f_vr) * loss_vr, a)
     _enter(state, sl + L_THROTTLE_MAKEUP, makeup, a)
     _enter(state, sl + L_LEAKAGE, h * ((pHL - pB) * qlL + (pHR - pB) * qlR), a)
+    cav = 0.0   # −Σ p̄·ΔV_g: the liquid's work on the air out of solution (EnergyLedger)
+    if min(p0[0], p0[1], p0[2], p0[3], p1[0], p1[1], p1[2], p1[3]) < 0.0:
+        for i, pm in enumerate((pA, pHL, pHR, pB)):
+            Vi = V1[i]
+            cav -= pm * (_air(const, p1[i], Vi)[0] - _air(const, p0[i], Vi)[0])
+    _enter(state, sl + L_CAVITATION, cav, a)
     _enter(state, sl + L_NUMERICAL_SUPPLY, num_supply, a)
     _enter(state, sl + L_VOLUME_TERM, vol, a)
     fp = const[C_AH] * (pHL + pHR) - 2.0 * const[C_AR] * pB

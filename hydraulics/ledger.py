@@ -5,7 +5,7 @@ the prime mover to the track::
 
     pump      = pump_volumetric + pump_mechanical + unloaded + delivered
     delivered = relief + Δ(oil_supply + gas) + numerical_supply + circuit
-    circuit   = to_tank + throttle_* + leakage + Δoil + volume_term + piston
+    circuit   = to_tank + throttle_* + leakage + cavitation + Δoil + volume_term + piston
     piston    = friction + endstop + mech_work + interface_residual
 
 The circuit's terms are booked at each node's mean pressure over the step,
@@ -59,6 +59,11 @@ class EnergyLedger:
         head restrictors and the make-up check valves; a valve and its series restrictor
         share a loss in proportion to 1/A² (exact for the turbulent orifice law).
     leakage_J: Δp·Q of the internal head->rod leakage.
+    cavitation_J: −Σ p̄·ΔV_g, the work the liquid does on the air out of solution below
+        atmospheric (``kernels.released_air``): > 0 while air comes out, < 0 while it goes
+        back. The law is reversible, so over a release and re-absorption the sum is the
+        steps' quadrature of it, not a loss (a 30 ms pull of the rod node into the air,
+        tests/test_cavitation.py: +0.96 J out, −1.02 J back).
     friction_J / endstop_J: friction work and end-stop work absorbed (F·v·h, ≥ 0 for friction).
     numerical_supply_J: backward-Euler dissipation V(Δp)²/(2β) of the supply node (booked
         at its end-of-step pressure, as the pump's and the relief's energies are) and the
@@ -73,8 +78,8 @@ class EnergyLedger:
         circuit nodes: line A, heads with their hoses, rod node; accumulator gas);
         *_start_J at the ledger start.
 
-    The terms live in ``terms``, a float64 array of length 29 in ``kernels.LEDGER_FIELDS``
-    order (the first 23 are the flow terms that ``add`` accumulates). ``EnergyLedger.view``
+    The terms live in ``terms``, a float64 array of length 30 in ``kernels.LEDGER_FIELDS``
+    order (the first 24 are the flow terms that ``add`` accumulates). ``EnergyLedger.view``
     wraps an existing array: the tensioner's ledgers are views of its state array, so they
     show the current values at any time.
     """
@@ -114,6 +119,7 @@ class EnergyLedger:
     throttle_head_restrictor_R_J = _term(k.L_THROTTLE_HEAD_RESTRICTOR_R)
     throttle_makeup_J = _term(k.L_THROTTLE_MAKEUP)
     leakage_J = _term(k.L_LEAKAGE)
+    cavitation_J = _term(k.L_CAVITATION)
     friction_J = _term(k.L_FRICTION)
     endstop_J = _term(k.L_ENDSTOP)
     numerical_supply_J = _term(k.L_NUMERICAL_SUPPLY)
@@ -162,8 +168,8 @@ class EnergyLedger:
         """Every dissipated/exported term except mechanical work and the interface residual,
         from the pump shaft to the piston [J]."""
         return (self.pump_losses_J + self.relief_J + self.to_tank_J + self.throttle_J
-                + self.leakage_J + self.friction_J + self.endstop_J + self.numerical_supply_J
-                + self.volume_term_J)
+                + self.leakage_J + self.cavitation_J + self.friction_J + self.endstop_J
+                + self.numerical_supply_J + self.volume_term_J)
 
     @property
     def supply_balance_error_J(self) -> float:

@@ -51,7 +51,8 @@ class Tank(Parameters):
 
 @dataclass(frozen=True, slots=True)
 class Cavitation(Parameters):
-    """Outflow limiter floor/band and tank->chamber make-up check valves."""
+    """Outflow limiter floor/band, tank->chamber make-up check valves, air released below
+    atmospheric (gaseous cavitation)."""
 
     floor_Pa: float = param(-1e5, 1e7, doc="outflow of a node stops at this pressure")
     band_Pa: float = param(0.0, 1e7, open_low=True,
@@ -62,6 +63,13 @@ class Cavitation(Parameters):
     makeup_full_below_tank_Pa: float = param(0.0, 1e7, open_low=True,
                                              doc="make-up valve fully open this far below p_t")
     makeup_area_m2: float = param(0.0, 1.0, doc="make-up valve full opening area")
+    air_fraction: float = param(0.0, 0.2, unit="-",
+                                doc="free air per chamber volume out of solution below "
+                                    "atmospheric: V_g = α·V·(−p)/p_abs (kernels."
+                                    "released_air); 0 lets a chamber go into tension")
+    air_onset_band_Pa: float = param(0.0, 1e6, open_low=True,
+                                     doc="depth below atmospheric over which the release "
+                                         "sets in (V_g and its slope continuous)")
 
     def cross_check(self, at: Location) -> None:
         if self.makeup_full_below_tank_Pa <= self.makeup_crack_below_tank_Pa:

@@ -154,8 +154,9 @@ class HydraulicTensioner:
     exchange (stroke integrated internally, re-synchronised at each exchange). With a light
     carrier (80 kg against the ~2e7 N/m oil spring, ω ≈ 500 rad/s) the 5 ms held exchange is
     unstable, a real property of the scheme: the carrier oscillation grows until the held
-    velocity drives a chamber below absolute vacuum (p < −p_atm gauge), empties a chamber
-    volume or stops Newton converging. The element then does not raise: it sets
+    velocity drives a chamber below absolute vacuum (p < −p_atm gauge: only without free
+    air, ``[cavitation] air_fraction`` = 0), empties a chamber volume or stops Newton
+    converging. The element then does not raise: it sets
     ``diverged = True`` and ``divergence_time_s`` (start of the failing sub-step), keeps the
     hydraulics frozen at the last physical state (its last force law is held, the ledger
     stops at the last completed sub-step) and keeps accepting steps, so an experiment can
@@ -325,6 +326,7 @@ class HydraulicTensioner:
         c[k.C_FLOOR], c[k.C_BAND] = self.floor, cav.band_Pa
         c[k.C_MU_OPEN], c[k.C_MU_WIDTH] = self.mu_open, self.mu_width
         c[k.C_K_MU] = orifice_gain(cq, cav.makeup_area_m2, rho)
+        c[k.C_AIR], c[k.C_AIR_BAND] = cav.air_fraction, cav.air_onset_band_Pa
         c[k.C_FRIC_C], c[k.C_FRIC_VS] = cyl.coulomb_friction_N, cyl.coulomb_velocity_m_s
         c[k.C_FRIC_B] = cyl.viscous_friction_N_s_m
         c[k.C_ES_K], c[k.C_ES_C] = cyl.endstop_stiffness_N_m, cyl.endstop_damping_N_s_m

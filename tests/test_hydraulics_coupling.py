@@ -183,13 +183,16 @@ def _pressurize_80kg(coupling: str, steps: int = 100) -> tuple[HydraulicTensione
 
 def test_multirate_divergence_is_reported_not_raised() -> None:
     """With 80 kg the 5 ms held exchange across the ~2e7 N/m oil spring is unstable: the
-    carrier's oscillation grows until a chamber is driven below absolute vacuum; the element
-    flags it, freezes the hydraulics at the last physical state and keeps stepping."""
-    mr, v_mr = _pressurize_80kg("multirate")
-    st, v_st = _pressurize_80kg("strong")
+    carrier's oscillation grows until the scheme leaves physics (here at 0.105 s, the rod
+    node filling with air out of solution on each swing, the heads at ~2.9 GPa when Newton
+    stops converging; without free air the rod node went below vacuum at 0.084 s); the
+    element flags it, freezes the hydraulics at the last physical state and keeps
+    stepping."""
+    mr, v_mr = _pressurize_80kg("multirate", 200)
+    st, v_st = _pressurize_80kg("strong", 200)
     print(f"multirate diverged at t = {mr.divergence_time_s} s; max |v| multirate "
           f"{max(v_mr):.3g} m/s, strong {max(v_st):.3g} m/s")
-    assert mr.diverged and 0.02 < mr.divergence_time_s < 0.1   # valves open at 20 ms
+    assert mr.diverged and 0.02 < mr.divergence_time_s < 0.2   # valves open at 20 ms
     assert not st.diverged and max(v_st) < 0.01
     assert max(v_mr) > 10.0 * max(v_st)   # the growing oscillation, not a solver artefact
     assert all(math.isfinite(x) and x >= -mr.p_atm for x in mr.pressures)

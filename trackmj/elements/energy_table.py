@@ -7,7 +7,8 @@ chain from the prime mover to the track (:class:`~trackmj.hydraulics.EnergyLedge
 
     pump    = Σ pump_losses + relief + stored_change.supply_oil + stored_change.accumulator
               + numerical.supply + circuit
-    circuit = Σ throttling + makeup + leakage + return_line + stored_change.circuit_oil
+    circuit = Σ throttling + makeup + leakage + cavitation + return_line
+              + stored_change.circuit_oil
               + numerical.volume_term + friction + endstop
               + numerical.interface + mechanical
 
@@ -26,6 +27,8 @@ state). Keys:
 - ``throttling``: by valve, ``main_valve`` (its four edges), ``rod_feed_restrictor``,
   ``V_L``, ``V_R``, ``head_restrictor_L``, ``head_restrictor_R``;
 - ``makeup``: the make-up check valves; ``leakage``: cylinder seals head -> rod;
+  ``cavitation``: the liquid's work on the air out of solution below atmospheric, −Σ p̄·ΔV_g
+  (a reversible law: what stays is the steps' quadrature of it, hundredths of a joule);
   ``return_line``: p_t·Q of the circuit's return flow (back-pressure of the tank line);
 - ``friction``: cylinder seal friction; ``endstop``: end-stop contact work;
 - ``stored_change``: ``supply_oil``, ``accumulator`` (gas), ``circuit_oil`` (line A, heads
@@ -82,6 +85,7 @@ def energy_table(ledger: EnergyLedger, supply_model: str, t_end_s: float) -> dic
                        "head_restrictor_R": led.throttle_head_restrictor_R_J},
         "makeup": led.throttle_makeup_J,
         "leakage": led.leakage_J,
+        "cavitation": led.cavitation_J,
         "return_line": led.to_tank_J,
         "friction": led.friction_J,
         "endstop": led.endstop_J,

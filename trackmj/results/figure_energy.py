@@ -17,8 +17,9 @@ from trackmj.results.energy_terms import ENERGY_TOTALS, energy_terms
 from trackmj.results.figure_style import number
 from trackmj.results.store import Result
 
-ENERGY_ORDER = ("throttling", "leakage", "friction", "makeup", "return_line", "endstop",
-                "mechanical", "stored_change", "numerical", "residual", "relief", "pump_losses")
+ENERGY_ORDER = ("throttling", "leakage", "friction", "makeup", "cavitation", "return_line",
+                "endstop", "mechanical", "stored_change", "numerical", "residual", "relief",
+                "pump_losses")
 """Stacking order of the energy terms (terms not listed go on top)."""
 SUPPLY_SIDE = ("pump_losses", "relief", "stored_change.supply_oil",
                "stored_change.accumulator", "numerical.supply")
@@ -29,6 +30,7 @@ ENERGY_WORDS = {
     "leakage": "seal leakage, head to rod",
     "friction": "cylinder seal friction",
     "makeup": "make-up check valves",
+    "cavitation": "air out of solution (cavitation)",
     "return_line": "return-line back-pressure",
     "endstop": "end-stop contact",
     "mechanical": "work into the track, ∫F·v dt",
