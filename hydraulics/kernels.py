@@ -219,6 +219,9 @@ OK, NOT_CONVERGED, LEFT_PHYSICS = 0, 1, 2
 MAX_BACKTRACKS = 12  # line-search halvings per Newton iteration (alpha >= 2^-12)
 _MIN_STEP = 2.0 ** -MAX_BACKTRACKS
 MAX_CHORD = 3  # chord corrections in a strong complete_step before full Newton
+AIR_P_ABS_MIN = 100.0
+"""Absolute pressure [Pa] below which ``released_air`` follows its tangent (the law's
+V_g ∝ 1/p_abs has no value at absolute zero; a chamber there holds ~αV·p_atm/100 of air)."""
 SQRT2 = math.sqrt(2.0)
 
 
@@ -332,17 +335,23 @@ def released_air(p_Pa: float, volume_m3: float, alpha: float, band_Pa: float,
     saturated: V_g = α·V·r(x)/p_abs, x = −p the depth below atmospheric, p_abs = p_atm − x,
     r(x) = x − b/2 beyond the onset band b and x²/(2b) inside it (so V_g and dV_g/dp are
     continuous at p = 0). V_g grows without bound as p_abs → 0: the liquid never goes into
-    tension, the chamber fills with air instead."""
+    tension, the chamber fills with air instead. Below p_abs = AIR_P_ABS_MIN the law goes
+    on along its tangent there (V_g and its slope continuous; the slope then takes ~1/20 of
+    the chamber per pascal), so Newton's trial points past absolute zero stay finite."""
     x = -p_Pa
     if x <= 0.0 or alpha == 0.0:
         return 0.0, 0.0
+    past = 0.0   # depth beyond p_abs = AIR_P_ABS_MIN [Pa], taken along the tangent
+    q = p_atm_Pa_abs - x
+    if q < AIR_P_ABS_MIN:
+        past, x, q = AIR_P_ABS_MIN - q, p_atm_Pa_abs - AIR_P_ABS_MIN, AIR_P_ABS_MIN
     if x < band_Pa:
         r, dr = 0.5 * x * x / band_Pa, x / band_Pa
     else:
         r, dr = x - 0.5 * band_Pa, 1.0
-    q = max(p_atm_Pa_abs - x, 1e-3 * p_atm_Pa_abs)   # p_abs, kept > 0 for Newton's trials
     g = alpha * volume_m3 / q
-    return g * r, -g * (dr + r / q)
+    slope = g * (dr + r / q)   # dV_g/dx
+    return g * r + slope * past, -slope
 
 
 @njit(cache=True)

@@ -20,6 +20,7 @@ from typing import Literal
 
 import numpy as np
 
+from trackmj.errors import PhysicsError
 from trackmj.ports import ElementLog, ForceLaw, make_force_law, positional
 
 from . import kernels as k
@@ -570,9 +571,11 @@ class HydraulicTensioner:
         return t, s, v
 
     def _not_converged(self) -> None:
-        raise RuntimeError(f"hydraulic Newton did not converge in "
+        """PhysicsError: the step's Newton solve failed (a run stops on it with its reason)."""
+        raise PhysicsError(f"t = {self.t:.3f} s: hydraulic Newton did not converge in "
                            f"{self.params.coupling.newton_max_iter} iterations (t = {self.t} s, "
-                           f"last |dp| = {self._state.item(k.LAST_DP)} Pa)")
+                           f"last |dp| = {self._state.item(k.LAST_DP):.3g} Pa); the run left "
+                           "physics and was stopped")
 
     def _setpoint_at(self, t_s: float) -> float:
         """The set-point profile at ``t_s`` [s] -> p_set [Pa gauge], checked finite and >= 0."""
