@@ -479,25 +479,28 @@ def test_a_sweep_writes_its_summary_and_a_figure_per_key(grid, executor) -> None
 
 
 def test_a_failing_run_becomes_an_error_row(executor, tmp_path) -> None:
-    """A -30 kN push on the rear hitch (the file's limit) pulls the rods below vacuum within
-    0.2 s: that run is a row with its error; the calibrated push beside it runs through."""
+    """A -30 kN push on the rear hitch (the file's limit) from 0.5 s, the oil's free air
+    swept: without it the push pulls the rods below vacuum within 0.2 s, and that run is a
+    row with its error; with the shipped air (0.005) the rod chambers fill with air and the
+    run beside it goes through."""
     spec = {"sweep": {"scenario": "W3", "duration_s": DURATION_S, "set": [
-        "scenario.load_pulses.0.start_s=0.5", "scenario.load_pulses.0.end_s=1.4"],
-        "parameters": [{"key": "scenario.load_pulses.0.hitch_N",
-                        "values": [-3197.0, -30000.0]}]}}
+        "scenario.load_pulses.0.start_s=0.5", "scenario.load_pulses.0.end_s=1.4",
+        "scenario.load_pulses.0.hitch_N=-30000.0", "scenario.load_pulses.1.hitch_N=0.0"],
+        "parameters": [{"key": "hydraulics.cavitation.air_fraction",
+                        "values": [0.005, 0.0]}]}}
     summary = sweep(spec, tmp_path, executor=executor, progress=False, plot=False,
                     keep_runs=True)
     assert (summary.ran, summary.failed) == (2, 1)
-    df = read_sweep(tmp_path).set_index("scenario.load_pulses.0.hitch_N")
-    assert math.isnan(df.loc[-30000.0, "rmse_N"]) and df.loc[-30000.0, "wall_time_s"] > 0
-    assert df.loc[-30000.0, "error"].startswith("PhysicsError: t = ")
-    assert "below vacuum" in df.loc[-30000.0, "error"]
-    assert df["error"].isna().sum() == 1 and df.loc[-3197.0, "rmse_N"] > 0
+    df = read_sweep(tmp_path).set_index("hydraulics.cavitation.air_fraction")
+    assert math.isnan(df.loc[0.0, "rmse_N"]) and df.loc[0.0, "wall_time_s"] > 0
+    assert df.loc[0.0, "error"].startswith("PhysicsError: t = ")
+    assert "below vacuum" in df.loc[0.0, "error"]
+    assert df["error"].isna().sum() == 1 and df.loc[0.005, "rmse_N"] > 0
     (kept,) = [p for p in (tmp_path / "runs").iterdir() if p.is_dir()]   # the run that ran
     assert json.loads((kept / "metrics.json").read_text())["run"]["scenario"] == "W3"
-    rows = {r.values["scenario.load_pulses.0.hitch_N"]: r for r in summary.table.rows}
-    assert (rows[-30000.0].seeds, rows[-30000.0].failed) == ((), 1)   # counted, not averaged
-    assert (rows[-3197.0].seeds, rows[-3197.0].failed) == ((0,), 0)
+    rows = {r.values["hydraulics.cavitation.air_fraction"]: r for r in summary.table.rows}
+    assert (rows[0.0].seeds, rows[0.0].failed) == ((), 1)   # counted, not averaged
+    assert (rows[0.005].seeds, rows[0.005].failed) == ((0,), 0)
     assert "0 (1 failed)" in (tmp_path / "summary.md").read_text()
     again = sweep(spec, tmp_path, executor=executor, progress=False, plot=False)
     assert (again.ran, again.skipped) == (0, 2)
