@@ -60,8 +60,8 @@ C_ROD_FEED, C_HEAD_BRANCH  restrictors in series: rod feed P->B, each head branc
 C_CQ, C_SQRT_RHO      discharge coefficient [-], sqrt(density) [sqrt(kg/m^3)]
 C_TWO                 2.0, the loss-share exponent (read at run time, so the square is
                       libm's pow(x, 2) as in Python, not folded into x·x)
-C_AIR, C_AIR_BAND     air released below atmospheric: volume fraction α [-] at
-                      p → −∞ of ``released_air``'s r(x)/p_abs law; onset band [Pa]
+C_AIR, C_AIR_BAND     air out of solution below atmospheric (``released_air``): its
+                      fraction α of the chamber volume [-], onset band [Pa]
 ====================  ===========================================================
 
 ``state`` layout (offset, length: content [unit]):

@@ -65,7 +65,7 @@ class Cavitation(Parameters):
     makeup_area_m2: float = param(0.0, 1.0, doc="make-up valve full opening area")
     air_fraction: float = param(0.0, 0.2, unit="-",
                                 doc="free air per chamber volume out of solution below "
-                                    "atmospheric: V_g = α·V·(−p)/p_abs (kernels."
+                                    "atmospheric: V_g ≈ α·V·(−p)/p_abs (kernels."
                                     "released_air); 0 lets a chamber go into tension")
     air_onset_band_Pa: float = param(0.0, 1e6, open_low=True,
                                      doc="depth below atmospheric over which the release "

@@ -573,9 +573,9 @@ class HydraulicTensioner:
     def _not_converged(self) -> None:
         """PhysicsError: the step's Newton solve failed (a run stops on it with its reason)."""
         raise PhysicsError(f"t = {self.t:.3f} s: hydraulic Newton did not converge in "
-                           f"{self.params.coupling.newton_max_iter} iterations (t = {self.t} s, "
-                           f"last |dp| = {self._state.item(k.LAST_DP):.3g} Pa); the run left "
-                           "physics and was stopped")
+                           f"{self.params.coupling.newton_max_iter} iterations (last |dp| = "
+                           f"{self._state.item(k.LAST_DP):.3g} Pa); the run left physics and "
+                           "was stopped")
 
     def _setpoint_at(self, t_s: float) -> float:
         """The set-point profile at ``t_s`` [s] -> p_set [Pa gauge], checked finite and >= 0."""

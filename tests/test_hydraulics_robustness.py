@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from trackmj.errors import PhysicsError
 from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
 
 # the trajectory was recorded with the stiff head column (no hose compliance, 1.5e-4 m^3)
@@ -76,11 +77,13 @@ def test_replay_ledger_closes(replay) -> None:
 @pytest.mark.parametrize("coupling", ["strong", "weak"])
 def test_newton_failure_raises_naming_the_iteration_limit(coupling: str) -> None:
     """A solve that cannot reach the tolerance in newton_max_iter iterations raises (the
-    compiled kernel returns a status; the element turns it into the RuntimeError)."""
+    compiled kernel returns a status; the element turns it into a PhysicsError, on which a
+    run stops with its reason)."""
     prm = dataclasses.replace(_P, coupling=dataclasses.replace(_P.coupling, newton_max_iter=1,
                                                                newton_tol_Pa=1e-9))
     ht = HydraulicTensioner(prm, coupling=coupling)
     ht.set_mode(1)
-    with pytest.raises(RuntimeError, match=r"did not converge in 1 iterations \(t = 0.0 s"):
+    with pytest.raises(PhysicsError, match=r"t = 0\.000 s: hydraulic Newton did not converge "
+                                           r"in 1 iterations"):
         ht.force_law(0.0, 0.05, 0.01)
         ht.complete_step(1e-3, 0.05001, 0.01)
