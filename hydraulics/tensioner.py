@@ -148,7 +148,9 @@ class HydraulicTensioner:
     adds δF = clip(E_c/(h·v_k), ±max_correction_N) when |v_k| ≥ min_correction_velocity,
     else 0. Deadbeat when v changes little per step, so Σ r stays ≈ one step's residual.
 
-    Weak coupling: F0 = pressure force of the last completed step + end stop at (s_k, v_k),
+    Weak coupling: F0 = pressure force at the last completed step's end pressures (its
+    latest state; the circuit books that step at its mean pressures, so the interface
+    residual carries A·(p̄ − p_k)·v·h) + end stop at (s_k, v_k),
     friction linearised at v_k (Z = −dF_fric/dv only), no correction. Multi-rate: the force
     is updated every ``exchange_steps`` calls to force_law; in between, each completed step
     advances the hydraulics in ``substep_s`` BE sub-steps with the velocity held from the last
