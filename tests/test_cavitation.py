@@ -11,7 +11,7 @@ import math
 import pytest
 
 from trackmj.hydraulics import HydraulicTensioner, load_hydraulic_params
-from trackmj.hydraulics.kernels import released_air
+from trackmj.hydraulics.kernels import AIR_P_ABS_MIN, released_air
 
 P_ATM = 101325.0
 """Atmospheric pressure [Pa abs] of the shipped hydraulics files."""
@@ -34,6 +34,24 @@ def test_released_air_follows_the_isothermal_law_below_atmospheric() -> None:
     assert released_air(-1e-3, 1e-3, alpha, band, P_ATM)[1] == pytest.approx(0.0, abs=1e-12)
     # near absolute zero the air takes any volume: 1 kPa abs holds ~0.5 L per litre
     assert released_air(-(P_ATM - 1e3), 1e-3, alpha, band, P_ATM)[0] > 0.4e-3
+
+
+def test_released_air_goes_on_along_its_tangent_past_absolute_zero() -> None:
+    """The law V_g ∝ 1/p_abs has no value at absolute zero; below p_abs = AIR_P_ABS_MIN it
+    follows its tangent there, so Newton's trial points stay finite: value and slope
+    continuous at the switch, and 1 kPa past absolute zero the volume is the tangent's."""
+    alpha, band, volume = 0.005, 1e4, 1e-3
+    switch = -(P_ATM - AIR_P_ABS_MIN)
+    v, dv = released_air(switch, volume, alpha, band, P_ATM)
+    below = released_air(switch - 1e-3, volume, alpha, band, P_ATM)
+    above = released_air(switch + 1e-3, volume, alpha, band, P_ATM)
+    assert below[1] == pytest.approx(dv, rel=1e-9)
+    assert above[1] == pytest.approx(dv, rel=1e-4)
+    assert above[0] < v < below[0]
+    past = -P_ATM - 1e3
+    assert released_air(past, volume, alpha, band, P_ATM) == pytest.approx(
+        (v + dv * (past - switch), dv), rel=1e-12)
+    assert math.isfinite(released_air(-1e9, volume, alpha, band, P_ATM)[0])
 
 
 def _pull(air_fraction: float, speed_m_s: float = 0.3, start_s: float = 0.06,
