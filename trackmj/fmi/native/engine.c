@@ -519,9 +519,10 @@ static double value_of(const Engine *e, unsigned vr) {
     return e->s.values[variable_index(vr)];
 }
 
-/* Copy a configuration array into a fresh allocation of ints or doubles; NULL (and a logged
-   reason) when the key is missing or has another length. */
-static int *cfg_ints(const Engine *e, const Cfg *cfg, const char *key, int expected) {
+/* The entry of a configuration key with `expected` values (any number when < 0); NULL, and a
+   logged reason, when the key is missing or has another length. */
+static const CfgEntry *cfg_entry(const Engine *e, const Cfg *cfg, const char *key,
+                                 int expected) {
     const CfgEntry *entry = cfg_find(cfg, key);
     if (!entry || (expected >= 0 && entry->count != expected)) {
         logf_engine(e, ENGINE_ERROR, "logStatusError",
@@ -529,6 +530,14 @@ static int *cfg_ints(const Engine *e, const Cfg *cfg, const char *key, int expec
                     entry ? "has another length" : "missing", expected);
         return NULL;
     }
+    return entry;
+}
+
+/* A configuration array in a fresh allocation of ints or doubles; NULL (and a logged reason)
+   when the key is missing or has another length. */
+static int *cfg_ints(const Engine *e, const Cfg *cfg, const char *key, int expected) {
+    const CfgEntry *entry = cfg_entry(e, cfg, key, expected);
+    if (!entry) return NULL;
     int *out = malloc(sizeof(int) * (size_t)(entry->count ? entry->count : 1));
     if (out)
         for (int i = 0; i < entry->count; i++) out[i] = (int)entry->values[i];
@@ -536,13 +545,8 @@ static int *cfg_ints(const Engine *e, const Cfg *cfg, const char *key, int expec
 }
 
 static double *cfg_doubles(const Engine *e, const Cfg *cfg, const char *key, int expected) {
-    const CfgEntry *entry = cfg_find(cfg, key);
-    if (!entry || (expected >= 0 && entry->count != expected)) {
-        logf_engine(e, ENGINE_ERROR, "logStatusError",
-                    "resources/track.cfg: key %s %s (expected %d values)", key,
-                    entry ? "has another length" : "missing", expected);
-        return NULL;
-    }
+    const CfgEntry *entry = cfg_entry(e, cfg, key, expected);
+    if (!entry) return NULL;
     double *out = malloc(sizeof(double) * (size_t)(entry->count ? entry->count : 1));
     if (out) memcpy(out, entry->values, sizeof(double) * (size_t)entry->count);
     return out;
@@ -553,35 +557,19 @@ static int cfg_count(const Cfg *cfg, const char *key) {
     return entry ? entry->count : -1;
 }
 
-static int cfg_int(const Engine *e, const Cfg *cfg, const char *key, int *out) {
-    int *v = cfg_ints(e, cfg, key, 1);
-    if (!v) return -1;
-    *out = v[0];
-    free(v);
-    return 0;
-}
-
-static int cfg_double(const Engine *e, const Cfg *cfg, const char *key, double *out) {
-    double *v = cfg_doubles(e, cfg, key, 1);
-    if (!v) return -1;
-    *out = v[0];
-    free(v);
-    return 0;
-}
-
+/* Copy the n values of a key into out (doubles, or ints); -1 (and a logged reason) when the
+   key is missing or has another length. */
 static int cfg_into(const Engine *e, const Cfg *cfg, const char *key, double *out, int n) {
-    double *v = cfg_doubles(e, cfg, key, n);
-    if (!v) return -1;
-    memcpy(out, v, sizeof(double) * (size_t)n);
-    free(v);
+    const CfgEntry *entry = cfg_entry(e, cfg, key, n);
+    if (!entry) return -1;
+    memcpy(out, entry->values, sizeof(double) * (size_t)n);
     return 0;
 }
 
 static int cfg_into_int(const Engine *e, const Cfg *cfg, const char *key, int *out, int n) {
-    int *v = cfg_ints(e, cfg, key, n);
-    if (!v) return -1;
-    memcpy(out, v, sizeof(int) * (size_t)n);
-    free(v);
+    const CfgEntry *entry = cfg_entry(e, cfg, key, n);
+    if (!entry) return -1;
+    for (int i = 0; i < n; i++) out[i] = (int)entry->values[i];
     return 0;
 }
 
@@ -602,27 +590,30 @@ void engine_free(Engine *e) {
 static int load_configuration(Engine *e, const Cfg *cfg) {
     const mjModel *m = e->m;
     Foundation *f = &e->f;
-    if (cfg_int(e, cfg, "substeps", &e->substeps) || cfg_int(e, cfg, "pins", &e->n)
-        || cfg_int(e, cfg, "slide_q", &e->slide_q) || cfg_int(e, cfg, "slide_v", &e->slide_v)
-        || cfg_int(e, cfg, "sprocket_v", &e->sprocket_v)
+    if (cfg_into_int(e, cfg, "substeps", &e->substeps, 1)
+        || cfg_into_int(e, cfg, "pins", &e->n, 1)
+        || cfg_into_int(e, cfg, "slide_q", &e->slide_q, 1)
+        || cfg_into_int(e, cfg, "slide_v", &e->slide_v, 1)
+        || cfg_into_int(e, cfg, "sprocket_v", &e->sprocket_v, 1)
         || cfg_into_int(e, cfg, "chassis_q", e->chassis_q, 3)
         || cfg_into_int(e, cfg, "chassis_v", e->chassis_v, 3)
-        || cfg_int(e, cfg, "tensioner", &e->tensioner) || cfg_int(e, cfg, "drive", &e->drive)
-        || cfg_int(e, cfg, "hitch_site", &e->hitch_site)
-        || cfg_int(e, cfg, "chassis_body", &e->chassis_body)
-        || cfg_int(e, cfg, "sprocket_body", &e->sprocket_body)
-        || cfg_double(e, cfg, "drive_gain", &e->drive_gain)
-        || cfg_double(e, cfg, "drive_limit", &e->drive_limit)
-        || cfg_double(e, cfg, "stroke_offset_m", &e->stroke_offset_m)
-        || cfg_double(e, cfg, "pitch_radius_m", &e->pitch_radius_m)
-        || cfg_double(e, cfg, "ride_height_m", &e->ride_height_m)
+        || cfg_into_int(e, cfg, "tensioner", &e->tensioner, 1)
+        || cfg_into_int(e, cfg, "drive", &e->drive, 1)
+        || cfg_into_int(e, cfg, "hitch_site", &e->hitch_site, 1)
+        || cfg_into_int(e, cfg, "chassis_body", &e->chassis_body, 1)
+        || cfg_into_int(e, cfg, "sprocket_body", &e->sprocket_body, 1)
+        || cfg_into(e, cfg, "drive_gain", &e->drive_gain, 1)
+        || cfg_into(e, cfg, "drive_limit", &e->drive_limit, 1)
+        || cfg_into(e, cfg, "stroke_offset_m", &e->stroke_offset_m, 1)
+        || cfg_into(e, cfg, "pitch_radius_m", &e->pitch_radius_m, 1)
+        || cfg_into(e, cfg, "ride_height_m", &e->ride_height_m, 1)
         || cfg_into(e, cfg, "strand_bounds", e->strand_bounds, 5)
-        || cfg_double(e, cfg, "envelope_threshold_m", &e->envelope_threshold_m)
-        || cfg_double(e, cfg, "seat_tolerance_m", &e->seat_tolerance_m)
-        || cfg_double(e, cfg, "slack_tension_N", &e->slack_tension_N)
-        || cfg_double(e, cfg, "closure_max_m", &e->closure_max_m)
-        || cfg_int(e, cfg, "min_seated_pins", &e->min_seated_pins)
-        || cfg_int(e, cfg, "foundation_width", &f->width)
+        || cfg_into(e, cfg, "envelope_threshold_m", &e->envelope_threshold_m, 1)
+        || cfg_into(e, cfg, "seat_tolerance_m", &e->seat_tolerance_m, 1)
+        || cfg_into(e, cfg, "slack_tension_N", &e->slack_tension_N, 1)
+        || cfg_into(e, cfg, "closure_max_m", &e->closure_max_m, 1)
+        || cfg_into_int(e, cfg, "min_seated_pins", &e->min_seated_pins, 1)
+        || cfg_into_int(e, cfg, "foundation_width", &f->width, 1)
         || cfg_into(e, cfg, "foundation_law", f->law, N_LAW))
         return -1;
     int n = e->n, D = f->width;
