@@ -19,8 +19,9 @@ from trackmj.control import mpc_kernels
 from trackmj.control.governor import drive_load_allowance, feasible_band, govern
 from trackmj.control.model import ReducedModel
 from trackmj.control.ocp import X_SCALE, Ocp, build_ocp, initial_guess, parameter_vector
-from trackmj.control.params import ControllerParams, MpcParams
+from trackmj.control.params import ControllerParams, MpcParams, resolved
 from trackmj.control.sqp import CondensedSqp
+from trackmj.control.trim import IntegralTrim
 from trackmj.ports import ControllerStatistics, ControlOutput
 
 #: Largest constraint violation (scaled units: MPa, mm, kN, ...) accepted from a truncated SQP.
@@ -40,6 +41,10 @@ class _MpcBase:
             (model.p.supply_pressure_Pa, model.p.stiffness_N_m, model.p.free_position_m)
         )
         self.u_prev = 0.0
+        middle = 0.5 * (resolved(ctrl, "force_min_N") + resolved(ctrl, "force_max_N"))
+        self.trim = IntegralTrim(mpc.offset_integral_time_s, mpc.offset_trim_max_rel * middle,
+                                 mpc.offset_clip_rel * middle, mpc.offset_filter_s,
+                                 ctrl.period_s)
         self.failures = 0
         self.overruns = 0
         self.fallbacks = 0
@@ -122,8 +127,10 @@ class _MpcBase:
         torque's idler load L [N] (:func:`~trackmj.control.model.drive_load_N`), fed
         forward as the unloaded stroke moved in by L/k_eq (held over the horizon), and
         rejected only as far as the band takes its end
-        (:func:`~trackmj.control.governor.drive_load_allowance`). The preview is saturated by
-        the reference governor (:mod:`trackmj.control.governor`) at the current supply.
+        (:func:`~trackmj.control.governor.drive_load_allowance`). The preview is raised by
+        the integral trim (:mod:`trackmj.control.trim`, updated first from this estimate's
+        cylinder force) and saturated by the reference governor
+        (:mod:`trackmj.control.governor`) at the current supply.
         A solve that fails is still used if its plan is finite (counted as a fallback), so
         the controller keeps acting; otherwise the previous plan is shifted on.
         """
@@ -134,7 +141,12 @@ class _MpcBase:
                 load = float(estimate[5])
                 self.theta[2] -= load / self.theta[1]
                 reference_preview = self._with_drive_load(reference_preview, load)
-        w0, p = self._problem(estimate, reference_preview)
+        plant = self.model.p
+        self.trim.update(np.asarray(reference_preview, dtype=float),
+                         feasible_band(self.ctrl, plant, float(self.theta[0])),
+                         float(estimate[0]) * plant.area_head_m2
+                         - float(estimate[1]) * plant.area_rod_m2)
+        w0, p = self._problem(estimate, self.trim.trimmed(reference_preview))
         t0 = time.perf_counter()
         try:
             w, lam_g, ok, iters = self._solve(w0, p)

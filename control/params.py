@@ -228,6 +228,17 @@ class MpcParams(Parameters):
                                 doc="LMPC OSQP eps_abs = eps_rel (scaled units)")
     time_budget_s: float = param(0.0, 10.0, open_low=True,
                                  doc="a solve longer than this counts as an overrun")
+    offset_integral_time_s: float = param(0.0, 1e3, open_low=True,
+                                          doc="integral time T_i of the reference trim "
+                                          "(trackmj.control.trim)")
+    offset_trim_max_rel: float = param(0.0, 0.5, unit="1",
+                                       doc="trim limit I_max as a fraction of the band's "
+                                       "middle (0: no trim)")
+    offset_clip_rel: float = param(0.0, 0.5, unit="1",
+                                   doc="the trim integrates its low-passed error clipped to "
+                                   "this fraction of the band's middle")
+    offset_filter_s: float = param(0.0, 100.0, open_low=True,
+                                   doc="time constant of the trim error's low-pass")
 
     def cross_check(self, at: Location) -> None:
         if self.block_steps > self.horizon_steps or self.horizon_steps % self.block_steps:
