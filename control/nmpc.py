@@ -43,8 +43,8 @@ class _MpcBase:
         self.u_prev = 0.0
         middle = 0.5 * (resolved(ctrl, "force_min_N") + resolved(ctrl, "force_max_N"))
         self.trim = IntegralTrim(mpc.offset_integral_time_s, mpc.offset_trim_max_rel * middle,
-                                 mpc.offset_clip_rel * middle, mpc.offset_filter_s,
-                                 ctrl.period_s)
+                                 mpc.offset_dead_band_rel * middle, mpc.offset_clip_rel * middle,
+                                 mpc.offset_filter_s, ctrl.period_s)
         self.failures = 0
         self.overruns = 0
         self.fallbacks = 0

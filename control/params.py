@@ -234,6 +234,9 @@ class MpcParams(Parameters):
     offset_trim_max_rel: float = param(0.0, 0.5, unit="1",
                                        doc="trim limit I_max as a fraction of the band's "
                                        "middle (0: no trim)")
+    offset_dead_band_rel: float = param(0.0, 0.5, unit="1",
+                                        doc="the trim ignores low-passed errors within this "
+                                        "fraction of the band's middle")
     offset_clip_rel: float = param(0.0, 0.5, unit="1",
                                    doc="the trim integrates its low-passed error clipped to "
                                    "this fraction of the band's middle")
