@@ -132,6 +132,21 @@ def test_acceptance_of_a_decaying_load_disturbance() -> None:
     assert a["mean_min_N"] == pytest.approx(ref)
 
 
+def test_the_start_ramps_traction_transient_is_not_a_steady_offset() -> None:
+    """The tension 600 N (4 %) above 15 kN until 2.5 s, where a front sprocket's start-up
+    traction leaves it, then on the reference: with the track's start ramp ending at 1 s
+    the first steady window starts at 3 s (offset 0); without that event the 1-6 s window
+    holds 600 N x 1.5 s / 5 s = 180 N (1.2 %)."""
+    ref = 15e3
+    t = time_grid(20.0)
+    y = np.where(t < 2.5, ref + 600.0, ref)
+    plain = acceptance(t, y, np.full_like(t, ref), windows(evaluation_start_s=1.0))
+    assert plain["steady_offset_max_rel"] == pytest.approx(180.0 / ref, rel=0.01)
+    ramped = acceptance(t, y, np.full_like(t, ref),
+                        windows(evaluation_start_s=1.0, drive_events_s=(1.0,)))
+    assert ramped["steady_offset_max_rel"] == pytest.approx(0.0, abs=1e-12)
+
+
 def test_a_condition_held_from_the_start_is_not_an_edge() -> None:
     """A supply drop in place from t = 0 to the run's end (NL1's 9 MPa) is the run's
     condition: no edge is judged, so a reference step inside it is not read as a slow

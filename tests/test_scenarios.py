@@ -61,6 +61,7 @@ def test_w1_reference_step_and_ramp() -> None:
     np.testing.assert_allclose(prev[6:], 15e3)
     w = s.metric_windows()
     assert w.step == (3.0, 12e3, 15e3, 15.0)  # evaluated until the ramp starts
+    assert w.drive_events_s == (1.0,)          # the track's 1 s start ramp ends
 
 
 def test_other_references_are_constant_15kN() -> None:

@@ -62,8 +62,9 @@ def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
       leaves; NaN if it does not return); ``recovery_max_s`` the largest of them (NaN if
       one never returns or there is no edge);
     - ``steady_offset_max_rel``: the largest |mean(F − F_ref)| / mean(F_ref) over the
-      ``steady_window_s`` windows (sliding by 1 s) that lie 2 s or more after any edge or
-      reference step/ramp start and end before the next one;
+      ``steady_window_s`` windows (sliding by 1 s) that lie 2 s or more after any edge,
+      reference step/ramp start or the end of the track's start ramp and end before the
+      next one;
     - the settings they were taken with.
     """
     t = np.asarray(t, dtype=float)
@@ -72,7 +73,8 @@ def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
     ev = t >= w.evaluation_start_s
     edges = sorted({e for pair in w.disturbances for e in pair if w.judges_edge(e, t[-1])})
     recovery = _edge_recovery(t, err, ref, edges, w.recovery_band_rel)
-    worst = _worst_steady_offset(t, y, ref, sorted({*edges, *w.reference_events_s}), w)
+    worst = _worst_steady_offset(t, y, ref,
+                                 sorted({*edges, *w.reference_events_s, *w.drive_events_s}), w)
     return {"mean_window_s": w.mean_window_s, "recovery_band_rel": w.recovery_band_rel,
             "steady_window_s": w.steady_window_s,
             "mean_min_N": float(mean[ev].min()) if ev.any() else math.nan,

@@ -37,7 +37,10 @@ class MetricWindows:
     resolution and upper end of the spectra. mean_window_s, recovery_band_rel, steady_window_s,
     reference_events_s: the :func:`~trackmj.results.acceptance.acceptance` checks (trailing-mean
     length, recovery band relative to the reference, steady-window length, and the reference's
-    steps and ramp starts, which end a steady window like a disturbance edge does).
+    steps and ramp starts, which end a steady window like a disturbance edge does);
+    drive_events_s: the end of the track's start ramp, which ends a steady window likewise
+    (the drive's traction transient: on a front-sprocket machine the tight side loads the
+    idler while the track accelerates).
     """
 
     force_min_N: float
@@ -60,6 +63,7 @@ class MetricWindows:
     recovery_band_rel: float = 0.05
     steady_window_s: float = 5.0
     reference_events_s: tuple[float, ...] = ()
+    drive_events_s: tuple[float, ...] = ()
 
     def judges_edge(self, t_s: float, t_end_s: float) -> bool:
         """Whether a disturbance edge at ``t_s`` [s] is judged in a run ending at ``t_end_s``:

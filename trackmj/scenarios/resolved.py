@@ -298,7 +298,17 @@ class Scenario:
             psd_max_Hz=ev.psd_max_Hz, mean_window_s=ev.mean_window_s,
             recovery_band_rel=ev.recovery_band_rel, steady_window_s=ev.steady_window_s,
             reference_events_s=tuple(sorted({*(s.time_s for s in self.reference.steps),
-                                             *(r.start_s for r in self.reference.ramps)})))
+                                             *(r.start_s for r in self.reference.ramps)})),
+            drive_events_s=self._drive_events_s())
+
+    def _drive_events_s(self) -> tuple[float, ...]:
+        """The end of the track's start ramp [s], where the drive's traction transient ends
+        (a steady window starts 2 s after it, as after a disturbance edge); none for a speed
+        read from a file or a track standing still."""
+        if "track" in self.signals:
+            return ()
+        speed, ramp = self._constant_track()
+        return (ramp,) if speed > 0.0 else ()
 
     def _first_step(self, duration_s: float) -> tuple[float, float, float, float] | None:
         """The first reference step as (time [s], F_ref before [N], F_ref after [N], end of
