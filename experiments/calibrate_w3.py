@@ -13,8 +13,12 @@ Run: ``python experiments/calibrate_w3.py [--machine NAME]`` (default: every shi
 from __future__ import annotations
 
 import argparse
+import fcntl
 import json
 import math
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -115,6 +119,18 @@ def calibrate_machine(name: str, rows: dict[str, dict[str, Any]]) -> dict[str, A
     return record
 
 
+@contextmanager
+def _exclusive(path: Path) -> Iterator[None]:
+    """An exclusive ``flock`` on the directory of ``path`` (the file itself is replaced by
+    each write, so a lock on it would not be shared by the next writer)."""
+    fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--machine", choices=names(), help="one shipped machine (default: all)")
@@ -124,8 +140,12 @@ def main() -> None:
     todo = [args.machine] if args.machine else sorted(
         names(), key=lambda n: (n != REFERENCE_MACHINE, n))
     for name in todo:
-        rows[name] = calibrate_machine(name, rows)
-        write_table(rows)
+        record = calibrate_machine(name, rows)
+        # read, merge and write as one step: another run's entries written meanwhile are kept
+        # (two runs for different machines each wrote back the table they had read)
+        with _exclusive(CALIBRATION_FILE):
+            rows = committed_rows() | {name: record}
+            write_table(rows)
     print(f"written: {CALIBRATION_FILE}")
 
 
