@@ -32,19 +32,6 @@ def test_lf1352_cylinders_by_hand() -> None:
     assert math.pi * 0.032 ** 2 / 4 < 9.195e-4 < cyl.area_head_m2
 
 
-def test_low_supply_condition_by_hand() -> None:
-    """M113 (F_nom 20 kN): 40 mm holds F_max = 26.7 kN at 12 MPa (A_h >= 26.7e3 /
-    (2 (11e6 - 0.125e6)) = 1.226e-3 <= 1.2566e-3) but at W4's 9 MPa needs A_h >= 20e3 /
-    (2 (8e6 - 0.125e6)) = 1.270e-3: 50 mm (1.9635e-3), rod 50 x 0.612 = 30.6 -> 32 mm.
-    LF1352 keeps 40 mm (15e3 / (2 x 7.875e6) = 9.52e-4)."""
-    assert 80e3 / 3 / (2 * (11e6 - 0.2e6 / 1.6)) < 1.2566e-3 < 20e3 / (2 * (8e6 - 0.2e6 / 1.6))
-    m113 = sizing.tensioner_cylinders(80e3 / 3, 20e3, SUPPLY_PA, TANK_PA, VALVE_DROP_PA)
-    assert (m113.bore_m, m113.rod_m) == (0.050, 0.032)
-    assert sizing.size_cylinders(80e3 / 3, SUPPLY_PA, TANK_PA, VALVE_DROP_PA).bore_m == 0.040
-    lf1352 = sizing.tensioner_cylinders(20e3, 15e3, SUPPLY_PA, TANK_PA, VALVE_DROP_PA)
-    assert (lf1352.bore_m, lf1352.rod_m) == (0.040, 0.025)
-
-
 def test_head_path_area_inverts_the_reduced_models_tension_rate() -> None:
     """The area asked for a rate gives that rate in control/model.py's independent
     quasi-static gain (LF1352 plant at 15 kN, 12 MPa), and by hand: with 8e-8 m^2 the head
@@ -69,16 +56,15 @@ def test_head_path_area_inverts_the_reduced_models_tension_rate() -> None:
 
 @pytest.mark.parametrize("name", machines.names())
 def test_shipped_hydraulics_are_the_sizing_rules(name: str) -> None:
-    """Each machine's cylinders are tensioner_cylinders(4/3 F_nom, F_nom) and its head
-    restrictors give
+    """Each machine's cylinders are size_cylinders(4/3 F_nom) and its head restrictors give
     PULSE_REL of F_nom per 30 ms pulse on its identified idler (2-digit rounding: 2 %;
     LF1352's hand-sized 4.0e-8 m^2 is within 1 % of the rule's 4.04e-8)."""
     machine = machines.resolve(name)
     params = machines.mechanics(machine)
     hyd = load_hydraulic_params(machine.hydraulics)
     nominal = params.nominal_tension_N
-    cyl = sizing.tensioner_cylinders(nominal * BAND_REL[1], nominal, hyd.supply.setpoint_Pa,
-                                     hyd.tank_pressure_Pa, VALVE_DROP_PA)
+    cyl = sizing.size_cylinders(nominal * BAND_REL[1], hyd.supply.setpoint_Pa,
+                                hyd.tank_pressure_Pa, VALVE_DROP_PA)
     assert hyd.cylinder.area_head_m2 == pytest.approx(cyl.area_head_m2, rel=1e-4)
     assert hyd.cylinder.area_rod_m2 == pytest.approx(cyl.area_rod_m2, rel=1e-3)
     idler = load_idler(machine.idler)

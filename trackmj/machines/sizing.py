@@ -25,9 +25,6 @@ ISO_3320_RODS_M = tuple(d * 1e-3 for d in (
 """Piston-rod diameters of ISO 3320 [m]."""
 AREA_RATIO = 1.6
 """Head over annulus area phi of the ISO 7181 series (1.25, 1.4, 1.6, 2, 2.5) chosen."""
-LOW_SUPPLY_REL = 0.75
-"""Lowest supply the tensioner holds its nominal tension at, over the supply set-point: the
-study's W4 drop, 12 -> 9 MPa (a supply sagging with the machine's other consumers)."""
 PULSE_REL = 0.0075
 """Tension change of one minimum-hold pulse at full pressurizing opening over the nominal
 tension, the metering the shipped machines are sized for (LF1352's restrictors give
@@ -68,18 +65,6 @@ def size_cylinders(force_N: float, supply_Pa: float, tank_Pa: float, valve_drop_
             rod = min(ISO_3320_RODS_M, key=lambda d: abs(d - ideal_rod))
             return CylinderSize(bore, rod)
     raise ValueError(f"{force_N:g} N needs a bore above {ISO_3320_BORES_M[-1]:g} m")
-
-
-def tensioner_cylinders(max_force_N: float, hold_force_N: float, supply_Pa: float,
-                        tank_Pa: float, valve_drop_Pa: float, count: int = 2) -> CylinderSize:
-    """The larger of :func:`size_cylinders` for the top of the band ``max_force_N`` [N] at
-    the supply ``supply_Pa`` and for the nominal tension ``hold_force_N`` [N] at
-    :data:`LOW_SUPPLY_REL` of it: the tensioner reaches the band's top at the set-point and
-    still holds its working tension while the supply sags (W4)."""
-    top = size_cylinders(max_force_N, supply_Pa, tank_Pa, valve_drop_Pa, count)
-    hold = size_cylinders(hold_force_N, LOW_SUPPLY_REL * supply_Pa, tank_Pa, valve_drop_Pa,
-                          count)
-    return max(top, hold, key=lambda size: size.bore_m)
 
 
 def oil_stiffness_N_m(area_head_m2: float, volume_head_m3: float, bulk_modulus_Pa: float) -> float:
