@@ -21,8 +21,8 @@ trim chasing it set up a valve limit cycle (LF1352's W5 with 0.8 x pretension: 4
 switches/s against 2, measured). Transients are the MPC's to remove: the clip c
 bounds what a load pulse or a step's settling winds up to c·t/T_i (without it, T_i = 1 s,
 LF1352's W1 step and W3's pulses wound the trim up by ~0.5 kN and the low-pass RMSE rose
-15 %, measured). A gate that integrated only while |ē| < c instead selected the low side of
-a skewed error (M113's W1: ē +200 N on average, the trim driven to −190 N). The trim
+15 %, measured). A gate that integrated only while |ē| < 2 % instead selected the low side
+of a skewed error (M113's W1: ē +200 N on average, the trim driven to −190 N). The trim
 integrates only while the reference preview is flat (a reference step or ramp is the MPC's
 to follow) and while the trimmed reference is not saturated by the governor in the direction
 it would grow (a supply that cannot reach the reference, W4's drop, does not wind it up).
@@ -43,9 +43,8 @@ class IntegralTrim:
     """Slow integral loop on the MPC's tracked force (see the module docstring).
 
     ``integral_time_s`` T_i [s] (> 0), ``limit_N`` I_max [N] (>= 0), ``dead_band_N`` b [N],
-    ``clip_N`` c [N],
-    ``filter_s`` T_f [s] (> 0), ``period_s`` T [s]. :meth:`trimmed` gives the preview
-    to track, :meth:`update` integrates one period.
+    ``clip_N`` c [N], ``filter_s`` T_f [s] (> 0), ``period_s`` T [s]. :meth:`trimmed` gives
+    the preview to track, :meth:`update` integrates one period.
     """
 
     def __init__(self, integral_time_s: float, limit_N: float, dead_band_N: float,
