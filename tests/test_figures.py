@@ -112,6 +112,21 @@ def test_overlay_and_psd_figures_units_and_legends(captured) -> None:
                                                                                         abs=2e-3)
 
 
+def test_overlay_of_the_reference_alone_shows_its_own_figures(captured) -> None:
+    """A report of tp alone has no prediction to compare: the bars are tp's tracking RMSE,
+    peak head pressure and switching rate, not three empty comparison panels."""
+    tp = _runs()[0]
+    preds = {"tp": prediction_vs_tp(tp.columns(), tp.metrics, tp.columns(), tp.metrics,
+                                    windows_of(tp))}
+    figure_compare.overlay_figure([tp], "unused.png", predictions=preds)
+    fig = captured[0]
+    _check_axes(fig)
+    rmse = next(ax for ax in fig.axes if ax.get_ylabel() == "tracking RMSE [kN]")
+    assert [p.get_height() for p in rmse.patches] == pytest.approx(
+        [tp.metrics["rmse_N"] / 1e3, tp.metrics["rmse_lp_N"] / 1e3])
+    assert not any(ax.get_ylabel().startswith("F_ten RMSE vs") for ax in fig.axes)
+
+
 def test_styles_differ_in_more_than_colour() -> None:
     """Readable in grayscale: within the architectures and within the controllers, each line
     has its own dash pattern and marker, and its own colour too."""

@@ -92,9 +92,10 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
     """Runs of one case overlaid, labelled by ``label_by`` (``architecture`` or
     ``controller``): low-passed tension (raw of the first run as a band), head pressure
     (low-passed) and the first run's supply pressure, zooms on the events, then bars:
-    with ``predictions`` (label -> :func:`trackmj.results.comparison.prediction_vs_tp`) the
-    prediction RMSE against the reference architecture (raw and low-passed), the
-    peak-pressure error and the energy error; without, the tracking RMSE (raw and
+    with ``predictions`` (label -> :func:`trackmj.results.comparison.prediction_vs_tp`) for
+    a run other than the reference architecture, the prediction RMSE against the reference
+    (raw and low-passed), the peak-pressure error and the energy error; otherwise the
+    tracking RMSE (raw and
     low-passed), the peak head pressure and the valve switching rate; and the energy
     waterfall of every run. The title names the machine."""
     labels = [getattr(r, label_by) for r in results]
@@ -117,9 +118,11 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
         tension_panel(ax, runs, w, (t0, t1), legend=False, raw_as_line=True)
         ax.set_title(f"zoom: {name}", fontsize=9, loc="left")
         ax.set_xlabel("time [s]")
-    if predictions:
+    compared = [lab for lab in labels
+                if predictions and lab in predictions and lab != REFERENCE_ARCHITECTURE]
+    if predictions and compared:
         _prediction_bars(top, grid[3].subgridspec(1, 3), labels, predictions, w)
-    else:
+    else:   # nothing to compare with the reference (a report of tp alone): its own figures
         _run_bars(top, grid[3].subgridspec(1, 3), labels, results, w)
     energy_bars(bottom, labels, results)
     first = results[0]
