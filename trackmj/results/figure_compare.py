@@ -95,9 +95,8 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
     with ``predictions`` (label -> :func:`trackmj.results.comparison.prediction_vs_tp`) for
     a run other than the reference architecture, the prediction RMSE against the reference
     (raw and low-passed), the peak-pressure error and the energy error; otherwise the
-    tracking RMSE (raw and
-    low-passed), the peak head pressure and the valve switching rate; and the energy
-    waterfall of every run. The title names the machine."""
+    tracking RMSE (raw and low-passed), the peak head pressure and the valve switching rate;
+    and the energy waterfall of every run. The title names the machine."""
     labels = [getattr(r, label_by) for r in results]
     runs = list(zip(labels, results, strict=True))
     w = windows_of(results[0])
