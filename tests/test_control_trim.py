@@ -4,7 +4,9 @@ estimate cannot explain, and a transient or an unreachable reference does not wi
 import dataclasses
 
 import numpy as np
+import pytest
 
+from trackmj.control.lmpc import LinearMpc
 from trackmj.control.model import ReducedModel
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.trim import IntegralTrim
@@ -16,29 +18,31 @@ PLANT = nominal_plant_params(control_config=CFG)
 F_REF = 15e3
 
 
-def _offset_after_step(trim_rel: float, leak_factor: float, t_end: float = 10.0
-                       ) -> tuple[list[float], NonlinearMpc]:
+def _offset_after_step(trim_rel: float, leak_factor: float, t_end: float = 10.0,
+                       mpc_class: type = NonlinearMpc
+                       ) -> tuple[list[float], NonlinearMpc | LinearMpc]:
     """Mean F − F_ref [N] over 2 s windows from 2 s to ``t_end`` after a 12 -> 15 kN step
     at 0.2 s, on a reduced plant whose piston seals leak ``leak_factor`` times what the
-    NMPC's model (the file's) assumes."""
+    MPC's model (the file's) assumes."""
     cfg = dataclasses.replace(CFG, mpc=dataclasses.replace(CFG.mpc,
                                                            offset_trim_max_rel=trim_rel))
     plant = dataclasses.replace(PLANT, leakage_m3_s_Pa=PLANT.leakage_m3_s_Pa * leak_factor)
-    ctrl = NonlinearMpc(ReducedModel(PLANT), cfg.controller, cfg.mpc)
+    ctrl = mpc_class(ReducedModel(PLANT), cfg.controller, cfg.mpc)
     res = run_closed_loop(cfg, plant, ctrl, lambda t: 12e3 if t < 0.2 else F_REF, t_end,
                           seed=1)
     return [float(np.mean(res.force[(res.t >= a) & (res.t < a + 2.0)]) - F_REF)
             for a in np.arange(2.0, t_end - 1.0, 2.0)], ctrl
 
 
-def test_trim_removes_the_offset_of_an_unmodelled_leak() -> None:
+@pytest.mark.parametrize("mpc_class", [NonlinearMpc, LinearMpc])
+def test_trim_removes_the_offset_of_an_unmodelled_leak(mpc_class: type) -> None:
     """A head-to-rod leak 20x the model's drains the heads at ~(p_h − p_r)·C_l: the
     estimators' disturbance state (the idler's free position) explains forces, not flows,
-    so the NMPC alone holds the tension short of the reference; the trim brings it to the
-    dead band b (0.75 % of 15 kN, 112 N: what one minimum-hold pulse moves), rising at most
-    at c/T_i = 75 N/s, so from 6 s on."""
-    untrimmed, _ = _offset_after_step(0.0, 20.0)
-    trimmed, ctrl = _offset_after_step(CFG.mpc.offset_trim_max_rel, 20.0)
+    so the MPC alone (NMPC and LMPC share the trim) holds the tension short of the
+    reference; the trim brings it to the dead band b (0.75 % of 15 kN, 112 N: what one
+    minimum-hold pulse moves), rising at most at c/T_i = 75 N/s, so from 6 s on."""
+    untrimmed, _ = _offset_after_step(0.0, 20.0, mpc_class=mpc_class)
+    trimmed, ctrl = _offset_after_step(CFG.mpc.offset_trim_max_rel, 20.0, mpc_class=mpc_class)
     print(f"offsets [N], no trim {np.round(untrimmed)}, trim {np.round(trimmed)}, "
           f"trim {ctrl.trim.trim_N:.0f} N")
     assert all(o < -0.01 * F_REF for o in untrimmed)      # the defect the trim is for
