@@ -135,18 +135,18 @@ class _MpcBase:
         the controller keeps acting; otherwise the previous plan is shifted on.
         """
         n, lb = self.mpc.horizon_steps, self.mpc.block_steps
+        plant = self.model.p
+        band = feasible_band(self.ctrl, plant, float(self.theta[0]))
         if len(estimate) > 4:
             self.theta[2] = float(estimate[4])
             if len(estimate) > 5 and estimate[5] > 0.0:
                 load = float(estimate[5])
                 self.theta[2] -= load / self.theta[1]
-                reference_preview = self._with_drive_load(reference_preview, load)
-        plant = self.model.p
-        self.trim.update(np.asarray(reference_preview, dtype=float),
-                         feasible_band(self.ctrl, plant, float(self.theta[0])),
+                reference_preview = self._with_drive_load(reference_preview, load, band)
+        self.trim.update(np.asarray(reference_preview, dtype=float), band,
                          float(estimate[0]) * plant.area_head_m2
                          - float(estimate[1]) * plant.area_rod_m2)
-        w0, p = self._problem(estimate, self.trim.trimmed(reference_preview))
+        w0, p = self._problem(estimate, self.trim.trimmed(reference_preview), band)
         t0 = time.perf_counter()
         try:
             w, lam_g, ok, iters = self._solve(w0, p)
@@ -176,21 +176,21 @@ class _MpcBase:
         self.u_prev = u
         return ControlOutput(u, ok and not overrun, dt, iters, not (ok and not overrun))
 
-    def _with_drive_load(self, reference_preview: NDArray[np.float64], load_N: float
-                         ) -> NDArray[np.float64]:
-        """The preview [N] raised by the drive load's allowance for load ``load_N`` [N]."""
+    def _with_drive_load(self, reference_preview: NDArray[np.float64], load_N: float,
+                         band: tuple[float, float]) -> NDArray[np.float64]:
+        """The preview [N] raised by the drive load's allowance for load ``load_N`` [N] in
+        the governed ``band`` (lo, hi) [N]."""
         preview = np.asarray(reference_preview, dtype=float)
-        band = feasible_band(self.ctrl, self.model.p, float(self.theta[0]))
         held = self.model.hold_load_share(float(preview[0])) * load_N
         return preview + drive_load_allowance(preview, band[0], held)
 
-    def _problem(self, estimate: NDArray[np.float64], reference_preview: NDArray[np.float64]
-                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _problem(self, estimate: NDArray[np.float64], reference_preview: NDArray[np.float64],
+                 band: tuple[float, float]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(initial guess w0, parameter vector p) of the solve from the estimate and the
-        preview: the numpy expressions below, or their compiled equal into the controller's
-        own buffers (the NMPC's OCP with every limit set and a preview of N + 1 values)."""
+        preview, governed to ``band`` (lo, hi) [N]: the numpy expressions below, or their
+        compiled equal into the controller's own buffers (the NMPC's OCP with every limit set
+        and a preview of N + 1 values)."""
         ctrl, n = self.ctrl, self.mpc.horizon_steps
-        band = feasible_band(ctrl, self.model.p, float(self.theta[0]))
         lim = (ctrl.force_min_N, ctrl.force_max_N, ctrl.pressure_min_Pa, ctrl.pressure_max_Pa)
         if (self._compiled_problem and len(reference_preview) == n + 1
                 and None not in lim):

@@ -16,6 +16,7 @@ from trackmj.control import compiled
 from trackmj.control.compiled import CompiledFunction, bind
 from trackmj.control.estimators import ExtendedKalmanFilter, UnscentedKalmanFilter
 from trackmj.control.fastcall import BufferedFunction
+from trackmj.control.governor import feasible_band
 from trackmj.control.model import ReducedModel, ReducedPlant
 from trackmj.control.nmpc import NonlinearMpc
 from trackmj.control.sensors import Sensors
@@ -193,14 +194,15 @@ def test_nmpc_problem_and_update_kernels_equal_their_numpy_expressions() -> None
     x = model.equilibrium(14e3)
     cases = [(np.append(x, 0.01), np.linspace(9e3, 25e3, n + 1)),
              (np.array((-1e5, -2e5, x[2], 0.01)), np.full(n + 1, 15e3))]
+    band = feasible_band(CFG.controller, PLANT, PLANT.supply_pressure_Pa)
     for warm in (False, True):
         if warm:
             ctrl(x, np.full(n + 1, 16e3), 0.0)
         for estimate, preview in cases:
             ctrl._compiled_problem = True
-            w_c, p_c = (a.copy() for a in ctrl._problem(estimate, preview))
+            w_c, p_c = (a.copy() for a in ctrl._problem(estimate, preview, band))
             ctrl._compiled_problem = False
-            w_n, p_n = ctrl._problem(estimate, preview)
+            w_n, p_n = ctrl._problem(estimate, preview, band)
             assert _same(w_c, w_n) and _same(p_c, p_n)
     rng = np.random.default_rng(5)
     for t in (1.0, 0.8, 0.64):
