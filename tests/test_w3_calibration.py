@@ -137,15 +137,15 @@ def test_pushing_raises_and_towing_lowers_the_idler_load_on_lf1352() -> None:
 
 
 RECOVERY_NOT_MET = {
-    "m113": ("issue 32's floor, not met (edges 6/8/18/20 s: 1.32/1.01/never/3.23 s, the "
-             "0.5 s mean up to 27.2 kN against F_max = 26.7 kN): with the sprocket at the "
+    "m113": ("issue 32's floor, not met (edges 6/8/18/20 s: 1.38/0.91/never/3.14 s, the "
+             "0.5 s mean up to 26.1 kN, F_max = 26.7 kN): with the sprocket at the "
              "front, braking leaves the idler on the slack side, so the -10 % drive pulse "
              "needs a 14.9 kN push, 28 % of the side's weight, whose release rings the "
              "sprocket servo by +-3.8 kN·m"),
     "compact3": ("issue 32's floor, not met: its oil column takes only 16 % of an idler "
                  "load step in hold, so the +13 % braking pulse needs a 5.2 kN push, 35 % of "
                  "the side's weight; while it lasts the 0.5 s mean does not come back within "
-                 "5 % (edge 6 s), after it in 0.82 s; the release it asks for pulls the "
+                 "5 % (edge 6 s), after it in 1.20 s; the release it asks for pulls the "
                  "carrier in faster than the rod feed fills (air out of solution down to "
                  "-0.012 MPa gauge; before the air was modelled the run left physics there)"),
 }
