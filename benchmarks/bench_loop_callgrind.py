@@ -19,9 +19,10 @@ of the loop (``mj_step1`` + ``mj_factorM`` + ``mj_step2`` inclusive, from
 ``callgrind_annotate``) and the rest of the loop by object file (CPython, DAQP, numpy,
 numba's JIT code as ``???``, libc, ...).
 
-Run: ``python benchmarks/bench_loop_callgrind.py [--steps 2000] [--start 2000]``; the
-interpreter it runs under decides which tree is measured (another checkout's venv python
-measures that checkout). Takes about a quarter of an hour (both runs side by side).
+Run: ``python benchmarks/bench_loop_callgrind.py [--steps 2000] [--start 2000] [--structure
+slides]``; the interpreter it runs under decides which tree is measured (another checkout's
+venv python measures that checkout). Takes about a quarter of an hour (both runs side by
+side).
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ def _windowed(items: list, start: int, steps: int, toggle: ctypes._CFuncPtr) -> 
         toggle()
 
 
-def inner_loop(start: int, steps: int) -> None:
+def inner_loop(start: int, steps: int, structure: str) -> None:
     """Under valgrind: warm-up run, then W1 with collection over its window."""
     toggle = ctypes.CDLL(str(_helper())).trackmj_collect
     import trackmj.sim.run as run_module
@@ -80,7 +81,8 @@ def inner_loop(start: int, steps: int) -> None:
 
     # kernels compiled/loaded, settled track cached (a 50 ms run needs an earlier start of
     # the metrics' window; the counted run keeps the scenario's own)
-    simulate("W1", duration=0.05, set={"scenario.evaluation.start_s": 0.01})
+    model = {"model.track.structure": structure}
+    simulate("W1", duration=0.05, set={"scenario.evaluation.start_s": 0.01, **model})
     original = run_module.run_loop
 
     def counted(schedule, **blocks):
@@ -88,17 +90,17 @@ def inner_loop(start: int, steps: int) -> None:
         return original(dataclasses.replace(schedule, inputs=window), **blocks)
 
     run_module.run_loop = counted
-    simulate("W1", duration=(start + steps) * 1e-3 + 0.01)
+    simulate("W1", duration=(start + steps) * 1e-3 + 0.01, set=model)
 
 
-def inner_bare(start: int, steps: int) -> None:
+def inner_bare(start: int, steps: int, structure: str) -> None:
     """Under valgrind: the default machine driven by the passive tensioner to W1's speed,
     collection over ``steps`` plant steps after ``start`` steps."""
     toggle = ctypes.CDLL(str(_helper())).trackmj_collect
     from trackmj.machines.track_plant import load_plant
     from trackmj.track.plant import PassiveTensioner
 
-    plant = load_plant()
+    plant = load_plant(overrides={"track.structure": structure})
     passive = PassiveTensioner.from_params(plant.params)
     plant.run(passive, start * 1e-3, lambda t: SPEED_M_S * min(1.0, t))
     plant.set_track_speed(SPEED_M_S)
@@ -145,7 +147,7 @@ def _inclusive(out: str, functions: tuple[str, ...]) -> int:
     return total
 
 
-def _count(start: int, steps: int) -> tuple[str, str]:
+def _count(start: int, steps: int, structure: str) -> tuple[str, str]:
     """Run the loop and the bare step under callgrind side by side; their output files."""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONHASHSEED="0")
     outs, runs = [], []
@@ -154,7 +156,7 @@ def _count(start: int, steps: int) -> tuple[str, str]:
         runs.append(subprocess.Popen(
             ["valgrind", "--tool=callgrind", "--collect-atstart=no",
              f"--callgrind-out-file={out}", sys.executable, __file__, "--inner", mode,
-             "--start", str(start), "--steps", str(steps)],
+             "--start", str(start), "--steps", str(steps), "--structure", structure],
             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
         outs.append(out)
     for mode, run in zip(("loop", "bare"), runs, strict=True):
@@ -168,14 +170,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=2000, help="counted steps")
     parser.add_argument("--start", type=int, default=2000, help="steps before the count")
+    parser.add_argument("--structure", choices=("chains", "slides", "free"), default="chains",
+                        help="the track's [track] structure (default: chains, the machine's)")
     parser.add_argument("--inner", choices=("loop", "bare"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.inner:
-        (inner_loop if args.inner == "loop" else inner_bare)(args.start, args.steps)
+        (inner_loop if args.inner == "loop" else inner_bare)(args.start, args.steps,
+                                                             args.structure)
         return
     _helper()
     n = args.steps
-    loop_out, bare_out = _count(args.start, n)
+    loop_out, bare_out = _count(args.start, n, args.structure)
     loop, bare = _total(loop_out), _total(bare_out)
     mujoco_in_loop = _inclusive(loop_out, MUJOCO_STEP)
     objects = _by_object(loop_out)
@@ -186,7 +191,8 @@ def main() -> None:
     # is not the rest of the loop's
     system = ("libc.so.6", "libm.so.6", "ld-linux-x86-64.so.2")
     libc = sum(objects.pop(name, 0) for name in system) - (mujoco_in_loop - mujoco_own)
-    print(f"W1 (tp, nmpc, ekf), steps {args.start}..{args.start + n} at {SPEED_M_S} m/s, "
+    print(f"W1 (tp, nmpc, ekf), structure {args.structure}, steps {args.start}.."
+          f"{args.start + n} at {SPEED_M_S} m/s, "
           f"callgrind ({loop_out}, {bare_out}):")
     print(f"  bare step (TrackPlant.step, passive) {bare / n / 1e3:8.1f}k instructions per step")
     print(f"  whole loop                           {loop / n / 1e3:8.1f}k "

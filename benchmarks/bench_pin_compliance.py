@@ -4,15 +4,13 @@ Candidates, built on the default machine's model file:
 
 * ``chainsN`` / ``free``: the generator's structures (``[track] structure``, ``chain_links``),
   as ``bench_structure.py`` builds them;
-* ``slidesN``: chains of at most N links with a slide joint along the parent link's pitch
-  before every pin hinge (child origin at the pin), the pin's radial stiffness K and damping
-  B of ``[pins]`` as the joint's stiffness and damping, and every connect carrying one pin
-  (solref/solimp of K, B at the compiled candidate's row diagonals,
-  :mod:`trackmj.track.mjcf.soft`), so that every pin is compliant on its own;
+* ``slidesN``: ``[track] structure = "slides"`` with chains of at most N links: a slide
+  along the parent link's pitch before every pin hinge carrying the pin's K and B of
+  ``[pins]`` as joint stiffness and damping, with the armature of
+  :func:`trackmj.track.mjcf.structure.stretch_armature_kg`, every connect carrying one pin;
 * suffixes ``+discrete`` (MuJoCo 4's ``discrete`` integrator instead of ``implicitfast``)
-  and ``+armX`` (armature X kg on every pin slide; ``+arm`` alone: the soft constraints'
-  apparent mass soft_margin·(h²K + 2hB)/4, which keeps the explicit slide spring stable
-  under ``implicitfast`` as it keeps a connect's).
+  and ``+armX`` (armature X kg on every pin slide instead; ``+arm0`` none, which
+  ``implicitfast`` cannot integrate).
 
 Every candidate is generated through the project's builders and settled 3 s standing under
 the passive tensioner (``trackmj.track.mjcf.generate.settle``) for its ``home`` keyframe,
@@ -25,15 +23,16 @@ then run through ``TrackPlant`` on the ground foundation, as every run is. Check
   1 s, hold 1 s, record 8.3 s ≈ 2 revolutions): the lines at 1/4, 3/4, 5/4 and 7/4 of the
   measured link-passing frequency (where a 4-link period shows, the even quarters being the
   track's own), each as a Hann single-bin rms and as the rms within ±0.75 Hz, and their
-  root-sum-square;
+  root-sum-square; the same lines of the lower run's tension and of the chassis' vertical
+  acceleration, and that acceleration's 8-12 Hz band (the chassis' body mode);
 * ``--cost``: bare ``TrackPlant.step`` µs per step at 1.5 m/s, candidates alternating in one
   process (best and median of ``--rounds`` blocks of 1000 steps);
 * ``--hard``: hard start to 1.5 m/s from ``home``, preload 12 kN stepped to 15 kN at 3 s,
   8 s: MuJoCo warnings, derailment checks every 0.1 s, largest pin stretch.
 
 Run: ``python benchmarks/bench_pin_compliance.py --static --comb --hard chains4 free
-slides4+arm`` and ``taskset -c 0 python benchmarks/bench_pin_compliance.py --cost chains4
-slides4+arm``.
+slides4`` and ``taskset -c 0 python benchmarks/bench_pin_compliance.py --cost chains4
+slides4``.
 """
 
 from __future__ import annotations
@@ -53,10 +52,9 @@ from scipy.signal import periodogram
 from trackmj.host import machine
 from trackmj.machines.assembly import model_mjcf, resolve
 from trackmj.track.mechanics import ModelParams, load_model_params
-from trackmj.track.mjcf.builders import build_mjcf, soft_constraints
+from trackmj.track.mjcf.builders import build_mjcf
 from trackmj.track.mjcf.generate import SETTLE_DURATION_S, settle
 from trackmj.track.mjcf.layout import compute_layout
-from trackmj.track.mjcf.soft import body_inv_weight, row_diag, soft_constraint
 from trackmj.track.mjcf.tree import find
 from trackmj.track.plant import PassiveTensioner, TrackPlant
 
@@ -69,54 +67,8 @@ BAND_HZ = 0.75
 
 def _params(structure: str, links: int) -> ModelParams:
     overrides: dict[str, object] = ({"track.structure": "free"} if structure == "free" else
-                                    {"track.structure": "chains", "track.chain_links": links})
+                                    {"track.structure": structure, "track.chain_links": links})
     return load_model_params(MACHINE.mechanics, overrides=overrides)
-
-
-def _fmt(values: np.ndarray | tuple[float, ...]) -> str:
-    return " ".join(f"{float(v):.9g}" for v in values)
-
-
-def _add_pin_slides(root: ET.Element, p: ModelParams, armature_kg: float) -> None:
-    """A slide along the parent's pitch (x) before every pin hinge ``link_kk_pin``."""
-    joint = p.pin_joint
-    rot = np.empty(9)
-    for body in root.iter("body"):
-        name = body.get("name", "")
-        if body.find(f"joint[@name='{name}_pin']") is None:
-            continue
-        quat = np.array([float(v) for v in body.get("quat", "1 0 0 0").split()])
-        mujoco.mju_quat2Mat(rot, quat)
-        attrs = {"name": f"{name}_stretch", "type": "slide", "pos": "0 0 0",
-                 "axis": _fmt(rot.reshape(3, 3).T @ (1.0, 0.0, 0.0)),
-                 "stiffness": f"{joint.radial_stiffness_N_m:.9g}",
-                 "damping": f"{joint.radial_damping_N_s_m:.9g}"}
-        if armature_kg > 0.0:
-            attrs["armature"] = f"{armature_kg:.9g}"
-        body.insert(0, ET.Element("joint", attrs))
-
-
-def _map_one_pin_connects(root: ET.Element, p: ModelParams) -> None:
-    """solref/solimp of the stated contacts and of connects carrying one pin each, from
-    the compiled candidate's row diagonals (as the generator maps its own)."""
-    model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
-    mapping = soft_constraints(p, model)
-    ground = find(root, "default/default[@class='collision']/default[@class='ground']/geom")
-    for geom in root.iter("geom"):
-        soft = mapping.get(geom.get("name", ""))
-        if soft is not None:
-            target = ground if geom.get("name") == "ground" else geom
-            target.set("solref", _fmt(soft.solref))
-            target.set("solimp", _fmt(soft.solimp))
-    rows, diag = row_diag(2.0 * body_inv_weight(model, "link_00"), condim=1)
-    pin = soft_constraint(p.pin_joint.radial_stiffness_N_m, p.pin_joint.radial_damping_N_s_m,
-                          rows, diag, p.simulation.timestep_s, p.solver.soft_margin,
-                          "bench_pin_compliance")
-    find(root, "default/default[@class='pin_joint']/equality").set("solref", _fmt(pin.solref))
-    find(root, "default/default[@class='pin_joint']/equality").set("solimp", _fmt(pin.solimp))
-    for connect in root.iter("connect"):
-        connect.attrib.pop("solref", None)
-        connect.attrib.pop("solimp", None)
 
 
 def candidate_mjcf(candidate: str) -> tuple[str, ModelParams]:
@@ -127,26 +79,24 @@ def candidate_mjcf(candidate: str) -> tuple[str, ModelParams]:
         raise SystemExit(f"unknown candidate {candidate!r}")
     links = int(head[len(structure):] or 4) if structure != "free" else 4
     params = _params(structure, links)
-    integrator = "discrete" if "discrete" in options else "implicitfast"
     unknown = [o for o in options if o != "discrete" and not o.startswith("arm")]
     if unknown:
         raise SystemExit(f"unknown candidate option {unknown[0]!r}")
-    if structure != "slides" and integrator == "implicitfast":
+    if not options:
         return model_mjcf(params, MACHINE), params
     root = ET.fromstring(build_mjcf(params, compute_layout(params)))
-    find(root, "option").set("integrator", integrator)
-    if structure == "slides":
-        h, joint = params.simulation.timestep_s, params.pin_joint
-        apparent = params.solver.soft_margin * (h * h * joint.radial_stiffness_N_m
-                                                + 2.0 * h * joint.radial_damping_N_s_m) / 4.0
-        arm = next((o[3:] for o in options if o.startswith("arm")), None)
-        _add_pin_slides(root, params, 0.0 if arm is None else float(arm or apparent))
-        _map_one_pin_connects(root, params)
+    if "discrete" in options:
+        find(root, "option").set("integrator", "discrete")
+    arm = next((o[3:] for o in options if o.startswith("arm")), "")
+    if arm:
+        if structure != "slides":
+            raise SystemExit(f"{candidate!r}: an armature needs the pin slides")
+        find(root, "default/default[@class='pin_stretch']/joint").set("armature", arm)
     model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
     data = settle(model, params, SETTLE_DURATION_S)
     key = ET.SubElement(ET.SubElement(root, "keyframe"), "key", name="home",
                         qpos=" ".join(f"{v:.6f}" for v in data.qpos),
-                        ctrl=_fmt((0.0, params.tensioner.preload_N)))
+                        ctrl=f"0 {params.tensioner.preload_N:.9g}")
     key.tail = "\n"
     return ET.tostring(root, encoding="unicode"), params
 
@@ -181,11 +131,17 @@ def static(candidate: str) -> str:
             f" largest deviation {spread:.2f} T/K; warnings {plant.warning_count}")
 
 
-def band_rms(x: np.ndarray, f_hz: float, dt: float) -> float:
-    """Rms of ``x`` within ±BAND_HZ of ``f_hz`` (Hann periodogram) [unit of x]."""
+def band_rms(x: np.ndarray, f_hz: float, dt: float, half_width_hz: float = BAND_HZ) -> float:
+    """Rms of ``x`` within ±``half_width_hz`` of ``f_hz`` (Hann periodogram) [unit of x]."""
     f, psd = periodogram(x - x.mean(), fs=1.0 / dt, window="hann", scaling="density")
-    band = (f >= f_hz - BAND_HZ) & (f <= f_hz + BAND_HZ)
+    band = (f >= f_hz - half_width_hz) & (f <= f_hz + half_width_hz)
     return float(math.sqrt(np.trapezoid(psd[band], f[band])))
+
+
+def _odd_quarters(x: np.ndarray, f_link: float, dt: float) -> str:
+    """The odd-quarter lines of ``x``: each within ±BAND_HZ and their root-sum-square."""
+    bands = [band_rms(x, f_link * q / 4, dt) for q in QUARTERS]
+    return f"{', '.join(f'{v:.3g}' for v in bands)} (rss {math.hypot(*bands):.3g})"
 
 
 def comb(candidate: str) -> str:
@@ -195,23 +151,26 @@ def comb(candidate: str) -> str:
     plant.run(element, 3.0, ramp(SPEED_M_S))
     steps, dt = 8300, 1e-3
     force, omega = np.empty(steps), np.empty(steps)
+    lower, accel = np.empty(steps), np.empty(steps)
     geom, wrench = plant.model.geom("idler_wheel").id, np.zeros(6)
     for i in range(steps):
         plant.set_track_speed(SPEED_M_S)
         plant.step(element)
         force[i] = idler_contact_N(plant, geom, wrench)
         omega[i] = plant.sprocket_speed_rad_s
+        lower[i] = plant.strand_tensions_N().lower_N
+        accel[i] = plant.chassis_acc_z_m_s2
     # the peak near the sprocket's pitch-line link rate (bench_structure.check)
     guess = omega.mean() * plant.params.sprocket_pitch_radius_m / plant.params.track.pitch_m
     grid = guess * np.linspace(0.97, 1.01, 401)
     f_link = float(grid[np.argmax([_component(force, f, dt) for f in grid])])
     lines = [_component(force, f_link * q / 4, dt) for q in QUARTERS]
-    bands = [band_rms(force, f_link * q / 4, dt) for q in QUARTERS]
-    return (f"link passing {f_link:.2f} Hz, {_component(force, f_link, dt):.0f} N; odd "
-            f"quarters single-bin {', '.join(f'{v:.1f}' for v in lines)} N (rss "
-            f"{math.hypot(*lines):.1f}), within ±{BAND_HZ} Hz "
-            f"{', '.join(f'{v:.1f}' for v in bands)} N (rss {math.hypot(*bands):.1f}); "
-            f"warnings {plant.warning_count}")
+    return (f"link passing {f_link:.2f} Hz, {_component(force, f_link, dt):.0f} N; idler "
+            f"force odd quarters single-bin {', '.join(f'{v:.1f}' for v in lines)} N (rss "
+            f"{math.hypot(*lines):.1f}), within ±{BAND_HZ} Hz {_odd_quarters(force, f_link, dt)}"
+            f" N; lower-run tension {_odd_quarters(lower, f_link, dt)} N; chassis vertical "
+            f"acceleration {_odd_quarters(accel, f_link, dt)} m/s², 8-12 Hz "
+            f"{band_rms(accel, 10.0, dt, 2.0):.3g} m/s²; warnings {plant.warning_count}")
 
 
 def hard(candidate: str) -> str:

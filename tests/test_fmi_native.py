@@ -52,7 +52,7 @@ DAMPING_N_S_M = 2.0e4
 13 kN, c = 20 kN·s/m (the order of the hydraulic port's Z in W1)."""
 VR = {"force_N": 1, "force_dv_N_s_m": 2, "track_speed_m_s": 3, "hitch_pull_N": 4,
       "stroke_m": 10, "velocity_m_s": 11, "tension_N": 12, "upper_strand_tension_N": 15,
-      "ground_friction": 34, "derailed": 23}
+      "closure_error_m": 18, "ground_friction": 34, "derailed": 23}
 
 
 def force_at(t_s: float) -> float:
@@ -168,6 +168,46 @@ def test_the_fmu_steps_as_the_python_plant(native, which) -> None:
     scale = np.abs(theirs).max(axis=0)
     assert np.abs(ours - theirs).max(axis=0) / scale == pytest.approx(0.0, abs=1e-9)
     assert theirs[:, 1].std() > 1e-3   # the comparison saw a moving idler
+
+
+@pytest.mark.slow
+def test_a_track_with_pin_slides_steps_as_the_python_plant(tmp_path) -> None:
+    """``[track] structure = "slides"`` (every hinged pin on its own compliant slide): 2 s
+    of the W1-like law at 1.5 m/s, stroke, velocity, tension and the largest pin gap (now
+    a slide's stretch or a connect's) equal the Python plant's to 1e-9 relative."""
+    text = (Path(__file__).resolve().parents[1] / "models" / "lf1352.toml").read_text()
+    line = next(x for x in text.splitlines() if x.startswith("structure = "))
+    model = tmp_path / "lf1352_slides.toml"
+    model.write_text(text.replace(line, 'structure = "slides"   # per-pin compliance'))
+    fmu_path = export_track(tmp_path / "slides.fmu", force_N=FORCE_N, model=str(model),
+                            platforms=("linux",)).path
+    plant = settled_track(prepare("W1", model=model), FORCE_N)
+    assert plant.model.nv == 196
+
+    def python_step(force: float, speed: float) -> tuple[float, ...]:
+        plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))
+        plant.step(ConstantForce(force, DAMPING_N_S_M))
+        return (plant.stroke_m, plant.stroke_velocity_m_s, plant.idler_force_N,
+                plant.closure_error_m)
+
+    with slave(fmu_path) as fmu:
+        fmu.start()
+        fmu.set("force_dv_N_s_m", -DAMPING_N_S_M)
+
+        def fmu_step(force: float, speed: float) -> tuple[float, ...]:
+            fmu.set("force_N", force)
+            fmu.set("track_speed_m_s", speed)
+            fmu.step()
+            return (fmu.get("stroke_m"), fmu.get("velocity_m_s"), fmu.get("tension_N"),
+                    fmu.get("closure_error_m"))
+
+        ours = drive(fmu_step, 2.0)
+        fmu.close()
+    theirs = drive(python_step, 2.0)
+    scale = np.abs(theirs).max(axis=0)
+    assert np.abs(ours - theirs).max(axis=0) / scale == pytest.approx(0.0, abs=1e-9)
+    # the largest gap is one pin's stretch: a few T/K (~30 µm) on the start's traction peak
+    assert 10e-6 < np.median(theirs[:, 3]) < 0.1e-3 and theirs[:, 3].max() < 0.5e-3
 
 
 @pytest.mark.parametrize("which", ["fmi2", "fmi3"])

@@ -26,7 +26,8 @@ integrated (solver tolerance, an unbooked force); it is not a fitted quantity.
 
 Constraint work is booked per row, f_row·(J_row·Δq) with MuJoCo's Jacobian of the step, and
 summed by partner: sprocket (hub and teeth), road wheels, idler, return rollers, pins (the
-pin connects) and joint limits. The ground is the foundation force element
+pin connects, and with structure "slides" the pin slides' dampers; their springs are joint
+springs, in PE) and joint limits. The ground is the foundation force element
 (:mod:`trackmj.track.foundation`), booked as integrated: (F(v_k) − C·J·Δv)·(J·Δq) per pin, split
 into normal (ground) and friction (ground_friction). A contact's work includes what its
 explicit spring returns.
@@ -101,11 +102,12 @@ class TrackEnergy:
 def _book_dampers(q_deriv: np.ndarray, deriv_row: np.ndarray, deriv_col: np.ndarray,
                   dv: np.ndarray, dq: np.ndarray, qfrc_damper: np.ndarray,
                   actuator_dofs: np.ndarray, actuator_bias: np.ndarray,
-                  actuator_free: np.ndarray, damped: np.ndarray, implicit: np.ndarray,
+                  actuator_free: np.ndarray, slot: np.ndarray, implicit: np.ndarray,
                   acc: np.ndarray) -> None:
     """Dampers as integrated: qfrc_damper at v_k plus their share of qDeriv·Δv (the
-    unclamped actuators' affine velocity terms removed), on Δq; the ``damped`` dofs (the
-    suspension slides) into A_SUSPENSION, the rest (pin torsion) into A_TORSION."""
+    unclamped actuators' affine velocity terms removed), on Δq, into the accumulator slot
+    of each dof (``slot``, shape (nv,)): A_SUSPENSION for the suspension slides, the pins'
+    work for the pin slides of structure "slides", A_TORSION for the rest (pin torsion)."""
     implicit[:] = 0.0
     for k in range(len(q_deriv)):
         implicit[deriv_row[k]] += q_deriv[k] * dv[deriv_col[k]]
@@ -114,7 +116,7 @@ def _book_dampers(q_deriv: np.ndarray, deriv_row: np.ndarray, deriv_col: np.ndar
             implicit[actuator_dofs[i]] -= actuator_bias[i] * dv[actuator_dofs[i]]
     for j in range(len(dq)):
         work = (qfrc_damper[j] + implicit[j]) * dq[j]
-        acc[A_SUSPENSION if damped[j] else A_TORSION] += work
+        acc[slot[j]] += work
 
 
 @njit(cache=True)
@@ -256,7 +258,13 @@ class TrackEnergyLedger:
         self._drive = m.actuator("sprocket_drive").id
         self._drive_dof = int(m.jnt_dofadr[m.actuator_trnid[self._drive, 0]])
         self._tensioner_dof = int(m.jnt_dofadr[m.joint("idler_slide").id])
-        self._damped = m.dof_damping > 0.0   # the suspension slides
+        # where each dof's damper work goes: the pin slides' (structure "slides") to the
+        # pins, whose connects' work is booked there too; other damped dofs are the
+        # suspension slides; the rest (tendon dampers of the pin torsion) to A_TORSION
+        self._damper_slot = np.where(m.dof_damping > 0.0, A_SUSPENSION, A_TORSION)
+        for j in range(m.njnt):
+            if m.joint(j).name.endswith("_stretch"):
+                self._damper_slot[m.jnt_dofadr[j]] = A_WORK + _PINS
         hinges = [j for j in range(m.njnt) if m.joint(j).name.startswith("link_")
                   and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]   # pitch and pin hinges
         if np.any(m.dof_damping[m.jnt_dofadr[hinges]] > 0.0):
@@ -324,7 +332,7 @@ class TrackEnergyLedger:
         # links, are implicit on their diagonal only)
         _book_dampers(d.qDeriv, self._deriv_row, self._deriv_col, dv, dq, d.qfrc_damper,
                       self._actuator_dofs, m.actuator_biasprm[:, 2], self._actuator_free,
-                      self._damped, self._implicit, self._acc)
+                      self._damper_slot, self._implicit, self._acc)
         if np.any(d.xfrc_applied[self._chassis]):
             mujoco.mj_jacBodyCom(m, d, self._jacp, self._jacr, self._chassis)
             wrench = d.xfrc_applied[self._chassis]

@@ -56,12 +56,14 @@ class TrackParams(Parameters):
     pin_radius_m: float = param(0.002, 0.05, doc="pin sphere radius [m]")
     link_width_m: float = param(0.05, 1.5, doc="shoe width [m], visual and inertia")
     ground_friction: float = param(0.0, 2.0, unit="1", doc="Coulomb coefficient pin-ground [-]")
-    structure: Literal["free", "chains"] = param(
+    structure: Literal["free", "chains", "slides"] = param(
         default="chains", doc="chains: hinged sub-chains of at most chain_links links joined "
-        "by pin connects (trackmj/track/mjcf/structure.py); free: every link a free planar body, "
-        "every pin a connect (twice the step cost, benchmarks/README.md); optional: chains")
+        "by pin connects (trackmj/track/mjcf/structure.py); slides: chains with every hinged "
+        "pin on its own compliant slide (every pin stretches T/K; 1.34x the step cost); free: "
+        "every link a free planar body, every pin a connect (1.6x the step cost, "
+        "benchmarks/README.md); optional: chains")
     chain_links: int = param(2, 12, unit="1", default=4,
-                             doc="longest chain of hinged links for structure = chains "
+                             doc="longest chain of hinged links for structure = chains or slides "
                                  "[-]; optional: 4. Measured on the shipped machines up to "
                                  "12 (gaps, strands, ledger as with 4); longer chains lump "
                                  "more pins in one connect (24: a slack-strand check trips "

@@ -9,8 +9,10 @@ Sign conventions (see also :mod:`trackmj.ports`):
   pin k joins link_{k-1} and link_k; array index k, shape (link_count,). With ``[track]
   structure = "chains"`` (the default) the pins inside a chain are hinges and the pin
   starting a chain is a compliant ``connect`` carrying the chain's pins in series; with
-  ``"free"`` every pin is a connect with the stated stiffness (``[pins]``). A pin's tension
-  is the force it transmits, along the bisector of the two links.
+  ``"slides"`` every hinged pin also has its own compliant slide ``link_kk_stretch`` and
+  every connect carries one pin; with ``"free"`` every pin is a connect with the stated
+  stiffness (``[pins]``). A pin's tension is the force it transmits, along the bisector of
+  the two links.
 * ground: the Kelvin–Voigt foundation under every pin (:mod:`trackmj.track.foundation`) replaces
   the MJCF ground's contact; its forces act along the ground normal (N > 0 pushes the pin
   out) and tangent (+x on flat ground).
@@ -248,6 +250,13 @@ class TrackPlant:
         # pins each connect carries in series: the links up to the next connect
         self._pins_per_connect = np.diff([*connected, n]).astype(float)
         self._has_hinged_pins = bool(hinged)
+        # structure "slides": every hinged pin's own stretch (its slide's qpos) [m]
+        stretch = [m.joint(link_name(k) + "_stretch").id for k in hinged
+                   if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT,
+                                        link_name(k) + "_stretch") >= 0]
+        if stretch:
+            self._pins_per_connect[:] = 1.0
+        self._stretch_qpos = m.jnt_qposadr[stretch].astype(np.int64)
         equalise_link_weights(m)   # chains: every link link_00's row weight
         self.foundation = Foundation(m, self.data, self._pin_geom,
                                      FoundationLaw.from_params(params))
@@ -436,9 +445,12 @@ class TrackPlant:
         """Largest pin gap of the loop [m]: the deflection of the most loaded pin compliance
         (tension / stated pin stiffness, plus its damping share), at the start of the
         last step; a connect carrying m pins in series (structure "chains") stretches m
-        times that. Evaluated every step (the physics guard reads it), so in a compiled
-        kernel (~1 µs)."""
-        return _largest_pin_gap_m(self.data.efc_pos, self._pins_per_connect)
+        times that; a pin slide (structure "slides") its own. Evaluated every step (the
+        physics guard reads it), so in a compiled kernel (~1 µs)."""
+        gap = _largest_pin_gap_m(self.data.efc_pos, self._pins_per_connect)
+        if len(self._stretch_qpos):
+            gap = max(gap, float(np.abs(self.data.qpos[self._stretch_qpos]).max()))
+        return gap
 
     @property
     def pin_rows(self) -> int:
@@ -608,6 +620,7 @@ class TrackPlant:
             "min_seated_pins": np.array([self.MIN_SEATED_PINS]),
             "link_body": self._link_body, "pin_geom": self._pin_geom,
             "connect_of_pin": self._connect_of_pin, "pins_per_connect": self._pins_per_connect,
+            "stretch_qpos": self._stretch_qpos,
             "home_envelope": self._envelope, "timestep_s": np.array([m.opt.timestep]),
             **self.foundation.configuration(),
         }

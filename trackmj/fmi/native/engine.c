@@ -474,8 +474,9 @@ struct Engine {
     double drive_gain, drive_limit, stroke_offset_m, pitch_radius_m, ride_height_m;
     int n;                  /* pins (= links) */
     int *link_body, *pin_geom, *connect_of_pin;
+    int *stretch_qpos;      /* structure "slides": qpos of every pin slide */
     double *pins_per_connect;
-    int connects, has_hinged;
+    int connects, has_hinged, stretches;
     double strand_bounds[5];
     int hull_n;
     double *hull;           /* (hull_n, 2) home envelope, chassis frame, counter-clockwise */
@@ -582,7 +583,8 @@ void engine_free(Engine *e) {
     free(f->state); free(f->jac); free(f->memory); free(f->choice); free(f->saved_mass);
     free(f->saved_qvel);
     free(e->redo); free(e->link_body); free(e->pin_geom); free(e->connect_of_pin);
-    free(e->pins_per_connect); free(e->hull); free(e->tension); free(e->upper);
+    free(e->pins_per_connect); free(e->stretch_qpos);
+    free(e->hull); free(e->tension); free(e->upper);
     free(e->lower); free(e->initial_mj); free(e->initial_memory);
     free(e);
 }
@@ -625,6 +627,8 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
     e->pin_geom = cfg_ints(e, cfg, "pin_geom", n);
     e->connect_of_pin = cfg_ints(e, cfg, "connect_of_pin", n);
     e->pins_per_connect = cfg_doubles(e, cfg, "pins_per_connect", -1);
+    e->stretches = cfg_count(cfg, "stretch_qpos");
+    e->stretch_qpos = cfg_ints(e, cfg, "stretch_qpos", -1);
     e->hull = cfg_doubles(e, cfg, "home_envelope", 2 * e->hull_n);
     f->pins = cfg_ints(e, cfg, "foundation_pins", 4 * n);
     f->dofs = cfg_ints(e, cfg, "foundation_dofs", n * D);
@@ -636,6 +640,7 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
     e->initial_memory = cfg_doubles(e, cfg, "initial_memory", N_MEMORY * n);
     double initial_law[2], initial_out[N_OUT_REAL + N_OUT_BOOL], kinematics[N_KINEMATICS];
     if (!e->link_body || !e->pin_geom || !e->connect_of_pin || !e->pins_per_connect
+        || !e->stretch_qpos
         || !e->hull || !f->pins || !f->dofs || !f->mass_index || !f->radius || !f->line
         || !e->initial_mj || !e->initial_memory || e->hull_n < 3 || f->line_n < 2
         || cfg_into(e, cfg, "initial_law", initial_law, 2)
@@ -965,6 +970,10 @@ static double closure_error(const Engine *e) {
     for (int c = 0; c < e->connects; c++) {
         double a = efc[3 * c], b = efc[3 * c + 1], z = efc[3 * c + 2];
         double gap = sqrt(a * a + b * b + z * z) / e->pins_per_connect[c];
+        if (gap > largest) largest = gap;
+    }
+    for (int i = 0; i < e->stretches; i++) {
+        double gap = fabs(e->d->qpos[e->stretch_qpos[i]]);
         if (gap > largest) largest = gap;
     }
     return largest;

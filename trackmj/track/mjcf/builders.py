@@ -58,7 +58,7 @@ from trackmj.track.mechanics import MODEL_NAME, ModelParams
 from trackmj.track.mjcf.layout import Layout, hub_radius, outward_sign, slide_axis
 from trackmj.track.mjcf.names import link_name, pin_name
 from trackmj.track.mjcf.soft import SoftConstraint, body_inv_weight, row_diag, soft_constraint
-from trackmj.track.mjcf.structure import chain_links, pin_series_count
+from trackmj.track.mjcf.structure import chain_links, pin_series_count, stretch_armature_kg
 from trackmj.track.mjcf.tree import attribute, find
 from trackmj.track.terrain import RoadProfile, heightfield
 from trackmj.validator import ParameterError
@@ -145,6 +145,11 @@ def _defaults(root: ET.Element, p: ModelParams) -> None:
     _sub(link_j, "joint", type="hinge", axis="0 1 0")
     pin_joint = _sub(default, "default", class_="pin_joint")
     _sub(pin_joint, "equality", solref="0.02 1")  # replaced by _map_soft_constraints
+    if t.structure == "slides":   # every hinged pin's own compliance (structure.py)
+        stretch = _sub(default, "default", class_="pin_stretch")
+        _sub(stretch, "joint", type="slide", stiffness=_fmt(p.pin_joint.radial_stiffness_N_m),
+             damping=_fmt(p.pin_joint.radial_damping_N_s_m),
+             armature=_fmt(stretch_armature_kg(p)))
 
 
 def _world(root: ET.Element) -> ET.Element:
@@ -446,7 +451,7 @@ def build_mjcf(p: ModelParams, layout: Layout, home_qpos: np.ndarray | None = No
     _running_gear(chassis, p, layout)
     _check_torsion(p)
     _links(root, world, p, layout)
-    if p.track.structure == "chains":
+    if p.track.structure in ("chains", "slides"):
         chain_links(root, p)
     _actuators(root, p)
     _map_soft_constraints(root, p)

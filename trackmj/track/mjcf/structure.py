@@ -21,6 +21,19 @@ stated stiffness (:mod:`trackmj.track.mjcf.soft`). The revolution component of t
 stays ≤ 4 % of the link-passing one at 1.0/1.5/2.0 m/s and the connect gaps ≤ 0.32 mm.
 The pins' torsional spring-damper (bushings) needs free links: their tendons join the links'
 pitch hinges, which chained links do not have.
+
+Track structure "slides": the chains above with every pin compliant on its own. Before each
+pin hinge a slide ``link_kk_stretch`` along the parent link's pitch carries that pin's
+stated stiffness K and damping B as joint stiffness and damping (class ``pin_stretch``), and
+every connect carries one pin, so a loaded strand's pins stretch T/K each, as free links'
+do, instead of a chain's m pins' worth at one connect (chains of 4 at standstill: pitch
+75.000/75.000/75.000/75.108 mm, lines at the odd quarters of the link-passing frequency).
+``implicitfast`` integrates joint stiffness explicitly (h²K/m ≈ 57 for a 3.5 kg link at
+2e8 N/m: it diverges), so each slide carries an armature equal to the apparent mass a
+connect of the same K, B already has (:func:`stretch_armature_kg`); the pin-stretch mode
+sits at ~220 Hz either way, far above every line the track excites (link passing ≤ 30 Hz).
+Cost: one more DOF per hinged pin (LF1352: nv 135 -> 196), 1.34x the instructions of chains
+per step (``benchmarks/README.md``, "Every pin compliant on its own").
 """
 
 from __future__ import annotations
@@ -62,15 +75,33 @@ def structure_text(p: ModelParams) -> str:
         return "free links, every pin a connect"
     sizes = chain_sizes(p.track.link_count, p.track.chain_links)
     counts = sorted({size: sizes.count(size) for size in sizes}.items(), reverse=True)
-    return "chains: " + ", ".join(f"{count} of {size}" for size, count in counts) + " links"
+    text = ", ".join(f"{count} of {size}" for size, count in counts) + " links"
+    if p.track.structure == "slides":
+        return f"slides: chains ({text}), every hinged pin on its own compliant slide"
+    return "chains: " + text
 
 
 def pin_series_count(p: ModelParams) -> dict[int, int]:
     """Pins whose compliance each pin ``connect`` carries, by its pin index: the size of the
-    chain it begins (1 for every pin of free links)."""
+    chain it begins for "chains", 1 for free links and for "slides" (whose hinged pins
+    carry their own on their slides)."""
     starts = chain_starts(p)
+    if p.track.structure == "slides":
+        return dict.fromkeys(starts, 1)
     ends = [*starts[1:], p.track.link_count]
     return {s: e - s for s, e in zip(starts, ends, strict=True)}
+
+
+def stretch_armature_kg(p: ModelParams) -> float:
+    """Armature of every pin slide [kg]: soft_margin·(h²K + 2hB)/4, the apparent mass a
+    soft ``connect`` of the pin's K, B carries at the step h (:mod:`trackmj.track.mjcf.soft`:
+    the margin over the stability limit h²K/m + 2hB/m ≤ 4 of the explicit spring and the
+    implicit damper, which the slide's joint stiffness under ``implicitfast`` has as well).
+    LF1352 (K 2e8 N/m, B 1e3 N·s/m, h 1 ms, margin 2): 101 kg, the stretch mode
+    √(K/m)/2π ≈ 220 Hz; 50-200 kg changed the odd-quarter comb by < 1 N (benchmarks)."""
+    h, joint = p.simulation.timestep_s, p.pin_joint
+    return p.solver.soft_margin * (h * h * joint.radial_stiffness_N_m
+                                   + 2.0 * h * joint.radial_damping_N_s_m) / 4.0
 
 
 def hinged_pins(p: ModelParams) -> list[int]:
@@ -84,13 +115,14 @@ def _floats(text: str) -> np.ndarray:
 
 
 def chain_links(root: ET.Element, p: ModelParams) -> None:
-    """Hinge every link inside a chain to the link before it (see the module docstring);
-    refuses the torsional spring-damper of bushings (its tendons join pitch hinges that the
-    chained links no longer have)."""
+    """Hinge every link inside a chain to the link before it, for "slides" on a compliant
+    slide along the parent's pitch (see the module docstring); refuses the torsional
+    spring-damper of bushings (its tendons join pitch hinges that the chained links no
+    longer have)."""
     joint = p.pin_joint
     if joint.torsional_stiffness_N_m_rad > 0.0 or joint.torsional_damping_N_m_s_rad > 0.0:
-        raise ParameterError(f"[track] structure = \"chains\" does not take the "
-                             f"[{p.pin_joint_table}] torsional spring-damper; use "
+        raise ParameterError(f"[track] structure = \"{p.track.structure}\" does not take "
+                             f"the [{p.pin_joint_table}] torsional spring-damper; use "
                              "structure = \"free\" with it")
 
     world = find(root, "worldbody")
@@ -113,6 +145,12 @@ def chain_links(root: ET.Element, p: ModelParams) -> None:
             child.remove(j)
         child.insert(0, ET.Element("joint", name=link_name(k) + "_pin", type="hinge",
                                    axis="0 1 0", pos="0 0 0"))
+        if p.track.structure == "slides":   # the parent's x axis in the child's frame
+            mujoco.mju_quat2Mat(rot, rel_quat)
+            axis = rot.reshape(3, 3).T @ (1.0, 0.0, 0.0)
+            child.insert(0, ET.Element("joint", {
+                "name": link_name(k) + "_stretch", "class": "pin_stretch", "pos": "0 0 0",
+                "axis": " ".join(f"{v:.9g}" for v in axis)}))
         world.remove(child)
         parent.append(child)
     equality = find(root, "equality")
