@@ -140,8 +140,12 @@ RECOVERY_NOT_MET = {
     "m113": ("issue 32's floor, not met (edges 6/8/18/20 s: 1.38/0.91/never/3.14 s, the "
              "0.5 s mean up to 26.1 kN, F_max = 26.7 kN): with the sprocket at the "
              "front, braking leaves the idler on the slack side, so the -10 % drive pulse "
-             "needs a 14.9 kN push, 28 % of the side's weight, whose release rings the "
-             "sprocket servo by +-3.8 kN·m"),
+             "needs a 14.9 kN push, 28 % of the side's weight, that pitches the chassis "
+             "by 38 mrad; its release rings the chassis' pitch mode (1.0 Hz, about 10 % "
+             "of critical on Chrono's torsion-arm damping) and with it the drive torque "
+             "(+-3.8 kN·m): with the stroke held the 0.5 s mean swings 17.8 -> 27.3 kN and "
+             "rings for 3 s; with 4x the metering and pump flow the loop still rings "
+             "+-3.5 kN for 2 s (models/README.md, W3 on M113)"),
     "compact3": ("issue 32's floor, not met: its oil column takes only 16 % of an idler "
                  "load step in hold, so the +13 % braking pulse needs a 5.2 kN push, 35 % of "
                  "the side's weight; while it lasts the 0.5 s mean does not come back within "
