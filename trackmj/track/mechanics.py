@@ -59,7 +59,7 @@ class TrackParams(Parameters):
     structure: Literal["free", "chains", "slides"] = param(
         default="chains", doc="chains: hinged sub-chains of at most chain_links links joined "
         "by pin connects (trackmj/track/mjcf/structure.py); slides: chains with every hinged "
-        "pin on its own compliant slide (every pin stretches T/K; 1.34x the step cost); free: "
+        "pin on its own compliant slide (every pin stretches T/K; 1.33x the step cost); free: "
         "every link a free planar body, every pin a connect (1.6x the step cost, "
         "benchmarks/README.md); optional: chains")
     chain_links: int = param(2, 12, unit="1", default=4,

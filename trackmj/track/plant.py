@@ -40,16 +40,22 @@ from trackmj.track.mjcf.structure import equalise_link_weights
 
 
 @numba.njit(cache=True)
-def _largest_pin_gap_m(efc_pos: np.ndarray, pins_per_connect: np.ndarray) -> float:
+def _largest_pin_gap_m(efc_pos: np.ndarray, pins_per_connect: np.ndarray, qpos: np.ndarray,
+                       stretch_qpos: np.ndarray) -> float:
     """Largest deflection of one pin [m]: each pin connect's gap (the Euclidean norm of its
     3 rows, efc_pos[3c:3c+3], summed x² + y² + z² in that order) over the pins whose
-    compliance it carries in series (``pins_per_connect``, one per connect)."""
+    compliance it carries in series (``pins_per_connect``, one per connect), and each pin
+    slide's stretch |qpos[i]| (``stretch_qpos``, structure "slides"; empty otherwise)."""
     largest = 0.0
     for c in range(len(pins_per_connect)):
         a, b, d = efc_pos[3 * c], efc_pos[3 * c + 1], efc_pos[3 * c + 2]
         gap = math.sqrt(a * a + b * b + d * d) / pins_per_connect[c]
         if gap > largest:
             largest = gap
+    for i in range(len(stretch_qpos)):
+        stretch = abs(float(qpos[stretch_qpos[i]]))
+        if stretch > largest:
+            largest = stretch
     return largest
 
 
@@ -251,9 +257,9 @@ class TrackPlant:
         self._pins_per_connect = np.diff([*connected, n]).astype(float)
         self._has_hinged_pins = bool(hinged)
         # structure "slides": every hinged pin's own stretch (its slide's qpos) [m]
-        stretch = [m.joint(link_name(k) + "_stretch").id for k in hinged
-                   if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT,
-                                        link_name(k) + "_stretch") >= 0]
+        stretch = [j for j in (mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT,
+                                                 link_name(k) + "_stretch") for k in hinged)
+                   if j >= 0]
         if stretch:
             self._pins_per_connect[:] = 1.0
         self._stretch_qpos = m.jnt_qposadr[stretch].astype(np.int64)
@@ -447,10 +453,8 @@ class TrackPlant:
         last step; a connect carrying m pins in series (structure "chains") stretches m
         times that; a pin slide (structure "slides") its own. Evaluated every step (the
         physics guard reads it), so in a compiled kernel (~1 µs)."""
-        gap = _largest_pin_gap_m(self.data.efc_pos, self._pins_per_connect)
-        if len(self._stretch_qpos):
-            gap = max(gap, float(np.abs(self.data.qpos[self._stretch_qpos]).max()))
-        return gap
+        return _largest_pin_gap_m(self.data.efc_pos, self._pins_per_connect, self.data.qpos,
+                                  self._stretch_qpos)
 
     @property
     def pin_rows(self) -> int:

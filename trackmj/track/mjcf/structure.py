@@ -32,7 +32,7 @@ do, instead of a chain's m pins' worth at one connect (chains of 4 at standstill
 2e8 N/m: it diverges), so each slide carries an armature equal to the apparent mass a
 connect of the same K, B already has (:func:`stretch_armature_kg`); the pin-stretch mode
 sits at ~220 Hz either way, far above every line the track excites (link passing ≤ 30 Hz).
-Cost: one more DOF per hinged pin (LF1352: nv 135 -> 196), 1.34x the instructions of chains
+Cost: one more DOF per hinged pin (LF1352: nv 135 -> 196), 1.33x the instructions of chains
 per step (``benchmarks/README.md``, "Every pin compliant on its own").
 """
 
