@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -25,6 +26,8 @@ from test_contacts import STATIC_TOLERANCE, _static_stiffness, span_under_tensio
 from test_model import assert_sparse_matches_dense
 
 from trackmj.machines.track_plant import load_plant
+from trackmj.sim.setup import prepare
+from trackmj.sim.w3_hitch import Rig, load_change_N
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.mechanics import ModelParams, load_model_params
 from trackmj.track.mjcf.generate import generate_mjcf
@@ -230,3 +233,29 @@ def test_chains_longer_than_measured_are_refused_naming_the_key() -> None:
     assert load_model_params(overrides={"track.chain_links": 12}).track.chain_links == 12
     with pytest.raises(ParameterError, match=r"chain_links.*\[2, 12\]"):
         load_model_params(overrides={"track.chain_links": 24})
+
+
+@pytest.mark.slow
+def test_a_hitch_load_reaches_the_idler_as_on_free_links_when_every_pin_is_compliant(
+        tmp_path) -> None:
+    """W3's calibration rig (hold mode, seed 0): the idler-load change of the calibrated
+    LF1352 tow (+6126 N) on slides is the free links' to 2 % (measured −1923 and −1930 N);
+    chains of 4, whose rigid 4-link spans are the road wheels' 0.30 m spacing, give −1481 N
+    (models/README.md, "Loop structure")."""
+    models = Path(__file__).resolve().parents[1] / "models"
+    text = (models / "lf1352.toml").read_text()
+    line = next(x for x in text.splitlines() if x.startswith("structure = "))
+    change = {}
+    for structure in ("slides", "free"):
+        (tmp_path / f"{structure}.toml").write_text(
+            text.replace(line, f'structure = "{structure}"'))
+        machine = tmp_path / f"{structure}_machine.toml"
+        machine.write_text(
+            f'[machine]\nname = "lf1352{structure}"\ndescription = "LF1352, {structure}"\n'
+            f'mechanics = "{structure}.toml"\n'
+            f'hydraulics = "{models / "lf1352_hydraulics.toml"}"\n'
+            f'control = "{models / "lf1352_control.toml"}"\n')
+        rig = Rig(prepare("W3", machine=machine))
+        change[structure] = load_change_N(rig.setup.scenario, rig, 6126.4, 30.0)
+    assert change["free"] < -1700.0
+    assert change["slides"] == pytest.approx(change["free"], rel=0.02)
