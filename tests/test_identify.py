@@ -17,6 +17,7 @@ from trackmj.machines.identify import (
     identify_idler,
     multisine,
     r2,
+    skill_over_spring,
 )
 from trackmj.machines.idler import ModalTerm
 from trackmj.machines.track_plant import load_plant
@@ -94,11 +95,35 @@ def test_a_response_no_mass_spring_damper_fits_is_refused() -> None:
     mode = 1.0 / (k - m * omega ** 2 + 1j * c * omega)
     mass, damping = fit_single_dof(freq, mode, k)
     assert mass == pytest.approx(m, rel=1e-4) and damping == pytest.approx(c, rel=1e-4)
-    check_single_dof(mass, damping, r2(1.0 / (k - mass * omega ** 2 + 1j * damping * omega),
-                                       mode), (1.0, 50.0))
+    fitted = 1.0 / (k - mass * omega ** 2 + 1j * damping * omega)
+    assert skill_over_spring(fitted, mode, k) == pytest.approx(1.0, abs=1e-6)
+    check_single_dof(mass, damping, skill_over_spring(fitted, mode, k), (1.0, 50.0))
     held = 1.0 / (k + 1j * 1e9 * omega)
     mass, damping = fit_single_dof(freq, held, k)
     assert damping == pytest.approx(MAX_DAMPING_N_S_M)
     fitted = 1.0 / (k - mass * omega ** 2 + 1j * damping * omega)
     with pytest.raises(IdentificationError, match=r"no mass-spring-damper.*c = 1e\+08"):
-        check_single_dof(mass, damping, r2(fitted, held), (1.0, 50.0))
+        check_single_dof(mass, damping, skill_over_spring(fitted, held, k), (1.0, 50.0))
+
+
+def test_a_response_the_carriers_mass_cannot_describe_is_refused() -> None:
+    """A compliance flat within ±10 % and lagging only 45° at 50 Hz, while the carrier's
+    80 kg on k = 4.4e6 N/m must resonate at 37 Hz: the single mode fitted with M at that
+    floor misses it by more than the static spring does (skill −0.99) and is refused; the
+    same ripple lagging 90° at 50 Hz is a damped mode (skill 0.88) and passes."""
+    freq = np.linspace(1.0, 50.0, 99)
+    omega = 2.0 * np.pi * freq
+    k = 4.4e6
+    for lag, accepted in ((0.5, False), (1.0, True)):
+        response = ((1.0 + 0.1 * np.sin(2.0 * np.pi * freq / 4.0)) / k
+                    * np.exp(-1j * lag * (np.pi / 2.0) * freq / 50.0))
+        mass, damping = fit_single_dof(freq, response, k, min_mass_kg=80.0)
+        fitted = 1.0 / (k - mass * omega ** 2 + 1j * damping * omega)
+        skill = skill_over_spring(fitted, response, k)
+        if accepted:
+            assert skill > 0.8
+            check_single_dof(mass, damping, skill, (1.0, 50.0))
+        else:
+            assert skill < -0.5 and mass == pytest.approx(80.0)
+            with pytest.raises(IdentificationError, match=r"no mass-spring-damper"):
+                check_single_dof(mass, damping, skill, (1.0, 50.0))
