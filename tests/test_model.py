@@ -43,7 +43,7 @@ def test_counts_and_names(plant: TrackPlant) -> None:
     # hinge at every other pin
     p = plant.params
     starts = chain_starts(p)
-    assert p.track.structure == "chains" and len(starts) == m.neq == 21
+    assert p.track.structure == "slides" and len(starts) == m.neq == 21
     assert all(m.equality(f"pin_{k:02d}").type == mujoco.mjtEq.mjEQ_CONNECT for k in starts)
     hinged = [k for k in range(82) if k not in starts]
     assert all(m.joint(f"link_{k:02d}_pin").type == mujoco.mjtJoint.mjJNT_HINGE for k in hinged)

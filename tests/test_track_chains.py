@@ -51,7 +51,12 @@ def _variant(model_params: ModelParams, **track) -> tuple[str, ModelParams]:
 
 @pytest.fixture(scope="module")
 def pairs(model_params: ModelParams) -> tuple[str, ModelParams]:
-    return _variant(model_params, chain_links=2)
+    return _variant(model_params, structure="chains", chain_links=2)
+
+
+@pytest.fixture(scope="module")
+def chains(model_params: ModelParams) -> tuple[str, ModelParams]:
+    return _variant(model_params, structure="chains")
 
 
 @pytest.fixture(scope="module")
@@ -76,18 +81,21 @@ def test_chain_sizes_cover_the_loop_evenly(links: int, longest: int) -> None:
     assert max(sizes) <= longest and max(sizes) - min(sizes) <= 1
 
 
-@pytest.mark.parametrize("structure", ["default", "pairs", "free", "slides"])
-def test_structure_cuts_the_loop_into_its_chains(structure: str, pairs, free, slides,
+@pytest.mark.parametrize("structure", ["default", "chains", "pairs", "free", "slides"])
+def test_structure_cuts_the_loop_into_its_chains(structure: str, chains, pairs, free, slides,
                                                  model_params: ModelParams) -> None:
-    plant = {"default": load_plant, "pairs": lambda: _plant(pairs),
-             "free": lambda: _plant(free), "slides": lambda: _plant(slides)}[structure]()
+    plant = {"default": load_plant, "chains": lambda: _plant(chains),
+             "pairs": lambda: _plant(pairs), "free": lambda: _plant(free),
+             "slides": lambda: _plant(slides)}[structure]()
     m, p, n = plant.model, plant.params, model_params.track.link_count
+    assert structure != "default" or p.track.structure == "slides"   # LF1352's
+    slid = p.track.structure == "slides"
     starts = chain_starts(p)
     hinged = n - len(starts)
-    per_hinged = 2 if structure == "slides" else 1   # a slide before the pin's hinge
+    per_hinged = 2 if slid else 1   # a slide before the pin's hinge
     # 3 DOFs per free link, 1 (2) per hinged link, besides the machine's own 11
     assert m.neq == len(starts) and m.nv == 11 + 3 * len(starts) + per_hinged * hinged
-    carried = np.ones(len(starts)) if structure == "slides" else np.diff([*starts, n])
+    carried = np.ones(len(starts)) if slid else np.diff([*starts, n])
     assert pin_series_count(p) == dict(zip(starts, carried, strict=True))
     for k in range(n):
         parent = m.body(link_name(k)).parentid
@@ -96,7 +104,7 @@ def test_structure_cuts_the_loop_into_its_chains(structure: str, pairs, free, sl
         else:
             assert parent == m.body(link_name(k - 1)).id
             assert m.joint(link_name(k) + "_pin").type == mujoco.mjtJoint.mjJNT_HINGE
-            if structure == "slides":
+            if slid:
                 # along the parent's pitch: the pin's gap, K and B as stated
                 stretch = m.joint(link_name(k) + "_stretch")
                 axis = plant.data.xmat[parent].reshape(3, 3) @ np.array([1.0, 0.0, 0.0])
@@ -127,18 +135,19 @@ def test_pairs_static_contact_stiffness_is_the_stated_one(pairs) -> None:
         np.testing.assert_allclose(values, target, rtol=STATIC_TOLERANCE, err_msg=kind)
 
 
-@pytest.mark.parametrize("structure", ["default", "pairs", "slides"])
-def test_span_stretches_as_its_connects_pins_in_series(structure: str, pairs,
+@pytest.mark.parametrize("structure", ["default", "chains", "pairs", "slides"])
+def test_span_stretches_as_its_connects_pins_in_series(structure: str, chains, pairs,
                                                        slides) -> None:
     """The free upper span stretches by Σ m_c·ΔT/K when its tension rises by ΔT, m_c the
     pins each compliance in it carries (a connect its chain's, a slide its own pin); its
     hinged pins carry the tension of their neighbours (the cfrc_int readout)."""
-    plant = {"default": load_plant, "pairs": lambda: _plant(pairs),
-             "slides": lambda: _plant(slides)}[structure]()
+    plant = {"default": load_plant, "chains": lambda: _plant(chains),
+             "pairs": lambda: _plant(pairs), "slides": lambda: _plant(slides)}[structure]()
     series = pin_series_count(plant.params)
     # the slides' pins in series with the connects' (none for chains)
     compliant = {**dict.fromkeys(hinged_pins(plant.params),
-                                 1 if structure == "slides" else 0), **series}
+                                 1 if plant.params.track.structure == "slides" else 0),
+                 **series}
     spans = [span_under_tension(plant, f) for f in (11_000.0, 15_000.0)]
     for a, b, _, _, tension in spans:
         inner = np.arange(a + 1, b)
@@ -222,7 +231,7 @@ def test_chains_refuse_the_torsional_bushings(model_params: ModelParams) -> None
     """The bushings' torsion tendons join pitch hinges the chained links do not have."""
     p = dataclasses.replace(model_params,
                             bushings=dataclasses.replace(model_params.bushings, enabled=True))
-    with pytest.raises(ParameterError, match=r"structure = \"chains\" does not take the "
+    with pytest.raises(ParameterError, match=r"structure = \"slides\" does not take the "
                                               r"\[bushings\] torsional"):
         generate_mjcf(p)
 

@@ -55,8 +55,9 @@ def test_free_fall_loses_the_integrators_known_energy() -> None:
     track side falls rigidly; semi-implicit Euler loses ½·M·g²·h per second (first order
     in h), which the ledger books as its velocity-jump term, and nothing else moves
     energy but the integrator's explicit-force term: the chained links' mass matrix
-    depends on their pose, and the loop keeps a slow spin from the settle (under 2e-6 of
-    the loss)."""
+    depends on their pose, the loop keeps a slow spin from the settle, and the pin slides'
+    joint springs, explicit under implicitfast, still ring at their ~220 Hz stretch mode
+    (0.35 % of critical with the armature; measured 9e-6 of the loss, under 2e-5)."""
     plant = load_plant()
     m = plant.model
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
@@ -73,10 +74,11 @@ def test_free_fall_loses_the_integrators_known_energy() -> None:
     mass, h, g = float(m.body_subtreemass[0]), float(m.opt.timestep), float(-gravity[2])
     expected = -0.5 * mass * g * g * h * duration
     explicit = e.numerical_terms_J["explicit_forces"]
-    assert abs(explicit) < 2e-6 * abs(expected)
-    assert e.kinetic_change_J + e.potential_change_J == pytest.approx(expected + explicit,
+    assert abs(explicit) < 2e-5 * abs(expected)
+    jump = e.numerical_terms_J["velocity_jump"]
+    assert e.kinetic_change_J + e.potential_change_J == pytest.approx(jump + explicit,
                                                                       rel=1e-6)
-    assert e.numerical_terms_J["velocity_jump"] == pytest.approx(expected, rel=1e-3)
+    assert jump == pytest.approx(expected, rel=1e-3)
     assert e.potential_change_J == pytest.approx(-mass * g * 0.5 * g * duration ** 2, rel=1e-2)
     assert abs(e.residual_J) < 1e-6 * abs(expected)
 
