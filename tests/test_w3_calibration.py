@@ -149,7 +149,7 @@ RECOVERY_NOT_MET = {
     "compact3": ("issue 32's floor, not met: its oil column takes only 16 % of an idler "
                  "load step in hold, so the +13 % braking pulse needs a 5.2 kN push, 35 % of "
                  "the side's weight; while it lasts the 0.5 s mean does not come back within "
-                 "5 % (edge 6 s), after it in 1.20 s; the release it asks for pulls the "
+                 "5 % (edge 6 s), after it in 1.24 s; the release it asks for pulls the "
                  "carrier in faster than the rod feed fills (air out of solution down to "
                  "-0.012 MPa gauge; before the air was modelled the run left physics there)"),
 }

@@ -61,8 +61,9 @@ class TrackParams(Parameters):
         "by pin connects (trackmj/track/mjcf/structure.py); slides: chains with every hinged "
         "pin on its own compliant slide (every pin stretches T/K; 1.33x the step cost); free: "
         "every link a free planar body, every pin a connect (1.6x the step cost, "
-        "benchmarks/README.md); optional: chains (the cheaper; LF1352 states slides: the "
-        "chains' lumped stretch also bends the hitch's load path to the idler by 8-23 %)")
+        "benchmarks/README.md); optional: chains (the cheaper; LF1352 and compact3 state "
+        "slides: the chains' lumped stretch also bends the hitch's load path to the idler by "
+        "8-23 %)")
     chain_links: int = param(2, 12, unit="1", default=4,
                              doc="longest chain of hinged links for structure = chains or slides "
                                  "[-]; optional: 4. Measured on the shipped machines up to "
