@@ -31,7 +31,7 @@ from trackmj.sim.w3_hitch import Rig, load_change_N
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.mechanics import ModelParams, load_model_params
 from trackmj.track.mjcf.generate import generate_mjcf
-from trackmj.track.mjcf.names import link_name
+from trackmj.track.mjcf.names import link_name, stretch_name
 from trackmj.track.mjcf.structure import (
     chain_sizes,
     chain_starts,
@@ -106,7 +106,7 @@ def test_structure_cuts_the_loop_into_its_chains(structure: str, chains, pairs, 
             assert m.joint(link_name(k) + "_pin").type == mujoco.mjtJoint.mjJNT_HINGE
             if slid:
                 # along the parent's pitch: the pin's gap, K and B as stated
-                stretch = m.joint(link_name(k) + "_stretch")
+                stretch = m.joint(stretch_name(k))
                 axis = plant.data.xmat[parent].reshape(3, 3) @ np.array([1.0, 0.0, 0.0])
                 np.testing.assert_allclose(plant.data.xaxis[stretch.id], axis, atol=1e-6)
                 assert stretch.stiffness[0] == p.pin_joint.radial_stiffness_N_m
@@ -220,7 +220,7 @@ def test_pin_slides_armature_is_a_connects_apparent_mass(slides) -> None:
     xml, p = slides
     m = mujoco.MjModel.from_xml_string(xml)
     h, k, b = m.opt.timestep, p.pin_joint.radial_stiffness_N_m, p.pin_joint.radial_damping_N_s_m
-    armature = m.dof_armature[[m.joint(link_name(j) + "_stretch").dofadr[0]
+    armature = m.dof_armature[[m.joint(stretch_name(j)).dofadr[0]
                                for j in hinged_pins(p)]]
     np.testing.assert_allclose(armature, stretch_armature_kg(p), rtol=1e-12)
     assert (h * h * k + 2.0 * h * b) / armature[0] == pytest.approx(4.0 / p.solver.soft_margin)

@@ -262,9 +262,7 @@ class TrackEnergyLedger:
         # pins, whose connects' work is booked there too; other damped dofs are the
         # suspension slides; the rest (tendon dampers of the pin torsion) to A_TORSION
         self._damper_slot = np.where(m.dof_damping > 0.0, A_SUSPENSION, A_TORSION)
-        for j in range(m.njnt):
-            if m.joint(j).name.endswith("_stretch"):
-                self._damper_slot[m.jnt_dofadr[j]] = A_WORK + _PINS
+        self._damper_slot[m.jnt_dofadr[plant.pin_slide_joints]] = A_WORK + _PINS
         hinges = [j for j in range(m.njnt) if m.joint(j).name.startswith("link_")
                   and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]   # pitch and pin hinges
         if np.any(m.dof_damping[m.jnt_dofadr[hinges]] > 0.0):

@@ -21,6 +21,7 @@ Sign conventions (see also :mod:`trackmj.ports`):
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,7 +36,7 @@ from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElemen
 from trackmj.track.foundation import REDO_STATE, Foundation, FoundationLaw
 from trackmj.track.foundation import step as foundation_step
 from trackmj.track.mechanics import ModelParams
-from trackmj.track.mjcf.names import link_name, pin_name
+from trackmj.track.mjcf.names import link_name, pin_name, stretch_name
 from trackmj.track.mjcf.structure import equalise_link_weights
 
 
@@ -253,16 +254,19 @@ class TrackPlant:
         self._connect_of_pin = np.full(n, -1, dtype=np.int64)
         self._connect_of_pin[connected] = np.arange(len(connected))
         self._tension = np.zeros(n)
-        # pins each connect carries in series: the links up to the next connect
-        self._pins_per_connect = np.diff([*connected, n]).astype(float)
         self._has_hinged_pins = bool(hinged)
-        # structure "slides": every hinged pin's own stretch (its slide's qpos) [m]
-        stretch = [j for j in (mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT,
-                                                 link_name(k) + "_stretch") for k in hinged)
-                   if j >= 0]
-        if stretch:
-            self._pins_per_connect[:] = 1.0
-        self._stretch_qpos = m.jnt_qposadr[stretch].astype(np.int64)
+        # structure "slides": the hinged pins with their own compliant slide
+        slide = {k: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, stretch_name(k))
+                 for k in hinged}
+        # their joint ids (empty for chains and free links; the energy ledger books them)
+        self.pin_slide_joints = np.array([j for j in slide.values() if j >= 0], dtype=np.int64)
+        self._stretch_qpos = m.jnt_qposadr[self.pin_slide_joints].astype(np.int64)
+        # pins each connect carries in series: its own and the hinged pins without a slide
+        # up to the next connect
+        bounds = [*connected, n]
+        self._pins_per_connect = np.array(
+            [1 + sum(slide[k] < 0 for k in range(a + 1, b))
+             for a, b in itertools.pairwise(bounds)], dtype=float)
         equalise_link_weights(m)   # chains: every link link_00's row weight
         self.foundation = Foundation(m, self.data, self._pin_geom,
                                      FoundationLaw.from_params(params))

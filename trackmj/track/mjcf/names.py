@@ -8,6 +8,12 @@ def link_name(k: int) -> str:
     return f"link_{k:02d}"
 
 
+def stretch_name(k: int) -> str:
+    """Name of the slide that carries pin k's own compliance (structure "slides"):
+    ``link_kk_stretch``, a joint of link k."""
+    return link_name(k) + "_stretch"
+
+
 def pin_name(k: int) -> str:
     """Name of pin k, the connect joining link k−1 and link k (``pin_00`` ..)."""
     return f"pin_{k:02d}"

@@ -45,7 +45,7 @@ import mujoco
 import numpy as np
 
 from trackmj.track.mechanics import ModelParams
-from trackmj.track.mjcf.names import link_name, pin_name
+from trackmj.track.mjcf.names import link_name, pin_name, stretch_name
 from trackmj.track.mjcf.tree import attribute, find
 from trackmj.validator import ParameterError
 
@@ -149,7 +149,7 @@ def chain_links(root: ET.Element, p: ModelParams) -> None:
             mujoco.mju_quat2Mat(rot, rel_quat)
             axis = rot.reshape(3, 3).T @ (1.0, 0.0, 0.0)
             child.insert(0, ET.Element("joint", {
-                "name": link_name(k) + "_stretch", "class": "pin_stretch", "pos": "0 0 0",
+                "name": stretch_name(k), "class": "pin_stretch", "pos": "0 0 0",
                 "axis": " ".join(f"{v:.9g}" for v in axis)}))
         world.remove(child)
         parent.append(child)
