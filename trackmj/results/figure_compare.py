@@ -118,9 +118,9 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
         ax.set_title(f"zoom: {name}", fontsize=9, loc="left")
         ax.set_xlabel("time [s]")
     compared = [lab for lab in labels
-                if predictions and lab in predictions and lab != REFERENCE_ARCHITECTURE]
+                if lab in (predictions or {}) and lab != REFERENCE_ARCHITECTURE]
     if predictions and compared:
-        _prediction_bars(top, grid[3].subgridspec(1, 3), labels, predictions, w)
+        _prediction_bars(top, grid[3].subgridspec(1, 3), compared, predictions, w)
     else:   # nothing to compare with the reference (a report of tp alone): its own figures
         _run_bars(top, grid[3].subgridspec(1, 3), labels, results, w)
     energy_bars(bottom, labels, results)
@@ -153,13 +153,13 @@ def _head_pressures(ax_p: Axes, runs: Sequence[tuple[str, Result]], w: MetricWin
 
 
 def _prediction_bars(fig: Figure | SubFigure, bars: GridSpecFromSubplotSpec,
-                     labels: Sequence[str],
+                     others: Sequence[str],
                      predictions: Mapping[str, Mapping[str, Any]], w: MetricWindows) -> None:
-    """Bars of each run's prediction error against the reference architecture: F_ten RMSE
-    (raw and low-passed) [kN], peak head pressure [MPa], energy [%] (named by the term
-    compared) in the first three cells of ``bars``."""
+    """Bars of the prediction error of each run labelled in ``others`` (keys of
+    ``predictions``, the reference architecture's run not among them) against the reference:
+    F_ten RMSE (raw and low-passed) [kN], peak head pressure [MPa], energy [%] (named by the
+    term compared) in the first three cells of ``bars``."""
     ref = REFERENCE_ARCHITECTURE
-    others = [lab for lab in labels if lab in predictions and lab != ref]
     _bars(fig.add_subplot(bars[0]), others, {
         "raw": [predictions[o]["prediction_rmse_vs_tp_N"] / 1e3 for o in others],
         f"{w.lowpass_cutoff_Hz:g} Hz low-pass":
