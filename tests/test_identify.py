@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -127,3 +129,13 @@ def test_a_response_the_carriers_mass_cannot_describe_is_refused() -> None:
             assert skill < -0.5 and mass == pytest.approx(80.0)
             with pytest.raises(IdentificationError, match=r"no mass-spring-damper"):
                 check_single_dof(mass, damping, skill, (1.0, 50.0))
+
+
+def test_the_identification_cli_refuses_an_unknown_machine_in_one_line() -> None:
+    """``python -m trackmj.machines.identify NAME`` with a name no machine ships: argparse's
+    usage and one line naming the allowed machines, exit status 2, no traceback."""
+    run = subprocess.run([sys.executable, "-m", "trackmj.machines.identify", "lf1353"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    assert "Traceback" not in run.stderr
+    assert "invalid choice: 'lf1353'" in run.stderr and "lf1352" in run.stderr

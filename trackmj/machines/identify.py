@@ -20,8 +20,8 @@ R² on H: 1 − Σ|H_model − H|² / Σ|H − mean H|² over the band's lines.
 
 from __future__ import annotations
 
+import argparse
 import math
-import sys
 from collections.abc import Callable
 
 import mujoco
@@ -30,7 +30,7 @@ from scipy.optimize import least_squares
 from scipy.signal import csd, welch
 
 from trackmj.elements.prescribed import ConstantForce, ForceHistory
-from trackmj.machines.assembly import mechanics, model_mjcf, resolve
+from trackmj.machines.assembly import mechanics, model_mjcf, names, resolve
 from trackmj.machines.idler import (
     IDENTIFICATION,
     EquivalentIdler,
@@ -249,19 +249,35 @@ def identify_machine_idler(name: str) -> tuple[EquivalentIdler, str, Identificat
 def main(argv: list[str] | None = None) -> None:
     """Identify the idler on the packaged track and rewrite ``models/lf1352_idler.toml``;
     with machine names (``python -m trackmj.machines.identify m113``), each shipped machine's
-    ``models/<name>_idler.toml`` from its generated model."""
-    for name in (sys.argv[1:] if argv is None else argv) or ["lf1352"]:
-        if name == "lf1352":
-            idler = identify_packaged_idler()
-            path = write_idler_file(idler, default_idler_path())
-        else:
-            idler, text, arguments = identify_machine_idler(name)
-            machine = resolve(name)
-            path = write_idler_file(idler, models_dir() / f"{name}_idler.toml",
-                                    machine.mechanics, identification=arguments,
-                                    machine=name.upper(), model_text=text)
-        print(f"wrote {path}: k {idler.stiffness_N_m:.4g} N/m, M {idler.mass_kg:.4g} kg, "
-              f"c {idler.damping_N_s_m:.4g} N s/m, fit R^2 {idler.fit_r2:.3f}")
+    ``models/<name>_idler.toml`` from its generated model. A refused identification exits
+    with its one-line reason."""
+    parser = argparse.ArgumentParser(
+        prog="python -m trackmj.machines.identify", description=main.__doc__.splitlines()[0])
+    parser.add_argument("machines", nargs="*", choices=names(), default=["lf1352"],
+                        metavar="MACHINE", help=f"shipped machines ({', '.join(names())}; "
+                        "default lf1352)")
+    args = parser.parse_args(argv)
+    for name in args.machines:
+        try:
+            write = _identify_and_write(name)
+        except ParameterError as error:   # IdentificationError is one
+            raise SystemExit(f"{name}: {error}") from None
+        print(write)
+
+
+def _identify_and_write(name: str) -> str:
+    """Identify shipped machine ``name``'s idler, write its file; the line to print."""
+    if name == "lf1352":
+        idler = identify_packaged_idler()
+        path = write_idler_file(idler, default_idler_path())
+    else:
+        idler, text, arguments = identify_machine_idler(name)
+        machine = resolve(name)
+        path = write_idler_file(idler, models_dir() / f"{name}_idler.toml",
+                                machine.mechanics, identification=arguments,
+                                machine=name.upper(), model_text=text)
+    return (f"wrote {path}: k {idler.stiffness_N_m:.4g} N/m, M {idler.mass_kg:.4g} kg, "
+            f"c {idler.damping_N_s_m:.4g} N s/m, fit R^2 {idler.fit_r2:.3f}")
 
 
 if __name__ == "__main__":
