@@ -252,7 +252,9 @@ def main(argv: list[str] | None = None) -> None:
     ``models/<name>_idler.toml`` from its generated model. A refused identification exits
     with its one-line reason."""
     parser = argparse.ArgumentParser(
-        prog="python -m trackmj.machines.identify", description=main.__doc__.splitlines()[0])
+        prog="python -m trackmj.machines.identify",
+        description="Identify shipped machines' equivalent idlers on their generated tracks "
+                    "and rewrite models/<name>_idler.toml.")
     parser.add_argument("machines", nargs="*", choices=names(), default=["lf1352"],
                         metavar="MACHINE", help=f"shipped machines ({', '.join(names())}; "
                         "default lf1352)")
