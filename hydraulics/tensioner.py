@@ -5,9 +5,9 @@ supply S (one of four supply models: fixed pump + accumulator + relief, pressure
 variable pump, fixed pump + accumulator + unloading valve, or a prescribed pressure) -> main
 4/2 (rest P->A, B->T; energised P->B, A->T) -> line A -> V_L / V_R (NC 2/2, each with a
 head-branch restrictor in series) -> heads; line B feeds both rod chambers,
-with a 4.95e-8 m^2 restrictor in the release feed P->B only (the rods vent B->T freely). The
+with a 5.5e-8 m^2 restrictor in the release feed P->B only (the rods vent B->T freely). The
 restrictors set how fast the tension moves: a 3 kN change against the identified track
-(6.31e6 N/m, ``models/lf1352_idler.toml``) in series with the head oil and hoses takes
+(4.40e6 N/m, ``models/lf1352_idler.toml``) in series with the head oil and hoses takes
 ~0.8 s at 12 MPa supply (the sizing in ``models/lf1352_hydraulics.toml``, [metering]).
 """
 

@@ -81,7 +81,7 @@ def test_controller_period_must_be_multiple_of_step() -> None:
 
 
 def test_online_stiffness_update_is_used_by_the_prediction() -> None:
-    """An NMPC built on k = 1e6 N/m and told the identified stiffness (6.31e6 N/m) online
+    """An NMPC built on k = 1e6 N/m and told the identified stiffness (4.40e6 N/m) online
     must, at its rest state for 15 kN, plan hold and predict the stroke staying put (with
     k = 1e6 the spring would be ~12 kN short there and the predicted idler would run out by
     mm)."""

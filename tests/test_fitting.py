@@ -23,8 +23,8 @@ DURATION_S = 2.5
 AREA = "hydraulics.metering.head_branch_area_m2"
 BULK = "hydraulics.fluid.bulk_modulus_Pa"
 TRUTH = {AREA: 3.0e-8, BULK: 1.1e9}
-"""Off nominal (the hydraulic file has 3.6e-8 m² and 1.4e9 Pa)."""
-NOMINAL = {AREA: 3.6e-8, BULK: 1.4e9}
+"""Off nominal (the hydraulic file has 4.0e-8 m² and 1.4e9 Pa)."""
+NOMINAL = {AREA: 4.0e-8, BULK: 1.4e9}
 
 
 def lf1352_sensors():

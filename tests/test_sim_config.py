@@ -53,14 +53,14 @@ def test_committed_idler_file_equals_a_fresh_identification() -> None:
 
 def test_reduced_plant_lumps_both_cylinders_and_puts_paths_in_series() -> None:
     """Hand-derived from models/lf1352_hydraulics.toml: two cylinders of bore 40 / rod 25 mm,
-    each head branch a 2e-5 m^2 valve in series with a 3.6e-8 m^2 restrictor (two in
-    parallel), the release feed a 1e-4 m^2 edge with a 4.95e-8 m^2 restrictor, line B
+    each head branch a 2e-5 m^2 valve in series with a 4e-8 m^2 restrictor (two in
+    parallel), the release feed a 1e-4 m^2 edge with a 5.5e-8 m^2 restrictor, line B
     (5e-5 m^3) in the rod node, seal leakage 5e-15 per cylinder."""
     p = nominal_plant_params()
     assert p.area_head_m2 == pytest.approx(2 * math.pi * 0.02**2, rel=1e-4)
     assert p.area_rod_m2 == pytest.approx(2 * math.pi * (0.02**2 - 0.0125**2), rel=1e-4)
-    assert p.valve_area_head_m2 == pytest.approx(2 * 3.6e-8 / math.sqrt(1 + (3.6e-8 / 2e-5)**2))
-    assert p.valve_area_rod_m2 == pytest.approx(4.95e-8 / math.sqrt(1 + (4.95e-8 / 1e-4)**2))
+    assert p.valve_area_head_m2 == pytest.approx(2 * 4e-8 / math.sqrt(1 + (4e-8 / 2e-5)**2))
+    assert p.valve_area_rod_m2 == pytest.approx(5.5e-8 / math.sqrt(1 + (5.5e-8 / 1e-4)**2))
     assert p.dead_volume_head_m3 == pytest.approx(2 * 1.82e-3)
     assert p.dead_volume_rod_m3 == pytest.approx(2 * 1.5e-4 + 5e-5)
     assert p.leakage_m3_s_Pa == pytest.approx(1e-14)

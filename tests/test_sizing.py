@@ -58,8 +58,7 @@ def test_head_path_area_inverts_the_reduced_models_tension_rate() -> None:
 def test_shipped_hydraulics_are_the_sizing_rules(name: str) -> None:
     """Each machine's cylinders are size_cylinders(4/3 F_nom) and its head restrictors give
     PULSE_REL of F_nom per 30 ms pulse on its identified idler (2-digit rounding: 2 %;
-    LF1352's first hand sizing, 4.0e-8 m^2 on the 2e8 N/m pins' idler, was within 1 % of the
-    rule's 4.04e-8 there)."""
+    LF1352's hand-sized 4.0e-8 m^2 is within 1 % of the rule's 4.04e-8)."""
     machine = machines.resolve(name)
     params = machines.mechanics(machine)
     hyd = load_hydraulic_params(machine.hydraulics)

@@ -206,16 +206,15 @@ def test_every_pin_of_a_loaded_strand_stretches_T_over_K(structure: str, free,
     pins = plant.pin_positions()
     stretch = (np.linalg.norm(pins - np.roll(pins, 1, axis=0), axis=1)
                - p.track.pitch_m)[upper]
-    tension = plant.pin_tensions_N()[upper].mean()
-    t_over_k = tension / p.pin_joint.radial_stiffness_N_m
-    assert len(upper) >= 8 and tension > 3e3   # a loaded strand: ~5.7 kN, T/K ~9 µm
+    t_over_k = plant.pin_tensions_N()[upper].mean() / p.pin_joint.radial_stiffness_N_m
+    assert len(upper) >= 8 and t_over_k > 10e-6   # a loaded strand: T/K of ~27 µm
     assert stretch.mean() == pytest.approx(t_over_k, rel=0.05)
     assert np.abs(stretch - stretch.mean()).max() <= 0.3 * t_over_k
     assert plant.warning_count == 0
 
 
 def test_pin_slides_armature_is_a_connects_apparent_mass(slides) -> None:
-    """Every pin slide's armature is soft_margin·(h²K + 2hB)/4 (LF1352: 306 kg), the mass
+    """Every pin slide's armature is soft_margin·(h²K + 2hB)/4 (LF1352: 101 kg), the mass
     at which the explicit slide spring and implicit damper sit at 1/margin of their stability
     limit h²K/m + 2hB/m = 4; its stretch mode √(K/m)/2π lies far above link passing."""
     xml, p = slides
@@ -248,11 +247,10 @@ def test_chains_longer_than_measured_are_refused_naming_the_key() -> None:
 @pytest.mark.slow
 def test_a_hitch_load_reaches_the_idler_as_on_free_links_when_every_pin_is_compliant(
         tmp_path) -> None:
-    """W3's calibration rig (hold mode, seed 0): the idler-load changes of LF1352's calibrated
-    tow (+4601 N) and push (−3193 N) on slides are the free links' to 2 % (measured −1525 /
-    −1509 N and +1993 / +1992 N). On its earlier 2e8 N/m pins chains of 4, whose rigid 4-link
-    spans are the road wheels' 0.30 m spacing, missed the free links' tow by 23 %; with the
-    steel pins they come within 3 % (models/README.md, "Loop structure")."""
+    """W3's calibration rig (hold mode, seed 0): the idler-load change of the calibrated
+    LF1352 tow (+6126 N) on slides is the free links' to 2 % (measured −1923 and −1930 N);
+    chains of 4, whose rigid 4-link spans are the road wheels' 0.30 m spacing, give −1481 N
+    (models/README.md, "Loop structure")."""
     models = Path(__file__).resolve().parents[1] / "models"
     text = (models / "lf1352.toml").read_text()
     line = next(x for x in text.splitlines() if x.startswith("structure = "))
@@ -267,8 +265,6 @@ def test_a_hitch_load_reaches_the_idler_as_on_free_links_when_every_pin_is_compl
             f'hydraulics = "{models / "lf1352_hydraulics.toml"}"\n'
             f'control = "{models / "lf1352_control.toml"}"\n')
         rig = Rig(prepare("W3", machine=machine))
-        change[structure] = [load_change_N(rig.setup.scenario, rig, hitch_N, 30.0)
-                             for hitch_N in (4601.0, -3193.0)]
-    tow, push = change["free"]
-    assert tow < -1300.0 and push > 1700.0     # the rig moves the idler as calibrated
-    np.testing.assert_allclose(change["slides"], change["free"], rtol=0.02)
+        change[structure] = load_change_N(rig.setup.scenario, rig, 6126.4, 30.0)
+    assert change["free"] < -1700.0
+    assert change["slides"] == pytest.approx(change["free"], rel=0.02)

@@ -27,8 +27,8 @@ AREA_RATIO = 1.6
 """Head over annulus area phi of the ISO 7181 series (1.25, 1.4, 1.6, 2, 2.5) chosen."""
 PULSE_REL = 0.0075
 """Tension change of one minimum-hold pulse at full pressurizing opening over the nominal
-tension, the metering the shipped machines are sized for (LF1352's first hand-sized
-restrictors gave 0.74 %: 3.71 kN/s × 30 ms at 15 kN and 12 MPa, on its 2e8 N/m pins' idler)."""
+tension, the metering the shipped machines are sized for (LF1352's restrictors give
+0.74 %: 3.71 kN/s × 30 ms at 15 kN and 12 MPa)."""
 
 
 @dataclass(frozen=True)
