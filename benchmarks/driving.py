@@ -50,7 +50,7 @@ class DrivingSnapshot:
         for timer in d.timer:
             timer.duration, timer.number = 0.0, 0
         start = time.perf_counter()
-        foundation = plant.foundation
+        foundation, springs = plant.foundation, plant.springs
         for _ in range(steps):
-            step(m, d, foundation)
+            step(m, d, foundation, springs=springs)
         return (time.perf_counter() - start) / steps

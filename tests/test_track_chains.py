@@ -29,6 +29,7 @@ from trackmj.machines.track_plant import load_plant
 from trackmj.sim.setup import prepare
 from trackmj.sim.w3_hitch import Rig, load_change_N
 from trackmj.track.energy import TrackEnergyLedger
+from trackmj.track.foundation import ImplicitSprings
 from trackmj.track.mechanics import ModelParams, load_model_params
 from trackmj.track.mjcf.generate import generate_mjcf
 from trackmj.track.mjcf.names import link_name, stretch_name
@@ -213,18 +214,52 @@ def test_every_pin_of_a_loaded_strand_stretches_T_over_K(structure: str, free,
     assert plant.warning_count == 0
 
 
-def test_pin_slides_armature_is_a_connects_apparent_mass(slides) -> None:
-    """Every pin slide's armature is soft_margin·(h²K + 2hB)/4 (LF1352: 101 kg), the mass
-    at which the explicit slide spring and implicit damper sit at 1/margin of their stability
-    limit h²K/m + 2hB/m = 4; its stretch mode √(K/m)/2π lies far above link passing."""
+def test_pin_slides_armature_is_only_for_mujocos_own_stepping(slides) -> None:
+    """The MJCF gives every pin slide the armature soft_margin·(h²K + 2hB)/4 (LF1352:
+    101 kg), at which MuJoCo's explicit joint spring and implicit damper sit at 1/margin of
+    their stability limit h²K/m + 2hB/m = 4 (its viewer steps the file alone); the plant
+    integrates the slides' springs implicitly and simulates them without it."""
     xml, p = slides
     m = mujoco.MjModel.from_xml_string(xml)
     h, k, b = m.opt.timestep, p.pin_joint.radial_stiffness_N_m, p.pin_joint.radial_damping_N_s_m
-    armature = m.dof_armature[[m.joint(stretch_name(j)).dofadr[0]
-                               for j in hinged_pins(p)]]
+    dofs = [m.joint(stretch_name(j)).dofadr[0] for j in hinged_pins(p)]
+    armature = m.dof_armature[dofs]
     np.testing.assert_allclose(armature, stretch_armature_kg(p), rtol=1e-12)
     assert (h * h * k + 2.0 * h * b) / armature[0] == pytest.approx(4.0 / p.solver.soft_margin)
-    assert 100.0 < math.sqrt(k / armature[0]) / (2.0 * math.pi) < 1000.0
+    plant = TrackPlant(m, p)
+    assert plant.springs is not None
+    np.testing.assert_array_equal(plant.model.dof_armature[dofs], 0.0)
+    np.testing.assert_array_equal(np.sort(plant.springs.dofs), np.sort(dofs))
+
+
+def test_implicit_spring_is_backward_euler_on_a_stiff_slide() -> None:
+    """A 1 kg body on a slide of 1e8 N/m at 1 ms (h²K/m = 100: MuJoCo's explicit spring
+    diverges) with the spring by :class:`ImplicitSprings`: every step is backward Euler,
+    (m + h²K)·Δv = −h·K·(q₀ + h·v₀), q₁ = q₀ + h·v₁ (the recursion by hand, to 1e-12 of
+    the start stretch), and the energy ½mv² + ½Kq² falls every step."""
+    m_kg, k, h = 1.0, 1e8, 1e-3
+    model = mujoco.MjModel.from_xml_string(
+        f'<mujoco><option timestep="{h}" gravity="0 0 0"/><worldbody><body>'
+        f'<joint name="s" type="slide" axis="1 0 0" stiffness="{k}"/>'
+        f'<geom type="sphere" size="0.01" mass="{m_kg}" contype="0" conaffinity="0"/>'
+        '</body></worldbody></mujoco>')
+    data = mujoco.MjData(model)
+    springs = ImplicitSprings(model, data, [model.joint("s").id])
+    q, v = 1e-3, 0.0
+    data.qpos[0] = q
+    energy = 0.5 * k * q * q
+    for _ in range(10):   # backward Euler takes ~0.1 of the stretch per step here
+        mujoco.mj_step1(model, data)
+        springs.apply()
+        mujoco.mj_factorM(model, data)
+        mujoco.mj_step2(model, data)
+        v += -h * k * (q + h * v) / (m_kg + h * h * k)
+        q += h * v
+        assert data.qpos[0] == pytest.approx(q, abs=1e-15)
+        assert data.qvel[0] == pytest.approx(v, abs=1e-12)
+        now = 0.5 * m_kg * v * v + 0.5 * k * q * q
+        assert now < energy
+        energy = now
 
 
 def test_chains_refuse_the_torsional_bushings(model_params: ModelParams) -> None:

@@ -19,7 +19,11 @@ where the numerical term N_k is the integrator's own energy error, in two parts:
 * explicit forces PE_{k+1} − PE_k + (f_spring − f_bias)ᵀ·Δq + KE_{k+1} − ½·v_{k+1}ᵀ·M_k·v_{k+1}:
   springs, gravity and the Coriolis force (``qfrc_bias``) are taken at the step's start
   while PE and M change over it (½·Δqᵀ·K·Δq ≥ 0 for a linear spring; the M change is
-  small: every link has a constant mass matrix, only the chassis pitch moves M).
+  small: every link has a constant mass matrix, only the chassis pitch moves M);
+* implicit springs: the pin slides' springs act at the step's end
+  (:class:`trackmj.track.foundation.ImplicitSprings`), their implicit part −h·K·v_{k+1} on
+  Δq adds −K·Δq² per slide, so with the explicit part's +½·K·Δq² backward Euler's −½·K·Δq²
+  (dissipates).
 
 The residual r_k = (M_k·Δv − h·f)ᵀ·v_{k+1} is what the booked forces miss of what MuJoCo
 integrated (solver tolerance, an unbooked force); it is not a fitted quantity.
@@ -57,9 +61,9 @@ _LIMIT_JOINT = int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)
 # accumulator slots of the kernels: work and ½·K·Δr² creation by partner, then scalars
 _N = len(PARTNERS)
 A_WORK, A_CREATION = 0, _N
-A_CURVATURE, A_SUSPENSION, A_TORSION, A_JUMP, A_EXPLICIT, A_KINETIC_MID = range(2 * _N,
-                                                                                 2 * _N + 6)
-A_SIZE = 2 * _N + 6
+(A_CURVATURE, A_SUSPENSION, A_TORSION, A_JUMP, A_EXPLICIT, A_KINETIC_MID,
+ A_IMPLICIT_SPRINGS) = range(2 * _N, 2 * _N + 7)
+A_SIZE = 2 * _N + 7
 
 
 @dataclass
@@ -84,7 +88,7 @@ class TrackEnergy:
     numerical_J: float = 0.0
     numerical_terms_J: dict[str, float] = field(default_factory=lambda: dict.fromkeys(
         ("velocity_jump", "explicit_forces", "explicit_constraint_springs",
-         "constraint_curvature"), 0.0))
+         "constraint_curvature", "implicit_springs"), 0.0))
     residual_J: float = 0.0
 
     @property
@@ -346,6 +350,10 @@ class TrackEnergyLedger:
         mujoco.mj_mulM(m, d, self._mv, v1)
         self._acc[A_JUMP] -= 0.5 * float(dv @ self._mdv)
         self._acc[A_EXPLICIT] += float((d.qfrc_spring - d.qfrc_bias) @ dq)
+        springs = self.plant.springs
+        if springs is not None:   # their implicit part −h·K·v₁ on Δq: −K·Δq² per dof
+            s = springs.dofs
+            self._acc[A_IMPLICIT_SPRINGS] -= float(springs.h_stiffness @ (v1[s] * dq[s]))
         self._acc[A_KINETIC_MID] += 0.5 * float(v1 @ self._mv)
         self._v_prev = v1.copy()
         self._steps += 1
@@ -423,7 +431,8 @@ class TrackEnergyLedger:
             "explicit_forces": float(acc[A_EXPLICIT] + t.potential_change_J + kinetic_next
                                      - acc[A_KINETIC_MID]),
             "explicit_constraint_springs": float(creation.sum()),
-            "constraint_curvature": float(acc[A_CURVATURE])}
+            "constraint_curvature": float(acc[A_CURVATURE]),
+            "implicit_springs": float(acc[A_IMPLICIT_SPRINGS])}
         t.numerical_J = float(sum(t.numerical_terms_J.values()))
         t.residual_J = t.kinetic_change_J + t.potential_change_J - t.booked_J
         return t

@@ -614,19 +614,75 @@ class Foundation:
         return self.memory[:, M_SHEAR]
 
 
+@njit(cache=True)
+def implicit_springs_apply(mass: np.ndarray, qfrc_applied: np.ndarray, qvel: np.ndarray,
+                           dofs: np.ndarray, mass_index: np.ndarray, h_stiffness: np.ndarray,
+                           h: float) -> None:
+    """Backward Euler for joint springs on single dofs: h²·K into ``mass`` (MuJoCo's sparse
+    M, at each dof's diagonal address ``mass_index``) and −h·K·v₀ into ``qfrc_applied``, so
+    that with MuJoCo's own −K·(q₀ − q_ref) the spring acts with −K·(q₀ + h·v₁ − q_ref) =
+    −K·(q₁ − q_ref) over the step. dofs, mass_index: (s,) int; h_stiffness: h·K (s,)
+    [N·s/m]; h [s]."""
+    for i in range(dofs.shape[0]):
+        mass[mass_index[i]] += h * h_stiffness[i]
+        qfrc_applied[dofs[i]] = -h_stiffness[i] * qvel[dofs[i]]
+
+
+class ImplicitSprings:
+    """Joint springs on single dofs integrated by backward Euler inside MuJoCo's step (the
+    pins' slides, structure "slides"), the way the foundation's damping is: their h²·K sits
+    in the mass matrix the constraint solver and the integrator use, so they need no
+    armature and create no energy (MuJoCo integrates joint stiffness explicitly, stable
+    only for h²·K/m < 4). The model's armature of those dofs is set to 0 here: the MJCF's
+    armature is for MuJoCo's own stepping (its viewer). Call :meth:`apply` after
+    :meth:`Foundation.apply` (which saved the true M: :meth:`Foundation.finish` puts it
+    back); they own ``qfrc_applied`` of their dofs.
+
+    joints: ids of slide or hinge joints with ``jnt_stiffness`` K [N/m or N·m/rad].
+    """
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData,
+                 joints: Sequence[int] | np.ndarray) -> None:
+        joints = np.asarray(joints, dtype=np.int64)
+        self.dofs = model.jnt_dofadr[joints].astype(np.int64)
+        self.stiffness_N_m = model.jnt_stiffness[joints].copy()
+        # M is CSR over the lower triangle: a row's diagonal is its last entry
+        self.mass_index = (model.M_rowadr[self.dofs] + model.M_rownnz[self.dofs] - 1
+                           ).astype(np.int64)
+        if np.any(model.M_colind[self.mass_index] != self.dofs):
+            raise ValueError("implicit springs: a dof's diagonal is not its row's last entry")
+        model.dof_armature[self.dofs] = 0.0
+        self.h_s = float(model.opt.timestep)
+        self.h_stiffness = self.h_s * self.stiffness_N_m
+        self._args = (data.M, data.qfrc_applied, data.qvel, self.dofs, self.mass_index,
+                      self.h_stiffness, self.h_s)
+
+    def apply(self) -> None:
+        """h²·K into M and −h·K·v₀ into qfrc_applied (after :meth:`Foundation.apply`)."""
+        implicit_springs_apply(*self._args)
+
+    def configuration(self) -> dict[str, np.ndarray]:
+        """What the native FMU's engine needs: dofs, M addresses (s,) and h·K (s,)."""
+        return {"spring_dofs": self.dofs, "spring_mass_index": self.mass_index,
+                "spring_h_stiffness": self.h_stiffness}
+
+
 def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
-         saved: np.ndarray | None = None) -> None:
-    """One MuJoCo step with the foundation bound to ``data`` (see :class:`Foundation`),
-    its ``mj_step2`` taken again while the law contradicts an attempt's active set, at most
-    :data:`MAX_ATTEMPTS` times, from what the integration changed (kept in ``saved``, of
-    ``mj_stateSize`` of :data:`REDO_STATE`, allocated here if not given; ``mj_step1``'s
-    results stay valid: they depend on positions and velocities only)."""
+         saved: np.ndarray | None = None, springs: ImplicitSprings | None = None) -> None:
+    """One MuJoCo step with the foundation bound to ``data`` (see :class:`Foundation`) and
+    the ``springs`` integrated implicitly (:class:`ImplicitSprings`), its ``mj_step2`` taken
+    again while the law contradicts an attempt's active set, at most :data:`MAX_ATTEMPTS`
+    times, from what the integration changed (kept in ``saved``, of ``mj_stateSize`` of
+    :data:`REDO_STATE`, allocated here if not given; ``mj_step1``'s results stay valid:
+    they depend on positions and velocities only)."""
     if saved is None:
         saved = np.zeros(mujoco.mj_stateSize(model, REDO_STATE))
     mujoco.mj_step1(model, data)
     mujoco.mj_getState(model, data, saved, REDO_STATE)
     for attempt in range(MAX_ATTEMPTS):
         foundation.apply()
+        if springs is not None:
+            springs.apply()
         mujoco.mj_factorM(model, data)
         mujoco.mj_step2(model, data)
         final = attempt == MAX_ATTEMPTS - 1
@@ -646,6 +702,6 @@ REDO_STATE = int(mujoco.mjtState.mjSTATE_QPOS | mujoco.mjtState.mjSTATE_QVEL
 """What ``mj_step2``'s integration changes, restored before a step is taken again."""
 
 
-__all__ = ["REDO_STATE", "Foundation", "FoundationLaw", "foundation_apply",
+__all__ = ["REDO_STATE", "Foundation", "FoundationLaw", "ImplicitSprings", "foundation_apply",
            "foundation_commit", "foundation_finish", "foundation_penetration",
-           "foundation_work", "ground_line", "step"]
+           "foundation_work", "ground_line", "implicit_springs_apply", "step"]

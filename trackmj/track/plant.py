@@ -33,7 +33,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElement
-from trackmj.track.foundation import REDO_STATE, Foundation, FoundationLaw
+from trackmj.track.foundation import REDO_STATE, Foundation, FoundationLaw, ImplicitSprings
 from trackmj.track.foundation import step as foundation_step
 from trackmj.track.mechanics import ModelParams
 from trackmj.track.mjcf.names import link_name, pin_name, stretch_name
@@ -270,6 +270,9 @@ class TrackPlant:
         equalise_link_weights(m)   # chains: every link link_00's row weight
         self.foundation = Foundation(m, self.data, self._pin_geom,
                                      FoundationLaw.from_params(params))
+        # the pin slides' springs by backward Euler (no armature); None without slides
+        self.springs = (ImplicitSprings(m, self.data, self.pin_slide_joints)
+                        if len(self.pin_slide_joints) else None)
         self._saved_state = np.zeros(mujoco.mj_stateSize(m, REDO_STATE))
         # the step's start velocity (the foundation keeps it) and the chassis' z dof, for
         # the per-step acceleration readout
@@ -631,6 +634,10 @@ class TrackPlant:
             "stretch_qpos": self._stretch_qpos,
             "home_envelope": self._envelope, "timestep_s": np.array([m.opt.timestep]),
             **self.foundation.configuration(),
+            **(self.springs.configuration() if self.springs is not None else
+               {"spring_dofs": np.zeros(0, dtype=np.int64),
+                "spring_mass_index": np.zeros(0, dtype=np.int64),
+                "spring_h_stiffness": np.zeros(0)}),
         }
 
     def hitch_kinematics(self) -> np.ndarray:
@@ -657,7 +664,7 @@ class TrackPlant:
         self._ctrl[self._tensioner] = force
         self._biasprm[self._tensioner, 2] = damping
         for _ in range(self.substeps):
-            foundation_step(m, d, self.foundation, self._saved_state)
+            foundation_step(m, d, self.foundation, self._saved_state, self.springs)
         stroke = self.stroke_m
         if self.substeps == 1:
             velocity = self.stroke_velocity_m_s

@@ -98,6 +98,10 @@ typedef struct {
     double *saved_mass;    /* (nC,) */
     double *saved_qvel;    /* (nv,): the step's start velocity */
     long redone, unresolved;
+    int springs;           /* joint springs integrated implicitly (the pin slides) */
+    int *spring_dofs;      /* (springs,) */
+    int *spring_mass_index;  /* (springs,): the dof's diagonal address in d->M */
+    double *spring_h_stiffness;  /* (springs,): h*K [N s/m] */
 } Foundation;
 
 static int segment_of(const double *line, int n, double x) {
@@ -344,12 +348,24 @@ static int foundation_finish(const mjModel *m, mjData *d, Foundation *f, int fin
     return changed;
 }
 
-/* One MuJoCo step with the foundation (foundation.step). */
+/* Backward Euler for the joint springs: h^2*K into M, -h*K*v0 into qfrc_applied
+   (foundation.implicit_springs_apply). */
+static void implicit_springs_apply(const mjModel *m, mjData *d, const Foundation *f) {
+    const double h = m->opt.timestep;
+    for (int i = 0; i < f->springs; i++) {
+        d->M[f->spring_mass_index[i]] += h * f->spring_h_stiffness[i];
+        int dof = f->spring_dofs[i];
+        d->qfrc_applied[dof] = -f->spring_h_stiffness[i] * d->qvel[dof];
+    }
+}
+
+/* One MuJoCo step with the foundation and the implicit springs (foundation.step). */
 static void foundation_step(const mjModel *m, mjData *d, Foundation *f, double *redo) {
     mj_step1(m, d);
     mj_getState(m, d, redo, REDO_STATE);
     for (int attempt = 0; attempt < MAX_ATTEMPTS; attempt++) {
         foundation_apply(m, d, f);
+        implicit_springs_apply(m, d, f);
         mj_factorM(m, d);
         mj_step2(m, d);
         int final = attempt == MAX_ATTEMPTS - 1;
@@ -580,6 +596,7 @@ void engine_free(Engine *e) {
     if (e->m) mj_deleteModel(e->m);
     Foundation *f = &e->f;
     free(f->pins); free(f->dofs); free(f->mass_index); free(f->radius); free(f->line);
+    free(f->spring_dofs); free(f->spring_mass_index); free(f->spring_h_stiffness);
     free(f->state); free(f->jac); free(f->memory); free(f->choice); free(f->saved_mass);
     free(f->saved_qvel);
     free(e->redo); free(e->link_body); free(e->pin_geom); free(e->connect_of_pin);
@@ -635,12 +652,17 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
     f->mass_index = cfg_ints(e, cfg, "foundation_mass_index", n * D * D);
     f->radius = cfg_doubles(e, cfg, "foundation_radius", n);
     f->line = cfg_doubles(e, cfg, "ground_line", 2 * f->line_n);
+    f->springs = cfg_count(cfg, "spring_dofs");
+    f->spring_dofs = cfg_ints(e, cfg, "spring_dofs", -1);
+    f->spring_mass_index = cfg_ints(e, cfg, "spring_mass_index", f->springs);
+    f->spring_h_stiffness = cfg_doubles(e, cfg, "spring_h_stiffness", f->springs);
     int state_size = mj_stateSize(m, SAVED_STATE);
     e->initial_mj = cfg_doubles(e, cfg, "initial_state", state_size);
     e->initial_memory = cfg_doubles(e, cfg, "initial_memory", N_MEMORY * n);
     double initial_law[2], initial_out[N_OUT_REAL + N_OUT_BOOL], kinematics[N_KINEMATICS];
     if (!e->link_body || !e->pin_geom || !e->connect_of_pin || !e->pins_per_connect
-        || !e->stretch_qpos
+        || !e->stretch_qpos || !f->spring_dofs || !f->spring_mass_index
+        || !f->spring_h_stiffness
         || !e->hull || !f->pins || !f->dofs || !f->mass_index || !f->radius || !f->line
         || !e->initial_mj || !e->initial_memory || e->hull_n < 3 || f->line_n < 2
         || cfg_into(e, cfg, "initial_law", initial_law, 2)

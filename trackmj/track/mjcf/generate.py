@@ -17,11 +17,11 @@ import mujoco
 import numpy as np
 
 from trackmj.io import write_text_atomic
-from trackmj.track.foundation import Foundation, FoundationLaw, step
+from trackmj.track.foundation import Foundation, FoundationLaw, ImplicitSprings, step
 from trackmj.track.mechanics import MODEL_NAME, ModelParams, default_xml_path, load_model_params
 from trackmj.track.mjcf.builders import build_mjcf, split_mjcf
 from trackmj.track.mjcf.layout import compute_layout
-from trackmj.track.mjcf.names import link_name
+from trackmj.track.mjcf.names import link_name, stretch_name
 from trackmj.track.mjcf.structure import equalise_link_weights
 from trackmj.validator import ParameterError
 
@@ -31,11 +31,15 @@ MAX_INITIAL_PENETRATION_M = 1e-3
 
 def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> mujoco.MjData:
     """State after ``duration_s`` [s] from the layout, standing (sprocket servo at 0 rad/s),
-    under the passive tensioner of ``params``; RuntimeError on MuJoCo warnings."""
+    under the passive tensioner of ``params``, the pin slides' springs implicit as in the
+    plant's step; RuntimeError on MuJoCo warnings."""
     equalise_link_weights(model)
     data = mujoco.MjData(model)
     pins = [model.geom(link_name(k) + "_pin").id for k in range(params.track.link_count)]
     foundation = Foundation(model, data, pins, FoundationLaw.from_params(params))
+    slides = [j for k in range(params.track.link_count)
+              if (j := mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, stretch_name(k))) >= 0]
+    springs = ImplicitSprings(model, data, slides) if slides else None
     tensioner = model.actuator("tensioner").id
     t = params.tensioner
     model.actuator_biasprm[tensioner, :3] = (0.0, -t.stiffness_N_m, -t.damping_N_s_m)
@@ -48,7 +52,7 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
                              "and positions in the model file")
     steps = round(duration_s / model.opt.timestep)
     for _ in range(steps):
-        step(model, data, foundation)
+        step(model, data, foundation, springs=springs)
     if sum(w.number for w in data.warning):
         raise RuntimeError("MuJoCo warnings while settling the home keyframe")
     return data
