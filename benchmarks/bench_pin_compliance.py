@@ -6,11 +6,10 @@ Candidates, built on the default machine's model file:
   as ``bench_structure.py`` builds them;
 * ``slidesN``: ``[track] structure = "slides"`` with chains of at most N links: a slide
   along the parent link's pitch before every pin hinge carrying the pin's K and B of
-  ``[pins]`` as joint stiffness and damping, with the armature of
-  :func:`trackmj.track.mjcf.structure.stretch_armature_kg`, every connect carrying one pin;
-* suffixes ``+discrete`` (MuJoCo 4's ``discrete`` integrator instead of ``implicitfast``)
-  and ``+armX`` (armature X kg on every pin slide instead; ``+arm0`` none, which
-  ``implicitfast`` cannot integrate).
+  ``[pins]`` as joint stiffness and damping, every connect carrying one pin; the plant
+  integrates the slides' springs implicitly (``trackmj.track.foundation.ImplicitSprings``:
+  no armature; the armature candidates ``+armX`` of the record were measured before that);
+* suffix ``+discrete`` (MuJoCo 4's ``discrete`` integrator instead of ``implicitfast``).
 
 Every candidate is generated through the project's builders and settled 3 s standing under
 the passive tensioner (``trackmj.track.mjcf.generate.settle``) for its ``home`` keyframe,
@@ -79,7 +78,7 @@ def candidate_mjcf(candidate: str) -> tuple[str, ModelParams]:
         raise SystemExit(f"unknown candidate {candidate!r}")
     links = int(head[len(structure):] or 4) if structure != "free" else 4
     params = _params(structure, links)
-    unknown = [o for o in options if o != "discrete" and not o.startswith("arm")]
+    unknown = [o for o in options if o != "discrete"]
     if unknown:
         raise SystemExit(f"unknown candidate option {unknown[0]!r}")
     if not options:
@@ -87,11 +86,6 @@ def candidate_mjcf(candidate: str) -> tuple[str, ModelParams]:
     root = ET.fromstring(build_mjcf(params, compute_layout(params)))
     if "discrete" in options:
         find(root, "option").set("integrator", "discrete")
-    arm = next((o[3:] for o in options if o.startswith("arm")), "")
-    if arm:
-        if structure != "slides":
-            raise SystemExit(f"{candidate!r}: an armature needs the pin slides")
-        find(root, "default/default[@class='pin_stretch']/joint").set("armature", arm)
     model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
     data = settle(model, params, SETTLE_DURATION_S)
     key = ET.SubElement(ET.SubElement(root, "keyframe"), "key", name="home",

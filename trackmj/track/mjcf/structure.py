@@ -28,10 +28,12 @@ stated stiffness K and damping B as joint stiffness and damping (class ``pin_str
 every connect carries one pin, so a loaded strand's pins stretch T/K each, as free links'
 do, instead of a chain's m pins' worth at one connect (chains of 4 at standstill: pitch
 75.000/75.000/75.000/75.108 mm, lines at the odd quarters of the link-passing frequency).
-``implicitfast`` integrates joint stiffness explicitly (h²K/m ≈ 57 for a 3.5 kg link at
-2e8 N/m: it diverges), so each slide carries an armature equal to the apparent mass a
-connect of the same K, B already has (:func:`stretch_armature_kg`); the pin-stretch mode
-sits at ~220 Hz either way, far above every line the track excites (link passing ≤ 30 Hz).
+trackmj's step integrates the slides' springs by backward Euler
+(:class:`trackmj.track.foundation.ImplicitSprings`: h²K in the solver's mass matrix) and
+simulates no armature. ``implicitfast`` alone integrates joint stiffness explicitly (h²K/m
+≈ 57 for a 3.5 kg link at 2e8 N/m: it diverges), so for MuJoCo's own stepping of the file
+(its viewer) each slide carries an armature equal to the apparent mass a connect of the
+same K, B already has (:func:`stretch_armature_kg`).
 Cost: one more DOF per hinged pin (LF1352: nv 135 -> 196), 1.33x the instructions of chains
 per step (``benchmarks/README.md``, "Every pin compliant on its own").
 """
@@ -93,12 +95,13 @@ def pin_series_count(p: ModelParams) -> dict[int, int]:
 
 
 def stretch_armature_kg(p: ModelParams) -> float:
-    """Armature of every pin slide [kg]: soft_margin·(h²K + 2hB)/4, the apparent mass a
-    soft ``connect`` of the pin's K, B carries at the step h (:mod:`trackmj.track.mjcf.soft`:
-    the margin over the stability limit h²K/m + 2hB/m ≤ 4 of the explicit spring and the
-    implicit damper, which the slide's joint stiffness under ``implicitfast`` has as well).
-    LF1352 (K 2e8 N/m, B 1e3 N·s/m, h 1 ms, margin 2): 101 kg, the stretch mode
-    √(K/m)/2π ≈ 220 Hz; 50-200 kg changed the odd-quarter comb by < 1 N (benchmarks)."""
+    """Armature of every pin slide in the MJCF, for MuJoCo's own stepping (trackmj's step
+    sets it to 0 and integrates the spring implicitly) [kg]: soft_margin·(h²K + 2hB)/4, the
+    apparent mass a soft ``connect`` of the pin's K, B carries at the step h
+    (:mod:`trackmj.track.mjcf.soft`: the margin over the stability limit h²K/m + 2hB/m ≤ 4
+    of the explicit spring and the implicit damper, which the slide's joint stiffness under
+    ``implicitfast`` has as well). LF1352 (K 2e8 N/m, B 1e3 N·s/m, h 1 ms, margin 2):
+    101 kg."""
     h, joint = p.simulation.timestep_s, p.pin_joint
     return p.solver.soft_margin * (h * h * joint.radial_stiffness_N_m
                                    + 2.0 * h * joint.radial_damping_N_s_m) / 4.0
