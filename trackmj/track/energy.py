@@ -5,14 +5,15 @@ constraint forces with the mass matrix M_k, takes v_{k+1} = v_k + h·M̂⁻¹·f
 damping and actuator-velocity terms implicit, and moves q_{k+1} = q_k + h·v_{k+1}. Every
 force therefore does the work f·Δq with Δq = h·v_{k+1}, and the forces are those the step
 applied: the dampers and the two actuators at v_{k+1} (the tensioner's ``ForceLaw`` at
-v_{k+1}, the velocity servo kv·(ctrl − v_{k+1}) unless clamped), everything else (springs,
-gravity, Coriolis, contacts, pins) at (q_k, v_k). With MuJoCo's energy flag
+v_{k+1}, the velocity servo kv·(ctrl − v_{k+1}) unless clamped), the pin slides' springs
+at q_{k+1} (trackmj's step integrates them by backward Euler), everything else (the other
+springs, gravity, Coriolis, contacts, pins) at (q_k, v_k). With MuJoCo's energy flag
 (E = KE + PE: KE = ½·vᵀ·M(q)·v, PE = gravity and joint/tendon springs) one step books
 
     E_{k+1} − E_k = W_drive + W_tensioner + W_suspension + W_torsion + W_hitch
                     + Σ_partners W_constraint + N_k + r_k
 
-where the numerical term N_k is the integrator's own energy error, in two parts:
+where the numerical term N_k is the integrator's own energy error, in three parts:
 
 * velocity jump −½·Δvᵀ·M_k·Δv (Δv = v_{k+1} − v_k): the first-order dissipation of
   semi-implicit Euler when work is booked on the displacement; always ≤ 0;
