@@ -216,7 +216,7 @@ def test_every_pin_of_a_loaded_strand_stretches_T_over_K(structure: str, free,
 
 def test_pin_slides_armature_is_only_for_mujocos_own_stepping(slides) -> None:
     """The MJCF gives every pin slide the armature soft_margin·(h²K + 2hB)/4 (LF1352:
-    101 kg), at which MuJoCo's explicit joint spring and implicit damper sit at 1/margin of
+    76 kg), at which MuJoCo's explicit joint spring and implicit damper sit at 1/margin of
     their stability limit h²K/m + 2hB/m = 4 (its viewer steps the file alone); the plant
     integrates the slides' springs implicitly and simulates them without it."""
     xml, p = slides

@@ -100,8 +100,8 @@ def stretch_armature_kg(p: ModelParams) -> float:
     apparent mass a soft ``connect`` of the pin's K, B carries at the step h
     (:mod:`trackmj.track.mjcf.soft`: the margin over the stability limit h²K/m + 2hB/m ≤ 4
     of the explicit spring and the implicit damper, which the slide's joint stiffness under
-    ``implicitfast`` has as well). LF1352 (K 2e8 N/m, B 1e3 N·s/m, h 1 ms, margin 2):
-    101 kg."""
+    ``implicitfast`` has as well). LF1352 (K 2e8 N/m, B 1e3 N·s/m, h 1 ms, margin 1.5):
+    76 kg."""
     h, joint = p.simulation.timestep_s, p.pin_joint
     return p.solver.soft_margin * (h * h * joint.radial_stiffness_N_m
                                    + 2.0 * h * joint.radial_damping_N_s_m) / 4.0
