@@ -8,7 +8,8 @@
      F = F0 + Z*v on the idler carrier (ctrl and the actuator's velocity bias, integrated
      implicitly by MuJoCo's implicitfast), then the model's MuJoCo steps with the ground
      foundation (trackmj.track.foundation.step: mj_step1, the foundation's forces and h*D
-     added to M, mj_factorM, mj_step2, the active set checked against the law at the
+     added to M, the pin slides' springs' h^2*K too (implicit_springs_apply), mj_factorM,
+     mj_step2, the active set checked against the law at the
      end-of-step velocity and mj_step2 taken again from the saved state while it is
      contradicted, at most MAX_ATTEMPTS times);
    * the readouts (stroke, velocity, the applied tension, chassis acceleration as the
