@@ -55,9 +55,9 @@ def test_free_fall_loses_the_integrators_known_energy() -> None:
     track side falls rigidly; semi-implicit Euler loses ½·M·g²·h per second (first order
     in h), which the ledger books as its velocity-jump term, and nothing else moves
     energy but the integrator's explicit-force term: the chained links' mass matrix
-    depends on their pose, the loop keeps a slow spin from the settle, and the pin slides'
-    joint springs, explicit under implicitfast, still ring at their ~220 Hz stretch mode
-    (0.35 % of critical with the armature; measured 9e-6 of the loss, under 2e-5)."""
+    depends on their pose and the loop keeps a slow spin from the settle (measured 4e-7 of
+    the loss with the pin slides' springs implicit; 9e-6 when they were explicit on an
+    armature and rang at ~220 Hz; bound 2e-5)."""
     plant = load_plant()
     m = plant.model
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
