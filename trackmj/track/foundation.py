@@ -59,6 +59,10 @@ it out of the constraint solve, which then passes the explicit −B·v₀ throug
 connects to links the damper does not slow (measured on the LF1352: divergence within
 60 ms even at B = 200 N·s/m).
 
+The same step (:func:`step`) integrates the pin slides' springs by backward Euler
+(:class:`ImplicitSprings`, structure "slides"): their h²·K joins h·D in the mass matrix the
+solver and the integrator use, so they need no armature.
+
 Active set. Which pins push, which stick and the normal force N_ref that bounds friction are
 chosen before the step (from v_n extrapolated over it, N_ref = the predicted N) but known
 only after it, so :func:`step` checks every pin against the law at v₁: a pin whose applied
