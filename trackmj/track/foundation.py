@@ -649,17 +649,17 @@ class ImplicitSprings:
                  joints: Sequence[int] | np.ndarray) -> None:
         joints = np.asarray(joints, dtype=np.int64)
         self.dofs = model.jnt_dofadr[joints].astype(np.int64)
-        self.stiffness_N_m = model.jnt_stiffness[joints].copy()
         # M is CSR over the lower triangle: a row's diagonal is its last entry
         self.mass_index = (model.M_rowadr[self.dofs] + model.M_rownnz[self.dofs] - 1
                            ).astype(np.int64)
         if np.any(model.M_colind[self.mass_index] != self.dofs):
             raise ValueError("implicit springs: a dof's diagonal is not its row's last entry")
         model.dof_armature[self.dofs] = 0.0
-        self.h_s = float(model.opt.timestep)
-        self.h_stiffness = self.h_s * self.stiffness_N_m
+        h = float(model.opt.timestep)
+        self.h_stiffness = h * model.jnt_stiffness[joints]
+        """h·K of each spring [N·s/m], shape (s,)."""
         self._args = (data.M, data.qfrc_applied, data.qvel, self.dofs, self.mass_index,
-                      self.h_stiffness, self.h_s)
+                      self.h_stiffness, h)
 
     def apply(self) -> None:
         """h²·K into M and −h·K·v₀ into qfrc_applied (after :meth:`Foundation.apply`)."""

@@ -36,8 +36,8 @@ from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElemen
 from trackmj.track.foundation import REDO_STATE, Foundation, FoundationLaw, ImplicitSprings
 from trackmj.track.foundation import step as foundation_step
 from trackmj.track.mechanics import ModelParams
-from trackmj.track.mjcf.names import link_name, pin_name, stretch_name
-from trackmj.track.mjcf.structure import equalise_link_weights
+from trackmj.track.mjcf.names import link_name, pin_name
+from trackmj.track.mjcf.structure import equalise_link_weights, pin_slide_ids
 
 
 @numba.njit(cache=True)
@@ -256,8 +256,7 @@ class TrackPlant:
         self._tension = np.zeros(n)
         self._has_hinged_pins = bool(hinged)
         # structure "slides": the hinged pins with their own compliant slide
-        slide = {k: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, stretch_name(k))
-                 for k in hinged}
+        slide = pin_slide_ids(m, hinged)
         # their joint ids (empty for chains and free links; the energy ledger books them)
         self.pin_slide_joints = np.array([j for j in slide.values() if j >= 0], dtype=np.int64)
         self._stretch_qpos = m.jnt_qposadr[self.pin_slide_joints].astype(np.int64)

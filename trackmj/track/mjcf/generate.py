@@ -21,8 +21,8 @@ from trackmj.track.foundation import Foundation, FoundationLaw, ImplicitSprings,
 from trackmj.track.mechanics import MODEL_NAME, ModelParams, default_xml_path, load_model_params
 from trackmj.track.mjcf.builders import build_mjcf, split_mjcf
 from trackmj.track.mjcf.layout import compute_layout
-from trackmj.track.mjcf.names import link_name, stretch_name
-from trackmj.track.mjcf.structure import equalise_link_weights
+from trackmj.track.mjcf.names import link_name
+from trackmj.track.mjcf.structure import equalise_link_weights, pin_slide_ids
 from trackmj.validator import ParameterError
 
 SETTLE_DURATION_S = 3.0
@@ -37,8 +37,8 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
     data = mujoco.MjData(model)
     pins = [model.geom(link_name(k) + "_pin").id for k in range(params.track.link_count)]
     foundation = Foundation(model, data, pins, FoundationLaw.from_params(params))
-    slides = [j for k in range(params.track.link_count)
-              if (j := mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, stretch_name(k))) >= 0]
+    slides = [j for j in pin_slide_ids(model, range(params.track.link_count)).values()
+              if j >= 0]
     springs = ImplicitSprings(model, data, slides) if slides else None
     tensioner = model.actuator("tensioner").id
     t = params.tensioner

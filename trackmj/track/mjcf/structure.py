@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Iterable
 
 import mujoco
 import numpy as np
@@ -105,6 +106,13 @@ def stretch_armature_kg(p: ModelParams) -> float:
     h, joint = p.simulation.timestep_s, p.pin_joint
     return p.solver.soft_margin * (h * h * joint.radial_stiffness_N_m
                                    + 2.0 * h * joint.radial_damping_N_s_m) / 4.0
+
+
+def pin_slide_ids(model: mujoco.MjModel, links: Iterable[int]) -> dict[int, int]:
+    """Joint id of link k's pin slide (``stretch_name(k)``, structure "slides") for each k
+    of ``links``; −1 where the link has none (chains, free links, a chain's first link)."""
+    return {k: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, stretch_name(k))
+            for k in links}
 
 
 def hinged_pins(p: ModelParams) -> list[int]:
