@@ -45,10 +45,12 @@ HEADER = """\
 # idler-load change is W3's target (delta_rel x the machine's nominal tension), found by
 # trackmj/sim/w3_hitch.py (secant on hold-mode tp runs; start: LF1352's force per side
 # weight x this side weight; bound: the drawbar capacity mu x side weight, Wong, Theory of
-# Ground Vehicles). Written by `python experiments/calibrate_w3.py [--machine NAME]`; not
-# edited by hand. A run uses a table only while its hashes equal those of the run's inputs
-# (the validated mechanics and hydraulics, the pulses, speed, initial force, terrain and
-# method); otherwise it recalibrates (stderr says so) and caches the result for the user.
+# Ground Vehicles; a target no force within it reaches is out of reach: the weight-scaled
+# start is applied, listed in out_of_reach with its measured change). Written by
+# `python experiments/calibrate_w3.py [--machine NAME]`; not edited by hand. A run uses a
+# table only while its hashes equal those of the run's inputs (the validated mechanics and
+# hydraulics, the pulses, speed, initial force, terrain and method); otherwise it
+# recalibrates (stderr says so) and caches the result for the user.
 """
 
 
@@ -114,6 +116,8 @@ def calibrate_machine(name: str, rows: dict[str, dict[str, Any]]) -> dict[str, A
               f"({'tow' if p.hitch_N > 0 else 'push'}: {horizontal / 1e3:.2f} kN horizontal, "
               f"{p.hitch_N / measured.side_weight_N:+.4f} x side weight), "
               f"achieved {p.achieved_N / 1e3:+.3f} kN in {p.runs} runs")
+        if p.out_of_reach:
+            print(f"    {p.out_of_reach}")
     for i, reason in sorted(measured.refused.items()):
         print(f"  pulse {i}: refused: {reason}")
     return record

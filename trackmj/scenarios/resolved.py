@@ -57,13 +57,16 @@ class HitchCalibration:
     """Hitch forces calibrated for one machine (:mod:`trackmj.sim.w3_hitch`): the
     machine's name, per load pulse the hitch force [N] (None for a pulse whose file gives
     hitch_N), where the forces came from ("committed": ``experiments/W3_calibration.toml``;
-    "cache": the user's cache directory; "calibrated": measured in this process) and the
-    hash of the inputs that determine them."""
+    "cache": the user's cache directory; "calibrated": measured in this process), the
+    hash of the inputs that determine them and, per pulse whose target is out of the
+    machine's reach (its force then the weight-scaled one), why and what it does (one
+    line each)."""
 
     machine: str
     hitch_N: tuple[float | None, ...]
     origin: str
     inputs_sha256: str
+    out_of_reach: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

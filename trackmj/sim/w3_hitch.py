@@ -40,7 +40,15 @@ The rule that ties the hitch force to the machine (:func:`starting_guess`,
   ground's shear strength, μ·W on firm ground (Wong, *Theory of Ground Vehicles*, ch. 2
   and 4: tractive effort ≤ c·A + W·tan φ; a dry-friction ground has c = 0, tan φ = μ).
   The chain's vertical component changes the normal load (a tow adds to it, a push lifts
-  it); the bound leaves that out. A pulse that would need more is refused with one line.
+  it); the bound leaves that out.
+* a target that no force within that bound reaches (compact3's drive pulse: its rollers are
+  bolted to the frame, so a tow does not shorten its track path) is out of the machine's
+  reach, not refused: the pulse applies the secant's start itself, LF1352's hitch force per
+  side weight times this side weight, in the direction that moved the idler load towards
+  the target, and the machine's own hold-mode change with it is recorded and printed (one
+  line on stderr per process). The disturbance is then the same drawbar load per weight as
+  on LF1352; the idler sees what this machine's layout makes of it.
+  A run that leaves physics, or a secant that does not converge, still refuses the pulse.
 
 The calibrated forces are looked up by a hash of what determines them (the machine's
 validated mechanics and hydraulics, the pulses' targets, angles and edges, the track speed
@@ -216,12 +224,24 @@ def load_change_N(scenario: Scenario, rig: Rig, hitch_N: float, pull_angle_deg: 
 
 @dataclass(frozen=True)
 class PulseCalibration:
-    """One pulse's result: the hitch force [N], the idler-load change it gave [N] and the
-    hold-mode runs it took (the reference run not counted)."""
+    """One pulse's result: the hitch force [N], the idler-load change it gave [N], the
+    hold-mode runs it took (the reference run not counted) and, for a target out of the
+    machine's reach, why (one line; the force is then the weight-scaled start)."""
 
     hitch_N: float
     achieved_N: float
     runs: int
+    out_of_reach: str = ""
+
+
+class OutOfReach(ParameterError):
+    """No hitch force within the drawbar capacity reaches the target: the message says
+    why; ``tried`` holds each trial's (hitch force [N], idler-load change [N]), the
+    start and its mirror first."""
+
+    def __init__(self, message: str, tried: list[tuple[float, float]]) -> None:
+        super().__init__(message)
+        self.tried = tried
 
 
 def starting_guess(target_rel: float, weight_N: float,
@@ -250,8 +270,9 @@ def search(change: Callable[[float], float], target_N: float, start_N: float, ca
     towards it), then the Illinois variant of false position closes the bracket. The
     response need not be linear (a rigid undercarriage makes it convex) nor monotone over
     the whole range; the bracket keeps the root nearest the origin that the steps find.
-    ParameterError (one line, naming ``what``) if the change at the cap still falls short,
-    a run leaves physics, or MAX_RUNS trials do not reach the target."""
+    :class:`OutOfReach` (one line, naming ``what``) if the change at the cap still falls
+    short; ParameterError if a run leaves physics or MAX_RUNS trials do not reach the
+    target."""
     if not (math.isfinite(target_N) and target_N != 0.0):
         raise ValueError(f"target_N = {target_N!r}: must be finite and non-zero")
     tried: list[tuple[float, float]] = []
@@ -287,8 +308,10 @@ def search(change: Callable[[float], float], target_N: float, start_N: float, ca
     lo = (0.0, 0.0)
     while towards(d) < abs(target_N):        # short: step out along the direction
         if abs(f) >= cap_N:
-            raise give_up(f"at the limit {cap_N:.0f} N along the chain the idler load "
-                          f"changes by {d / 1e3:+.3f} kN, short of {target_N / 1e3:+.3f} kN")
+            short = give_up(f"at the limit {cap_N:.0f} N along the chain the idler load "
+                            f"changes by {d / 1e3:+.3f} kN, short of "
+                            f"{target_N / 1e3:+.3f} kN")
+            raise OutOfReach(str(short), tried)
         if len(tried) >= MAX_RUNS:
             raise give_up(f"not bracketed in {MAX_RUNS} runs")
         grows = towards(d) > towards(lo[1])
@@ -316,6 +339,20 @@ def search(change: Callable[[float], float], target_N: float, start_N: float, ca
             if kept < -1:
                 g_lo /= 2.0
     raise give_up(f"not within {REL_TOL:.0%} in {MAX_RUNS} runs")
+
+
+def weight_scaled(short: OutOfReach, target_N: float) -> PulseCalibration:
+    """The pulse for a target out of reach (``short``, from :func:`search`): the secant's
+    start (the weight-scaled force, capped at the drawbar capacity) or its mirror, whichever
+    moved the idler load further towards ``target_N`` [N], with its measured change and the
+    reason."""
+    (f, d), (f_mirror, d_mirror) = short.tried[:2]
+    if d_mirror * target_N > d * target_N:
+        f, d = f_mirror, d_mirror
+    reason = (f"{short} -> out of reach: applied the weight-scaled "
+              f"{'tow' if f > 0.0 else 'push'} {f:+.0f} N (LF1352's hitch force per side "
+              f"weight x this side's weight), hold-mode idler-load change {d / 1e3:+.3f} kN")
+    return PulseCalibration(f, d, len(short.tried), reason)
 
 
 @dataclass(frozen=True)
@@ -362,6 +399,8 @@ def calibrate(scenario: Scenario, rig: Rig, indices: tuple[int, ...],
         try:
             out[i] = search(change, target, starting_guess(target / nominal, weight,
                                                            reference), cap, what=what)
+        except OutOfReach as exc:
+            out[i] = weight_scaled(exc, target)
         except ParameterError as exc:
             refused[i] = str(exc)
     return Measured(out, refused, weight, capacity, time.perf_counter() - t0)
@@ -370,6 +409,15 @@ def calibrate(scenario: Scenario, rig: Rig, indices: tuple[int, ...],
 # ------------------------------------------------------------- committed table and cache
 
 SHA256 = r"[0-9a-f]{64}"
+
+
+@dataclass(frozen=True)
+class Applied:
+    """A pulse's calibrated hitch force [N]; for a target out of the machine's reach (the
+    force then the weight-scaled one) why, in one line, else ""."""
+
+    hitch_N: float
+    out_of_reach: str = ""
 
 
 @dataclass(frozen=True)
@@ -405,6 +453,14 @@ class CalibrationEntry(Parameters):
                                             doc="hash of each refused one's inputs")
     refused: tuple[str, ...] = param(max_len=2000, default=(), allow_empty=True,
                                      doc="why each could not be calibrated (one line)")
+    out_of_reach_index: tuple[int, ...] = param(0, 100, unit="1", default=(),
+                                                allow_empty=True,
+                                                doc="the calibrated pulses whose target "
+                                                "no force within the drawbar capacity "
+                                                "reaches (their hitch_N is the "
+                                                "weight-scaled start)")
+    out_of_reach: tuple[str, ...] = param(max_len=2000, default=(), allow_empty=True,
+                                          doc="why, and what was applied (one line each)")
 
     def cross_check(self, at: Location) -> None:
         n = len(self.pulse_index)
@@ -416,16 +472,24 @@ class CalibrationEntry(Parameters):
             if len(getattr(self, key)) != len(self.refused_index):
                 raise at.error(key, list(getattr(self, key)), "must have one value per "
                                f"refused_index ({len(self.refused_index)})")
+        if len(self.out_of_reach) != len(self.out_of_reach_index):
+            raise at.error("out_of_reach", list(self.out_of_reach), "must have one value "
+                           f"per out_of_reach_index ({len(self.out_of_reach_index)})")
+        if not set(self.out_of_reach_index) <= set(self.pulse_index):
+            raise at.error("out_of_reach_index", list(self.out_of_reach_index),
+                           f"must be among pulse_index {list(self.pulse_index)}")
 
-    def lookup(self, hashes: InputHashes, index: int) -> float | str | None:
-        """Pulse ``index``'s calibrated hitch force [N], or the reason it is refused, if
-        this entry holds its inputs (``hashes``); None if not."""
+    def lookup(self, hashes: InputHashes, index: int) -> Applied | str | None:
+        """Pulse ``index``'s calibrated hitch force, or the reason it is refused, if this
+        entry holds its inputs (``hashes``); None if not."""
         if (self.mechanics_sha256, self.hydraulics_sha256) != (hashes.mechanics,
                                                                 hashes.hydraulics):
             return None
         pulse = hashes.pulses[index]
         if pulse in self.pulse_sha256:
-            return self.hitch_N[self.pulse_sha256.index(pulse)]
+            at = self.pulse_sha256.index(pulse)
+            reach = dict(zip(self.out_of_reach_index, self.out_of_reach, strict=True))
+            return Applied(self.hitch_N[at], reach.get(self.pulse_index[at], ""))
         if pulse in self.refused_sha256:
             return self.refused[self.refused_sha256.index(pulse)]
         return None
@@ -535,9 +599,10 @@ def calibrated_setup(setup: RunSetup) -> RunSetup:
                                                                    hitch_calibration=cal))
 
 
-def _found(entries: list[CalibrationEntry], hashes: InputHashes) -> dict[int, float | str]:
+def _found(entries: list[CalibrationEntry],
+           hashes: InputHashes) -> dict[int, Applied | str]:
     """Per pulse of ``hashes``: its force or refusal from the first entry holding it."""
-    out: dict[int, float | str] = {}
+    out: dict[int, Applied | str] = {}
     for i in hashes.pulses:
         for entry in entries:
             value = entry.lookup(hashes, i)
@@ -547,16 +612,21 @@ def _found(entries: list[CalibrationEntry], hashes: InputHashes) -> dict[int, fl
     return out
 
 
-def _calibration(scenario: Scenario, name: str, found: dict[int, float | str], origin: str,
-                 key: str) -> HitchCalibration:
+def _calibration(scenario: Scenario, name: str, found: dict[int, Applied | str],
+                 origin: str, key: str) -> HitchCalibration:
     """The :class:`HitchCalibration` of the forces ``found``; ParameterError with the first
-    refusal among them."""
+    refusal among them. A target out of reach is said on stderr (once per process: the
+    calibrations are kept by input hash)."""
     forces: list[float | None] = [None] * len(scenario.load_pulses)
+    out_of_reach = []
     for i, value in sorted(found.items()):
         if isinstance(value, str):
             raise ParameterError(value)
-        forces[i] = value
-    return HitchCalibration(name, tuple(forces), origin, key)
+        if value.out_of_reach:
+            print(f"trackmj: {value.out_of_reach}", file=sys.stderr)
+            out_of_reach.append(value.out_of_reach)
+        forces[i] = value.hitch_N
+    return HitchCalibration(name, tuple(forces), origin, key, tuple(out_of_reach))
 
 
 def _find(scenario: Scenario, rig: Rig, hashes: InputHashes) -> HitchCalibration:
@@ -591,7 +661,9 @@ def _find(scenario: Scenario, rig: Rig, hashes: InputHashes) -> HitchCalibration
     except OSError:          # a read-only home: calibrate each time rather than fail
         pass
     # the forces as recorded (to 0.1 N), so a run is the same whether it calibrated or read
-    found |= dict(zip(record["pulse_index"], record["hitch_N"], strict=True)) | measured.refused
+    reach = dict(zip(record["out_of_reach_index"], record["out_of_reach"], strict=True))
+    found |= {i: Applied(f, reach.get(i, "")) for i, f in
+              zip(record["pulse_index"], record["hitch_N"], strict=True)} | measured.refused
     return _calibration(scenario, name, found, "calibrated", key)
 
 
@@ -613,4 +685,7 @@ def entry_record(scenario: Scenario, measured: Measured,
             "mechanics_sha256": hashes.mechanics, "hydraulics_sha256": hashes.hydraulics,
             "host": host_machine(), "wall_s": round(measured.wall_s, 1),
             "refused_index": bad, "refused_sha256": [hashes.pulses[i] for i in bad],
-            "refused": [measured.refused[i] for i in bad]}
+            "refused": [measured.refused[i] for i in bad],
+            "out_of_reach_index": [i for i in idx if measured.pulses[i].out_of_reach],
+            "out_of_reach": [measured.pulses[i].out_of_reach for i in idx
+                             if measured.pulses[i].out_of_reach]}
