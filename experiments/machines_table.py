@@ -9,7 +9,9 @@ seeds, and W5's parameter variants: every run must pass), the lowest and highest
 [kN], and the low-pass tension RMSE [kN] as mean ± std over the runs; a run that failed is
 counted and its reason shortened.
 
-Run: ``python experiments/machines_table.py lf1352=runs/report m113=runs/report-m113 ...``
+Run: ``python experiments/machines_table.py lf1352=runs/report m113=runs/report-m113 ...``;
+``NAME=FOLDER,FOLDER2`` takes a machine's conditions from several reports, a later folder's
+condition replacing an earlier one's (a condition re-run on its own)
 """
 
 from __future__ import annotations
@@ -60,24 +62,26 @@ def cell(rows: dict[str, np.ndarray], nominal_N: float) -> str:
             f"RMSE {rmse.mean():.2f} ± {rmse.std(ddof=1) if len(rmse) > 1 else 0.0:.2f} kN")
 
 
-def table(folders: dict[str, Path]) -> str:
-    """Markdown table, conditions down, machines across."""
-    cells: dict[str, dict[str, str]] = {}
-    for name, folder in folders.items():
+def table(folders: dict[str, list[Path]]) -> str:
+    """Markdown table, conditions down, machines across; per machine its report folders,
+    a later one's condition replacing an earlier one's."""
+    found: dict[str, dict[str, str]] = {}
+    for name, paths in folders.items():
         nominal = mechanics(resolve(name)).nominal_tension_N
-        data = pq.read_table(folder / "results.parquet").to_pydict()
-        columns = {k: np.asarray(v, dtype=object if k == "error" else float)
-                   for k, v in data.items()
-                   if k == "error" or k == "rmse_lp_N" or k.startswith("acceptance.")}
-        scenario = np.array(data["scenario"])
-        for condition in sorted(set(scenario), key=lambda c: (c not in ORDER,
-                                                                ORDER.index(c) if c in ORDER
-                                                                else 0, c)):
-            keep = scenario == condition
-            rows = {k: v[keep] for k, v in columns.items()}
-            if "error" not in rows:
-                rows["error"] = np.full(int(keep.sum()), None, dtype=object)
-            cells.setdefault(condition, {})[name] = cell(rows, nominal)
+        for folder in paths:
+            data = pq.read_table(folder / "results.parquet").to_pydict()
+            columns = {k: np.asarray(v, dtype=object if k == "error" else float)
+                       for k, v in data.items()
+                       if k == "error" or k == "rmse_lp_N" or k.startswith("acceptance.")}
+            scenario = np.array(data["scenario"])
+            for condition in set(scenario):
+                keep = scenario == condition
+                rows = {k: v[keep] for k, v in columns.items()}
+                if "error" not in rows:
+                    rows["error"] = np.full(int(keep.sum()), None, dtype=object)
+                found.setdefault(condition, {})[name] = cell(rows, nominal)
+    cells = {c: found[c] for c in sorted(found, key=lambda c: (
+        c not in ORDER, ORDER.index(c) if c in ORDER else 0, c))}
     names = list(folders)
     lines = ["| condition | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
     for condition, by_machine in cells.items():
@@ -90,7 +94,8 @@ def main(argv: list[str]) -> int:
     if not argv or any("=" not in a for a in argv):
         print(__doc__.strip().splitlines()[-1], file=sys.stderr)
         return 2
-    folders = {a.split("=", 1)[0]: Path(a.split("=", 1)[1]) for a in argv}
+    folders = {a.split("=", 1)[0]: [Path(p) for p in a.split("=", 1)[1].split(",")]
+               for a in argv}
     print(table(folders))
     return 0
 
