@@ -49,7 +49,7 @@ CLOSURE_MAX_M = PhysicsLimits(0.0, (0.0, 0.0)).closure_max_m
 """The pin gap beyond which a run's physics guard counts the loop as broken [m]; the
 engine stops a step there as the guard stops a run."""
 HERE = Path(__file__).resolve().parent
-SOURCES = ("engine.c", "engine.h")
+SOURCES = ("engine.c", "engine.h", "layer.h")
 FMI_LAYER = {2: "fmi2.c", 3: "fmi3.c"}
 GROUND_LAW = {"ground_stiffness_N_m": L_K, "ground_damping_N_s_m": L_B,
               "ground_damping_onset_m": L_ONSET, "ground_shear_modulus_m": L_SHEAR,

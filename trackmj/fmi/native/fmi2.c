@@ -19,16 +19,14 @@
    seconds since the settled initial state (the time variable, value reference 0). */
 
 #include <ctype.h>
-#include <limits.h>
-#include <math.h>
 #include <stdarg.h>
-#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi2Functions.h"
 #include "engine.h"
+#include "layer.h"
 #include "trackmj_variables.h"
 
 #ifdef _WIN32
@@ -36,35 +34,6 @@
 #else
 #define ON_WINDOWS 0
 #endif
-
-#ifdef __GNUC__
-#define PRINTF_LIKE(f, a) __attribute__((format(printf, f, a)))
-#else
-#define PRINTF_LIKE(f, a)
-#endif
-
-/* Tolerances of doStep's checks: the communication point may differ from the FMU's time by
-   TIME_ABS_S + TIME_REL * |t| (an importer's sum of step sizes rounds), the step size from a
-   whole number of coupling steps by STEP_REL * h. */
-#define TIME_ABS_S 1e-9
-#define TIME_REL 1e-12
-#define STEP_REL 1e-9
-
-/* Modes of the calling sequence, as bits so that a call names the set it is allowed in. */
-typedef enum {
-    MODE_INSTANTIATED = 1,
-    MODE_INITIALIZATION = 2,
-    MODE_STEP_COMPLETE = 4,
-    MODE_TERMINATED = 8,
-    MODE_FAILED = 16
-} Mode;
-
-#define MODES_ANY (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP_COMPLETE \
-                   | MODE_TERMINATED | MODE_FAILED)
-#define MODES_GET (MODE_INITIALIZATION | MODE_STEP_COMPLETE | MODE_TERMINATED | MODE_FAILED)
-#define MODES_SET (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP_COMPLETE)
-#define MODES_SAVE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP_COMPLETE \
-                    | MODE_TERMINATED)
 
 typedef struct {
     Engine *engine;
@@ -78,23 +47,15 @@ typedef struct {
     double stop_time_s;              /* [s], from fmi2SetupExperiment */
 } Instance;
 
-/* A saved FMU state: the mode and the engine's bytes. */
-typedef struct {
-    Mode mode;
-    size_t size;
-    unsigned char bytes[];
-} State;
-
-/* Serialised state: this header, then the engine's bytes. */
+/* Serialised state: the header of layer.h, then the engine's bytes. */
 static const char STATE_MAGIC[8] = "TMJFMI2";
-#define STATE_HEADER_SIZE 24   /* magic[8], uint32 mode, uint32 zero, uint64 engine size */
 
 static const char *mode_name(Mode mode)
 {
     switch (mode) {
     case MODE_INSTANTIATED: return "instantiated";
     case MODE_INITIALIZATION: return "initialization mode";
-    case MODE_STEP_COMPLETE: return "step complete";
+    case MODE_STEP: return "step complete";
     case MODE_TERMINATED: return "terminated";
     default: return "failed (a step or the initialisation failed: Reset, SetFMUstate or "
                     "FreeInstance)";
@@ -435,7 +396,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
     if (!inst)
         return fmi2Error;
     status = from_engine(engine_initialize(inst->engine));
-    inst->mode = status == fmi2Error ? MODE_FAILED : MODE_STEP_COMPLETE;
+    inst->mode = status == fmi2Error ? MODE_FAILED : MODE_STEP;
     if (status != fmi2Error)
         LOG_EVENT(inst, "initialised");
     return status;
@@ -443,7 +404,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 
 fmi2Status fmi2Terminate(fmi2Component c)
 {
-    Instance *inst = enter(c, MODE_STEP_COMPLETE | MODE_FAILED, "fmi2Terminate");
+    Instance *inst = enter(c, MODE_STEP | MODE_FAILED, "fmi2Terminate");
     if (!inst)
         return fmi2Error;
     inst->mode = MODE_TERMINATED;
@@ -573,17 +534,9 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
    cleared). NULL if out of memory (logged). */
 static State *state_in(Instance *inst, void **slot, size_t size, const char *function)
 {
-    State *state = (State *)*slot;
-    if (state && state->size == size)
-        return state;
-    free(state);
-    *slot = NULL;
-    state = (State *)malloc(sizeof(State) + size);
-    if (!state) {
+    State *state = state_buffer(slot, size);
+    if (!state)
         LOG_ERROR(inst, "%s: out of memory (%lu bytes)", function, (unsigned long)size);
-        return NULL;
-    }
-    state->size = size;
     return state;
 }
 
@@ -658,8 +611,6 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate,
 {
     Instance *inst = enter(c, MODES_ANY, "fmi2SerializeFMUstate");
     const State *state = (const State *)FMUstate;
-    uint32_t mode, zero = 0;
-    uint64_t engine_size;
     if (!inst)
         return fmi2Error;
     if (!state || !serializedState) {
@@ -672,13 +623,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate,
                   (unsigned long)(STATE_HEADER_SIZE + state->size));
         return fmi2Error;
     }
-    mode = (uint32_t)state->mode;
-    engine_size = (uint64_t)state->size;
-    memcpy(serializedState, STATE_MAGIC, 8);
-    memcpy(serializedState + 8, &mode, 4);
-    memcpy(serializedState + 12, &zero, 4);
-    memcpy(serializedState + 16, &engine_size, 8);
-    memcpy(serializedState + STATE_HEADER_SIZE, state->bytes, state->size);
+    state_serialize(state, STATE_MAGIC, (unsigned char *)serializedState);
     return fmi2OK;
 }
 
@@ -687,9 +632,9 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
 {
     Instance *inst = enter(c, MODES_ANY, "fmi2DeSerializeFMUstate");
     size_t expected;
-    uint32_t mode;
-    uint64_t engine_size;
+    Mode mode;
     State *state;
+    char why[REFUSAL_SIZE];
     if (!inst)
         return fmi2Error;
     if (!serializedState || !FMUstate) {
@@ -697,25 +642,16 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
         return fmi2Error;
     }
     expected = engine_state_size(inst->engine);
-    if (size < STATE_HEADER_SIZE || memcmp(serializedState, STATE_MAGIC, 8) != 0) {
-        LOG_ERROR(inst, "fmi2DeSerializeFMUstate: %lu bytes without the header of "
-                  "a serialised FMI 2 state of this FMU", (unsigned long)size);
-        return fmi2Error;
-    }
-    memcpy(&mode, serializedState + 8, 4);
-    memcpy(&engine_size, serializedState + 16, 8);
-    if (engine_size != (uint64_t)expected || size != STATE_HEADER_SIZE + expected
-        || !(mode & MODES_SAVE) || (mode & (mode - 1)) != 0) {
-        LOG_ERROR(inst, "fmi2DeSerializeFMUstate: %lu bytes holding %lu state bytes in mode "
-                  "%lu; this FMU's state takes %lu + %d bytes", (unsigned long)size,
-                  (unsigned long)engine_size, (unsigned long)mode, (unsigned long)expected,
-                  STATE_HEADER_SIZE);
+    mode = state_mode((const unsigned char *)serializedState, size, STATE_MAGIC, expected, 2,
+                      why);
+    if (!mode) {
+        LOG_ERROR(inst, "fmi2DeSerializeFMUstate: %s", why);
         return fmi2Error;
     }
     state = state_in(inst, FMUstate, expected, "fmi2DeSerializeFMUstate");
     if (!state)
         return fmi2Error;
-    state->mode = (Mode)mode;
+    state->mode = mode;
     memcpy(state->bytes, serializedState + STATE_HEADER_SIZE, expected);
     *FMUstate = state;
     return fmi2OK;
@@ -755,36 +691,21 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
                       fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
-    Instance *inst = enter(c, MODE_STEP_COMPLETE, "fmi2DoStep");
-    double t, h = communicationStepSize, steps;   /* [s], [s], [coupling steps] */
+    Instance *inst = enter(c, MODE_STEP, "fmi2DoStep");
+    long steps;
     fmi2Status status;
+    char why[REFUSAL_SIZE];
     (void)noSetFMUStatePriorToCurrentPoint;   /* states are kept by the importer's copies */
     if (!inst)
         return fmi2Error;
-    t = engine_time(inst->engine);
-    if (!(fabs(currentCommunicationPoint - t) <= TIME_ABS_S + TIME_REL * fabs(t))) {
-        LOG_ERROR(inst, "doStep at t = %.12g s but the FMU is at %.12g s",
-                  currentCommunicationPoint, t);
+    steps = step_count(currentCommunicationPoint, communicationStepSize,
+                       engine_time(inst->engine), inst->stop_time_defined, inst->stop_time_s,
+                       "fmi2SetupExperiment", why);
+    if (!steps) {
+        LOG_ERROR(inst, "%s", why);
         return fmi2Error;
     }
-    steps = floor(h / ENGINE_STEP_S + 0.5);
-    if (!(h > 0.0) || steps < 1.0 || fabs(steps * ENGINE_STEP_S - h) > STEP_REL * h) {
-        LOG_ERROR(inst, "doStep with h = %.12g s: the step size must be a positive whole "
-                  "multiple of %g s (within %g relative)", h, ENGINE_STEP_S, STEP_REL);
-        return fmi2Error;
-    }
-    if (steps > (double)LONG_MAX) {
-        LOG_ERROR(inst, "doStep with h = %.12g s: at most %.12g s in one step", h,
-                  (double)LONG_MAX * ENGINE_STEP_S);
-        return fmi2Error;
-    }
-    if (inst->stop_time_defined
-        && t + h > inst->stop_time_s + TIME_ABS_S + TIME_REL * fabs(inst->stop_time_s)) {
-        LOG_ERROR(inst, "doStep from t = %.12g s by h = %.12g s goes past the stop time "
-                  "%.12g s (fmi2SetupExperiment)", t, h, inst->stop_time_s);
-        return fmi2Error;
-    }
-    status = from_engine(engine_step(inst->engine, (long)steps));
+    status = from_engine(engine_step(inst->engine, steps));
     if (status == fmi2Error)
         inst->mode = MODE_FAILED;
     return status;

@@ -20,45 +20,15 @@
    number may run in one process, each in its own thread. Time is in seconds since the
    settled initial state (the time variable, value reference 0). */
 
-#include <limits.h>
-#include <math.h>
 #include <stdarg.h>
-#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi3Functions.h"
 #include "engine.h"
+#include "layer.h"
 #include "trackmj_variables.h"
-
-#ifdef __GNUC__
-#define PRINTF_LIKE(f, a) __attribute__((format(printf, f, a)))
-#else
-#define PRINTF_LIKE(f, a)
-#endif
-
-/* Tolerances of doStep's checks: the communication point may differ from the FMU's time by
-   TIME_ABS_S + TIME_REL * |t| (an importer's sum of step sizes rounds), the step size from a
-   whole number of coupling steps by STEP_REL * h. */
-#define TIME_ABS_S 1e-9
-#define TIME_REL 1e-12
-#define STEP_REL 1e-9
-
-/* Modes of the calling sequence, as bits so that a call names the set it is allowed in. */
-typedef enum {
-    MODE_INSTANTIATED = 1,
-    MODE_INITIALIZATION = 2,
-    MODE_STEP = 4,
-    MODE_TERMINATED = 8,
-    MODE_FAILED = 16
-} Mode;
-
-#define MODES_ANY (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED \
-                   | MODE_FAILED)
-#define MODES_GET (MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED | MODE_FAILED)
-#define MODES_SET (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP)
-#define MODES_SAVE (MODE_INSTANTIATED | MODE_INITIALIZATION | MODE_STEP | MODE_TERMINATED)
 
 typedef struct {
     Engine *engine;
@@ -71,16 +41,8 @@ typedef struct {
     double stop_time_s;              /* [s], from fmi3EnterInitializationMode */
 } Instance;
 
-/* A saved FMU state: the mode and the engine's bytes. */
-typedef struct {
-    Mode mode;
-    size_t size;
-    unsigned char bytes[];
-} State;
-
-/* Serialised state: this header, then the engine's bytes. */
+/* Serialised state: the header of layer.h, then the engine's bytes. */
 static const char STATE_MAGIC[8] = "TMJFMI3";
-#define STATE_HEADER_SIZE 24   /* magic[8], uint32 mode, uint32 zero, uint64 engine size */
 
 static const char *mode_name(Mode mode)
 {
@@ -603,17 +565,9 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
    cleared). NULL if out of memory (logged). */
 static State *state_in(Instance *inst, void **slot, size_t size, const char *function)
 {
-    State *state = (State *)*slot;
-    if (state && state->size == size)
-        return state;
-    free(state);
-    *slot = NULL;
-    state = (State *)malloc(sizeof(State) + size);
-    if (!state) {
+    State *state = state_buffer(slot, size);
+    if (!state)
         LOG_ERROR(inst, "%s: out of memory (%lu bytes)", function, (unsigned long)size);
-        return NULL;
-    }
-    state->size = size;
     return state;
 }
 
@@ -689,8 +643,6 @@ fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
 {
     Instance *inst = enter(instance, MODES_ANY, "fmi3SerializeFMUState");
     const State *state = (const State *)FMUState;
-    uint32_t mode, zero = 0;
-    uint64_t engine_size;
     if (!inst)
         return fmi3Error;
     if (!state || !serializedState) {
@@ -703,13 +655,7 @@ fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState,
                   (unsigned long)(STATE_HEADER_SIZE + state->size));
         return fmi3Error;
     }
-    mode = (uint32_t)state->mode;
-    engine_size = (uint64_t)state->size;
-    memcpy(serializedState, STATE_MAGIC, 8);
-    memcpy(serializedState + 8, &mode, 4);
-    memcpy(serializedState + 12, &zero, 4);
-    memcpy(serializedState + 16, &engine_size, 8);
-    memcpy(serializedState + STATE_HEADER_SIZE, state->bytes, state->size);
+    state_serialize(state, STATE_MAGIC, (unsigned char *)serializedState);
     return fmi3OK;
 }
 
@@ -718,9 +664,9 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
 {
     Instance *inst = enter(instance, MODES_ANY, "fmi3DeserializeFMUState");
     size_t expected;
-    uint32_t mode;
-    uint64_t engine_size;
+    Mode mode;
     State *state;
+    char why[REFUSAL_SIZE];
     if (!inst)
         return fmi3Error;
     if (!serializedState || !FMUState) {
@@ -728,25 +674,16 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
         return fmi3Error;
     }
     expected = engine_state_size(inst->engine);
-    if (size < STATE_HEADER_SIZE || memcmp(serializedState, STATE_MAGIC, 8) != 0) {
-        LOG_ERROR(inst, "fmi3DeserializeFMUState: %lu bytes without the header of a "
-                  "serialised FMI 3 state of this FMU", (unsigned long)size);
-        return fmi3Error;
-    }
-    memcpy(&mode, serializedState + 8, 4);
-    memcpy(&engine_size, serializedState + 16, 8);
-    if (engine_size != (uint64_t)expected || size != STATE_HEADER_SIZE + expected
-        || !(mode & MODES_SAVE) || (mode & (mode - 1)) != 0) {
-        LOG_ERROR(inst, "fmi3DeserializeFMUState: %lu bytes holding %lu state bytes in mode "
-                  "%lu; this FMU's state takes %lu + %d bytes", (unsigned long)size,
-                  (unsigned long)engine_size, (unsigned long)mode, (unsigned long)expected,
-                  STATE_HEADER_SIZE);
+    mode = state_mode((const unsigned char *)serializedState, size, STATE_MAGIC, expected, 3,
+                      why);
+    if (!mode) {
+        LOG_ERROR(inst, "fmi3DeserializeFMUState: %s", why);
         return fmi3Error;
     }
     state = state_in(inst, FMUState, expected, "fmi3DeserializeFMUState");
     if (!state)
         return fmi3Error;
-    state->mode = (Mode)mode;
+    state->mode = mode;
     memcpy(state->bytes, serializedState + STATE_HEADER_SIZE, expected);
     *FMUState = state;
     return fmi3OK;
@@ -975,8 +912,9 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                       fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
 {
     Instance *inst = enter(instance, MODE_STEP, "fmi3DoStep");
-    double t, h = communicationStepSize, steps;   /* [s], [s], [coupling steps] */
+    long steps;
     fmi3Status status;
+    char why[REFUSAL_SIZE];
     (void)noSetFMUStatePriorToCurrentPoint;   /* states are kept by the importer's copies */
     if (!inst)
         return fmi3Error;
@@ -987,31 +925,15 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     *eventHandlingNeeded = false;
     *terminateSimulation = false;
     *earlyReturn = false;
-    t = engine_time(inst->engine);
-    *lastSuccessfulTime = t;
-    if (!(fabs(currentCommunicationPoint - t) <= TIME_ABS_S + TIME_REL * fabs(t))) {
-        LOG_ERROR(inst, "doStep at t = %.12g s but the FMU is at %.12g s",
-                  currentCommunicationPoint, t);
+    *lastSuccessfulTime = engine_time(inst->engine);
+    steps = step_count(currentCommunicationPoint, communicationStepSize, *lastSuccessfulTime,
+                       inst->stop_time_defined, inst->stop_time_s,
+                       "fmi3EnterInitializationMode", why);
+    if (!steps) {
+        LOG_ERROR(inst, "%s", why);
         return fmi3Error;
     }
-    steps = floor(h / ENGINE_STEP_S + 0.5);
-    if (!(h > 0.0) || steps < 1.0 || fabs(steps * ENGINE_STEP_S - h) > STEP_REL * h) {
-        LOG_ERROR(inst, "doStep with h = %.12g s: the step size must be a positive whole "
-                  "multiple of %g s (within %g relative)", h, ENGINE_STEP_S, STEP_REL);
-        return fmi3Error;
-    }
-    if (steps > (double)LONG_MAX) {
-        LOG_ERROR(inst, "doStep with h = %.12g s: at most %.12g s in one step", h,
-                  (double)LONG_MAX * ENGINE_STEP_S);
-        return fmi3Error;
-    }
-    if (inst->stop_time_defined
-        && t + h > inst->stop_time_s + TIME_ABS_S + TIME_REL * fabs(inst->stop_time_s)) {
-        LOG_ERROR(inst, "doStep from t = %.12g s by h = %.12g s goes past the stop time "
-                  "%.12g s (fmi3EnterInitializationMode)", t, h, inst->stop_time_s);
-        return fmi3Error;
-    }
-    status = from_engine(engine_step(inst->engine, (long)steps));
+    status = from_engine(engine_step(inst->engine, steps));
     if (status == fmi3Error)
         inst->mode = MODE_FAILED;
     *lastSuccessfulTime = engine_time(inst->engine);
