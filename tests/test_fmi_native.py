@@ -506,6 +506,26 @@ def test_state_restored_or_deserialized_replays_bit_for_bit(native, which) -> No
         fmu.close()
 
 
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_a_foreign_or_cut_serialized_state_is_refused_naming_why(native, which) -> None:
+    """Bytes that are not this FMU's serialised state (the other FMI version's header, or
+    one byte short) are refused with an error naming why, and the instance steps on."""
+    with slave(native[which]) as fmu:
+        fmu.start()
+        serialize = fmu.fmu.serializeFMUState if fmu.fmi3 else fmu.fmu.serializeFMUstate
+        deserialize = fmu.fmu.deserializeFMUState if fmu.fmi3 else fmu.fmu.deSerializeFMUstate
+        blob = bytes(serialize(fmu.fmu.getFMUState()))
+        foreign = (b"TMJFMI2" if fmu.fmi3 else b"TMJFMI3") + blob[7:]
+        for bad, why in ((foreign, "without the header of a serialised FMI"),
+                         (blob[:-1], "state bytes in mode")):
+            with pytest.raises(FMICallException, match="status 3"):
+                deserialize(bad)
+            assert why in fmu.errors()
+        fmu.step()
+        assert math.isfinite(fmu.get("stroke_m"))
+        fmu.close()
+
+
 @pytest.mark.slow
 def test_two_instances_on_two_threads_agree_with_one(native) -> None:
     def run(out: list[float], name: str) -> None:
