@@ -82,7 +82,7 @@ def test_compact3_drive_pulse_is_out_of_reach_and_takes_the_weight_scaled_tow() 
     assert cal is not None and len(cal.out_of_reach) == 1
     assert "W3 load pulse 1 (-1.300 kN) on machine compact3 (drawbar capacity mu W = 0.8 x " \
            "14.77 kN" in cal.out_of_reach[0]
-    assert "out of reach: applied the weight-scaled tow" in cal.out_of_reach[0]
+    assert "is out of reach: the pulse applies the weight-scaled tow" in cal.out_of_reach[0]
     rig = Rig(setup)
     weight = side_weight_N(rig)
     assert weight == pytest.approx(1500.0 * 9.81, rel=0.01)   # the 3 t class, one side

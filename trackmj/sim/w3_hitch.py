@@ -235,13 +235,13 @@ class PulseCalibration:
 
 
 class OutOfReach(ParameterError):
-    """No hitch force within the drawbar capacity reaches the target: the message says
-    why; ``tried`` holds each trial's (hitch force [N], idler-load change [N]), the
-    start and its mirror first."""
+    """No hitch force within the drawbar capacity reaches the target: ``what`` names the
+    pulse, machine and capacity, ``why`` what the search found; ``tried`` holds each
+    trial's (hitch force [N], idler-load change [N]), the start and its mirror first."""
 
-    def __init__(self, message: str, tried: list[tuple[float, float]]) -> None:
-        super().__init__(message)
-        self.tried = tried
+    def __init__(self, what: str, why: str, tried: list[tuple[float, float]]) -> None:
+        super().__init__(f"{what}: {why}")
+        self.what, self.why, self.tried = what, why, tried
 
 
 def starting_guess(target_rel: float, weight_N: float,
@@ -291,10 +291,13 @@ def search(change: Callable[[float], float], target_N: float, start_N: float, ca
     def close(d: float) -> bool:
         return abs(d - target_N) <= REL_TOL * abs(target_N)
 
+    def trials() -> str:
+        return "tried " + ", ".join(f"{a:+.0f} N -> {b / 1e3:+.3f} kN" for a, b in tried)
+
     def give_up(reason: str) -> ParameterError:
-        return ParameterError(f"{what}: {reason}; tried " + ", ".join(
-            f"{a:+.0f} N -> {b / 1e3:+.3f} kN" for a, b in tried) + " (a hitch_N given for "
-            "the pulse, e.g. --set scenario.load_pulses.N.hitch_N=..., is applied as it is)")
+        return ParameterError(f"{what}: {reason}; {trials()} (a hitch_N given for the pulse, "
+                              "e.g. --set scenario.load_pulses.N.hitch_N=..., is applied as "
+                              "it is)")
 
     f = math.copysign(min(abs(start_N), cap_N), start_N)
     d = run(f)
@@ -308,10 +311,9 @@ def search(change: Callable[[float], float], target_N: float, start_N: float, ca
     lo = (0.0, 0.0)
     while towards(d) < abs(target_N):        # short: step out along the direction
         if abs(f) >= cap_N:
-            short = give_up(f"at the limit {cap_N:.0f} N along the chain the idler load "
-                            f"changes by {d / 1e3:+.3f} kN, short of "
-                            f"{target_N / 1e3:+.3f} kN")
-            raise OutOfReach(str(short), tried)
+            raise OutOfReach(what, f"at the limit {cap_N:.0f} N along the chain the idler "
+                             f"load changes by {d / 1e3:+.3f} kN, short of "
+                             f"{target_N / 1e3:+.3f} kN; {trials()}", tried)
         if len(tried) >= MAX_RUNS:
             raise give_up(f"not bracketed in {MAX_RUNS} runs")
         grows = towards(d) > towards(lo[1])
@@ -349,9 +351,11 @@ def weight_scaled(short: OutOfReach, target_N: float) -> PulseCalibration:
     (f, d), (f_mirror, d_mirror) = short.tried[:2]
     if d_mirror * target_N > d * target_N:
         f, d = f_mirror, d_mirror
-    reason = (f"{short} -> out of reach: applied the weight-scaled "
+    reason = (f"{short.what} is out of reach: the pulse applies the weight-scaled "
               f"{'tow' if f > 0.0 else 'push'} {f:+.0f} N (LF1352's hitch force per side "
-              f"weight x this side's weight), hold-mode idler-load change {d / 1e3:+.3f} kN")
+              f"weight x this side's weight), a hold-mode idler-load change of "
+              f"{d / 1e3:+.3f} kN ({short.why}; --set scenario.load_pulses.N.hitch_N=... "
+              "applies a force of your choice)")
     return PulseCalibration(f, d, len(short.tried), reason)
 
 
