@@ -15,12 +15,15 @@ e₁, e₂ the unit vectors along the idler's two strands away from it
 vector (G = 2 for straight strands along a horizontal slide). On the slack side ΔF ≈ 0.
 So L(T) = g·max(σ·T, 0) with g = G/r and σ = +1 for a front sprocket, −1 for a rear one.
 
-Measured on the shipped machines (``trackmj drive`` at 1.5 m/s with hitch loads of −4, 0
-and +8 kN, the carrier's compliance taken out with the identified idler stiffness: ΔF − k·Δy;
-Intel Xeon 2-core VM): tight side M113 7.35 against G/r = 7.93 /m (−7 %), LF1352 braking
-14.4 against 11.9 /m (+22 %: the push also pitches the chassis); slack side M113 0.67,
-LF1352 −2.30, compact3 −0.16 /m, a fifth of G/r at most. tests/test_drive_load.py holds
-them to that.
+The formula takes the strands inextensible. Measured with the idler truly held
+(tests/test_drive_load.py: ``trackmj drive`` at 1.5 m/s with hitch loads of −4, 0 and
++8 kN, the tensioner a 1e9 N/m spring made implicit through its damping; Intel Xeon 2-core
+VM, 2026-12-06), the tight side's gain over G/r is 0.97 on M113 (driving), 0.90 on compact3
+and 0.64 on LF1352 (braking): with the stroke held, the sprocket's turn that stretches the
+tight span relaxes the slack one, which unloads by the spans' compliance share, the more
+the softer the pins (LF1352 at its derived 6.08e8 N/m steel pins: 0.80). The slack side
+takes 0.004 (LF1352), 0.17 (compact3) and up to 0.24 (M113) of G/r. The controllers use the
+formula; the test holds the tight side to [0.55, 1.25] of it and the slack side to 0.3.
 """
 
 from __future__ import annotations
