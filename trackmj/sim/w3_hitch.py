@@ -245,17 +245,19 @@ class OutOfReach(ParameterError):
 
 
 def starting_guess(target_rel: float, weight_N: float,
-                   reference: CalibrationEntry | None) -> float:
+                   reference: CalibrationEntry | None) -> tuple[float, str]:
     """Secant start [N] for a target change of ``target_rel`` x nominal on a side weighing
-    ``weight_N`` [N]: the reference machine's calibrated hitch force per side weight for
-    the target of the same sign, times this weight and the ratio of the targets; without a
-    reference entry for that sign, a hitch force of the target's size x the weight, pushing
-    for a rise (LF1352's sign)."""
+    ``weight_N`` [N], and its rule in words: the reference machine's calibrated hitch force
+    per side weight for the target of the same sign, times this weight and the ratio of the
+    targets; without a reference entry for that sign, a hitch force of the target's size x
+    the weight, pushing for a rise (LF1352's sign)."""
     if reference is not None:
         for hitch, rel in zip(reference.hitch_N, reference.delta_rel, strict=True):
             if rel * target_rel > 0.0:
-                return hitch / reference.side_weight_N * weight_N * target_rel / rel
-    return -target_rel * weight_N
+                return (hitch / reference.side_weight_N * weight_N * target_rel / rel,
+                        f"{REFERENCE_MACHINE}'s hitch force per side weight x this side's "
+                        "weight")
+    return -target_rel * weight_N, "the target's share of the nominal x the side weight"
 
 
 def search(change: Callable[[float], float], target_N: float, start_N: float, cap_N: float,
@@ -343,19 +345,18 @@ def search(change: Callable[[float], float], target_N: float, start_N: float, ca
     raise give_up(f"not within {REL_TOL:.0%} in {MAX_RUNS} runs")
 
 
-def weight_scaled(short: OutOfReach, target_N: float) -> PulseCalibration:
+def weight_scaled(short: OutOfReach, target_N: float, rule: str) -> PulseCalibration:
     """The pulse for a target out of reach (``short``, from :func:`search`): the secant's
-    start (the weight-scaled force, capped at the drawbar capacity) or its mirror, whichever
-    moved the idler load further towards ``target_N`` [N], with its measured change and the
-    reason."""
+    start (the weight-scaled force by ``rule``, capped at the drawbar capacity) or its mirror,
+    whichever moved the idler load further towards ``target_N`` [N], with its measured
+    change and the reason."""
     (f, d), (f_mirror, d_mirror) = short.tried[:2]
     if d_mirror * target_N > d * target_N:
         f, d = f_mirror, d_mirror
     reason = (f"{short.what} is out of reach: the pulse applies the weight-scaled "
-              f"{'tow' if f > 0.0 else 'push'} {f:+.0f} N (LF1352's hitch force per side "
-              f"weight x this side's weight), a hold-mode idler-load change of "
-              f"{d / 1e3:+.3f} kN ({short.why}; --set scenario.load_pulses.N.hitch_N=... "
-              "applies a force of your choice)")
+              f"{'tow' if f > 0.0 else 'push'} {f:+.0f} N ({rule}), a hold-mode idler-load "
+              f"change of {d / 1e3:+.3f} kN ({short.why}; --set "
+              "scenario.load_pulses.N.hitch_N=... applies a force of your choice)")
     return PulseCalibration(f, d, len(short.tried), reason)
 
 
@@ -400,11 +401,11 @@ def calibrate(scenario: Scenario, rig: Rig, indices: tuple[int, ...],
                 f"{capacity / 1e3:.2f} kN horizontal, Wong, Theory of Ground Vehicles; the "
                 f"file's limit {HITCH_LIMIT_N / 1e3:g} kN)")
         cap = min(capacity / math.cos(math.radians(p.pull_angle_deg)), HITCH_LIMIT_N)
+        start, rule = starting_guess(target / nominal, weight, reference)
         try:
-            out[i] = search(change, target, starting_guess(target / nominal, weight,
-                                                           reference), cap, what=what)
+            out[i] = search(change, target, start, cap, what=what)
         except OutOfReach as exc:
-            out[i] = weight_scaled(exc, target)
+            out[i] = weight_scaled(exc, target, rule)
         except ParameterError as exc:
             refused[i] = str(exc)
     return Measured(out, refused, weight, capacity, time.perf_counter() - t0)
