@@ -158,9 +158,11 @@ RECOVERY_NOT_MET = {
     "compact3": ("issue 32's floor, not met: its oil column takes only 16 % of an idler "
                  "load step in hold, so the +13 % braking pulse needs a 5.2 kN push, 35 % of "
                  "the side's weight; while it lasts the 0.5 s mean does not come back within "
-                 "5 % (edge 6 s), after it in 1.28 s; the release it asks for pulls the "
-                 "carrier in faster than the rod feed fills (air out of solution down to "
-                 "-0.012 MPa gauge; before the air was modelled the run left physics there)"),
+                 "5 % (edge 6 s; the release overshoots to 11.5 kN and the loop swings at "
+                 "~0.7 Hz), after it in 1.28 s; the release it asks for pulls the carrier in "
+                 "faster than the rod feed fills (the rod chambers fall to 0.015-0.08 MPa "
+                 "absolute, below the 0.2 MPa tank, in the 5 seeds; before the air out of "
+                 "solution was modelled the run left physics there)"),
 }
 """Machines on which W3's recovery floor is not met yet (strict xfails: they report when
 met)."""
