@@ -665,10 +665,10 @@ def _find(scenario: Scenario, rig: Rig, hashes: InputHashes) -> HitchCalibration
         write_text_atomic(path, json.dumps(record))
     except OSError:          # a read-only home: calibrate each time rather than fail
         pass
-    # the forces as recorded (to 0.1 N), so a run is the same whether it calibrated or read
-    reach = dict(zip(record["out_of_reach_index"], record["out_of_reach"], strict=True))
-    found |= {i: Applied(f, reach.get(i, "")) for i, f in
-              zip(record["pulse_index"], record["hitch_N"], strict=True)} | measured.refused
+    # the forces as recorded (to 0.1 N), looked up as a cached entry's, so a run is the same
+    # whether it calibrated or read
+    found |= _found([build(CalibrationEntry, record, file=path.name, require_source=False)],
+                    hashes)
     return _calibration(scenario, name, found, "calibrated", key)
 
 
