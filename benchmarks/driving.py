@@ -52,5 +52,5 @@ class DrivingSnapshot:
         start = time.perf_counter()
         foundation, springs = plant.foundation, plant.springs
         for _ in range(steps):
-            step(m, d, foundation, springs=springs)
+            step(m, d, foundation, springs)
         return (time.perf_counter() - start) / steps

@@ -26,6 +26,7 @@ from trackmj.track.foundation import (
     TOLERANCE_N,
     Foundation,
     FoundationLaw,
+    ImplicitSprings,
     _closest,
     foundation_work,
     ground_line,
@@ -57,11 +58,13 @@ def _block(mass_kg: float) -> str:
 
 
 def _setup(xml: str, law: FoundationLaw = LAW) -> tuple[mujoco.MjModel, mujoco.MjData,
-                                                         Foundation]:
+                                                         Foundation, ImplicitSprings]:
+    """The toy's model and data, its foundation on the ``pin_*`` spheres and no implicit
+    springs."""
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
     pins = [g for g in range(model.ngeom) if model.geom(g).name.startswith("pin_")]
-    return model, data, Foundation(model, data, pins, law)
+    return model, data, Foundation(model, data, pins, law), ImplicitSprings(model, data, ())
 
 
 def test_static_sinkage_is_the_load_over_the_stated_stiffness() -> None:
@@ -69,9 +72,9 @@ def test_static_sinkage_is_the_load_over_the_stated_stiffness() -> None:
     foundation's only stiffness), level, and the ground force equals the weight; the
     MJCF ground contact is off (no MuJoCo contacts)."""
     for mass in (300.0, 400.0):
-        model, data, foundation = _setup(_block(mass))
+        model, data, foundation, springs = _setup(_block(mass))
         for _ in range(2000):
-            step(model, data, foundation)
+            step(model, data, foundation, springs)
         assert data.ncon == 0
         np.testing.assert_allclose(foundation.state[:, S_DELTA],
                                    mass * G / 2.0 / LAW.stiffness_N_m, rtol=1e-9)
@@ -88,12 +91,12 @@ def test_free_vibration_rings_with_the_stated_stiffness_and_damping() -> None:
     mass = 200.0
     for damping in (500.0, LAW.damping_N_s_m):
         law = dataclasses.replace(LAW, damping_N_s_m=damping, friction=0.0)
-        model, data, foundation = _setup(_block(mass), law)
+        model, data, foundation, springs = _setup(_block(mass), law)
         rest = -mass * G / (2.0 * law.stiffness_N_m)
         data.qpos[1] = rest + 1e-4
         x = []
         for _ in range(60):
-            step(model, data, foundation)
+            step(model, data, foundation, springs)
             x.append(data.qpos[1] - rest)
         x = np.array(x)
         assert foundation.state[:, S_ON].min() > 0.0   # in contact throughout
@@ -113,28 +116,28 @@ def test_friction_holds_below_the_coulomb_limit_and_slides_above() -> None:
     mass = 100.0
     limit = LAW.friction * mass * G
     for fraction in (0.5, 0.9):
-        model, data, foundation = _setup(_block(mass))
+        model, data, foundation, springs = _setup(_block(mass))
         for _ in range(500):   # set down
-            step(model, data, foundation)
+            step(model, data, foundation, springs)
         start = data.qpos[0]
         for k in range(2500):   # the pull ramped up over 1 s, then held
             data.ctrl[0] = fraction * limit * min(1.0, k / 1000)
-            step(model, data, foundation)
+            step(model, data, foundation, springs)
         x = data.qpos[0]
         for _ in range(1000):
-            step(model, data, foundation)
+            step(model, data, foundation, springs)
         assert abs(data.qpos[0] - x) < 1e-6   # creep below 1 µm/s
         assert data.qpos[0] - start == pytest.approx(fraction * LAW.shear_modulus_m,
                                                      rel=1e-3)
         np.testing.assert_allclose(foundation.friction_forces_N.sum(), -fraction * limit,
                                    rtol=1e-6)
-    model, data, foundation = _setup(_block(mass))
+    model, data, foundation, springs = _setup(_block(mass))
     data.ctrl[0] = 1.5 * limit
     for _ in range(200):
-        step(model, data, foundation)
+        step(model, data, foundation, springs)
     v0 = data.qvel[0]
     for _ in range(100):
-        step(model, data, foundation)
+        step(model, data, foundation, springs)
     assert (data.qvel[0] - v0) / 0.1 == pytest.approx(0.5 * limit / mass, rel=1e-6)
 
 
@@ -147,12 +150,12 @@ def test_a_block_parked_on_a_one_in_two_slope_holds() -> None:
     mass = 100.0
     xml = _block(mass).replace(f'gravity="0 0 -{G}"',
                                f'gravity="{G * math.sin(slope)} 0 {-G * math.cos(slope)}"')
-    model, data, foundation = _setup(xml)
+    model, data, foundation, springs = _setup(xml)
     for _ in range(3000):
-        step(model, data, foundation)
+        step(model, data, foundation, springs)
     x = data.qpos[0]
     for _ in range(1000):
-        step(model, data, foundation)
+        step(model, data, foundation, springs)
     assert abs(data.qpos[0] - x) / 1.0 < 1e-5
     assert foundation.friction_forces_N.sum() == pytest.approx(-mass * G * math.sin(slope),
                                                                rel=1e-4)
@@ -166,13 +169,13 @@ def test_a_bouncing_block_is_never_pulled_and_never_over_the_friction_limit() ->
     lift-offs happen (11) and every step's active set is resolved."""
     law = dataclasses.replace(LAW, damping_N_s_m=2.0e3)
     mass = 50.0
-    model, data, foundation = _setup(_block(mass), law)
+    model, data, foundation, springs = _setup(_block(mass), law)
     data.qpos[1] = 0.02
     data.qvel[2] = 3.0
     data.ctrl[0] = 0.7 * law.friction * mass * G
     lift_offs, touching = 0, np.zeros(2, dtype=bool)
     for _ in range(1500):
-        step(model, data, foundation)
+        step(model, data, foundation, springs)
         on = foundation.state[:, S_ON] > 0.0
         lift_offs += int(np.count_nonzero(touching & ~on))
         touching = on
@@ -215,7 +218,7 @@ def test_the_booked_work_closes_the_energy_balance() -> None:
     matrix of the step's start and W the work of every force on Δq = h·v₁; with the
     foundation's work booked as integrated, Σ(F(v₀) − C·J·Δv)·(J·Δq), the pull's and the
     bias forces' (gravity, Coriolis), the balance closes to round-off."""
-    model, data, foundation = _setup(_block(50.0))
+    model, data, foundation, springs = _setup(_block(50.0))
     data.qpos[1] = 0.005
     data.qvel[2] = 0.5   # a pitch rate: the pins strike one after the other
     data.ctrl[0] = 200.0
@@ -223,7 +226,7 @@ def test_the_booked_work_closes_the_energy_balance() -> None:
     work, other, kinetic, jump = np.zeros(2), 0.0, 0.0, 0.0
     for _ in range(400):
         v0 = data.qvel.copy()
-        step(model, data, foundation)
+        step(model, data, foundation, springs)
         v1 = data.qvel
         foundation_work(foundation.state, foundation.jac, foundation.pins, foundation.dofs,
                         v0, v1, H, work)
@@ -264,13 +267,13 @@ def test_ground_line_of_a_heightfield_and_a_block_resting_on_it() -> None:
     ground = '<geom name="ground" type="hfield" hfield="terrain" pos="0 0 0"/>'
     xml = _block(100.0).replace("<worldbody>", hfield + "<worldbody>").replace(
         '<geom name="ground" type="plane" size="10 1 0.1"/>', ground)
-    model, data, foundation = _setup(xml)
+    model, data, foundation, springs = _setup(xml)
     np.testing.assert_allclose(ground_line(model), [[-2.5, 0], [-1.5, 0], [-0.5, 0.02],
                                                     [0.5, 0.02], [1.5, 0], [2.5, 0]],
                                atol=1e-12)
     data.qpos[1] = 0.02
     for _ in range(1500):
-        step(model, data, foundation)
+        step(model, data, foundation, springs)
     np.testing.assert_allclose(foundation.normal_forces_N, 100.0 * G / 2.0, rtol=1e-6)
     assert data.qpos[1] == pytest.approx(0.02 - 100.0 * G / (2.0 * LAW.stiffness_N_m),
                                          abs=1e-9)

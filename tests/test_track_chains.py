@@ -227,7 +227,6 @@ def test_pin_slides_armature_is_only_for_mujocos_own_stepping(slides) -> None:
     np.testing.assert_allclose(armature, stretch_armature_kg(p), rtol=1e-12)
     assert (h * h * k + 2.0 * h * b) / armature[0] == pytest.approx(4.0 / p.solver.soft_margin)
     plant = TrackPlant(m, p)
-    assert plant.springs is not None
     np.testing.assert_array_equal(plant.model.dof_armature[dofs], 0.0)
     np.testing.assert_array_equal(np.sort(plant.springs.dofs), np.sort(dofs))
 

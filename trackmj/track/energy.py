@@ -351,10 +351,9 @@ class TrackEnergyLedger:
         mujoco.mj_mulM(m, d, self._mv, v1)
         self._acc[A_JUMP] -= 0.5 * float(dv @ self._mdv)
         self._acc[A_EXPLICIT] += float((d.qfrc_spring - d.qfrc_bias) @ dq)
-        springs = self.plant.springs
-        if springs is not None:   # their implicit part −h·K·v₁ on Δq: −K·Δq² per dof
-            s = springs.dofs
-            self._acc[A_IMPLICIT_SPRINGS] -= float(springs.h_stiffness @ (v1[s] * dq[s]))
+        springs = self.plant.springs   # their implicit part −h·K·v₁ on Δq: −K·Δq² per dof
+        s = springs.dofs
+        self._acc[A_IMPLICIT_SPRINGS] -= float(springs.h_stiffness @ (v1[s] * dq[s]))
         self._acc[A_KINETIC_MID] += 0.5 * float(v1 @ self._mv)
         self._v_prev = v1.copy()
         self._steps += 1

@@ -642,7 +642,8 @@ class ImplicitSprings:
     :meth:`Foundation.apply` (which saved the true M: :meth:`Foundation.finish` puts it
     back); they own ``qfrc_applied`` of their dofs.
 
-    joints: ids of slide or hinge joints with ``jnt_stiffness`` K [N/m or N·m/rad].
+    joints: ids of slide or hinge joints with ``jnt_stiffness`` K [N/m or N·m/rad]; none
+    for a model without such springs (structure "chains" or "free", the foundation's toys).
     """
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData,
@@ -672,7 +673,7 @@ class ImplicitSprings:
 
 
 def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
-         saved: np.ndarray | None = None, springs: ImplicitSprings | None = None) -> None:
+         springs: ImplicitSprings, saved: np.ndarray | None = None) -> None:
     """One MuJoCo step with the foundation bound to ``data`` (see :class:`Foundation`) and
     the ``springs`` integrated implicitly (:class:`ImplicitSprings`), its ``mj_step2`` taken
     again while the law contradicts an attempt's active set, at most :data:`MAX_ATTEMPTS`
@@ -685,8 +686,7 @@ def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
     mujoco.mj_getState(model, data, saved, REDO_STATE)
     for attempt in range(MAX_ATTEMPTS):
         foundation.apply()
-        if springs is not None:
-            springs.apply()
+        springs.apply()
         mujoco.mj_factorM(model, data)
         mujoco.mj_step2(model, data)
         final = attempt == MAX_ATTEMPTS - 1

@@ -269,9 +269,8 @@ class TrackPlant:
         equalise_link_weights(m)   # chains: every link link_00's row weight
         self.foundation = Foundation(m, self.data, self._pin_geom,
                                      FoundationLaw.from_params(params))
-        # the pin slides' springs by backward Euler (no armature); None without slides
-        self.springs = (ImplicitSprings(m, self.data, self.pin_slide_joints)
-                        if len(self.pin_slide_joints) else None)
+        # the pin slides' springs by backward Euler (no armature); none without slides
+        self.springs = ImplicitSprings(m, self.data, self.pin_slide_joints)
         self._saved_state = np.zeros(mujoco.mj_stateSize(m, REDO_STATE))
         # the step's start velocity (the foundation keeps it) and the chassis' z dof, for
         # the per-step acceleration readout
@@ -633,10 +632,7 @@ class TrackPlant:
             "stretch_qpos": self._stretch_qpos,
             "home_envelope": self._envelope, "timestep_s": np.array([m.opt.timestep]),
             **self.foundation.configuration(),
-            **(self.springs.configuration() if self.springs is not None else
-               {"spring_dofs": np.zeros(0, dtype=np.int64),
-                "spring_mass_index": np.zeros(0, dtype=np.int64),
-                "spring_h_stiffness": np.zeros(0)}),
+            **self.springs.configuration(),
         }
 
     def hitch_kinematics(self) -> np.ndarray:
@@ -663,7 +659,7 @@ class TrackPlant:
         self._ctrl[self._tensioner] = force
         self._biasprm[self._tensioner, 2] = damping
         for _ in range(self.substeps):
-            foundation_step(m, d, self.foundation, self._saved_state, self.springs)
+            foundation_step(m, d, self.foundation, self.springs, self._saved_state)
         stroke = self.stroke_m
         if self.substeps == 1:
             velocity = self.stroke_velocity_m_s

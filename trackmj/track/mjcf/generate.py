@@ -39,7 +39,7 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
     foundation = Foundation(model, data, pins, FoundationLaw.from_params(params))
     slides = [j for j in pin_slide_ids(model, range(params.track.link_count)).values()
               if j >= 0]
-    springs = ImplicitSprings(model, data, slides) if slides else None
+    springs = ImplicitSprings(model, data, slides)
     tensioner = model.actuator("tensioner").id
     t = params.tensioner
     model.actuator_biasprm[tensioner, :3] = (0.0, -t.stiffness_N_m, -t.damping_N_s_m)
@@ -52,7 +52,7 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
                              "and positions in the model file")
     steps = round(duration_s / model.opt.timestep)
     for _ in range(steps):
-        step(model, data, foundation, springs=springs)
+        step(model, data, foundation, springs)
     if sum(w.number for w in data.warning):
         raise RuntimeError("MuJoCo warnings while settling the home keyframe")
     return data
