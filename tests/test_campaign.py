@@ -135,6 +135,13 @@ def test_a_duration_that_cuts_an_event_is_refused_naming_it(tmp_path, capsys):
                                              r"at 3 s\)"):
         check_duration(load_scenario("W1"), 2.0)
     check_duration(load_scenario("W4"), 20.5)      # the drop's edge back is over at 20.1 s
+    # two pulses cut off: the duration offered holds the later one too (18-20 s, 0.1 s edge)
+    with pytest.raises(ParameterError, match=r"\[\[load_pulses\]\]\[0\] \(load pulse 6-8 s\) "
+                                             r"\(and 1 more, the last \[\[load_pulses\]\]\[1\] "
+                                             r"\(load pulse 18-20 s\)\): they need the run to "
+                                             r"last 20.1 or more s; give --duration 20.1 or more"):
+        check_duration(load_scenario("W3"), 2.0)
+    check_duration(load_scenario("W3"), 20.1)
 
 
 def test_moved_events_keep_their_order_inside_the_run():

@@ -61,19 +61,20 @@ def cut_events(sc: Scenario, duration_s: float) -> list[Event]:
 
 
 def check_duration(sc: Scenario, duration_s: float) -> None:
-    """ParameterError (one line naming the first event cut off) if a run of ``duration_s``
-    [s] would cut off one of ``sc``'s events; the same rule as the scenario file's, where an
-    event after ``duration_s`` is refused."""
+    """ParameterError (one line naming the first event cut off, and the duration that holds
+    every one of them) if a run of ``duration_s`` [s] would cut off one of ``sc``'s events;
+    the same rule as the scenario file's, where an event after ``duration_s`` is refused."""
     cut = cut_events(sc, duration_s)
     if cut:
-        e = cut[0]
-        more = f" (and {len(cut) - 1} more)" if len(cut) > 1 else ""
-        starts_inside = e.times[0][1] >= e.needs_s     # a step or open ramp: start < duration
-        least = f"more than {e.needs_s:g}" if starts_inside else f"{e.needs_s:g} or more"
+        first, last = cut[0], max(cut, key=lambda e: e.needs_s)
+        more = f" (and {len(cut) - 1} more, the last {last.what})" if len(cut) > 1 else ""
+        starts_inside = last.times[0][1] >= last.needs_s   # a step or open ramp: start < end
+        least = f"more than {last.needs_s:g}" if starts_inside else f"{last.needs_s:g} or more"
+        needs = "they need" if len(cut) > 1 else "it needs"
         raise ParameterError(
-            f"--duration {duration_s:g} s cuts off {sc.source.name} {e.what}{more}: it needs "
-            f"the run to last {least} s; give --duration {least}, or move "
-            f"the event with --set scenario.{e.times[0][0]}=...")
+            f"--duration {duration_s:g} s cuts off {sc.source.name} {first.what}{more}: "
+            f"{needs} the run to last {least} s; give --duration {least}, or move "
+            f"the event with --set scenario.{first.times[0][0]}=...")
 
 
 def moved_events(sc: Scenario, duration_s: float) -> dict[str, float]:
