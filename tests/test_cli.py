@@ -5,15 +5,18 @@ without the heavy modules."""
 
 from __future__ import annotations
 
+import math
 import re
 import subprocess
 import sys
 
 import pytest
+from synthetic import synthetic_result
 
 import trackmj
 from trackmj.cli.main import main
 from trackmj.cli.parser import build_parser
+from trackmj.cli.summary import summary_table
 from trackmj.scenarios.load import builtin_names, load_scenario
 from trackmj.sim import controllers
 from trackmj.sim.entries import Entry
@@ -148,3 +151,17 @@ def test_help_and_argument_errors_import_no_heavy_module(argv) -> None:
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                          check=True).stdout
     assert out.splitlines()[-1] == "[]"
+
+
+def test_the_summary_names_the_edges_the_tension_never_came_back_after() -> None:
+    """The acceptance's edge recovery (the 0.5 s mean back within ±5 % after each
+    disturbance edge) reads which edges it never came back after, not a dash."""
+    result = synthetic_result("W1", duration_s=2.0)
+    result.metrics["acceptance"] = {**result.metrics["acceptance"], "recovery_max_s": math.nan,
+                                    "edge_recovery_s": {"6": math.nan, "8": 1.28,
+                                                        "18": 0.0, "20": None}}
+    rows = summary_table([result], "{r.architecture}").splitlines()
+    assert "| back within 5 % after an edge [s] | never after the 6, 20 s edges |" in rows
+    result.metrics["acceptance"]["edge_recovery_s"] = {}
+    rows = summary_table([result], "{r.architecture}").splitlines()
+    assert "| back within 5 % after an edge [s] | – |" in rows

@@ -33,6 +33,9 @@ DISTURBANCE_METRICS = ("disturbance_peak_error_lp_N", "recovery_time_lp_s")
 """Rows shown only where a scenario has a disturbance."""
 UNSETTLED = ("settling_time_lp_s", "recovery_time_lp_s")
 """Times that read "not within ±band" when they never came."""
+EDGE_RECOVERY = "acceptance.recovery_max_s"
+"""The acceptance's slowest return after a disturbance edge: reads "never after the E s
+edge" when the 0.5 s mean did not come back after some edge."""
 VALVE_METRICS = ("valve_switches", "valve_switch_rate_Hz")
 """Rows that read "n/a" for a run whose tensioner takes no valve mode
 (``valve_mode_applied`` false: a passive tensioner, an FMU without a valve_mode input)."""
@@ -46,7 +49,8 @@ def summary_table(results: list, title: str) -> str:
     """Markdown table of the headline metrics, one column per result (``title`` formatted
     with ``r=`` the result heads its column). Rows of a step or a disturbance appear only
     where the scenario has one; a settling or recovery time that never came reads "not
-    within ±band" instead of a dash, a valve metric of a tensioner without valves "n/a".
+    within ±band" instead of a dash (the acceptance's edge recovery names the edges it
+    never came back after), a valve metric of a tensioner without valves "n/a".
     Below the table, one warning line per flag of each run (:func:`warning_lines`)."""
     # start-up: --help and argument errors must not import SciPy
     from trackmj.results.metrics import METRIC_DISPLAY, lookup
@@ -89,6 +93,11 @@ def _cell(value: float, metrics: Mapping[str, Any], window: dict, key: str,
         return f"{value * scale:.3g}"
     if key in UNSETTLED and "settle_band_rel" in window:
         return f"not within ±{100 * window['settle_band_rel']:g} %"
+    if key == EDGE_RECOVERY:
+        edges = (metrics.get("acceptance") or {}).get("edge_recovery_s") or {}
+        never = [edge for edge, s in edges.items() if s is None or s != s]
+        if never:
+            return f"never after the {', '.join(never)} s edge{'s' * (len(never) > 1)}"
     return "–"
 
 
