@@ -44,9 +44,10 @@ HEADER = """\
 # W3's rear-hitch forces per shipped machine: the hitch force along the chain whose hold-mode
 # idler-load change is W3's target (delta_rel x the machine's nominal tension), found by
 # trackmj/sim/w3_hitch.py (secant on hold-mode tp runs; start: LF1352's force per side
-# weight x this side weight; bound: the drawbar capacity mu x side weight, Wong, Theory of
-# Ground Vehicles; a target no force within it reaches is out of reach: the weight-scaled
-# start is applied, listed in out_of_reach with its measured change). Written by
+# weight x this side weight; bounds: the drawbar capacity mu x side weight, Wong, Theory of
+# Ground Vehicles, and 75 % of the static tipping force, ISO 10567; a target no force within
+# them reaches is out of reach: the trial furthest towards it is applied, listed in
+# out_of_reach with its measured change). Written by
 # `python experiments/calibrate_w3.py [--machine NAME]`; not edited by hand. A run uses a
 # table only while its hashes equal those of the run's inputs (the validated mechanics and
 # hydraulics, the pulses, speed, initial force, terrain and method); otherwise it

@@ -1,32 +1,42 @@
 """W3's physical load pulses on each shipped machine: the hitch forces calibrated for the
 machine change its hold-mode idler load by the scenario's targets (+2/15 and -1.5/15 of its
-nominal tension), measured on the tp plant; a target no hitch force within the drawbar
-capacity reaches is out of the machine's reach and takes LF1352's force per side weight,
-said; the committed calibration belongs to the shipped files; and in closed loop the
-tension recovers after each pulse edge."""
+nominal tension), measured on the tp plant, every trial within the drawbar capacity and
+75 % of the static tipping force (which brackets where the side rolls over); a target no
+such force reaches is out of the machine's reach and takes the trial furthest towards it,
+said, also on a layout no one shipped; the committed calibration belongs to the shipped
+files; and in closed loop the tension recovers after each pulse edge."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import re
 
+import numpy as np
 import pytest
+from layouts import Variant, overrides
 
 from trackmj.io import cache_dir
 from trackmj.machines.assembly import names
+from trackmj.ports import COUPLING_STEP_S, StepInputs
+from trackmj.scenarios.schema import LoadPulse
 from trackmj.sim.run import simulate
 from trackmj.sim.setup import RunSetup, prepare
 from trackmj.sim.w3_hitch import (
     REFERENCE_MACHINE,
+    TIPPING_SHARE,
     Rig,
     calibrated_setup,
     calibration_pulse,
     committed_entries,
     drawbar_capacity_N,
+    hold_mode_run,
     idler_force_history,
     input_hashes,
     load_change_N,
     side_weight_N,
+    tipping_forces_N,
 )
 
 
@@ -71,24 +81,27 @@ def test_front_sprocket_tows_for_the_rise_the_rear_sprocket_pushes_for() -> None
     assert _calibrated("compact3").scenario.pulse_hitch_N(0) < 0.0
 
 
-def test_compact3_drive_pulse_is_out_of_reach_and_takes_the_weight_scaled_tow() -> None:
+def test_compact3_drive_pulse_is_out_of_reach_and_takes_the_trial_furthest_towards_it(
+) -> None:
     """compact3's rollers are bolted to its frame (no suspension), so a tow does not shorten
     the track path as on LF1352: even at the drawbar capacity mu W along the 30° chain the
-    hold-mode idler load does not fall by 1.3 kN. The drive pulse then applies LF1352's tow
-    per side weight on compact3's side weight, said with the reason, and its measured
-    change is compact3's own: towards the target, short of it."""
+    hold-mode idler load does not fall by 1.3 kN. The drive pulse then applies the trial
+    that moved it furthest towards the target (here the search's start, LF1352's tow per
+    side weight on compact3's side weight), said with the reason, and its measured change
+    is compact3's own: towards the target, short of it."""
     setup = _calibrated("compact3")
     cal = setup.scenario.hitch_calibration
     assert cal is not None and len(cal.out_of_reach) == 1
     assert "W3 load pulse 1 (-1.300 kN) on machine compact3 (drawbar capacity mu W = 0.8 x " \
            "14.77 kN" in cal.out_of_reach[0]
-    assert "is out of reach: the pulse applies the weight-scaled tow" in cal.out_of_reach[0]
+    assert "is out of reach: the pulse applies the tow +4130 N, of the forces tried the one " \
+           "that moved the idler load furthest towards the target" in cal.out_of_reach[0]
     rig = Rig(setup)
     weight = side_weight_N(rig)
     assert weight == pytest.approx(1500.0 * 9.81, rel=0.01)   # the 3 t class, one side
     lf1352 = committed_entries()[REFERENCE_MACHINE]
     lf1352_tow = lf1352.hitch_N[lf1352.pulse_index.index(1)]
-    # the rule: the same drawbar load per side weight (the entries round to 0.1 N)
+    # the start's rule: the same drawbar load per side weight (the entries round to 0.1 N)
     assert setup.scenario.pulse_hitch_N(1) == pytest.approx(
         lf1352_tow / lf1352.side_weight_N * weight, abs=0.2)
     change = _change_of_calibrated_pulse(setup, 1)
@@ -143,6 +156,58 @@ def test_pushing_raises_and_towing_lowers_the_idler_load_on_lf1352() -> None:
     tow = load_change_N(setup.scenario, rig, 3e3, 30.0, reference=reference)
     assert push > 0.0 > tow
     assert abs(push) > abs(tow)
+
+
+def _fewest_pins_carried(machine: str, hitch_N: float) -> int:
+    """Fewest pins the ground carries at any step while a hitch force ``hitch_N`` [N] along
+    W3's 30° chain rises over 1 s from 1 s and is held to 6 s, the machine standing in hold
+    mode (valves closed)."""
+    setup = prepare("W3", machine=machine)
+    plant, element = hold_mode_run(setup.scenario, Rig(setup))
+    pulse = LoadPulse(start_s=1.0, end_s=6.0, delta_N=0.0, hitch_N=hitch_N,
+                      pull_angle_deg=30.0, rise_s=1.0)
+    sc = dataclasses.replace(setup.scenario, load_pulses=(pulse,), hitch_calibration=None)
+    t = COUPLING_STEP_S * np.arange(round(6.0 / COUPLING_STEP_S))
+    pull, down = sc.hitch_force_N(t)
+    fewest = plant.link_count
+    for k in range(len(t)):
+        plant.apply(StepInputs(0.0, float(pull[k]), float(down[k]), math.nan))
+        plant.step(element)
+        fewest = min(fewest, int(np.count_nonzero(plant.ground_forces_N()[:, 0] > 0.0)))
+    return fewest
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("machine", ["lf1352", "compact3"])
+def test_static_tipping_force_brackets_where_the_side_rolls_over(machine: str) -> None:
+    """The static moment balance over the idler's line (tipping_forces_N) against the
+    standing side pushed forward and up along 30°: at 0.8 of it the track stays on the
+    ground (pins carried at every step), at 1.2 the side rolls over its front end (a step
+    with no pin on the ground)."""
+    setup = prepare("W3", machine=machine)
+    push, tow = tipping_forces_N(hold_mode_run(setup.scenario, Rig(setup))[0], 30.0)
+    assert 0.0 < push < tow      # the hitch is at the rear: a push tips it first
+    assert _fewest_pins_carried(machine, -0.8 * push) >= 2
+    assert _fewest_pins_carried(machine, -1.2 * push) == 0
+
+
+@pytest.mark.slow
+def test_w3_calibrates_on_a_front_sprocket_compact3_within_the_tipping_limit() -> None:
+    """compact3 with its sprocket in front (6 road wheels, slide at 10°; not shipped): the
+    search for its drive pulse reached the drawbar capacity's 13.8 kN push, 1.6 times its
+    tipping force, and that run left physics, refusing W3. Every trial now stays within
+    75 % of the static tipping force; the pulse is out of reach and says so."""
+    variant = Variant("compact3", sprocket_front=True, wheel_count=6, slide_angle_deg=10.0)
+    setup = _calibrated("compact3", overrides(variant))
+    cal = setup.scenario.hitch_calibration
+    assert cal is not None and cal.origin in ("calibrated", "cache")
+    push, tow = tipping_forces_N(hold_mode_run(setup.scenario, Rig(setup))[0], 30.0)
+    for reason in cal.out_of_reach:
+        tried = [float(f) for f in re.findall(r"([+-]\d+) N -> ", reason)]
+        assert tried and all(-TIPPING_SHARE * push - 1.0 <= f <= TIPPING_SHARE * tow + 1.0
+                             for f in tried), reason
+    assert all(f is not None and -TIPPING_SHARE * push - 1.0 <= f <= TIPPING_SHARE * tow + 1.0
+               for f in cal.hitch_N)
 
 
 RECOVERY_NOT_MET = {

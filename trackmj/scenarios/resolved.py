@@ -59,7 +59,7 @@ class HitchCalibration:
     hitch_N), where the forces came from ("committed": ``experiments/W3_calibration.toml``;
     "cache": the user's cache directory; "calibrated": measured in this process), the
     hash of the inputs that determine them and, per pulse whose target is out of the
-    machine's reach (its force then the weight-scaled one), why and what it does (one
+    machine's reach (its force then the trial furthest towards it), why and what it does (one
     line each)."""
 
     machine: str

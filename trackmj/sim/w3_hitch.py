@@ -40,14 +40,20 @@ The rule that ties the hitch force to the machine (:func:`starting_guess`,
   ground's shear strength, μ·W on firm ground (Wong, *Theory of Ground Vehicles*, ch. 2
   and 4: tractive effort ≤ c·A + W·tan φ; a dry-friction ground has c = 0, tan φ = μ).
   The chain's vertical component changes the normal load (a tow adds to it, a push lifts
-  it); the bound leaves that out.
-* a target that no force within that bound reaches (compact3's drive pulse: its rollers are
-  bolted to the frame, so a tow does not shorten its track path) is out of the machine's
-  reach, not refused: the pulse applies the secant's start itself, LF1352's hitch force per
-  side weight times this side weight, in the direction that moved the idler load towards
-  the target, and the machine's own hold-mode change with it is recorded and printed (one
-  line on stderr per process). The disturbance is then the same drawbar load per weight as
-  on LF1352; the idler sees what this machine's layout makes of it.
+  it); that bound leaves it out;
+* and the hitch force must stay within 75 % of the static force that would tip the side
+  over the centre of its idler or sprocket (:func:`tipping_forces_N`; a push tips it
+  forward, a tow backward): the rated load of an earth-moving machine in normal work is at
+  most 75 % of its tipping load (ISO 10567, rated lift capacity). A trial beyond it is no
+  working load (on a layout no one shipped, compact3 with its sprocket in front, the
+  drawbar capacity's 13.8 kN push, 1.6 times its tipping force, left physics and refused
+  W3);
+* a target that no force within those bounds reaches (compact3's drive pulse: its rollers
+  are bolted to the frame, so a tow does not shorten its track path) is out of the
+  machine's reach, not refused: the pulse applies, of the forces the search tried, the one
+  that moved the idler load furthest towards the target, and the machine's own hold-mode
+  change with it is recorded and printed (one line on stderr per process); the idler sees
+  what this machine's layout makes of the load.
   A run that leaves physics, or a secant that does not converge, still refuses the pulse.
 
 The calibrated forces are looked up by a hash of what determines them (the machine's
@@ -113,13 +119,17 @@ REL_TOL = 0.02
 """The secant stops when the change is within 2 % of the target."""
 MAX_RUNS = 14
 """Trial runs per pulse before the calibration gives up."""
+TIPPING_SHARE = 0.75
+"""Share of the static tipping force a trial hitch force may reach (ISO 10567: the rated lift
+capacity of an earth-moving machine is at most 75 % of its tipping load)."""
 REFERENCE_MACHINE = DEFAULT_MACHINE
 """The machine whose calibrated hitch forces per side weight start the secant (LF1352)."""
 CALIBRATION_FILE = BUILTIN_FOLDER / "W3_calibration.toml"
 """The committed calibration of the shipped machines."""
 METHOD = (f"hold-mode tp, seed 0, nominal variant, {RIG_SUPPLY_MODEL} supply; pulse at "
           f"{START_S} s, plateau {PLATEAU_S} s, mean after {SETTLE_ALLOWANCE_S} s; secant "
-          f"to {REL_TOL}")
+          f"to {REL_TOL} within mu W and {TIPPING_SHARE} of the static tipping force; out of "
+          "reach: the trial furthest towards the target")
 """What a calibration's numbers depend on besides the machine and the pulses (hashed)."""
 
 
@@ -198,6 +208,50 @@ def drawbar_capacity_N(params: ModelParams, weight_N: float) -> float:
     return params.track.ground_friction * weight_N
 
 
+def tipping_forces_N(plant: TrackPlant, pull_angle_deg: float) -> tuple[float, float]:
+    """Static hitch forces along a chain ``pull_angle_deg`` [°] below the horizontal that
+    tip the settled side of ``plant`` over an end of its track [N]: (push, tow), both > 0
+    (the push's force is −push), inf where no force does.
+
+    Planar moment balance on the side as one rigid body (x forward, z up, the ground under
+    the track at z = 0): its weight W at the centre of mass x_c; the hitch force f along the
+    chain (f > 0 a tow: f·cos a rearward and f·sin a down at the hitch (x_h, z_h); f < 0
+    pushes forward and up), the ground's normal N = W + f·sin a at x_N and its traction
+    (in the ground line, no moment). x_N·N = x_c·W − z_h·f·cos a + x_h·f·sin a, so the
+    centre reaches a tipping line x_e at
+
+        f = W·(x_c − x_e) / (sin a·(x_e − x_h) + z_h·cos a),
+
+    the front one for a push, the rear one for a tow; a push is also bounded by lifting the
+    side (N = 0: f = −W / sin a). The tipping lines are under the centres of the track's
+    end wheels (sprocket and idler): pitching over an end, the side rolls onto the track
+    round that wheel. Measured (push along 30°, 1 s rise, hold mode): compact3 stands at
+    0.89 of this force and rolls over at 1.0, LF1352 stands at 0.8 and rolls over at 1.2
+    (tests/test_w3_calibration.py brackets both); the settled ground patch's front end as
+    the line would put compact3's limit at 0.81 of this, where it still stands."""
+    model, data = plant.model, plant.data
+    weight = float(model.body_subtreemass[0]) * float(-model.opt.gravity[2])
+    x_c = float(data.subtree_com[0][0])
+    rear, front = sorted(float(data.xpos[model.body(name).id][0])
+                         for name in ("sprocket", "idler"))
+    carried = plant.ground_forces_N()[:, 0] > 0.0
+    if not carried.any():
+        raise ValueError("tipping_forces_N: no pin carried by the ground (is the plant settled?)")
+    line = plant.foundation.line
+    ground_z = float(np.mean(np.interp(plant.pin_positions()[carried, 0], line[:, 0],
+                                       line[:, 1])))
+    hitch = plant.hitch_kinematics()[9:12]
+    x_h, z_h = float(hitch[0]), float(hitch[2]) - ground_z
+    s, c = math.sin(math.radians(pull_angle_deg)), math.cos(math.radians(pull_angle_deg))
+
+    def tipping(x_end: float) -> float:      # |f| at the line x_end (its sign: x_c − x_end)
+        lever = s * (x_end - x_h) + z_h * c
+        return weight * abs(x_c - x_end) / lever if lever > 0.0 else math.inf
+
+    lift = weight / s if s > 0.0 else math.inf
+    return min(tipping(front), lift), tipping(rear)
+
+
 def calibration_pulse(hitch_N: float, pull_angle_deg: float, rise_s: float,
                       plateau_s: float = PLATEAU_S) -> LoadPulse:
     """A pulse from START_S with the given hitch force [N], angle [deg], edges [s] and
@@ -226,7 +280,7 @@ def load_change_N(scenario: Scenario, rig: Rig, hitch_N: float, pull_angle_deg: 
 class PulseCalibration:
     """One pulse's result: the hitch force [N], the idler-load change it gave [N], the
     hold-mode runs it took (the reference run not counted) and, for a target out of the
-    machine's reach, why (one line; the force is then the weight-scaled start)."""
+    machine's reach, why (one line; the force is then the trial furthest towards it)."""
 
     hitch_N: float
     achieved_N: float
@@ -235,9 +289,9 @@ class PulseCalibration:
 
 
 class OutOfReach(ParameterError):
-    """No hitch force within the drawbar capacity reaches the target: ``what`` names the
-    pulse, machine and capacity, ``why`` what the search found; ``tried`` holds each
-    trial's (hitch force [N], idler-load change [N]), the start and its mirror first."""
+    """No hitch force within the limits reaches the target: ``what`` names the pulse,
+    machine and limits, ``why`` what the search found; ``tried`` holds each trial's (hitch
+    force [N], idler-load change [N]), the start and its mirror first."""
 
     def __init__(self, what: str, why: str, tried: list[tuple[float, float]]) -> None:
         super().__init__(f"{what}: {why}")
@@ -260,10 +314,10 @@ def starting_guess(target_rel: float, weight_N: float,
     return -target_rel * weight_N, "the target's share of the nominal x the side weight"
 
 
-def search(change: Callable[[float], float], target_N: float, start_N: float, cap_N: float,
-           *, what: str) -> PulseCalibration:
+def search(change: Callable[[float], float], target_N: float, start_N: float,
+           limits_N: tuple[float, float], *, what: str) -> PulseCalibration:
     """Hitch force [N] whose ``change`` [N] equals ``target_N`` within REL_TOL, every trial
-    within ±``cap_N``.
+    within ``limits_N`` = (push, tow), the largest push and tow along the chain [N] (> 0).
 
     ``start_N`` first; if it misses, its mirror (−start_N) too, and the direction whose
     change goes further towards the target is kept (on a front-sprocket machine a tow may
@@ -272,12 +326,18 @@ def search(change: Callable[[float], float], target_N: float, start_N: float, ca
     towards it), then the Illinois variant of false position closes the bracket. The
     response need not be linear (a rigid undercarriage makes it convex) nor monotone over
     the whole range; the bracket keeps the root nearest the origin that the steps find.
-    :class:`OutOfReach` (one line, naming ``what``) if the change at the cap still falls
+    :class:`OutOfReach` (one line, naming ``what``) if the change at the limit still falls
     short; ParameterError if a run leaves physics or MAX_RUNS trials do not reach the
     target."""
     if not (math.isfinite(target_N) and target_N != 0.0):
         raise ValueError(f"target_N = {target_N!r}: must be finite and non-zero")
     tried: list[tuple[float, float]] = []
+
+    def limit(f: float) -> float:           # the limit in f's direction [N]
+        return limits_N[0] if f < 0.0 else limits_N[1]
+
+    def within(f: float) -> float:          # f capped at that limit
+        return math.copysign(min(abs(f), limit(f)), f)
 
     def run(f: float) -> float:
         d = change(f)
@@ -301,26 +361,27 @@ def search(change: Callable[[float], float], target_N: float, start_N: float, ca
                               "e.g. --set scenario.load_pulses.N.hitch_N=..., is applied as "
                               "it is)")
 
-    f = math.copysign(min(abs(start_N), cap_N), start_N)
+    f = within(start_N)
     d = run(f)
     if close(d):
         return PulseCalibration(f, d, len(tried))
-    d_mirror = run(-f)
+    mirror = within(-f)
+    d_mirror = run(mirror)
     if close(d_mirror):
-        return PulseCalibration(-f, d_mirror, len(tried))
+        return PulseCalibration(mirror, d_mirror, len(tried))
     if towards(d_mirror) > towards(d):
-        f, d = -f, d_mirror
+        f, d = mirror, d_mirror
     lo = (0.0, 0.0)
     while towards(d) < abs(target_N):        # short: step out along the direction
-        if abs(f) >= cap_N:
-            raise OutOfReach(what, f"at the limit {cap_N:.0f} N along the chain the idler "
+        if abs(f) >= limit(f):
+            raise OutOfReach(what, f"at the limit {abs(f):.0f} N along the chain the idler "
                              f"load changes by {d / 1e3:+.3f} kN, short of "
                              f"{target_N / 1e3:+.3f} kN; {trials()}", tried)
         if len(tried) >= MAX_RUNS:
             raise give_up(f"not bracketed in {MAX_RUNS} runs")
         grows = towards(d) > towards(lo[1])
         nxt = (f + (target_N - d) * (f - lo[0]) / (d - lo[1])) if grows else 2.0 * f
-        nxt = math.copysign(min(max(abs(nxt), abs(f) * 1.25), cap_N), f)
+        nxt = within(math.copysign(max(abs(nxt), abs(f) * 1.25), f))
         lo, (f, d) = (f, d), (nxt, 0.0)
         d = run(f)
         if close(d):
@@ -345,17 +406,17 @@ def search(change: Callable[[float], float], target_N: float, start_N: float, ca
     raise give_up(f"not within {REL_TOL:.0%} in {MAX_RUNS} runs")
 
 
-def weight_scaled(short: OutOfReach, target_N: float, rule: str) -> PulseCalibration:
-    """The pulse for a target out of reach (``short``, from :func:`search`): the secant's
-    start (the weight-scaled force by ``rule``, capped at the drawbar capacity) or its mirror,
-    whichever moved the idler load further towards ``target_N`` [N], with its measured
-    change and the reason."""
-    (f, d), (f_mirror, d_mirror) = short.tried[:2]
-    if d_mirror * target_N > d * target_N:
-        f, d = f_mirror, d_mirror
-    reason = (f"{short.what} is out of reach: the pulse applies the weight-scaled "
-              f"{'tow' if f > 0.0 else 'push'} {f:+.0f} N ({rule}), a hold-mode idler-load "
-              f"change of {d / 1e3:+.3f} kN ({short.why}; --set "
+def furthest_towards(short: OutOfReach, target_N: float, rule: str) -> PulseCalibration:
+    """The pulse for a target out of reach (``short``, from :func:`search`): of the forces
+    tried (all within the limits; the search started from ``rule``), the one that moved the
+    idler load furthest towards ``target_N`` [N], with its measured change and the
+    reason."""
+    f, d = max(short.tried, key=lambda trial: math.copysign(trial[1], target_N))
+    kind = "tow" if f > 0.0 else "push"
+    reason = (f"{short.what} is out of reach: the pulse applies the {kind} {f:+.0f} N, "
+              f"of the forces tried the one that moved the idler load "
+              f"furthest towards the target (the search started from {rule}), a hold-mode "
+              f"idler-load change of {d / 1e3:+.3f} kN ({short.why}; --set "
               "scenario.load_pulses.N.hitch_N=... applies a force of your choice)")
     return PulseCalibration(f, d, len(short.tried), reason)
 
@@ -380,6 +441,7 @@ def calibrate(scenario: Scenario, rig: Rig, indices: tuple[int, ...],
     t0 = time.perf_counter()
     weight = side_weight_N(rig)
     capacity = drawbar_capacity_N(rig.params, weight)
+    settled, _ = hold_mode_run(scenario, rig)       # the side standing: its tipping lines
     nominal = scenario.nominal_tension_N or rig.params.nominal_tension_N
     references: dict[tuple[float, float], np.ndarray] = {}
     out, refused = {}, {}
@@ -395,17 +457,23 @@ def calibrate(scenario: Scenario, rig: Rig, indices: tuple[int, ...],
                    ref: np.ndarray = references[shape]) -> float:
             return load_change_N(scenario, rig, f, angle, rise_s=rise, reference=ref)
 
+        tip_push, tip_tow = tipping_forces_N(settled, p.pull_angle_deg)
         what = (f"{scenario.name} load pulse {i} ({target / 1e3:+.3f} kN) on machine "
                 f"{rig.machine.name} (drawbar capacity mu W = "
                 f"{rig.params.track.ground_friction:g} x {weight / 1e3:.2f} kN = "
-                f"{capacity / 1e3:.2f} kN horizontal, Wong, Theory of Ground Vehicles; the "
-                f"file's limit {HITCH_LIMIT_N / 1e3:g} kN)")
-        cap = min(capacity / math.cos(math.radians(p.pull_angle_deg)), HITCH_LIMIT_N)
+                f"{capacity / 1e3:.2f} kN horizontal, Wong, Theory of Ground Vehicles; "
+                f"{TIPPING_SHARE * 100:g} % of the static tipping force along the chain, "
+                f"ISO 10567: "
+                f"push {TIPPING_SHARE * tip_push / 1e3:.2f} kN, tow "
+                f"{TIPPING_SHARE * tip_tow / 1e3:.2f} kN; the file's limit "
+                f"{HITCH_LIMIT_N / 1e3:g} kN)")
+        drawbar = min(capacity / math.cos(math.radians(p.pull_angle_deg)), HITCH_LIMIT_N)
+        limits = (min(drawbar, TIPPING_SHARE * tip_push), min(drawbar, TIPPING_SHARE * tip_tow))
         start, rule = starting_guess(target / nominal, weight, reference)
         try:
-            out[i] = search(change, target, start, cap, what=what)
+            out[i] = search(change, target, start, limits, what=what)
         except OutOfReach as exc:
-            out[i] = weight_scaled(exc, target, rule)
+            out[i] = furthest_towards(exc, target, rule)
         except ParameterError as exc:
             refused[i] = str(exc)
     return Measured(out, refused, weight, capacity, time.perf_counter() - t0)
@@ -419,7 +487,7 @@ SHA256 = r"[0-9a-f]{64}"
 @dataclass(frozen=True)
 class Applied:
     """A pulse's calibrated hitch force [N]; for a target out of the machine's reach (the
-    force then the weight-scaled one) why, in one line, else ""."""
+    force then the trial furthest towards it) why, in one line, else ""."""
 
     hitch_N: float
     out_of_reach: str = ""
@@ -461,9 +529,9 @@ class CalibrationEntry(Parameters):
     out_of_reach_index: tuple[int, ...] = param(0, 100, unit="1", default=(),
                                                 allow_empty=True,
                                                 doc="the calibrated pulses whose target "
-                                                "no force within the drawbar capacity "
-                                                "reaches (their hitch_N is the "
-                                                "weight-scaled start)")
+                                                "no force within the limits reaches "
+                                                "(their hitch_N the trial furthest "
+                                                "towards it)")
     out_of_reach: tuple[str, ...] = param(max_len=2000, default=(), allow_empty=True,
                                           doc="why, and what was applied (one line each)")
 
