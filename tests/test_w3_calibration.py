@@ -211,10 +211,10 @@ def test_w3_calibrates_on_a_front_sprocket_compact3_within_the_tipping_limit() -
 
 
 RECOVERY_NOT_MET = {
-    "m113": ("issue 32's floor, not met (edges 6/8/18/20 s: 1.38/0.91/never/3.14 s, the "
-             "0.5 s mean up to 26.1 kN, F_max = 26.7 kN): with the sprocket at the "
+    "m113": ("issue 32's floor, not met (edges 6/8/18/20 s: 1.34/0.95/never/3.37 s, the "
+             "0.5 s mean up to 27.1 kN, F_max = 26.7 kN): with the sprocket at the "
              "front, braking leaves the idler on the slack side, so the -10 % drive pulse "
-             "needs a 14.9 kN push, 28 % of the side's weight, that pitches the chassis "
+             "needs a 15.0 kN push, 28 % of the side's weight, that pitches the chassis "
              "by 38 mrad; its release rings the chassis' pitch mode (1.0 Hz, about 10 % "
              "of critical on Chrono's torsion-arm damping) and with it the drive torque "
              "(+-3.8 kN·m): with the stroke held the 0.5 s mean swings 17.8 -> 27.3 kN and "
@@ -229,8 +229,8 @@ RECOVERY_NOT_MET = {
                  "valves held or the idler on a 3e5 or 1e8 N/m spring), and in the "
                  "hold-mode rig the idler load peaks at 3.4 kN for the 1.7 kN plateau and "
                  "swings +-0.5-0.9 kN, 4-7 % of 13 kN, through the pulse; after it in "
-                 "1.28 s, the release it asks for pulling the carrier in faster than the rod "
-                 "feed fills (the rod chambers at 0.015-0.08 MPa absolute, below the 0.2 MPa "
+                 "1.23 s, the release it asks for pulling the carrier in faster than the rod "
+                 "feed fills (the rod chambers at 0.08-0.17 MPa absolute, below the 0.2 MPa "
                  "tank, in the 5 seeds)"),
 }
 """Machines on which W3's recovery floor is not met yet (strict xfails: they report when
