@@ -157,11 +157,15 @@ def test_the_summary_names_the_edges_the_tension_never_came_back_after() -> None
     """The acceptance's edge recovery (the 0.5 s mean back within ±5 % after each
     disturbance edge) reads which edges it never came back after, not a dash."""
     result = synthetic_result("W1", duration_s=2.0)
+    assert summary_table([result], "{r.architecture}").splitlines()[-1].startswith(
+        "acceptance: holds (the 0.5 s mean ")
     result.metrics["acceptance"] = {**result.metrics["acceptance"], "recovery_max_s": math.nan,
                                     "edge_recovery_s": {"6": math.nan, "8": 1.28,
                                                         "18": 0.0, "20": None}}
     rows = summary_table([result], "{r.architecture}").splitlines()
     assert "| back within 5 % after an edge [s] | never after the 6, 20 s edges |" in rows
+    assert rows[-1] == ("acceptance: fails (recovery within ±5 % in 2 s: never after the 6 s "
+                        "edge, never after the 20 s edge)")
     result.metrics["acceptance"]["edge_recovery_s"] = {}
     rows = summary_table([result], "{r.architecture}").splitlines()
     assert "| back within 5 % after an edge [s] | – |" in rows

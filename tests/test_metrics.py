@@ -17,6 +17,7 @@ from trackmj.results import metrics as M
 from trackmj.results.acceptance import acceptance
 from trackmj.results.metric_windows import MetricWindows
 from trackmj.results.signals import lowpass
+from trackmj.results.verdict import verdict
 
 
 def test_compute_metrics_standard_set() -> None:
@@ -130,6 +131,36 @@ def test_acceptance_of_a_decaying_load_disturbance() -> None:
     # maximum is ref + amp at 6.5 s
     assert a["mean_max_N"] == pytest.approx(ref + amp, rel=1e-4)
     assert a["mean_min_N"] == pytest.approx(ref)
+
+
+def test_verdict_names_the_rules_a_decaying_disturbance_breaks() -> None:
+    """The disturbance above (its end edge at 12 s) judged by the scenario's rules (band
+    2/3-4/3 of 15 kN, back within 2 s, steady offset below 2 %): with tau = 0.4 s it holds;
+    with tau = 2 s the mean is back only 0.5 + tau·ln(amp/750) = 2.22 s after the edge
+    (amp = 2000·tau·(1 − exp(−0.5/tau))/0.5, the hand formula above); a 400 N offset
+    (2.7 %) breaks the steady rule; a band whose top is below the mean's peak breaks the
+    band rule."""
+    ref = 15e3
+    t = time_grid(20.0)
+    w = windows(disturbances=((6.0, 12.0),), evaluation_start_s=1.0)
+
+    def judged(tau: float, offset_N: float, band: tuple[float, float]) -> list[str]:
+        y = np.full_like(t, ref)
+        on = t >= 6.0
+        y[on] += 2000.0 * np.exp(-(t[on] - 6.0) / tau)
+        y[t >= 9.0] += offset_N
+        v = verdict(acceptance(t, y, np.full_like(t, ref), w), band, 2.0, 0.02)
+        if tau == 2.0:
+            amp = 2000.0 * tau * (1.0 - math.exp(-0.5 / tau)) / 0.5
+            assert v.late_edges["6"] == pytest.approx(0.5 + tau * math.log(amp / 750.0),
+                                                      abs=2e-3)
+        return v.broken
+
+    band = (2.0 * ref / 3.0, 4.0 * ref / 3.0)
+    assert judged(0.4, 200.0, band) == []
+    assert judged(2.0, 200.0, band) == ["recovery"]
+    assert judged(0.4, 400.0, band) == ["steady offset"]
+    assert judged(0.4, 200.0, (band[0], ref + 1000.0)) == ["band"]
 
 
 def test_the_start_ramps_traction_transient_is_not_a_steady_offset() -> None:

@@ -1,7 +1,7 @@
 """The tables and lines the commands print about a run: the headline metrics (markdown, one
-column per run) with a warning line for each run that is not a valid result (its
-``flags``, e.g. a controller output clipped), the prediction against a measured log, and an
-FMU tensioner's coupling.
+column per run) with the scenario's acceptance verdict on each run and a warning line for
+each run that is not a valid result (its ``flags``, e.g. a controller output clipped), the
+prediction against a measured log, and an FMU tensioner's coupling.
 
 Display units (kN, mm, MPa) appear only here and in the commands' own lines; the metrics
 they read are SI.
@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from trackmj.ports import unit_suffix
+from trackmj.results.verdict import RECOVERY_WITHIN_S, STEADY_OFFSET_MAX_REL, verdict
 
 SUMMARY_METRICS = ("rmse_lp_N", "rmse_N", "ripple_rms_N", "ripple_band_rms_N.tooth_passing",
                    "ripple_band_rms_N.body_mode", "peak_error_lp_N", "peak_error_N",
@@ -51,7 +52,8 @@ def summary_table(results: list, title: str) -> str:
     where the scenario has one; a settling or recovery time that never came reads "not
     within ±band" instead of a dash (the acceptance's edge recovery names the edges it
     never came back after), a valve metric of a tensioner without valves "n/a".
-    Below the table, one warning line per flag of each run (:func:`warning_lines`)."""
+    Below the table, each run's acceptance verdict (:func:`acceptance_line`) and one
+    warning line per flag of each run (:func:`warning_lines`)."""
     # start-up: --help and argument errors must not import SciPy
     from trackmj.results.metrics import METRIC_DISPLAY, lookup
 
@@ -74,12 +76,50 @@ def summary_table(results: list, title: str) -> str:
         lines.append(f"low-pass: zero-phase 2nd-order Butterworth at "
                      f"{', '.join(f'{c:g}' for c in sorted(cutoff))} Hz on F_ten; raw: the "
                      "1 kHz F_ten (see README, Metrics)")
-    warnings = [line for r in results
-                for line in warning_lines(r.metrics, title.format(r=r) if len(results) > 1
-                                          else "")]
+    names = [title.format(r=r) if len(results) > 1 else "" for r in results]
+    verdicts = [line for r, name in zip(results, names, strict=True)
+                if (line := acceptance_line(r.metrics, name))]
+    if verdicts:
+        lines += ["", *verdicts]
+    warnings = [line for r, name in zip(results, names, strict=True)
+                for line in warning_lines(r.metrics, name)]
     if warnings:
         lines += ["", *warnings]
     return "\n".join(lines)
+
+
+def acceptance_line(metrics: Mapping[str, Any], run: str = "") -> str:
+    """The scenario's acceptance verdict on a run (:func:`trackmj.results.verdict.verdict`)
+    in one line naming each rule broken and by how much; "" for a run without acceptance
+    figures (``run``: its name, for a table of several)."""
+    figures, window = metrics.get("acceptance"), metrics.get("evaluation") or {}
+    if not figures or "force_min_N" not in window:
+        return ""
+    band = (window["force_min_N"], window["force_max_N"])
+    within = window.get("recovery_within_s", RECOVERY_WITHIN_S)
+    limit = window.get("steady_offset_max_rel", STEADY_OFFSET_MAX_REL)
+    v = verdict(figures, band, within, limit)
+    mean = figures.get("mean_window_s", 0.5)
+    recovery = 100 * figures.get("recovery_band_rel", 0.05)
+    head = f"acceptance ({run})" if run else "acceptance"
+    low, high = v.mean_range_N
+    span = f"the {mean:g} s mean {low / 1e3:.1f}-{high / 1e3:.1f} kN"
+    limits = f"[{band[0] / 1e3:.1f}, {band[1] / 1e3:.1f}] kN"
+    if v.holds:
+        return (f"{head}: holds ({span} in {limits}; back within ±{recovery:g} % within "
+                f"{within:g} s of every edge; steady offset below {100 * limit:g} %)")
+    why = []
+    if "band" in v.broken:
+        why.append(f"band: {span}, outside {limits}")
+    if "recovery" in v.broken:
+        late = ", ".join(f"never after the {edge} s edge" if s != s
+                         else f"{s:.2f} s after the {edge} s edge"
+                         for edge, s in v.late_edges.items())
+        why.append(f"recovery within ±{recovery:g} % in {within:g} s: {late}")
+    if "steady offset" in v.broken:
+        why.append(f"steady offset {100 * v.steady_offset_rel:.2f} % (limit "
+                   f"{100 * limit:g} %)")
+    return f"{head}: fails ({'; '.join(why)})"
 
 
 def _cell(value: float, metrics: Mapping[str, Any], window: dict, key: str,

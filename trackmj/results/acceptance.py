@@ -1,5 +1,6 @@
 """The tensioner's acceptance figures (:func:`acceptance`): on the trailing mean of F_ten,
-its extremes, the recovery after each disturbance edge and the worst steady offset."""
+its extremes, the recovery after each disturbance edge and the worst steady offset (the
+verdict on them: :mod:`trackmj.results.verdict`)."""
 
 from __future__ import annotations
 
@@ -35,14 +36,14 @@ def _edge_recovery(t: np.ndarray, err: np.ndarray, ref: np.ndarray, edges: Seque
 def _worst_steady_offset(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
                          events: Sequence[float], w: MetricWindows) -> float:
     """Largest |mean(y − ref)| / mean(ref) over the steady_window_s windows (sliding by 1 s
-    from the evaluation start) that start 2 s or more after the last of ``events`` [s]
-    before their end; NaN if there is no such window."""
+    from the evaluation start) that start ``recovery_within_s`` or more after the last of
+    ``events`` [s] before their end; NaN if there is no such window."""
     worst = math.nan
     start = w.evaluation_start_s
     while start + w.steady_window_s <= t[-1] + 1e-9:
         end = start + w.steady_window_s
         last = max([e for e in events if e <= end] or [-math.inf])
-        if start >= last + 2.0:
+        if start >= last + w.recovery_within_s:
             m = (t >= start) & (t <= end)
             offset = abs(float(np.mean(y[m] - ref[m]))) / float(np.mean(ref[m]))
             worst = offset if math.isnan(worst) else max(worst, offset)
@@ -83,3 +84,4 @@ def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
             "recovery_max_s": (max(recovery.values()) if recovery
                                and not any(map(math.isnan, recovery.values())) else math.nan),
             "steady_offset_max_rel": worst}
+

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from trackmj.results.store import Result
+from trackmj.results.verdict import RECOVERY_WITHIN_S, STEADY_OFFSET_MAX_REL
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -38,6 +39,10 @@ class MetricWindows:
     reference_events_s: the :func:`~trackmj.results.acceptance.acceptance` checks (trailing-mean
     length, recovery band relative to the reference, steady-window length, and the reference's
     steps and ramp starts, which end a steady window like a disturbance edge does);
+    recovery_within_s, steady_offset_max_rel: the acceptance's limits
+    (:func:`~trackmj.results.verdict.verdict`: the mean back within the recovery band
+    this long after an edge [s], where a steady window also starts; a steady offset below
+    this share of the reference);
     drive_events_s: the end of the track's start ramp, which ends a steady window likewise
     (the drive's traction transient: on a front-sprocket machine the tight side loads the
     idler while the track accelerates).
@@ -62,6 +67,8 @@ class MetricWindows:
     mean_window_s: float = 0.5
     recovery_band_rel: float = 0.05
     steady_window_s: float = 5.0
+    recovery_within_s: float = RECOVERY_WITHIN_S
+    steady_offset_max_rel: float = STEADY_OFFSET_MAX_REL
     reference_events_s: tuple[float, ...] = ()
     drive_events_s: tuple[float, ...] = ()
 

@@ -300,6 +300,8 @@ class Scenario:
             road_band_Hz=self._road_band_Hz(speed), psd_resolution_Hz=ev.psd_resolution_Hz,
             psd_max_Hz=ev.psd_max_Hz, mean_window_s=ev.mean_window_s,
             recovery_band_rel=ev.recovery_band_rel, steady_window_s=ev.steady_window_s,
+            recovery_within_s=ev.recovery_within_s,
+            steady_offset_max_rel=ev.steady_offset_max_rel,
             reference_events_s=tuple(sorted({*(s.time_s for s in self.reference.steps),
                                              *(r.start_s for r in self.reference.ramps)})),
             drive_events_s=self._drive_events_s())

@@ -54,6 +54,7 @@ import numpy as np
 
 from trackmj.hydraulics.params import SupplyModel
 from trackmj.ports import COUPLING_STEP_S
+from trackmj.results.verdict import RECOVERY_WITHIN_S, STEADY_OFFSET_MAX_REL
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.entries import by_name, choices
 from trackmj.track.terrain import ISO8608_GD_N0_M3
@@ -445,6 +446,14 @@ class Evaluation(Parameters):
                                      "returns to after a disturbance edge")
     steady_window_s: float = param(0.1, 100.0, doc="acceptance: length of a steady window "
                                    "whose mean error is the steady offset")
+    recovery_within_s: float = param(0.0, 30.0, open_low=True, default=RECOVERY_WITHIN_S,
+                                     doc="acceptance: the mean is back within the recovery "
+                                     "band this long after each disturbance edge (and a "
+                                     "steady window starts no earlier)")
+    steady_offset_max_rel: float = param(0.0, 0.5, open_low=True,
+                                         default=STEADY_OFFSET_MAX_REL,
+                                         doc="acceptance: a steady window's mean error "
+                                         "stays below this share of the reference")
 
     def cross_check(self, at: Location) -> None:
         low, high = self.body_mode_band_Hz
