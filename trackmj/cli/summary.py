@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from trackmj.ports import unit_suffix
-from trackmj.results.verdict import RECOVERY_WITHIN_S, STEADY_OFFSET_MAX_REL, verdict
+from trackmj.results.verdict import run_verdict
 
 SUMMARY_METRICS = ("rmse_lp_N", "rmse_N", "ripple_rms_N", "ripple_band_rms_N.tooth_passing",
                    "ripple_band_rms_N.body_mode", "peak_error_lp_N", "peak_error_N",
@@ -89,37 +89,13 @@ def summary_table(results: list, title: str) -> str:
 
 
 def acceptance_line(metrics: Mapping[str, Any], run: str = "") -> str:
-    """The scenario's acceptance verdict on a run (:func:`trackmj.results.verdict.verdict`)
+    """The scenario's acceptance verdict on a run (:func:`trackmj.results.verdict.run_verdict`)
     in one line naming each rule broken and by how much; "" for a run without acceptance
     figures (``run``: its name, for a table of several)."""
-    figures, window = metrics.get("acceptance"), metrics.get("evaluation") or {}
-    if not figures or "force_min_N" not in window:
+    v = run_verdict(metrics)
+    if v is None:
         return ""
-    band = (window["force_min_N"], window["force_max_N"])
-    within = window.get("recovery_within_s", RECOVERY_WITHIN_S)
-    limit = window.get("steady_offset_max_rel", STEADY_OFFSET_MAX_REL)
-    v = verdict(figures, band, within, limit)
-    mean = figures.get("mean_window_s", 0.5)
-    recovery = 100 * figures.get("recovery_band_rel", 0.05)
-    head = f"acceptance ({run})" if run else "acceptance"
-    low, high = v.mean_range_N
-    span = f"the {mean:g} s mean {low / 1e3:.1f}-{high / 1e3:.1f} kN"
-    limits = f"[{band[0] / 1e3:.1f}, {band[1] / 1e3:.1f}] kN"
-    if v.holds:
-        return (f"{head}: holds ({span} in {limits}; back within ±{recovery:g} % within "
-                f"{within:g} s of every edge; steady offset below {100 * limit:g} %)")
-    why = []
-    if "band" in v.broken:
-        why.append(f"band: {span}, outside {limits}")
-    if "recovery" in v.broken:
-        late = ", ".join(f"never after the {edge} s edge" if s != s
-                         else f"{s:.2f} s after the {edge} s edge"
-                         for edge, s in v.late_edges.items())
-        why.append(f"recovery within ±{recovery:g} % in {within:g} s: {late}")
-    if "steady offset" in v.broken:
-        why.append(f"steady offset {100 * v.steady_offset_rel:.2f} % (limit "
-                   f"{100 * limit:g} %)")
-    return f"{head}: fails ({'; '.join(why)})"
+    return f"acceptance ({run}): {v.text()}" if run else f"acceptance: {v.text()}"
 
 
 def _cell(value: float, metrics: Mapping[str, Any], window: dict, key: str,

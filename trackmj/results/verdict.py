@@ -1,6 +1,7 @@
 """The verdict on a run's acceptance figures (:func:`trackmj.results.acceptance.acceptance`):
-which of the scenario's rules it broke. Plain Python, so that the command line's summary
-reads it without the numerical stack."""
+which of the scenario's rules it broke, and in words (kN, for the run's summary and the
+report). Plain Python, so that the command line's summary reads it without the numerical
+stack."""
 
 from __future__ import annotations
 
@@ -22,7 +23,9 @@ class Verdict:
     trailing mean's lowest and highest [N] against the band [N]; per disturbance edge (keyed
     by its time, as :func:`~trackmj.results.acceptance.acceptance` keys it) whose mean came
     back later than ``recovery_within_s`` [s], its recovery time [s] (NaN: never); the worst
-    steady offset against its limit (shares of the reference, NaN: no steady window)."""
+    steady offset against its limit (shares of the reference, NaN: no steady window); the
+    trailing mean's window [s] and the recovery band (share of the reference) the figures
+    were taken with."""
 
     mean_range_N: tuple[float, float]
     band_N: tuple[float, float]
@@ -30,6 +33,8 @@ class Verdict:
     recovery_within_s: float
     steady_offset_rel: float
     steady_offset_max_rel: float
+    mean_window_s: float = 0.5
+    recovery_band_rel: float = 0.05
 
     @property
     def broken(self) -> list[str]:
@@ -45,6 +50,29 @@ class Verdict:
     def holds(self) -> bool:
         """Whether the run keeps every rule."""
         return not self.broken
+
+    def text(self) -> str:
+        """The verdict in one phrase: "holds (...)" with what it measured, or "fails (...)"
+        naming each rule broken and by how much (forces in kN)."""
+        low, high = self.mean_range_N
+        span = f"the {self.mean_window_s:g} s mean {low / 1e3:.1f}-{high / 1e3:.1f} kN"
+        band = f"[{self.band_N[0] / 1e3:.1f}, {self.band_N[1] / 1e3:.1f}] kN"
+        back = f"±{100 * self.recovery_band_rel:g} % in {self.recovery_within_s:g} s"
+        if self.holds:
+            return (f"holds ({span} in {band}; back within {back} of every edge; steady "
+                    f"offset below {100 * self.steady_offset_max_rel:g} %)")
+        why = []
+        if "band" in self.broken:
+            why.append(f"band: {span}, outside {band}")
+        if "recovery" in self.broken:
+            why.append(f"recovery within {back}: " + ", ".join(
+                f"never after the {edge} s edge" if math.isnan(s)
+                else f"{s:.2f} s after the {edge} s edge"
+                for edge, s in self.late_edges.items()))
+        if "steady offset" in self.broken:
+            why.append(f"steady offset {100 * self.steady_offset_rel:.2f} % (limit "
+                       f"{100 * self.steady_offset_max_rel:g} %)")
+        return f"fails ({'; '.join(why)})"
 
 
 def verdict(figures: Mapping[str, Any], band_N: tuple[float, float],
@@ -62,4 +90,17 @@ def verdict(figures: Mapping[str, Any], band_N: tuple[float, float],
             if not number(s) <= recovery_within_s}
     return Verdict((number(figures.get("mean_min_N")), number(figures.get("mean_max_N"))),
                    band_N, late, recovery_within_s,
-                   number(figures.get("steady_offset_max_rel")), steady_offset_max_rel)
+                   number(figures.get("steady_offset_max_rel")), steady_offset_max_rel,
+                   figures.get("mean_window_s", 0.5), figures.get("recovery_band_rel", 0.05))
+
+
+def run_verdict(metrics: Mapping[str, Any]) -> Verdict | None:
+    """The verdict on a run from its ``metrics`` (its ``acceptance`` figures and its
+    ``evaluation`` windows: the band and the limits; a run written before the limits were
+    recorded is judged with the defaults); None for a run without acceptance figures."""
+    figures, window = metrics.get("acceptance"), metrics.get("evaluation") or {}
+    if not figures or "force_min_N" not in window:
+        return None
+    return verdict(figures, (window["force_min_N"], window["force_max_N"]),
+                   window.get("recovery_within_s", RECOVERY_WITHIN_S),
+                   window.get("steady_offset_max_rel", STEADY_OFFSET_MAX_REL))

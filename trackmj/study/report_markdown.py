@@ -17,6 +17,7 @@ from trackmj.results.figure_run import run_figure
 from trackmj.results.metrics import METRIC_DISPLAY
 from trackmj.results.seed_stats import finite
 from trackmj.results.store import Result
+from trackmj.results.verdict import run_verdict
 from trackmj.scenarios.events import describe_moves
 from trackmj.scenarios.load import load_scenario
 from trackmj.sim.registry import REFERENCE_ARCHITECTURE as REFERENCE
@@ -115,13 +116,15 @@ def _claims_table(findings: Sequence[Finding]) -> list[str]:
 # ----------------------------------------------------------------------------- conditions
 
 def _condition_section(m: Matrix, scenario: str, out: Path) -> list[str]:
-    """One condition: its metrics per architecture, the prediction errors against the
-    reference, and its figures (W5: over every variant)."""
+    """One condition: the acceptance verdict on the reference architecture's runs, its
+    metrics per architecture, the prediction errors against the reference, and its figures
+    (W5: over every variant)."""
     archs = m.architectures(scenario)
     variant = None if scenario == "W5" else "nominal"
     runs = [r for (case, a), r in m.runs.items() if case[0] == scenario]
     seeds = sorted({r.seed for r in runs})
     lines = _condition_intro(scenario, runs, seeds, variant)
+    lines += acceptance_lines(m, scenario)
     lines += _metric_table(m, scenario, archs, variant)
     reduced = [a for a in archs if a != REFERENCE]
     if reduced and REFERENCE in archs:
@@ -148,6 +151,26 @@ def _condition_intro(scenario: str, runs: Sequence[Result], seeds: Sequence[int]
                       f"({sc.evaluation.start_s:g} s) is compressed linearly into the run "
                       f"(README, Usage, Durations): {describe_moves(sc, moves)}.", ""]
     return lines
+
+
+def acceptance_lines(m: Matrix, scenario: str) -> list[str]:
+    """The scenario's acceptance on each :data:`REFERENCE` run
+    (:func:`trackmj.results.verdict.run_verdict`): how many hold, and each one that fails
+    with why."""
+    judged = [(case, run_verdict(r.metrics)) for (case, a), r in sorted(m.runs.items())
+              if case[0] == scenario and a == REFERENCE]
+    judged = [(case, v) for case, v in judged if v is not None]
+    if not judged:
+        return []
+    controllers = sorted({case[3] for case, _ in judged})
+    counts = ", ".join(f"{sum(v.holds for c, v in judged if c[3] == k)} of "
+                       f"{sum(c[3] == k for c, _ in judged)} {k} runs" for k in controllers)
+    lines = [f"Acceptance on {REFERENCE} (the scenario's rules, README Metrics): holds in "
+             f"{counts}.", ""]
+    failed = [f"- seed {seed}" + ("" if variant == "nominal" else f", {variant}")
+              + f" ({controller}): {v.text()}"
+              for (_, variant, seed, controller), v in judged if not v.holds]
+    return [*lines, *failed, ""] if failed else lines
 
 
 def _metric_table(m: Matrix, scenario: str, archs: Sequence[str],
