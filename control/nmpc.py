@@ -166,9 +166,10 @@ class _MpcBase:
             self._plan = plan    # w[:n_blocks], each value repeated block_steps times
             self._plan_age = 0
             u = min(max(float(w[0]), self.ctrl.u_min), self.ctrl.u_max)
-        else:
+        else:   # the previous plan shifted on (an LMPC plan may sit just past the bounds)
             self._plan_age += 1
             u = float(self._plan[self._plan_age]) if self._plan_age < n else 0.0
+            u = min(max(u, self.ctrl.u_min), self.ctrl.u_max)
         if not (ok and not overrun):
             self.failures += not ok
             self.overruns += overrun
@@ -202,8 +203,8 @@ class _MpcBase:
                 self.mpc.collocation_degree, self.ocp.n_blocks, p, w0)
             return w0, p
         x0 = np.array(estimate[:4], dtype=float)
-        # gauge pressures below p_min are estimator noise; a hard bound at node 1 would make
-        # the problem locally infeasible, so the initial state is projected onto p >= p_min
+        # gauge pressures below p_min are estimator noise: the prediction starts from p_min
+        # (the limits are soft, so a state beyond them no longer makes the problem infeasible)
         p_min = ctrl.pressure_min_Pa
         if x0[0] < p_min:
             x0[0] = p_min
