@@ -203,8 +203,8 @@ class _MpcBase:
                 self.mpc.collocation_degree, self.ocp.n_blocks, p, w0)
             return w0, p
         x0 = np.array(estimate[:4], dtype=float)
-        # gauge pressures below p_min are estimator noise: the prediction starts from p_min
-        # (the limits are soft, so a state beyond them no longer makes the problem infeasible)
+        # gauge pressures below p_min are estimator noise; a hard bound at node 1 would make
+        # the problem locally infeasible, so the initial state is projected onto p >= p_min
         p_min = ctrl.pressure_min_Pa
         if x0[0] < p_min:
             x0[0] = p_min

@@ -7,21 +7,13 @@ prediction. Inputs are move-blocked: one value per ``block_steps`` intervals (bl
 
 Decision variables (scaled: pressures MPa, stroke mm, velocity 0.1 m/s; this scaling balances
 the implicit-Euler Jacobian entries to O(1-10); with mm/s the QPs stalled, measured):
-w = [u_0 .. u_{nb-1}, s_1 .. s_N, X_{i,j} for i < N, j = 1..d], s_i >= 0 the stages' slacks.
+w = [u_0 .. u_{nb-1}, s_1 .. s_N, X_{i,j} for i < N, j = 1..d], s_i >= 0 soft-band slacks.
 Parameters p = [x0 (4, SI), F_ref_0..N (N+1, N), u_prev, theta (p_s Pa, k_eq N/m, y0 m),
 F_min N, F_max N, p_min Pa, p_max Pa], and for the linear OCP the affine model (c, A, B).
 
 Cost: sum_i w_F (F_i - F_ref_i)^2 [kN^2] + sum_b L (w_u u_b^2 + w_du (u_b - u_{b-1})^2)
-+ w_s s_i^2; constraints F_min - s_i <= F_i <= F_max + s_i [kN] and p_min - s_i <= p <=
-p_max + s_i [MPa], both chambers, at nodes 1..N (soft: one slack per stage relaxes the band
-and the pressure limits alike), u_min <= u <= u_max. Hard pressure limits made the
-linearised problem infeasible from states whose rod pressure no input could keep above
-p_min over the first interval (M113 W1, 15 s: 90 of 1500 solves, the rod chamber at
-0.23 MPa median where they failed); with the slack the problem is feasible from any state,
-and a plan may pass a limit by what the quadratic penalty allows (10-12 kPa past a p_max it
-could keep, tests/test_control_lmpc.py). An exact (linear) penalty on the shared slack
-would also make the force band exact: it cost compact3's W3 6 % of low-pass RMSE (a 20 s
-run), so it is not used. The cost is quadratic in w, so its Hessian is the exact
++ w_s s_i^2; constraints F_min - s_i <= F_i <= F_max + s_i (soft), p_min <= p <= p_max (hard)
+at nodes 1..N, u_min <= u <= u_max. The cost is quadratic in w, so its Hessian is the exact
 Gauss-Newton Hessian (constraint curvature dropped).
 """
 
@@ -140,8 +132,8 @@ def build_ocp(
         cost += mpc.weight_force_per_kN2 * (f_kn - ref[i + 1] / 1e3) ** 2
         cost += mpc.weight_force_slack_per_kN2 * s[i] ** 2
         g += [f_kn - s[i] - lim[1] / 1e3, lim[0] / 1e3 - f_kn - s[i]]
-        g += [x_end[0] - lim[3] / 1e6 - s[i], x_end[1] - lim[3] / 1e6 - s[i]]
-        g += [lim[2] / 1e6 - x_end[0] - s[i], lim[2] / 1e6 - x_end[1] - s[i]]
+        g += [x_end[0] - lim[3] / 1e6, x_end[1] - lim[3] / 1e6]
+        g += [lim[2] / 1e6 - x_end[0], lim[2] / 1e6 - x_end[1]]
         lbg += [-np.inf] * 6
         ubg += [0.0] * 6
         x_start = x_end

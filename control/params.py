@@ -216,9 +216,7 @@ class MpcParams(Parameters):
     weight_input: float = param(0.0, 1e6, unit="1", doc="weight on u^2")
     weight_input_rate: float = param(0.0, 1e6, unit="1", doc="weight on the u increments")
     weight_force_slack_per_kN2: float = param(0.0, 1e9, open_low=True, unit="1/kN^2",
-                                              doc="weight on the square of the stages' "
-                                              "slack (soft F_min/F_max band in kN, "
-                                              "pressure limits in MPa)")
+                                              doc="weight on the soft F_min/F_max slack")
     tuned_on_machine: str = param(pattern=r"[a-z0-9][a-z0-9_-]*", max_len=40,
                                   doc="the machine on whose plant the weights were tuned; on "
                                   "another the u and u-rate weights are scaled by (g/g_tuned)²")

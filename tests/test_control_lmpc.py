@@ -53,9 +53,7 @@ def test_step_12_to_15_kN_beside_nmpc_and_pid() -> None:
 
 def test_lmpc_respects_pressure_bound_in_its_plan() -> None:
     """From 12 kN towards 15 kN, a p_max 0.05 MPa above the head pressure (~+0.13 kN) must
-    cap the pressurize move of the unconstrained plan to about half, and the planned
-    pressures keep to it within the soft limit's give (control/ocp.py: the quadratic
-    penalty lets a plan pass it by less than a third of the 0.05 MPa margin)."""
+    cap the pressurize move of the unconstrained plan, and the planned pressures obey it."""
     ctrl = _lmpc()
     x = ReducedModel(PLANT).equilibrium(12e3)
     ref = np.full(CFG.mpc.horizon_steps + 1, 15e3)
@@ -69,5 +67,5 @@ def test_lmpc_respects_pressure_bound_in_its_plan() -> None:
     print(f"u unconstrained {free.u:.3f}, with p_max = p_head + 0.05 MPa {out.u:.3f}")
     assert free.success and out.success
     assert free.u > 0.5
-    assert 0.0 <= out.u < 0.52 * free.u
-    assert planned[:, 0].max() <= p_max + 0.05e6 / 3.0
+    assert 0.0 <= out.u < 0.5 * free.u
+    assert planned[:, 0].max() <= p_max + 5e3  # OSQP eps 1e-4 (relative, MPa units)
