@@ -84,4 +84,3 @@ def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
             "recovery_max_s": (max(recovery.values()) if recovery
                                and not any(map(math.isnan, recovery.values())) else math.nan),
             "steady_offset_max_rel": worst}
-

@@ -463,8 +463,7 @@ def calibrate(scenario: Scenario, rig: Rig, indices: tuple[int, ...],
                 f"{rig.params.track.ground_friction:g} x {weight / 1e3:.2f} kN = "
                 f"{capacity / 1e3:.2f} kN horizontal, Wong, Theory of Ground Vehicles; "
                 f"{TIPPING_SHARE * 100:g} % of the static tipping force along the chain, "
-                f"ISO 10567: "
-                f"push {TIPPING_SHARE * tip_push / 1e3:.2f} kN, tow "
+                f"ISO 10567: push {TIPPING_SHARE * tip_push / 1e3:.2f} kN, tow "
                 f"{TIPPING_SHARE * tip_tow / 1e3:.2f} kN; the file's limit "
                 f"{HITCH_LIMIT_N / 1e3:g} kN)")
         drawbar = min(capacity / math.cos(math.radians(p.pull_angle_deg)), HITCH_LIMIT_N)
