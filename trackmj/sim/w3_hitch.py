@@ -80,13 +80,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import mujoco
 import numpy as np
 
 from trackmj.host import machine as host_machine
 from trackmj.hydraulics.params import HydraulicParams
 from trackmj.io import cache_dir, write_text_atomic
-from trackmj.machines.assembly import Machine, model_mjcf
+from trackmj.machines.assembly import Machine
 from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.ports import COUPLING_STEP_S, Element, StepInputs
 from trackmj.scenarios.load import BUILTIN_FOLDER
@@ -194,10 +193,10 @@ def idler_force_history(scenario: Scenario, pulse: LoadPulse, rig: Rig) -> np.nd
     return force
 
 
-def side_weight_N(rig: Rig) -> float:
-    """Weight of the rig machine's track side [N]: the mass of every body of its model
-    (chassis share, track, wheels, idler and carrier) times gravity."""
-    model = mujoco.MjModel.from_xml_string(model_mjcf(rig.params, rig.machine))
+def side_weight_N(plant: TrackPlant) -> float:
+    """Weight of the plant's track side [N]: the mass of every body of its model (chassis
+    share, track, wheels, idler and carrier) times gravity."""
+    model = plant.model
     return float(model.body_subtreemass[0]) * float(-model.opt.gravity[2])
 
 
@@ -230,7 +229,7 @@ def tipping_forces_N(plant: TrackPlant, pull_angle_deg: float) -> tuple[float, f
     (tests/test_w3_calibration.py brackets both); the settled ground patch's front end as
     the line would put compact3's limit at 0.81 of this, where it still stands."""
     model, data = plant.model, plant.data
-    weight = float(model.body_subtreemass[0]) * float(-model.opt.gravity[2])
+    weight = side_weight_N(plant)
     x_c = float(data.subtree_com[0][0])
     rear, front = sorted(float(data.xpos[model.body(name).id][0])
                          for name in ("sprocket", "idler"))
@@ -439,9 +438,9 @@ def calibrate(scenario: Scenario, rig: Rig, indices: tuple[int, ...],
     its target delta_N (one reference run per pulse angle and edge; a pulse that cannot
     be reached is refused and the others still calibrated)."""
     t0 = time.perf_counter()
-    weight = side_weight_N(rig)
-    capacity = drawbar_capacity_N(rig.params, weight)
     settled, _ = hold_mode_run(scenario, rig)       # the side standing: its tipping lines
+    weight = side_weight_N(settled)
+    capacity = drawbar_capacity_N(rig.params, weight)
     nominal = scenario.nominal_tension_N or rig.params.nominal_tension_N
     references: dict[tuple[float, float], np.ndarray] = {}
     out, refused = {}, {}
