@@ -3,10 +3,11 @@ from the result folders of ``trackmj report --machine NAME`` (one per machine).
 
 Acceptance, as the scenario files state it (assumed engineering requirements, not the
 study's) and :func:`trackmj.results.verdict.verdict` judges it (as ``trackmj run`` prints it):
-the 0.5 s mean of F_ten stays in the machine's band [2/3, 4/3] × its nominal tension, is back
-within ±5 % of the reference 2 s after each disturbance edge, and no steady 5 s window's mean
-error reaches 2 % (the limits as each run recorded them, ``evaluation.*``; a report written
-before they were recorded was judged with the same 2 s and 2 %). A cell gives the verdict
+the 0.5 s mean of F_ten stays in the run's band (its control file's [F_min, F_max], by
+default [2/3, 4/3] × the machine's nominal tension), is back within ±5 % of the reference
+2 s after each disturbance edge, and no steady 5 s window's mean error reaches 2 % (the band
+and limits as each run recorded them, ``evaluation.*``; a report written before they were
+recorded was judged with the default band, 2 s and 2 %). A cell gives the verdict
 over the condition's runs (its
 seeds, and W5's parameter variants: every run must pass), the lowest and highest 0.5 s mean
 [kN], and the low-pass tension RMSE [kN] as mean ± std over the runs; a run that failed is
@@ -42,7 +43,9 @@ def cell(rows: dict[str, np.ndarray], nominal_N: float) -> str:
     ok = np.array([not (isinstance(e, str) and e) for e in error])
     if not ok.any():
         return f"**fails**: {len(failed)} of {len(error)} runs failed ({failed[0][:80]}...)"
-    band = (2.0 * nominal_N / 3.0, 4.0 * nominal_N / 3.0)
+    default = (2.0 * nominal_N / 3.0, 4.0 * nominal_N / 3.0)
+    low = rows.get("evaluation.force_min_N", np.full(len(ok), default[0]))
+    high = rows.get("evaluation.force_max_N", np.full(len(ok), default[1]))
     mean_min = float(np.min(rows["acceptance.mean_min_N"][ok]))
     mean_max = float(np.max(rows["acceptance.mean_max_N"][ok]))
     # the condition's edges: the edge columns some run of it filled (the table holds every
@@ -56,6 +59,7 @@ def cell(rows: dict[str, np.ndarray], nominal_N: float) -> str:
                    "mean_max_N": rows["acceptance.mean_max_N"][k],
                    "steady_offset_max_rel": rows["acceptance.steady_offset_max_rel"][k],
                    "edge_recovery_s": {name.removeprefix(EDGE): rows[name][k] for name in edges}}
+        band = (float(low[k]), float(high[k]))
         broken |= dict.fromkeys(verdict(figures, band, float(within[k]), float(limit[k])).broken)
     reasons = list(broken)
     if failed:
@@ -76,7 +80,8 @@ def table(folders: dict[str, list[Path]]) -> str:
             data = pq.read_table(folder / "results.parquet").to_pydict()
             columns = {k: np.asarray(v, dtype=object if k == "error" else float)
                        for k, v in data.items()
-                       if k in ("error", "rmse_lp_N", "evaluation.recovery_within_s",
+                       if k in ("error", "rmse_lp_N", "evaluation.force_min_N",
+                                "evaluation.force_max_N", "evaluation.recovery_within_s",
                                 "evaluation.steady_offset_max_rel")
                        or k.startswith("acceptance.")}
             scenario = np.array(data["scenario"])
