@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from trackmj.ports import unit_suffix
-from trackmj.results.verdict import run_verdict
+from trackmj.results.verdict import never_back, run_verdict
 
 SUMMARY_METRICS = ("rmse_lp_N", "rmse_N", "ripple_rms_N", "ripple_band_rms_N.tooth_passing",
                    "ripple_band_rms_N.body_mode", "peak_error_lp_N", "peak_error_N",
@@ -110,8 +110,7 @@ def _cell(value: float, metrics: Mapping[str, Any], window: dict, key: str,
     if key in UNSETTLED and "settle_band_rel" in window:
         return f"not within ±{100 * window['settle_band_rel']:g} %"
     if key == EDGE_RECOVERY:
-        edges = (metrics.get("acceptance") or {}).get("edge_recovery_s") or {}
-        never = [edge for edge, s in edges.items() if s is None or s != s]
+        never = never_back(metrics.get("acceptance") or {})
         if never:
             return f"never after the {', '.join(never)} s edge{'s' * (len(never) > 1)}"
     return "–"

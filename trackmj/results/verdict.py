@@ -83,15 +83,25 @@ def verdict(figures: Mapping[str, Any], band_N: tuple[float, float],
     F_max) [N], back within the recovery band ``recovery_within_s`` [s] after each edge,
     and no steady window's offset reaching ``steady_offset_max_rel`` of the reference. A
     figure that is NaN (no evaluation window, no steady window) breaks no rule."""
-    def number(value: Any) -> float:
-        return math.nan if value is None else float(value)
-
-    late = {edge: number(s) for edge, s in (figures.get("edge_recovery_s") or {}).items()
-            if not number(s) <= recovery_within_s}
-    return Verdict((number(figures.get("mean_min_N")), number(figures.get("mean_max_N"))),
+    late = {edge: _number(s) for edge, s in (figures.get("edge_recovery_s") or {}).items()
+            if not _number(s) <= recovery_within_s}
+    return Verdict((_number(figures.get("mean_min_N")), _number(figures.get("mean_max_N"))),
                    band_N, late, recovery_within_s,
-                   number(figures.get("steady_offset_max_rel")), steady_offset_max_rel,
+                   _number(figures.get("steady_offset_max_rel")), steady_offset_max_rel,
                    figures.get("mean_window_s", 0.5), figures.get("recovery_band_rel", 0.05))
+
+
+def never_back(figures: Mapping[str, Any]) -> list[str]:
+    """The disturbance edges (keyed by their time, as in ``figures["edge_recovery_s"]``)
+    after which the trailing mean never came back: a recovery that is None (read back from
+    JSON) or NaN."""
+    return [edge for edge, s in (figures.get("edge_recovery_s") or {}).items()
+            if math.isnan(_number(s))]
+
+
+def _number(value: Any) -> float:
+    """A figure as a float, None (JSON's NaN) as NaN."""
+    return math.nan if value is None else float(value)
 
 
 def run_verdict(metrics: Mapping[str, Any]) -> Verdict | None:
