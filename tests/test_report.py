@@ -10,14 +10,17 @@ from synthetic import energy_table, synthetic_result
 
 from trackmj.cli.main import main
 from trackmj.cli.summary import summary_table
+from trackmj.control.params import default_path
 from trackmj.results.store import read_result
 from trackmj.scenarios.load import load_scenario
+from trackmj.sim.setup import prepare
 from trackmj.study import report as R
 from trackmj.study import report_markdown as M
 from trackmj.study import report_stats as S
 from trackmj.study import report_verdicts as V
 from trackmj.study.campaign import RUNS
 from trackmj.study.report_matrix import Matrix
+from trackmj.validator import ParameterError
 
 
 def test_verdict_on_reductions_follows_its_rules() -> None:
@@ -227,3 +230,39 @@ def test_report_states_the_acceptance_of_each_reference_run() -> None:
                         "1 of 2 nmpc runs.")
     assert lines[2].startswith("- seed 1 (nmpc): fails (band: the 0.5 s mean ")
     assert lines[2].endswith(", outside [10.0, 20.0] kN)")
+
+
+def test_report_plan_carries_files_and_overrides_and_its_header_names_them() -> None:
+    """``trackmj report --machine compact3 --control FILE --set ...``: every planned run
+    (the baselines too) carries the machine, the file and the overrides, an override of an
+    event the duration moves wins over the move, and report.md's first sentence names the
+    crawler, the file and the overrides every run shares."""
+    control = str(default_path())
+    runs = R.plan(["W1"], [0], 2.0, archs=("tp",), baselines=("pid",), machine="compact3",
+                  files={"control": control},
+                  overrides=(("control.mpc.max_iter", 8),
+                             ("scenario.reference.steps.0.time_s", 1.5)))
+    assert [r.spec.controller for r in runs] == ["nmpc", "pid"]
+    for run in runs:
+        given = dict(run.spec.overrides)
+        assert (run.spec.machine, run.spec.control) == ("compact3", control)
+        assert given["control.mpc.max_iter"] == 8
+        assert given["scenario.reference.steps.0.time_s"] == 1.5   # the move would be ~1 s
+    setup = prepare(**runs[0].spec.prepare_kwargs())
+    assert (setup.control.mpc.max_iter, setup.machine.name) == (8, "compact3")
+    with pytest.raises(ParameterError, match=r"^W1: --set scenario\.load_pulses\.0"):
+        R.plan(["W3", "W1"], [0], None, archs=("tp",), baselines=(),
+               overrides=(("scenario.load_pulses.0.hitch_N", 5.0),))
+
+    def with_inputs(result, overrides: dict) -> object:
+        meta = result.timeseries.schema.metadata | {
+            b"machine": b"compact3", b"overrides": json.dumps(overrides).encode(),
+            b"files": json.dumps({"control": control, "model": "packaged"}).encode()}
+        return type(result)(result.timeseries.replace_schema_metadata(meta), result.metrics)
+
+    results = [with_inputs(synthetic_result("W1", "tp", seed=0),
+                           {"control.mpc.max_iter": 8, "scenario.track.speed_m_s": 1.0}),
+               with_inputs(synthetic_result("W1", "tp", seed=1), {"control.mpc.max_iter": 8})]
+    assert M._header(results)[2].startswith(
+        f"Machine: compact3; files control {control}; on every run "
+        "`control.mpc.max_iter = 8`. 2 runs, seeds [0, 1]")

@@ -251,8 +251,7 @@ def _add_report(sub: Subcommands) -> None:
     report.add_argument("--baselines", default=",".join(baselines()),
                         help=f"baseline controllers run on {REFERENCE_ARCHITECTURE} in W1 "
                              "('' for none)")
-    _tensioner_arg(report)
-    _machine_arg(report)
+    _file_args(report)
     _executor_args(report)
     report.add_argument("--out", help="output directory (default: runs/report, with -MACHINE "
                         "when it is not the default one); runs already complete in it are "

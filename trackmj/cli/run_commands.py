@@ -180,6 +180,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     if a run failed."""
     # start-up: --help and argument errors must not import MuJoCo, CasADi or Matplotlib
     from trackmj.machines.assembly import resolve
+    from trackmj.study.executor import as_path, overrides_tuple
     from trackmj.study.report import REPORT_ARCHS, check_report_dir, plan, run_matrix, write_report
 
     archs, baselines = _report_choices(args, REPORT_ARCHS)
@@ -189,7 +190,10 @@ def cmd_report(args: argparse.Namespace) -> int:
     if args.tensioner is not None:
         load_tensioner(args.tensioner)   # refused here, before any run, if it is bad
     specs = plan(args.scenarios.split(","), list(range(args.seeds)), args.duration, archs,
-                 baselines, tensioner=args.tensioner, machine=_machine_spec(args.machine))
+                 baselines, tensioner=args.tensioner, machine=_machine_spec(args.machine),
+                 files={kind: as_path(getattr(args, kind))
+                        for kind in ("model", "hydraulics", "control")},
+                 overrides=overrides_tuple(args.set))
     matrix = run_matrix(specs, out, workers=args.workers, scheduler=args.scheduler)
     path = write_report(matrix.results, out, matrix)
     print(f"{len(matrix.results)} runs ({matrix.resumed} resumed, {len(matrix.failed)} failed) "

@@ -31,7 +31,7 @@ import os
 import sys
 import time
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -57,6 +57,7 @@ from trackmj.study.report_claims import Finding, claims
 from trackmj.study.report_markdown import report_lines
 from trackmj.study.report_matrix import Matrix, MatrixRun
 from trackmj.study.study_numbers import STUDY_REDUCED
+from trackmj.validator import ParameterError
 
 REPORT_ARCHS = (REFERENCE_ARCHITECTURE, *STUDY_REDUCED)
 """Architectures of a report by default: the reference and the study's two reduced ones,
@@ -72,42 +73,47 @@ REPORT = "report.md"
 def plan(scenarios: Sequence[str], seeds: Sequence[int], duration: float | None,
          archs: Sequence[str] = REPORT_ARCHS,
          baselines: Sequence[str] | None = None, tensioner: str | None = None,
-         machine: str | None = None) -> list[PlannedRun]:
+         machine: str | None = None, files: Mapping[str, str | None] | None = None,
+         overrides: tuple[tuple[str, Any], ...] = ()) -> list[PlannedRun]:
     """Every run of a report: each scenario's variants × seeds × ``archs`` with its own
     controller, then ``baselines`` (default: the controllers registered as baselines,
     :func:`trackmj.sim.controllers.baselines`) on the reference architecture in the nominal
     :data:`BASELINE_SCENARIOS`; ``tensioner`` (a tensioner file) replaces the hydraulic
     element where an architecture has one (:func:`~trackmj.study.report_cases.tensioner_for`);
-    ``machine`` (a shipped name or a machine file) is every run's. A ``duration`` that would
-    cut off a scenario's step, pulse or drop moves its events inside the run
-    (:func:`~trackmj.study.report_cases.event_moves`). Each run is validated here
-    (ParameterError before anything runs) and known by its identity
-    (:func:`trackmj.study.identity.run_key`)."""
+    ``machine`` (a shipped name or a machine file) is every run's, and so are ``files``
+    (``model``, ``hydraulics``, ``control``: a parameter file replacing the machine's, None
+    for its own) and ``overrides`` (``--set`` items in :attr:`RunSpec.overrides` form). A
+    ``duration`` that would cut off a scenario's step, pulse or drop moves its events inside
+    the run (:func:`~trackmj.study.report_cases.event_moves`; an override of the same key
+    wins). Each run is validated here (ParameterError before anything runs) and known by its
+    identity (:func:`trackmj.study.identity.run_key`)."""
     if baselines is None:
         baselines = registered_baselines()
+    common = {"tensioner": tensioner, "machine": machine, **(files or {})}
     specs = []
     for name in scenarios:
-        specs += _scenario_specs(name, seeds, duration, archs, baselines, tensioner, machine)
+        specs += _scenario_specs(name, seeds, duration, archs, baselines, common, overrides)
     return _planned(specs)
 
 
 def _scenario_specs(name: str, seeds: Sequence[int], duration: float | None,
-                    archs: Sequence[str], baselines: Sequence[str], tensioner: str | None,
-                    machine: str | None) -> list[RunSpec]:
+                    archs: Sequence[str], baselines: Sequence[str], common: Mapping[str, Any],
+                    overrides: tuple[tuple[str, Any], ...]) -> list[RunSpec]:
     """The runs of one scenario: variants × seeds × ``archs`` with its controller, then
-    the ``baselines`` on the reference if it is one of :data:`BASELINE_SCENARIOS`."""
+    the ``baselines`` on the reference if it is one of :data:`BASELINE_SCENARIOS`;
+    ``common`` the RunSpec fields every run shares (its tensioner file given for the
+    architectures that have a hydraulic element)."""
     sc = load_scenario(name)
-    moves = overrides_tuple({f"scenario.{k}": v
-                             for k, v in event_moves(name, duration).items()})
+    moves = {f"scenario.{k}": v for k, v in event_moves(name, duration).items()}
+    given = overrides_tuple(moves | dict(overrides))
+    tensioner = common["tensioner"]
     specs = [RunSpec(scenario=name, architecture=arch, controller=sc.controller,
-                     seed=seed, duration=duration, variant=variant.name,
-                     overrides=moves, tensioner=tensioner_for(arch, tensioner),
-                     machine=machine)
+                     seed=seed, duration=duration, variant=variant.name, overrides=given,
+                     **{**common, "tensioner": tensioner_for(arch, tensioner)})
              for variant in sc.variants for seed in seeds for arch in archs]
     if sc.name in BASELINE_SCENARIOS:
         specs += [RunSpec(scenario=name, architecture=REFERENCE_ARCHITECTURE, controller=c,
-                          seed=seed, duration=duration, overrides=moves, tensioner=tensioner,
-                          machine=machine)
+                          seed=seed, duration=duration, overrides=given, **common)
                   for c in baselines if c != sc.controller for seed in seeds]
     return specs
 
@@ -119,7 +125,10 @@ def _planned(specs: Sequence[RunSpec]) -> list[PlannedRun]:
     for spec in specs:
         unseeded = replace(spec, seed=0)
         if unseeded not in setups:
-            setups[unseeded] = prepare(**unseeded.prepare_kwargs())
+            try:
+                setups[unseeded] = prepare(**unseeded.prepare_kwargs())
+            except ParameterError as exc:   # a report's overrides meet several scenarios
+                raise ParameterError(f"{spec.scenario}: {exc}") from None
         setup = replace(setups[unseeded], seed=spec.seed)
         runs.append(plan_run(spec, setup=setup, name=run_name(
             setup.scenario.name, setup.architecture, setup.controller, setup.variant.name,

@@ -5,6 +5,7 @@ directory as their sections are written."""
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -67,13 +68,35 @@ def report_lines(m: Matrix, findings: Sequence[Finding], results: Sequence[Resul
 
 # ----------------------------------------------------------------------------- head
 
+def _inputs(results: Sequence[Result]) -> str:
+    """The crawler the runs simulated, the parameter files that were not its own and the
+    ``--set`` overrides every run shares, in one sentence."""
+    crawlers = sorted({r.metadata.get("machine", "?") for r in results})
+    said = f"Machine: {', '.join(crawlers)}"
+    files: dict[str, set[str]] = {}
+    for r in results:
+        for kind, source in json.loads(r.metadata.get("files", "{}")).items():
+            if kind not in ("machine", "scenario") and source != "packaged":
+                files.setdefault(kind, set()).add(str(source))
+    if files:
+        said += "; files " + ", ".join(f"{kind} {' / '.join(sorted(paths))}"
+                                       for kind, paths in sorted(files.items()))
+    shared = [json.loads(r.metadata.get("overrides", "{}")) for r in results]
+    common = {k: v for k, v in shared[0].items() if all(o.get(k) == v for o in shared)}
+    if common:
+        said += "; on every run " + ", ".join(f"`{k} = {v}`" for k, v in sorted(common.items()))
+    return said + "."
+
+
 def _header(results: Sequence[Result]) -> list[str]:
-    """Title, what was run, the study cited, and where the metrics are defined."""
+    """Title, what was run (the crawler, its files and overrides), the study cited, and
+    where the metrics are defined."""
     durations = sorted({r.metadata.get("duration_s", "?") for r in results})
     seeds = sorted({r.seed for r in results})
     return ["# trackmj report", "",
-            f"{len(results)} runs, seeds {seeds}, {', '.join(durations)} s each, on "
-            f"{machine()}. Values are mean ± std over seeds (W5: over variants × seeds). "
+            f"{_inputs(results)} {len(results)} runs, seeds {seeds}, {', '.join(durations)} "
+            f"s each, on {machine()}. Values are mean ± std over seeds (W5: over variants × "
+            "seeds). "
             "The study's figures are from " + STUDY + ", shown for comparison only: trackmj "
             "is never tuned toward them.", "",
             "Metrics are defined in the README (section Metrics) and in "
