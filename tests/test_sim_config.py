@@ -33,6 +33,11 @@ IDENTIFICATION_RTOL = 1e-6
 (AVX-512 paths) and 8 s of contact dynamics and a nonlinear fit carry them to ~1e-9 relative
 (seen between an AMD EPYC and an Intel Xeon). A change of the track moves k, M, c by far more
 than 1e-6 (a pin stiffness 1 % off moves k by ~0.5 %)."""
+MODES_RTOL = 1e-4
+"""The modal fit's terms are less well conditioned than k, M and c: between an AMD EPYC and
+an Intel Xeon (2026-12-07) a residue moved 5.4e-6 and the damping ratio of the fit's
+overdamped 0 Hz term (3383) 5.9e-6 relative, while k, M and c stayed within 1e-6, which
+still catch a change of the track."""
 
 
 @pytest.mark.slow
@@ -48,7 +53,7 @@ def test_committed_idler_file_equals_a_fresh_identification() -> None:
         assert getattr(stored, f.name) == expected, (f.name, REGENERATE)
     for a, b in zip(stored.modes, fresh.modes, strict=True):
         assert dataclasses.astuple(a) == pytest.approx(dataclasses.astuple(b),
-                                                       rel=IDENTIFICATION_RTOL), REGENERATE
+                                                       rel=MODES_RTOL), REGENERATE
 
 
 def test_reduced_plant_lumps_both_cylinders_and_puts_paths_in_series() -> None:
