@@ -69,8 +69,9 @@ def report_lines(m: Matrix, findings: Sequence[Finding], results: Sequence[Resul
 # ----------------------------------------------------------------------------- head
 
 def _inputs(results: Sequence[Result]) -> str:
-    """The crawler the runs simulated, the parameter files that were not its own and the
-    ``--set`` overrides every run shares, in one sentence."""
+    """The crawler the runs simulated, the parameter and tensioner files that are not the
+    package's own (a machine file's, or given) and the ``--set`` overrides every run shares,
+    in one sentence."""
     crawlers = sorted({r.metadata.get("machine", "?") for r in results})
     said = f"Machine: {', '.join(crawlers)}"
     files: dict[str, set[str]] = {}
