@@ -43,16 +43,22 @@ def cell(rows: dict[str, np.ndarray], nominal_N: float) -> str:
     ok = np.array([not (isinstance(e, str) and e) for e in error])
     if not ok.any():
         return f"**fails**: {len(failed)} of {len(error)} runs failed ({failed[0][:80]}...)"
-    default = (2.0 * nominal_N / 3.0, 4.0 * nominal_N / 3.0)
-    low = rows.get("evaluation.force_min_N", np.full(len(ok), default[0]))
-    high = rows.get("evaluation.force_max_N", np.full(len(ok), default[1]))
+
+    def recorded(name: str, default: float) -> np.ndarray:
+        """Each run's ``evaluation.NAME``, ``default`` where it recorded none (NaN: a run
+        written before the column, in a table that has it)."""
+        values = rows.get(f"evaluation.{name}", np.full(len(ok), np.nan))
+        return np.where(np.isfinite(values), values, default)
+
+    low = recorded("force_min_N", 2.0 * nominal_N / 3.0)
+    high = recorded("force_max_N", 4.0 * nominal_N / 3.0)
+    within = recorded("recovery_within_s", RECOVERY_WITHIN_S)
+    limit = recorded("steady_offset_max_rel", STEADY_OFFSET_MAX_REL)
     mean_min = float(np.min(rows["acceptance.mean_min_N"][ok]))
     mean_max = float(np.max(rows["acceptance.mean_max_N"][ok]))
     # the condition's edges: the edge columns some run of it filled (the table holds every
     # condition's), so that a run's NaN there is an edge it never came back after
     edges = [name for name in rows if name.startswith(EDGE) and np.isfinite(rows[name][ok]).any()]
-    within = rows.get("evaluation.recovery_within_s", np.full(len(ok), RECOVERY_WITHIN_S))
-    limit = rows.get("evaluation.steady_offset_max_rel", np.full(len(ok), STEADY_OFFSET_MAX_REL))
     broken: dict[str, None] = {}            # the rules some run broke, in the verdict's order
     for k in np.flatnonzero(ok):
         figures = {"mean_min_N": rows["acceptance.mean_min_N"][k],

@@ -90,11 +90,18 @@ def test_a_later_report_replaces_a_condition_and_keeps_the_rest(tmp_path: Path) 
 def test_each_run_is_judged_by_the_band_it_recorded(tmp_path: Path) -> None:
     """A run whose control file narrowed the band (``evaluation.force_max_N`` at 1.05 x the
     nominal) fails with a mean at 1.1 x, which the default band (4/3 x) would hold; one
-    that widened it (0.5 x) holds with a mean at 0.6 x, below the default's 2/3."""
+    that widened it (0.5 x) holds with a mean at 0.6 x, below the default's 2/3; a run
+    without a recorded band (an older run in the same table) is judged by the default."""
     narrow = _run("W1", high_rel=1.1) | {"evaluation.force_min_N": 2.0 / 3.0 * NOMINAL_N,
                                          "evaluation.force_max_N": 1.05 * NOMINAL_N}
     wide = _run("W2", low_rel=0.6) | {"evaluation.force_min_N": 0.5 * NOMINAL_N,
                                       "evaluation.force_max_N": 4.0 / 3.0 * NOMINAL_N}
+    older = _run("W1", high_rel=1.4) | {"evaluation.force_min_N": None,
+                                         "evaluation.force_max_N": None}
     cells = _cells(table([_report(tmp_path / "a", [narrow, wide])]))
     assert cells["W1"].startswith("**fails** (band)")
     assert cells["W2"].startswith("holds; ")
+    # a run that recorded no band beside one that did is judged by the default (4/3 x),
+    # not let through by a NaN band
+    assert _cells(table([_report(tmp_path / "b", [older, narrow | {"scenario": "W3"}])]))[
+        "W1"].startswith("**fails** (band)")
