@@ -45,9 +45,17 @@ def _specs_base(args: argparse.Namespace, scenario: str) -> dict:
 
     return dict(scenario=scenario, estimator=getattr(args, "estimator", None),
                 duration=args.duration, overrides=overrides_tuple(args.set),
-                model=as_path(args.model), hydraulics=as_path(args.hydraulics),
-                control=as_path(args.control), tensioner=as_path(args.tensioner),
+                **_parameter_files(args), tensioner=as_path(args.tensioner),
                 machine=_machine_spec(args.machine))
+
+
+def _parameter_files(args: argparse.Namespace) -> dict[str, str | None]:
+    """The ``--model``, ``--hydraulics`` and ``--control`` files as RunSpec fields (None:
+    the machine's own)."""
+    # start-up: --help and argument errors must not import MuJoCo, CasADi or SciPy
+    from trackmj.study.executor import as_path
+
+    return {kind: as_path(getattr(args, kind)) for kind in ("model", "hydraulics", "control")}
 
 
 def _machine_spec(machine: str | None) -> str | None:
@@ -180,7 +188,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     if a run failed."""
     # start-up: --help and argument errors must not import MuJoCo, CasADi or Matplotlib
     from trackmj.machines.assembly import resolve
-    from trackmj.study.executor import as_path, overrides_tuple
+    from trackmj.study.executor import overrides_tuple
     from trackmj.study.report import REPORT_ARCHS, check_report_dir, plan, run_matrix, write_report
 
     archs, baselines = _report_choices(args, REPORT_ARCHS)
@@ -191,9 +199,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         load_tensioner(args.tensioner)   # refused here, before any run, if it is bad
     specs = plan(args.scenarios.split(","), list(range(args.seeds)), args.duration, archs,
                  baselines, tensioner=args.tensioner, machine=_machine_spec(args.machine),
-                 files={kind: as_path(getattr(args, kind))
-                        for kind in ("model", "hydraulics", "control")},
-                 overrides=overrides_tuple(args.set))
+                 files=_parameter_files(args), overrides=overrides_tuple(args.set))
     matrix = run_matrix(specs, out, workers=args.workers, scheduler=args.scheduler)
     path = write_report(matrix.results, out, matrix)
     print(f"{len(matrix.results)} runs ({matrix.resumed} resumed, {len(matrix.failed)} failed) "
