@@ -134,8 +134,12 @@ def test_headers_name_their_unit(header, name, scale):
 @pytest.mark.parametrize(("mutate", "words"), [
     (lambda c: c["t_s"].__setitem__(5, c["t_s"][3]), ["rig.csv column 't_s'", "not strictly "
                                                        "increasing at row 6"]),
-    (lambda c: c["p_head [MPa]"].__setitem__(9, np.nan), ["rig.csv column 'p_head [MPa]'",
-                                                            "row 10", "nan"]),
+    (lambda c: c["p_head [MPa]"].__setitem__(slice(9, 70), np.nan),
+     ["rig.csv column 'p_head [MPa]'", "no sample from t = 0.009 to 0.071 s", "0.05 s"]),
+    (lambda c: c["p_head [MPa]"].__setitem__(9, np.inf), ["rig.csv column 'p_head [MPa]'",
+                                                            "data row 10 is inf"]),
+    (lambda c: c.update(t_s=c["t_s"] + 1234.5), ["rig.csv column 't_s'", "starts at 1234.5 s",
+                                                 "subtract its first time, 1234.5 s"]),
     (lambda c: c.update(t_s=c["t_s"] * 0.5), ["rig.csv column 't_s'", "too short"]),
 ])
 def test_bad_logs_are_refused_naming_file_and_column(tmp_path, mutate, words):
@@ -237,3 +241,55 @@ def test_run_refuses_a_bad_measured_log_before_running(tmp_path, capsys, columns
     err = capsys.readouterr().err
     assert code == 2 and all(w in err for w in words), err
     assert not (tmp_path / "r").exists()
+
+
+def test_missing_samples_are_bridged_and_counted(tmp_path):
+    """A channel logged at 1/10 of the time column's rate (blank cells between) and a
+    dropped command sample: the channel is the line between its samples, the command is
+    held across the gap, and the log record counts what was bridged."""
+    from trackmj.study.calibrate import load_log
+
+    t = 1e-3 * np.arange(1, 2501)
+    p_head = np.where(np.arange(t.size) % 10 == 0, 5.0 + t, np.nan)   # MPa, 100 Hz
+    mode = np.where(t < 1.0, 1.0, -1.0)
+    mode[1200] = np.nan
+    path = write_csv(tmp_path / "rig.csv", {"t_s": t, "p_head [MPa]": p_head, "valve_mode": mode})
+    log = load_log(path, DURATION_S)
+    np.testing.assert_allclose(log.channels["p_head_Pa"][:-9], 1e6 * (5.0 + t[:-9]), rtol=1e-12)
+    np.testing.assert_array_equal(log.mode[1195:1205], -1)
+    assert log.record()["missing_samples"] == {"p_head [MPa]": 2250, "valve_mode": 1}
+
+
+def test_the_information_matrix_names_the_keys_the_logs_do_not_determine():
+    """A Jacobian column of zeros (a key the channels do not see) and two proportional
+    columns (keys seen only together) are undetermined; the rest is inverted as it is."""
+    from trackmj.study.calibrate import _inverse_information
+
+    rng = np.random.default_rng(3)
+    a, b = rng.standard_normal((2, 200))
+    j = np.stack([a, np.zeros(200), b, -2.0 * b], axis=1)
+    inverse, determined = _inverse_information(j)
+    np.testing.assert_array_equal(determined, [True, False, False, False])
+    assert inverse[0, 0] == pytest.approx(1.0 / (a @ a), rel=1e-12)
+    assert np.isinf(inverse[1:, 1:]).all()
+    well = np.stack([a, b], axis=1)
+    inverse, determined = _inverse_information(well)
+    assert determined.all()
+    np.testing.assert_allclose(inverse, np.linalg.inv(well.T @ well), rtol=1e-12)
+
+
+def test_a_channel_the_fit_misses_by_far_more_than_its_noise_is_named():
+    """The warning names the log, the header as written and the ratio to the sensor's σ; a
+    channel at its noise is not named; an undetermined key is named with why."""
+    from types import SimpleNamespace
+
+    from trackmj.study.calibrate import fit_warnings
+
+    log = SimpleNamespace(file="rig.csv", used={"stroke_m": "stroke [mm]",
+                                                "p_head_Pa": "p_head [bar]"})
+    lines = fit_warnings(SimpleNamespace(logs=[log]), {"k": "its 95 % interval covers them"},
+                         [{"stroke_m": 0.0296, "p_head_Pa": 1.5e5}],
+                         {"stroke_m": 2e-4, "p_head_Pa": 1.5e5})
+    assert lines[0].startswith("k: the logs do not determine it within its bounds (its 95 %")
+    assert len(lines) == 2 and "rig.csv 'stroke [mm]'" in lines[1]
+    assert "29.6 mm RMS, 148 times its sensor's sigma" in lines[1]

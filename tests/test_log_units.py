@@ -106,7 +106,8 @@ def test_columns_naming_no_quantity_are_ignored_and_listed_even_with_text(tmp_pa
     record = log.record()
     assert record == {"file": "rig.csv", "sha256": log.sha256,
                       "columns_used": {"p_head_Pa": "p_head_MPa"},
-                      "columns_ignored": ["temperature [degC]", "comment", "engine_rpm"]}
+                      "columns_ignored": ["temperature [degC]", "comment", "engine_rpm"],
+                      "missing_samples": {}}
 
 
 def test_text_in_a_quantity_column_is_refused(tmp_path):
@@ -203,7 +204,7 @@ def test_calibration_log_records_its_columns_and_refuses_an_unknown_unit(tmp_pat
     assert log.record() == {"file": "rig.csv", "sha256": hashlib.sha256(
         path.read_bytes()).hexdigest(), "columns_used": {"valve_mode": "valve_mode",
                                                          "p_head_Pa": "p_head [psi]"},
-        "columns_ignored": ["note", "p_supply_bar"]}
+        "columns_ignored": ["note", "p_supply_bar"], "missing_samples": {}}
     path.write_text(path.read_text().replace("p_head [psi]", "p_head [psix]"))
     with pytest.raises(ParameterError, match=r"rig\.csv column 'p_head \[psix\]': unit 'psix' "
                                              "is not a unit pint knows"):
@@ -246,3 +247,37 @@ def test_an_absolute_pressure_is_refused_naming_why(tmp_path):
     path = write(tmp_path, "t_s,p_head [psia]\n0,100\n1,110\n")
     with pytest.raises(ParameterError, match=r"rig.csv column 'p_head \[psia\]'.*absolute"):
         read_trace(path)
+
+
+@pytest.mark.parametrize(("text", "encoding"), [
+    ("t [ms];p_head [bar];Öltemp [°C];valve_mode\n0;1,5;40,1;0\n1;2,5;40,2;1\n", "cp1252"),
+    ("t [ms]\tp_head [bar]\tvalve_mode\n0\t1,5\t0\n1\t2,5\t1\n", "utf-8"),
+    ("t [ms];p_head [bar];valve_mode\n0;1.5;0\n1;2.5;1\n", "utf-8"),
+    ("t [ms], p_head [bar] , valve_mode\n0, 1.5, 0\n1, 2.5, 1\n", "latin-1"),
+])
+def test_european_and_spaced_csv_dialects_read_as_the_plain_one(tmp_path, text, encoding):
+    """A Windows-1252 header with ';' and decimal commas, tabs, ';' with decimal points and
+    spaces around headers: the same bar values and valve modes as a plain CSV."""
+    path = tmp_path / "rig.csv"
+    path.write_bytes(text.encode(encoding))
+    trace = read_trace(path)
+    np.testing.assert_allclose(trace.t_s, [0.0, 0.001])
+    np.testing.assert_allclose(trace.columns["p_head_Pa"], [1.5e5, 2.5e5], rtol=1e-12)
+    np.testing.assert_array_equal(trace.columns["valve_mode"], [0, 1])
+    assert trace.ignored == (("Öltemp [°C]",) if "Öltemp" in text else ())
+
+
+def test_parquet_units_from_field_metadata_and_the_studys_symbols(tmp_path):
+    """A Parquet column named without a unit takes its field's unit metadata (kN, ms);
+    F_ten is the study's symbol for the tensioner force."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.table({"t": [0.0, 1.0], "F_ten": [12.0, 13.0]}).cast(pa.schema([
+        pa.field("t", pa.float64(), metadata={"unit": "ms"}),
+        pa.field("F_ten", pa.float64(), metadata={"unit": "kN"})]))
+    pq.write_table(table, tmp_path / "rig.parquet")
+    trace = read_trace(tmp_path / "rig.parquet")
+    np.testing.assert_allclose(trace.t_s, [0.0, 0.001])
+    np.testing.assert_allclose(trace.columns["tension_N"], [12e3, 13e3])
+    assert trace.headers["tension_N"] == "F_ten [kN]"

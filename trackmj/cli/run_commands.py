@@ -250,13 +250,18 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         unit = "" if unit in ("", "1") else f" {unit}"
         low, high = doc["intervals"][key]
         bound = "  (at a bound)" if doc["at_bound"][key] else ""
+        bound += "" if doc["determined"][key] else "  (not determined: the bounds)"
         print(f"  {key} = {value * scale:.5g}{unit}   95 % [{low * scale:.5g}, "
               f"{high * scale:.5g}]{unit}{bound}")
     rms = ", ".join(f"{name} {value:.4g}" for name, value in doc["residual_rms"].items())
     print(f"  residual RMS (SI): {rms}")
     for log in doc["logs"]:
         ignored = ", ".join(log["columns_ignored"]) or "none"
+        missing = "".join(f"; {header}: {n} missing samples bridged"
+                          for header, n in log["missing_samples"].items())
         print(f"  log {log['file']} (sha256 {log['sha256'][:12]}): fitted "
-              f"{', '.join(log['columns_used'].values())}; ignored: {ignored}")
+              f"{', '.join(log['columns_used'].values())}; ignored: {ignored}{missing}")
+    for line in doc["warnings"]:
+        print(f"warning: {line}", file=sys.stderr)
     print(f"-> {out / CALIBRATION_JSON}, {out / CALIBRATION_PNG}")
     return 0

@@ -50,6 +50,7 @@ def estimate_lines(doc: Mapping[str, Any]) -> list[str]:
         low, high = doc["intervals"][key]
         unit = "" if unit in ("", "1") else f" {unit}"
         bound = ", at a bound" if doc["at_bound"][key] else ""
+        bound += "" if doc["determined"][key] else ", not determined: the bounds"
         lines.append(f"{key} = {value * scale:.4g}{unit}   (95 %: {low * scale:.4g} .. "
                      f"{high * scale:.4g}{unit}; start {doc['start'][key] * scale:.4g}{unit}"
                      f"{bound})")

@@ -43,15 +43,28 @@ underscore whose left part names a quantity and whose unit fits
 (``stroke_velocity_mm_s``: stroke_velocity in mm/s); a header in SI of something else
 (``p_head_L_Pa`` when the run does not record it) names no quantity.
 
+A CSV file is read as UTF-8, else as Windows-1252 (a DAQ on a European Windows PC writes
+``Öltemp [°C]`` so), else Latin-1; its separator is the one of ``,``, ``;`` and tab its
+header line holds most of, and with ``;`` or tab a decimal comma is read when the first data
+line has one (``0,5;12,3``). Headers are taken without the spaces around them (``t_s,
+p_head [bar]``). In Parquet a column named without a unit takes the ``unit`` of its field's
+metadata, as trackmj writes its own results.
+
+An empty cell (or ``NaN``) of a quantity's column is a **missing sample**: the column is
+interpolated across it from its neighbours (a channel logged at a lower rate than the time
+column, or a dropped sample), if the gap between the samples around it is at most
+:data:`MAX_GAP_S`; :attr:`Trace.missing` counts them per column. Time has none.
+
 Refused, each with one line naming the file, the column and what is expected (a
 :class:`~trackmj.validator.ParameterError`, exit 2 on the command line): a quantity's
 column whose unit pint does not know, whose dimension does not fit (``tension [psi]``,
 ``p_head_N``, ``tension_kNm`` — pint reads kNm as kilo-number-metre), or that names no
 unit (``tension``); a quantity's column holding text; no time column, time not strictly
-increasing, a value not finite and, for a run, time not covering the run [1 ms,
-duration]. A header naming no quantity (``temperature [degC]``, ``comment``,
-``engine_rpm``) is **ignored and listed** (:attr:`Trace.ignored`,
-:attr:`MeasuredLog.ignored`); it may hold text.
+increasing or missing, an infinite value, a gap of missing samples longer than
+:data:`MAX_GAP_S` and, for a run, time not covering the run [1 ms, duration] (a log
+timed from another origin is told to subtract its start). A header naming no quantity
+(``temperature [degC]``, ``comment``, ``engine_rpm``) is **ignored and listed**
+(:attr:`Trace.ignored`, :attr:`MeasuredLog.ignored`); it may hold text.
 
 Signals are resampled to the run's 1 ms grid by linear interpolation (:func:`resample`; a
 log sampled faster than 1 kHz is interpolated, not averaged). Input signals of a scenario
@@ -63,9 +76,10 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import itertools
 import re
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -90,6 +104,8 @@ def suffix_of(unit: str) -> str:
 TIME = "t_s"
 TIME_NAMES = ("t", "time")
 """Base names of the time column (``t_s``, ``t [ms]``, ``time [s]``, ``time_ms``)."""
+SYMBOLS = {"F_ten": "tension", "F_ref": "tension_ref"}
+"""The study's symbols a header may use for a quantity's base name (``F_ten [kN]``)."""
 DIMENSIONLESS = tuple(name for name, unit in COLUMN_UNITS.items() if unit == "1")
 """Columns without a unit suffix (the run's valve mode −1/0/+1 and opening u [-])."""
 SI_SUFFIXES: dict[str, str] = {suffix_of(unit): unit for unit in COLUMN_UNITS.values()
@@ -112,6 +128,15 @@ UNIT_EXAMPLES: dict[str, tuple[str, str]] = {
 OTHER_DIMENSIONS = {"kg": "mass", "K": "temperature", "m^2": "area", "m^3": "volume",
                     "Hz": "frequency", "W": "power", "N/m": "stiffness"}
 """Further SI units whose dimension a message names in words (a unit of the wrong kind)."""
+MAX_GAP_S = 0.05
+"""Longest span [s] between two samples of a column that missing samples between them may
+leave (a channel logged at 20 Hz or faster is bridged; assumed: the tensioner's dynamics
+of interest, the valves' 20-50 ms and the 8-12 Hz body mode, are not resolved across a
+longer gap, so a longer one is refused rather than drawn as a straight line)."""
+ENCODINGS = ("utf-8-sig", "cp1252", "latin-1")
+"""A CSV file's encodings, tried in turn (Latin-1 reads any byte)."""
+SEPARATORS = (",", ";", "\t")
+"""A CSV file's separators: the one its header line holds most of (ties: the first)."""
 COVER_TOLERANCE_S = 0.5 * COUPLING_STEP_S
 """A trace covers the run if it starts by the end of the first step (a run's own ``t_s``
 starts there) and ends by the duration, within half a step [s]; before its first sample
@@ -239,13 +264,14 @@ def split_si(name: str) -> tuple[str, Quantity] | None:
 
 def log_quantities(names: Iterable[str] = ()) -> dict[str, Quantity]:
     """Base name -> quantity of a log: the run's columns (:data:`COLUMN_UNITS`), the
-    further SI column ``names`` given (a run's ``--channels all`` columns) and the time's
-    names (:data:`TIME_NAMES`)."""
+    further SI column ``names`` given (a run's ``--channels all`` columns), the study's
+    symbols (:data:`SYMBOLS`) and the time's names (:data:`TIME_NAMES`)."""
     out = {}
     for name in (*COLUMN_UNITS, *names):
         split = split_si(name)
         if split is not None:
             out[split[0]] = split[1]
+    out |= {alias: out[base] for alias, base in SYMBOLS.items() if base in out}
     return out | {base: Quantity(TIME, "s") for base in TIME_NAMES}
 
 
@@ -315,7 +341,9 @@ class Trace:
     ``columns``: SI name -> values, shape (n,); ``headers``: SI name -> the header as
     written, for every column naming a quantity (time included); ``ignored``: the headers
     as written that name no quantity; ``file``: the file's name; ``sha256``: the hex
-    SHA-256 of the file's bytes."""
+    SHA-256 of the file's bytes; ``missing``: SI name -> how many of the column's samples
+    are missing (NaN in ``columns``; bridged by :meth:`samples`), for the columns with
+    any."""
 
     file: str
     t_s: np.ndarray
@@ -323,6 +351,7 @@ class Trace:
     headers: Mapping[str, str]
     ignored: tuple[str, ...]
     sha256: str
+    missing: Mapping[str, int] = field(default_factory=dict)
 
     def where(self, name: str) -> str:
         """``file column 'header'`` for a message."""
@@ -341,35 +370,95 @@ class Trace:
     def check_covers(self, duration_s: float, what: str = "the run") -> None:
         """ParameterError naming the file and time column unless t spans [0, duration_s]."""
         t0, t1 = float(self.t_s[0]), float(self.t_s[-1])
-        if t0 > COUPLING_STEP_S + COVER_TOLERANCE_S or t1 < duration_s - COVER_TOLERANCE_S:
+        if t0 > COUPLING_STEP_S + COVER_TOLERANCE_S:
+            raise ParameterError(
+                f"{self.where(TIME)}: starts at {t0:g} s; its time counts from the start of "
+                f"{what} at 0 s, which it must cover from {COUPLING_STEP_S:g} s on (a log "
+                f"timed from another origin: subtract its first time, {t0:g} s)")
+        if t1 < duration_s - COVER_TOLERANCE_S:
             raise ParameterError(f"{self.where(TIME)}: spans {t0:g} .. {t1:g} s, too short "
                                  f"to cover {what} ({COUPLING_STEP_S:g} .. {duration_s:g} s)")
 
+    def samples(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(t [s], values) of column ``name`` where it has samples (its missing ones left
+        out), shape (m,) each."""
+        values = self.columns[name]
+        present = ~np.isnan(values)
+        return self.t_s[present], values[present]
+
     def resample(self, name: str, t_s: np.ndarray) -> np.ndarray:
-        """Column ``name`` at times ``t_s`` [s] by linear interpolation (held beyond the
-        ends), shape of ``t_s``."""
-        return np.interp(np.asarray(t_s, dtype=float), self.t_s, self.columns[name])
+        """Column ``name`` at times ``t_s`` [s] by linear interpolation of its samples
+        (across missing ones; held beyond the ends), shape of ``t_s``."""
+        return np.interp(np.asarray(t_s, dtype=float), *self.samples(name))
+
+
+def _decoded(data: bytes) -> str:
+    """A CSV file's text in the first of :data:`ENCODINGS` that reads it."""
+    for encoding in ENCODINGS[:-1]:
+        try:
+            return data.decode(encoding)
+        except UnicodeDecodeError:
+            continue
+    return data.decode(ENCODINGS[-1])
+
+
+def _csv_options(text: str) -> tuple[pacsv.ParseOptions, pacsv.ConvertOptions]:
+    """pyarrow's options for a CSV text: the separator of :data:`SEPARATORS` its first
+    line holds most of; with ``;`` or tab, a decimal comma if the second line has a digit,
+    a comma and a digit in a row."""
+    lines = text.splitlines()
+    header = lines[0] if lines else ""
+    separator = max(SEPARATORS, key=header.count)
+    decimal = "," if separator != "," and len(lines) > 1 and re.search(
+        r"\d,\d", lines[1]) else "."
+    return (pacsv.ParseOptions(delimiter=separator),
+            pacsv.ConvertOptions(decimal_point=decimal))
+
+
+def _with_field_units(table: pa.Table) -> pa.Table:
+    """A Parquet table whose columns named without a unit (``t``, ``tension``) are renamed
+    ``name [unit]`` by their field's ``unit`` metadata (as trackmj writes its results)."""
+    names = []
+    for f in table.schema:
+        unit = (f.metadata or {}).get(b"unit", b"").decode().strip()
+        try:
+            si_name(f.name)
+            names.append(f.name)
+        except ValueError:
+            names.append(f"{f.name} [{unit}]" if unit else f.name)
+    return table.rename_columns(names)
 
 
 def _read_table(path: Path) -> tuple[pa.Table, str]:
-    """The file's table (pyarrow: CSV, or Parquet for ``.parquet``/``.pq``) and the hex
-    SHA-256 of the bytes it was read from; ParameterError naming the file if it is none."""
+    """The file's table (pyarrow: CSV, or Parquet for ``.parquet``/``.pq``; see the module
+    docstring for encodings, separators and units in metadata), its headers stripped of
+    spaces, and the hex SHA-256 of the bytes it was read from; ParameterError naming the
+    file if it is none."""
     if not path.is_file():
         raise ParameterError(f"measured data file not found: {path}")
     data = path.read_bytes()
     parquet = path.suffix.lower() in (".parquet", ".pq")
     try:
-        table = (pq.read_table(pa.BufferReader(data)) if parquet
-                 else pacsv.read_csv(pa.BufferReader(data)))
+        if parquet:
+            table = _with_field_units(pq.read_table(pa.BufferReader(data)))
+        else:
+            text = _decoded(data)
+            parse, convert = _csv_options(text)
+            table = pacsv.read_csv(pa.BufferReader(text.encode()), parse_options=parse,
+                                   convert_options=convert)
     except (OSError, pa.ArrowInvalid) as exc:
         raise ParameterError(f"{path.name}: cannot read as {'Parquet' if parquet else 'CSV'}"
                              f": {str(exc).splitlines()[0]}") from None
-    return table, hashlib.sha256(data).hexdigest()
+    return (table.rename_columns([name.strip() for name in table.column_names]),
+            hashlib.sha256(data).hexdigest())
 
 
 def _numbers(file: str, header: str, column: pa.ChunkedArray) -> np.ndarray:
     """A column's values as floats (nulls -> NaN); ParameterError naming the file and
     column if it holds other than numbers."""
+    if pa.types.is_null(column.type):
+        raise ParameterError(f"{file} column {header!r}: holds no values (every cell empty"
+                             f"{'' if len(column) else '; the file has no data rows'})")
     if not (pa.types.is_floating(column.type) or pa.types.is_integer(column.type)):
         raise ParameterError(f"{file} column {header!r}: holds {column.type}, not numbers")
     return column.to_numpy(zero_copy_only=False).astype(float)
@@ -400,25 +489,52 @@ def _named(file: str, headers: Sequence[str], quantities: Mapping[str, Quantity]
     return named, tuple(ignored)
 
 
+def _longest_gap(t_s: np.ndarray, present: np.ndarray) -> tuple[float, float]:
+    """(from, to) [s] of the longest span that a column's missing samples leave without a
+    sample: between the samples around them, or from the log's first time or to its last
+    (``present``: which rows have a sample, shape of ``t_s``; at least one missing)."""
+    rows = np.flatnonzero(present)
+    if not len(rows):
+        return float(t_s[0]), float(t_s[-1])
+    spans = [(t_s[a], t_s[b]) for a, b in itertools.pairwise(rows) if b - a > 1]
+    spans += [(t_s[0], t_s[rows[0]])] if rows[0] > 0 else []
+    spans += [(t_s[rows[-1]], t_s[-1])] if rows[-1] < len(t_s) - 1 else []
+    start, end = max(spans, key=lambda span: span[1] - span[0])
+    return float(start), float(end)
+
+
 def _checked(trace: Trace) -> Trace:
-    """``trace`` after checking it has two or more rows, finite values and strictly
-    increasing time (ParameterError naming the file and column)."""
+    """``trace`` after checking it has two or more rows, strictly increasing time with no
+    cell missing, no infinite value and no gap of missing samples over :data:`MAX_GAP_S`
+    (ParameterError naming the file and column), with its missing samples counted."""
     t = trace.t_s
     if len(t) < 2:
         raise ParameterError(f"{trace.where(TIME)}: {len(t)} row(s); a time series needs two "
                              "or more")
+    missing = {}
     for name, data in ((TIME, t), *trace.columns.items()):
-        bad = ~np.isfinite(data)
+        bad = np.isinf(data) | (np.isnan(data) if name == TIME else False)
         if bad.any():
             i = int(np.argmax(bad))
-            raise ParameterError(f"{trace.where(name)}: row {i + 1} is {data[i]!r} (values "
-                                 "must be finite numbers)")
+            rule = ("a time in every row" if name == TIME
+                    else "values must be finite numbers, or missing")
+            raise ParameterError(f"{trace.where(name)}: data row {i + 1} is {data[i]:g} "
+                                 f"({rule})")
+        present = ~np.isnan(data)
+        if not present.all():
+            start, end = _longest_gap(t, present)
+            if end - start > MAX_GAP_S or not present.any():
+                raise ParameterError(
+                    f"{trace.where(name)}: no sample from t = {start:g} to {end:g} s; "
+                    f"missing samples are bridged over at most {MAX_GAP_S:g} s")
+            missing[name] = int((~present).sum())
     steps = np.diff(t)
     if (steps <= 0.0).any():
         i = int(np.argmax(steps <= 0.0))
         raise ParameterError(f"{trace.where(TIME)}: time is not strictly increasing at row "
                              f"{i + 2} (t = {t[i + 1]:g} s after {t[i]:g} s)")
-    return trace
+    return Trace(trace.file, t, trace.columns, trace.headers, trace.ignored, trace.sha256,
+                 missing)
 
 
 def read_trace(path: str | Path, columns: Sequence[str] | None = None,
@@ -471,31 +587,35 @@ def resample(trace: Trace, duration_s: float) -> dict[str, np.ndarray]:
     return {TIME: t} | {name: trace.resample(name, t) for name in trace.columns}
 
 
-def log_record(file: str, sha256: str, used: Mapping[str, str],
-               ignored: Sequence[str]) -> dict[str, Any]:
+def log_record(file: str, sha256: str, used: Mapping[str, str], ignored: Sequence[str],
+               missing: Mapping[str, int]) -> dict[str, Any]:
     """A log's JSON-ready record: ``{"file", "sha256", "columns_used": {SI name: header as
-    written}, "columns_ignored": [header, ...]}``."""
+    written}, "columns_ignored": [header, ...], "missing_samples": {header: count}}`` (the
+    used columns' missing samples, bridged)."""
     return {"file": file, "sha256": sha256, "columns_used": dict(used),
-            "columns_ignored": list(ignored)}
+            "columns_ignored": list(ignored),
+            "missing_samples": {used[name]: n for name, n in missing.items() if name in used}}
 
 
 @dataclass(frozen=True)
 class MeasuredLog:
     """A measured log a run is compared with: ``file`` (its name), ``sha256`` (hex, of the
     file's bytes), ``columns`` (SI name -> values on the run's 1 ms grid, shape (steps,),
-    ``t_s`` included), ``used`` (SI name -> the header as written, time excluded) and
-    ``ignored`` (the headers as written that name no quantity)."""
+    ``t_s`` included), ``used`` (SI name -> the header as written, time excluded),
+    ``ignored`` (the headers as written that name no quantity) and ``missing`` (SI name ->
+    missing samples bridged, :attr:`Trace.missing`)."""
 
     file: str
     sha256: str
     columns: dict[str, np.ndarray]
     used: dict[str, str]
     ignored: tuple[str, ...]
+    missing: Mapping[str, int] = field(default_factory=dict)
 
     def record(self) -> dict[str, Any]:
-        """JSON-ready ``{"file", "sha256", "columns_used", "columns_ignored"}``
-        (:func:`log_record`)."""
-        return log_record(self.file, self.sha256, self.used, self.ignored)
+        """JSON-ready ``{"file", "sha256", "columns_used", "columns_ignored",
+        "missing_samples"}`` (:func:`log_record`)."""
+        return log_record(self.file, self.sha256, self.used, self.ignored, self.missing)
 
 
 def load_measured(path: str | Path, duration_s: float,
@@ -517,7 +637,8 @@ def load_measured(path: str | Path, duration_s: float,
                              f"{trace.headers[TIME]!r}{ignored}; name columns as the run "
                              "does, with their unit (tension_N, p_head [psi])")
     return MeasuredLog(trace.file, trace.sha256, resample(trace, duration_s),
-                       {name: trace.headers[name] for name in trace.columns}, trace.ignored)
+                       {name: trace.headers[name] for name in trace.columns}, trace.ignored,
+                       trace.missing)
 
 
 # ----------------------------------------------------------------------------- inputs

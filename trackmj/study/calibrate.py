@@ -35,7 +35,14 @@ minimum of its smooth part (½δᵀJᵀJδ <= 2a). Measured on the test's fit (2
 keys): a ≈ 1-1.6 cost units, the second term 2.0-2.6 σ_x, so the intervals are about twice
 the noise-only ones; without it the true values fell outside in one of two noise draws.
 Both terms assume the model is the plant: a model error leaves correlated residuals and
-the intervals are then too narrow.
+the intervals are then too narrow. Intervals are cut to the bounds. A key is **not
+determined** (``determined``, and a line in ``warnings``) when the logs' channels do not
+change with it, alone or along a direction shared with other keys (an eigenvalue of JᵀJ's
+correlation form below :data:`UNDETERMINED_EIGENVALUE`: a valve that never moves, a
+viscosity the channels do not see), or when its interval covers its bounds; ``warnings``
+also names each log channel the fitted run misses by :data:`MISMATCH_NOISE_RATIO` times
+its sensor σ or more (a dead sensor, an offset, a key not fitted), whatever the intervals
+say.
 
 Logs are read as a run's measured logs (:func:`trackmj.results.measured.read_trace`):
 headers in any unit pint knows of the column's dimension (``p_head [psi]``,
@@ -68,7 +75,7 @@ from scipy.stats import t as student_t
 
 from trackmj.errors import PhysicsError
 from trackmj.ports import COLUMN_UNITS, COUPLING_STEP_S, Command, Readout
-from trackmj.results.columns import key_unit
+from trackmj.results.columns import display_unit, key_unit
 from trackmj.results.measured import TIME, Trace, log_record, read_trace, run_grid
 from trackmj.results.store import ResultWriter
 from trackmj.sim.architectures import assemble
@@ -100,10 +107,12 @@ class Log:
     sha256: str
     used: dict[str, str]
     ignored: tuple[str, ...]
+    missing: Mapping[str, int]
 
     def record(self) -> dict[str, Any]:
-        """JSON-ready ``{"file", "sha256", "columns_used", "columns_ignored"}``."""
-        return log_record(self.file, self.sha256, self.used, self.ignored)
+        """JSON-ready ``{"file", "sha256", "columns_used", "columns_ignored",
+        "missing_samples"}``."""
+        return log_record(self.file, self.sha256, self.used, self.ignored, self.missing)
 
 
 def load_log(path: str | Path, duration_s: float) -> Log:
@@ -114,13 +123,17 @@ def load_log(path: str | Path, duration_s: float) -> Log:
     trace.require(["valve_mode"])
     channels = [c for c in FIT_CHANNELS if c in trace.columns]
     if not channels:
+        others = [h for n, h in trace.headers.items() if n not in (TIME, "valve_mode", "u")]
+        ignored = f"; ignored: {', '.join((*others, *trace.ignored))}" if (
+            others or trace.ignored) else ""
         raise ParameterError(f"{trace.file}: no channel to fit; give one or more of "
-                             f"{', '.join(FIT_CHANNELS)} (or with units, e.g. p_head [psi])")
+                             f"{', '.join(FIT_CHANNELS)} (or with units, e.g. p_head [psi])"
+                             f"{ignored}")
     trace.check_covers(duration_s, "the calibration")
     mode = held(trace, "valve_mode", duration_s)
     bad = ~np.isin(mode, (-1.0, 0.0, 1.0))
     if bad.any():
-        raise ParameterError(f"{trace.where('valve_mode')}: value {mode[np.argmax(bad)]!r} "
+        raise ParameterError(f"{trace.where('valve_mode')}: value {mode[np.argmax(bad)]:g} "
                              "at t = {:g} s; a valve mode is -1, 0 or +1".format(
                                  run_grid(duration_s)[np.argmax(bad)]))
     u = held(trace, "u", duration_s) if "u" in trace.columns else mode.copy()
@@ -128,14 +141,15 @@ def load_log(path: str | Path, duration_s: float) -> Log:
     used = {n: trace.headers[n] for n in ("valve_mode", "u", *channels) if n in trace.columns}
     unused = tuple(h for n, h in trace.headers.items() if n != TIME and n not in used)
     return Log(trace.file, mode.astype(int), u, {c: trace.resample(c, t) for c in channels},
-               trace.sha256, used, trace.ignored + unused)
+               trace.sha256, used, trace.ignored + unused, trace.missing)
 
 
 def held(trace: Trace, name: str, duration_s: float) -> np.ndarray:
-    """A command column sampled and held (zero-order) at each step's end time."""
-    t = run_grid(duration_s)
-    i = np.searchsorted(trace.t_s, t + 1e-9, side="right") - 1
-    return trace.columns[name][np.clip(i, 0, len(trace.t_s) - 1)]
+    """A command column sampled and held (zero-order, across missing samples) at each
+    step's end time."""
+    t_s, values = trace.samples(name)
+    i = np.searchsorted(t_s, run_grid(duration_s) + 1e-9, side="right") - 1
+    return values[np.clip(i, 0, len(t_s) - 1)]
 
 
 def replay(setup: Any, mode: np.ndarray, u: np.ndarray,
@@ -265,19 +279,23 @@ class Problem:
         sigma = channel_sigma(setup)
         keep = run_grid(self.spec.duration_s) >= self.spec.start_s
         parts, rms = [], {}
+        by_log: list[dict[str, float]] = []
         wall = time.perf_counter()
         for log, sim in zip(self.logs, self.simulate(values), strict=True):
+            by_log.append({})
             for name, measured in log.channels.items():
                 e = sim[name][keep] - measured[keep]
                 m = max(1, round(self.spec.block_s / COUPLING_STEP_S))
                 blocks = e[: len(e) // m * m].reshape(-1, m).mean(axis=1)
                 parts.append(blocks * math.sqrt(m) / sigma[name])
                 rms.setdefault(name, []).append(float(np.mean(e * e)))
+                by_log[-1][name] = math.sqrt(float(np.mean(e * e)))
         r = np.concatenate(parts)
         self.runs.append({"purpose": purpose, "values": dict(values),
                           "cost": float(0.5 * r @ r),
                           "residual_rms": {n: math.sqrt(float(np.mean(v)))
                                            for n, v in rms.items()},
+                          "residual_rms_by_log": by_log,
                           "wall_time_s": time.perf_counter() - wall})
         return r
 
@@ -403,8 +421,62 @@ def _solve(problem: Problem, start: Mapping[str, float]
     return sol, fun
 
 
+UNDETERMINED_EIGENVALUE = 1e-10
+"""An eigenvalue of the correlation form of JᵀJ below this is a direction of the keys the
+logs do not see (their channels do not change along it, to the fit's resolution)."""
+MISMATCH_NOISE_RATIO = 5.0
+"""A log's channel whose fitted residual RMS is this many times its sensor σ or more is
+not explained by the model with the fitted keys (measured, LF1352's 2.2 s step log with
+noise at the sensors' σ, the bulk modulus 29 % off: 0.8-1.0 σ per channel logged at 2 kHz,
+0.7-0.9 σ at 200 Hz; the same log fitted by the oil's viscosity instead, 1.2-2.0 σ; its
+stroke sensor reading zero from mid-log, 148 σ)."""
+
+
+def _inverse_information(j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(JᵀJ)⁻¹ of the keys the Jacobian ``j`` (n, p) determines, shape (p, p), and which
+    they are, shape (p,): a key whose column is zero, or that takes part in a direction of
+    the correlation form of JᵀJ with an eigenvalue below :data:`UNDETERMINED_EIGENVALUE`,
+    is undetermined (its row and column inf)."""
+    info = j.T @ j
+    norm = np.sqrt(np.diag(info))
+    determined = norm > 0.0
+    while determined.any():
+        d = np.flatnonzero(determined)
+        corr = info[np.ix_(d, d)] / np.outer(norm[d], norm[d])
+        w, v = np.linalg.eigh(corr)
+        null = w < UNDETERMINED_EIGENVALUE
+        if not null.any():
+            break
+        determined[d[(np.abs(v[:, null]) > 1e-3).any(axis=1)]] = False
+    inverse = np.full(info.shape, np.inf)
+    d = np.flatnonzero(determined)
+    inverse[np.ix_(d, d)] = np.linalg.inv(info[np.ix_(d, d)])
+    return inverse, determined
+
+
+def fit_warnings(problem: Problem, undetermined: Mapping[str, str],
+                 residual_rms_by_log: Sequence[Mapping[str, float]],
+                 sigma: Mapping[str, float]) -> list[str]:
+    """One line per key the logs do not determine within its bounds (``undetermined``: key
+    -> why), and per log channel whose residual is :data:`MISMATCH_NOISE_RATIO` times its
+    sensor σ or more."""
+    lines = [f"{key}: the logs do not determine it within its bounds ({why}); its interval "
+             "is the bounds" for key, why in undetermined.items()]
+    for log, rms in zip(problem.logs, residual_rms_by_log, strict=True):
+        for name, value in rms.items():
+            if value >= MISMATCH_NOISE_RATIO * sigma[name]:
+                scale, unit = display_unit(COLUMN_UNITS[name])
+                lines.append(
+                    f"{log.file} {log.used[name]!r}: the fitted run misses it by "
+                    f"{value * scale:.3g} {unit} RMS, {value / sigma[name]:.0f} times its "
+                    f"sensor's sigma: the model with these keys does not explain it (a "
+                    "sensor fault, an offset, a key not fitted); the intervals assume it does")
+    return lines
+
+
 def fit(problem: Problem, start: Mapping[str, float]) -> dict[str, Any]:
-    """Least-squares fit from ``start``; estimates, 95 % intervals, residual RMS."""
+    """Least-squares fit from ``start``; estimates, 95 % intervals (within the bounds),
+    which keys the logs determine, residual RMS, and :func:`fit_warnings`."""
     step = problem.spec.fd_step_rel
     sol, fun = _solve(problem, start)
     r, j = fun(sol.x), _central_jacobian(problem, sol.x, step)   # d r / d theta
@@ -412,28 +484,41 @@ def fit(problem: Problem, start: Mapping[str, float]) -> dict[str, Any]:
     dof = max(n - p, 1)
     s2 = float(r @ r) / dof
     scale = problem.dx_dtheta(sol.x)
-    cov = s2 * np.outer(scale, scale) * np.linalg.inv(j.T @ j)     # of x, physical units
+    inverse, determined = _inverse_information(j)
+    with np.errstate(invalid="ignore"):                           # inf * 0 off the diagonal
+        cov = s2 * np.outer(scale, scale) * inverse                # of x, physical units
     rough = _roughness(problem, sol.x, float(0.5 * r @ r))
     sd = np.sqrt(np.diag(cov))
     half = (student_t.ppf(0.5 + 0.5 * CONFIDENCE, dof) + math.sqrt(4.0 * rough / s2)) * sd
     x = problem.x(sol.x)
+    low, high = np.maximum(x - half, problem.low), np.minimum(x + half, problem.high)
+    covers = (low <= problem.low) & (high >= problem.high)
+    undetermined = {k: "its channels do not change with it, or only together with another "
+                    "key's" if not determined[i] else "its 95 % interval covers them"
+                    for i, k in enumerate(problem.keys) if covers[i] or not determined[i]}
     fitted = problem.values(sol.x)
     final = next(run for run in reversed(problem.runs)
                  if run["values"] == fitted and run["purpose"] == "fit")
+    flags = {k: k not in undetermined for k in problem.keys}
+    with np.errstate(invalid="ignore"):
+        correlation = cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
     return {
         "estimates": fitted,
-        "intervals": {k: [float(x[i] - half[i]), float(x[i] + half[i])]
-                      for i, k in enumerate(problem.keys)},
-        "standard_errors": {k: float(math.sqrt(cov[i, i])) for i, k in enumerate(problem.keys)},
-        "correlation": (cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))).tolist(),
+        "intervals": {k: [float(low[i]), float(high[i])] for i, k in enumerate(problem.keys)},
+        "determined": flags,
+        "standard_errors": {k: float(sd[i]) for i, k in enumerate(problem.keys)},
+        "correlation": np.where(np.isfinite(correlation), correlation, np.nan).tolist(),
         "at_bound": {k: bool(sol.x[i] <= 1e-6 or sol.x[i] >= 1 - 1e-6)
                      for i, k in enumerate(problem.keys)},
         "residual_rms": final["residual_rms"],
+        "residual_rms_by_log": final["residual_rms_by_log"],
         "residual_variance_rel": s2,
         "cost_roughness": rough,
         "samples": n,
         "optimizer": {"status": int(sol.status), "message": str(sol.message),
                       "evaluations": int(sol.nfev)},
+        "warnings": fit_warnings(problem, undetermined, final["residual_rms_by_log"],
+                                 channel_sigma(problem.setup(fitted))),
     }
 
 
