@@ -302,3 +302,23 @@ def test_metric_display_is_the_registry_s_displays() -> None:
         "ripple in the tooth-passing band", 1e-3, "kN")
     with pytest.raises(KeyError):
         M.METRIC_DISPLAY["no_such_metric_N"]
+
+
+def test_a_verdict_claims_only_what_was_judged() -> None:
+    """A 4 s run without disturbances (no edge) and shorter than a steady window plus the
+    evaluation start: it holds, and says there was no edge to recover from and no steady
+    window, where it used to claim both rules kept; with a disturbance edge and 20 s it
+    says both were judged."""
+    ref = 15e3
+    band = (2.0 * ref / 3.0, 4.0 * ref / 3.0)
+    t = time_grid(4.0)
+    v = verdict(acceptance(t, np.full_like(t, ref), np.full_like(t, ref), windows()),
+                band, 2.0, 0.02)
+    assert v.holds and v.edges_judged == 0
+    assert "no disturbance edge to recover from" in v.text()
+    assert "no steady window to judge an offset in" in v.text()
+    t = time_grid(20.0)
+    v = verdict(acceptance(t, np.full_like(t, ref), np.full_like(t, ref),
+                           windows(disturbances=((6.0, 8.0),))), band, 2.0, 0.02)
+    assert v.edges_judged == 2
+    assert "back within ±5 % in 2 s of every edge; steady offset below 2 %" in v.text()

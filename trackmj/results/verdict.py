@@ -25,7 +25,8 @@ class Verdict:
     back later than ``recovery_within_s`` [s], its recovery time [s] (NaN: never); the worst
     steady offset against its limit (shares of the reference, NaN: no steady window); the
     trailing mean's window [s] and the recovery band (share of the reference) the figures
-    were taken with."""
+    were taken with; how many edges were judged (a run without disturbances, or one that
+    ends before an edge can be judged, has none)."""
 
     mean_range_N: tuple[float, float]
     band_N: tuple[float, float]
@@ -35,6 +36,7 @@ class Verdict:
     steady_offset_max_rel: float
     mean_window_s: float = 0.5
     recovery_band_rel: float = 0.05
+    edges_judged: int = 0
 
     @property
     def broken(self) -> list[str]:
@@ -59,8 +61,12 @@ class Verdict:
         band = f"[{self.band_N[0] / 1e3:.1f}, {self.band_N[1] / 1e3:.1f}] kN"
         back = f"±{100 * self.recovery_band_rel:g} % in {self.recovery_within_s:g} s"
         if self.holds:
-            return (f"holds ({span} in {band}; back within {back} of every edge; steady "
-                    f"offset below {100 * self.steady_offset_max_rel:g} %)")
+            edges = (f"back within {back} of every edge" if self.edges_judged
+                     else "no disturbance edge to recover from")
+            steady = (f"steady offset below {100 * self.steady_offset_max_rel:g} %"
+                      if not math.isnan(self.steady_offset_rel)
+                      else "no steady window to judge an offset in")
+            return f"holds ({span} in {band}; {edges}; {steady})"
         why = []
         if "band" in self.broken:
             why.append(f"band: {span}, outside {band}")
@@ -83,12 +89,13 @@ def verdict(figures: Mapping[str, Any], band_N: tuple[float, float],
     F_max) [N], back within the recovery band ``recovery_within_s`` [s] after each edge,
     and no steady window's offset reaching ``steady_offset_max_rel`` of the reference. A
     figure that is NaN (no evaluation window, no steady window) breaks no rule."""
-    late = {edge: _number(s) for edge, s in (figures.get("edge_recovery_s") or {}).items()
-            if not _number(s) <= recovery_within_s}
+    recovery = figures.get("edge_recovery_s") or {}
+    late = {edge: _number(s) for edge, s in recovery.items() if not _number(s) <= recovery_within_s}
     return Verdict((_number(figures.get("mean_min_N")), _number(figures.get("mean_max_N"))),
                    band_N, late, recovery_within_s,
                    _number(figures.get("steady_offset_max_rel")), steady_offset_max_rel,
-                   figures.get("mean_window_s", 0.5), figures.get("recovery_band_rel", 0.05))
+                   figures.get("mean_window_s", 0.5), figures.get("recovery_band_rel", 0.05),
+                   len(recovery))
 
 
 def never_back(figures: Mapping[str, Any]) -> list[str]:
