@@ -440,3 +440,18 @@ def test_w4_windows_give_dip_and_recovery_from_compute_metrics() -> None:
     assert out["disturbance_peak_error_N"] == pytest.approx(900.0)
     assert out["recovery_time_s"] == pytest.approx(0.5 * np.log(3.0), abs=1e-3)  # ±300 N band
     assert np.isnan(out["overshoot_N"]) and out["constraint_violation_s"] == 0.0
+
+
+def test_a_pulse_label_names_the_hitch_force_that_applies_it_and_a_missed_target():
+    """The label names the hold-mode target, and once calibrated the hitch force and
+    whether it reaches the target (a figure of compact3's W3 said "load pulse -1.3 kN"
+    for a tow that moved the idler load by -0.10 kN)."""
+    from trackmj.scenarios.resolved import HitchCalibration
+
+    sc = load_scenario("W3")
+    assert sc.metric_windows().disturbance_labels == ("load pulse +2 kN", "load pulse -1.5 kN")
+    cal = HitchCalibration("compact3", (-5290.0, 4130.0), "committed", "0" * 64,
+                           ("W3 load pulse 1 (-1.733 kN) on machine compact3: out of reach",))
+    sc = dataclasses.replace(sc, hitch_calibration=cal)
+    assert sc.metric_windows().disturbance_labels == (
+        "load pulse +2 kN (hitch -5.29 kN)", "load pulse -1.5 kN (hitch +4.13 kN, out of reach)")

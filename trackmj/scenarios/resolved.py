@@ -334,11 +334,25 @@ class Scenario:
         labels."""
         dist = tuple((p.start_s, p.end_s) for p in self.load_pulses)
         dist += tuple((d.start_s, d.end_s) for d in self.supply.drops)
-        pulses_N = [present(p.delta_N, "load_pulses.delta_N") for p in self.load_pulses]
         drops_Pa = [present(d.pressure_Pa, "supply.drops.pressure_Pa") for d in self.supply.drops]
-        labels = tuple(f"load pulse {x / 1e3:+g} kN" for x in pulses_N)
+        labels = tuple(self._pulse_label(i) for i in range(len(self.load_pulses)))
         labels += tuple(f"supply drop to {x / 1e6:g} MPa" for x in drops_Pa)
         return dist, labels
+
+    def _pulse_label(self, index: int) -> str:
+        """"load pulse +2 kN" (its hold-mode idler-load target), with the hitch force that
+        applies it once known and "out of reach" when that force misses the target
+        (:class:`HitchCalibration`)."""
+        pulse = self.load_pulses[index]
+        label = f"load pulse {present(pulse.delta_N, 'load_pulses.delta_N') / 1e3:+.3g} kN"
+        cal = self.hitch_calibration
+        hitch = pulse.hitch_N if pulse.hitch_N is not None else (
+            cal.hitch_N[index] if cal is not None and index < len(cal.hitch_N) else None)
+        if hitch is None:
+            return label
+        reach = ", out of reach" if cal is not None and any(
+            f"load pulse {index} " in line for line in cal.out_of_reach) else ""
+        return f"{label} (hitch {hitch / 1e3:+.2f} kN{reach})"
 
     def _tooth_band_Hz(self, speed_m_s: float,
                        link_pitch_m: float | None) -> tuple[float, float] | None:
