@@ -139,10 +139,11 @@ def test_a_response_the_carriers_mass_cannot_describe_is_refused() -> None:
 
 
 def test_the_identification_cli_refuses_an_unknown_machine_in_one_line() -> None:
-    """``python -m trackmj.machines.identify NAME`` with a name no machine ships: argparse's
-    usage and one line naming the allowed machines, exit status 2, no traceback."""
+    """``python -m trackmj.machines.identify NAME`` with a name no machine ships nor a
+    machine file: argparse's usage and one line naming the shipped machines, exit status 2,
+    no traceback."""
     run = subprocess.run([sys.executable, "-m", "trackmj.machines.identify", "lf1353"],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2
     assert "Traceback" not in run.stderr
-    assert "invalid choice: 'lf1353'" in run.stderr and "lf1352" in run.stderr
+    assert "machine 'lf1353': not a shipped machine" in run.stderr and "lf1352" in run.stderr

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import re
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -15,8 +16,9 @@ from hypothesis import strategies as st
 
 from trackmj.cli.main import main
 from trackmj.io import cache_dir
-from trackmj.machines.assembly import load_machine, model_mjcf, resolve, shipped
+from trackmj.machines.assembly import load_machine, mechanics, model_mjcf, resolve, shipped
 from trackmj.machines.track_plant import load_plant
+from trackmj.sim.setup import prepare
 from trackmj.track.mechanics import load_model_params
 from trackmj.track.mjcf.cache import cached_mjcf
 from trackmj.track.mjcf.generate import generate_mjcf
@@ -77,6 +79,75 @@ def test_reference_mjcf_for_own_parameters_generated_and_cached_otherwise() -> N
     cached_mjcf.cache_clear()        # a new process: read back from the directory
     assert cached_mjcf(other, "lf1352") == text
     assert text.count("<body name=\"link_") == 80
+
+
+def _copy_lf1352(folder, *, reference: bool = True) -> Path:
+    """README's "Your machine" step 1: lf1352's files copied to ``folder`` as mine_*
+    (the scene's include renamed with them); the machine file's path."""
+    lf = resolve("lf1352")
+    for source, target in ((lf.mechanics, "mine.toml"), (lf.hydraulics, "mine_hydraulics.toml"),
+                           (lf.control, "mine_control.toml"), (lf.idler, "mine_idler.toml"),
+                           (lf.reference_mjcf.with_name("lf1352.xml"), "mine.xml")):
+        (folder / target).write_text(source.read_text())
+    (folder / "mine_scene.xml").write_text(
+        lf.reference_mjcf.read_text().replace('"lf1352.xml"', '"mine.xml"'))
+    path = folder / "mine_machine.toml"
+    path.write_text('[machine]\nname = "mine"\ndescription = "a copy"\nmechanics = "mine.toml"\n'
+                    'hydraulics = "mine_hydraulics.toml"\ncontrol = "mine_control.toml"\n'
+                    'idler = "mine_idler.toml"\n'
+                    + ('reference_mjcf = "mine_scene.xml"\n' if reference else ""))
+    return path
+
+
+FIVE_WHEELS = (("count = 6", "count = 5"), ("x_m = [-0.75, -0.45, -0.15, 0.15, 0.45, 0.75]",
+                                            "x_m = [-0.72, -0.36, 0, 0.36, 0.72]"))
+
+
+def _edit(path: Path, changes: tuple[tuple[str, str], ...]) -> None:
+    text = path.read_text()
+    for old, new in changes:
+        assert old in text
+        text = text.replace(old, new)
+    path.write_text(text)
+
+
+def test_a_copied_machine_uses_its_copied_files_until_its_mechanics_change(tmp_path) -> None:
+    """An unchanged copy runs on its copied reference and idler; after an edit of the
+    mechanics both are stale: refused before any work, naming the file and the command
+    that regenerates it, and `model generate` writes a model of the edited mechanics,
+    named after the machine, whose header names its files."""
+    path = _copy_lf1352(tmp_path)
+    assert load_plant(machine=str(path)).model_path == tmp_path / "mine_scene.xml"
+    prepare("W1", machine=str(path))
+    _edit(tmp_path / "mine.toml", FIVE_WHEELS)
+    mechanics.cache_clear()          # a new process: the edited file read again
+    stale = (r"^mine_machine\.toml \[machine\]\.reference_mjcf: mine_scene\.xml is stale, not "
+             r"generated from mine\.toml as it is now: regenerate it with `trackmj model "
+             rf"generate --machine {re.escape(str(path))}`")
+    with pytest.raises(ParameterError, match=stale):
+        load_plant(machine=str(path))
+    with pytest.raises(ParameterError, match=stale):
+        prepare("W1", machine=str(path))
+    assert main(["model", "generate", "--machine", str(path)]) == 0
+    scene = (tmp_path / "mine_scene.xml").read_text()
+    assert "From mine.toml; regenerate with: trackmj model generate --machine " \
+           "mine_machine.toml -->" in scene
+    plant = load_plant(machine=str(path))
+    assert plant.model.names.startswith(b"mine\0")
+    assert [plant.model.body(i).name for i in range(plant.model.nbody)].count(
+        "road_wheel_6") == 0
+    with pytest.raises(ParameterError, match=r"^mine_machine\.toml \[machine\]\.idler: "
+                       r"mine_idler\.toml is stale, not identified on mine\.toml as it is now: "
+                       r"regenerate it with `python -m trackmj\.machines\.identify "):
+        prepare("W1", machine=str(path))
+
+
+def test_a_missing_include_names_the_file_that_includes_it(tmp_path) -> None:
+    path = _copy_lf1352(tmp_path)
+    (tmp_path / "mine.xml").unlink()
+    with pytest.raises(ParameterError, match=r"mine_scene\.xml: <include file=\"mine\.xml\"/>: "
+                                             r"no such file .*mine\.xml$"):
+        load_plant(machine=str(path))
 
 
 def _model_bytes(model: mujoco.MjModel) -> bytes:

@@ -85,6 +85,14 @@ KEYFRAME_ATOL_M = 2.01e-6
 """The settled ``home`` keyframe is rounded to 1 µm: one rounding step of platform noise."""
 
 
+def _comment_apart(xml: str) -> tuple[str, str]:
+    """(the opening comment, the rest) of generated ``xml`` ("" when it opens with none)."""
+    if not xml.lstrip().startswith("<!--"):
+        return "", xml
+    head, rest = xml.split("-->", 1)
+    return head, rest
+
+
 def _numbers_apart(xml: str) -> tuple[str, np.ndarray, np.ndarray]:
     """``xml`` with every number replaced by ``#``, the numbers in order, and for each its
     scale: the largest magnitude among its vector's components (:data:`VECTOR_ATTRIBUTE`),
@@ -114,10 +122,13 @@ REGENERATE = ("the generator's output differs from the committed models/lf1352.x
 
 
 def _assert_same_generated(generated: str, committed: str) -> None:
-    """Same text with every number replaced, numbers within :data:`GENERATED_RTOL` of their
-    attribute value's largest."""
-    (template_g, values_g, _), (template_c, values_c, scales_c) = (_numbers_apart(generated),
-                                                                   _numbers_apart(committed))
+    """The same opening comment (its mechanics SHA-256 included) and the same text after it
+    with every number replaced, numbers within :data:`GENERATED_RTOL` of their attribute
+    value's largest."""
+    (head_g, body_g), (head_c, body_c) = _comment_apart(generated), _comment_apart(committed)
+    assert head_g == head_c, REGENERATE
+    (template_g, values_g, _), (template_c, values_c, scales_c) = (_numbers_apart(body_g),
+                                                                   _numbers_apart(body_c))
     assert template_g == template_c, REGENERATE
     off = np.abs(values_g - values_c) > GENERATED_RTOL * scales_c
     assert not off.any(), (f"{REGENERATE}; {int(off.sum())} of {len(off)} numbers, first "
@@ -130,7 +141,8 @@ def test_generated_xml_equals_committed(model_params) -> None:
     keyframe's last rounding step; the scene loaded by MuJoCo (its include resolved) compiles
     to the model of the joined text the runs use."""
     generated = generate_mjcf(model_params)
-    machine, scene = split_mjcf(generated, "lf1352.xml")
+    machine, scene = split_mjcf(generated, "lf1352.xml", "From lf1352.toml; regenerate with: "
+                                "trackmj model generate --machine lf1352")
     _assert_same_generated(scene, scene_path(default_xml_path()).read_text())
     structure_c, home_c = _strip_keyframe(default_xml_path().read_text())
     structure_g, home_g = _strip_keyframe(machine)

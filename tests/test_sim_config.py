@@ -136,7 +136,7 @@ def test_reduced_plant_moves_the_tension_at_the_plugins_rate(mode: int, force_N:
 
 def test_idler_file_round_trips_and_is_validated(tmp_path) -> None:
     idler = load_idler()
-    path = write_idler_file(idler, tmp_path / "idler.toml")
+    path = write_idler_file(idler, tmp_path / "idler.toml", params=load_model_params())
     assert load_idler(path) == idler
     text = path.read_text()
     bad = tmp_path / "bad.toml"

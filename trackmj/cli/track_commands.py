@@ -181,7 +181,7 @@ def _span_supports(span: Span, supports: list[tuple[str, float, float]]) -> str:
 def cmd_model_generate(args: argparse.Namespace) -> int:
     """``trackmj model generate``: write a machine's reference MJCF from its files."""
     # start-up: --help and argument errors must not import MuJoCo
-    from trackmj.machines.assembly import resolve
+    from trackmj.machines.assembly import command_argument, resolve
     from trackmj.track.mechanics import load_model_params
     from trackmj.track.mjcf.generate import write_model
 
@@ -191,9 +191,14 @@ def cmd_model_generate(args: argparse.Namespace) -> int:
     if out is None:
         raise ValueError(f"machine {machine.name} has no reference_mjcf in "
                          f"{machine.file.name}: give --out FILE.xml")
-    params = load_model_params(args.model or machine.mechanics,
-                               overrides=model_overrides(args.set))
-    scene = write_model(out, params, machine.name)
+    mechanics = Path(args.model or machine.mechanics)
+    params = load_model_params(mechanics, overrides=model_overrides(args.set))
+    named = command_argument(machine)
+    if Path(named).parent == Path(out).resolve().parent:   # beside the files it writes
+        named = Path(named).name
+    scene = write_model(out, params, machine.name,
+                        origin=f"From {mechanics.name}{' with --set' if args.set else ''}; "
+                               f"regenerate with: trackmj model generate --machine {named}")
     print(f"wrote {out} (the machine part)")
     print(f"wrote {scene} (the scene including it: the file to load)")
     return 0

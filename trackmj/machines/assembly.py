@@ -27,8 +27,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trackmj.machines.default import DEFAULT_MACHINE
-from trackmj.track.mechanics import ModelParams, load_model_params, models_dir
-from trackmj.track.mjcf.builders import read_mjcf
+from trackmj.machines.idler import load_identification
+from trackmj.track.mechanics import ModelParams, load_model_params, mechanics_sha256, models_dir
+from trackmj.track.mjcf.builders import mjcf_parts, read_mjcf, recorded_mechanics_sha256
 from trackmj.track.mjcf.cache import cached_mjcf
 from trackmj.validator import ParameterError, Parameters, build, param, read_toml
 
@@ -141,9 +142,37 @@ def resolve(machine: str | Path | Machine | None = None) -> Machine:
         return registry[text.lower()]
     path = Path(text)
     if path.suffix == ".toml" or path.exists():
-        return load_machine(path)
+        return _not_posing(load_machine(path), registry)
     raise ParameterError(f"machine {text!r}: not a shipped machine ({', '.join(registry)}) "
                          f"nor a machine file (*{MACHINE_SUFFIX})")
+
+
+def _files(machine: Machine) -> tuple[Path | None, ...]:
+    """The files a machine is made of (what decides what it is, not its name)."""
+    return (machine.mechanics, machine.hydraulics, machine.control, machine.idler,
+            machine.reference_mjcf)
+
+
+def _not_posing(machine: Machine, registry: dict[str, Machine]) -> Machine:
+    """``machine``, unless it takes a shipped machine's name for other files
+    (ParameterError): its name would give it that machine's tuned weights, W3 forces and
+    scenario bindings."""
+    known = registry.get(machine.name)
+    if known is not None and _files(known) != _files(machine):
+        raise ParameterError(f"{machine.file.name} [machine].name = {machine.name!r} is the "
+                             f"shipped machine {known.file.name}'s, but its files are not "
+                             "that machine's: give it a name of its own")
+    return machine
+
+
+def is_shipped(machine: Machine) -> bool:
+    """Whether ``machine``'s files are those of a shipped machine (whatever its name)."""
+    return any(_files(m) == _files(machine) for m in shipped().values())
+
+
+def command_argument(machine: Machine) -> str:
+    """How a command names ``machine``: a shipped machine's name, else its file's path."""
+    return machine.name if is_shipped(machine) else str(machine.file)
 
 
 @functools.cache
@@ -152,16 +181,47 @@ def mechanics(machine: Machine) -> ModelParams:
     return load_model_params(machine.mechanics)
 
 
-def is_own(params: ModelParams, machine: Machine) -> bool:
-    """Whether ``params`` are exactly the machine's own mechanics (no override)."""
-    return params == mechanics(machine)
+def reference_mjcf(params: ModelParams, machine: Machine) -> Path | None:
+    """The machine's committed reference MJCF (its scene) for ``params``: None unless it
+    names one and ``params`` are exactly its own mechanics (no override). ParameterError
+    naming the file and the command that regenerates it if the file (or the machine part
+    it includes) records other mechanics than the mechanics file's now
+    (:func:`~trackmj.track.mechanics.mechanics_sha256`)."""
+    if machine.reference_mjcf is None or params != mechanics(machine):
+        return None
+    digest = mechanics_sha256(params)
+    for path, text in mjcf_parts(machine.reference_mjcf):
+        if recorded_mechanics_sha256(text) != digest:
+            raise ParameterError(
+                f"{machine.file.name} [machine].reference_mjcf: {path.name} is stale, not "
+                f"generated from {machine.mechanics.name} as it is now: regenerate it with "
+                f"`trackmj model generate --machine {command_argument(machine)}` (or remove "
+                "the key: the model is then generated and cached)")
+    return machine.reference_mjcf
+
+
+def idler_file(params: ModelParams, machine: Machine) -> Path | None:
+    """The machine's identified idler file for ``params``: None unless it names one and
+    ``params`` are exactly its own mechanics. ParameterError naming the file and the
+    command that regenerates it if the file's ``[identification].mechanics_sha256`` is
+    not that of the mechanics file now."""
+    if machine.idler is None or params != mechanics(machine):
+        return None
+    if load_identification(machine.idler).mechanics_sha256 != mechanics_sha256(params):
+        raise ParameterError(
+            f"{machine.file.name} [machine].idler: {machine.idler.name} is stale, not "
+            f"identified on {machine.mechanics.name} as it is now: regenerate it with "
+            f"`python -m trackmj.machines.identify {command_argument(machine)}` (or remove "
+            "the key: the idler is then identified and cached)")
+    return machine.idler
 
 
 def model_mjcf(params: ModelParams, machine: Machine | None = None) -> str:
     """MJCF text of the track model of ``params``: the machine's committed reference file
-    when ``params`` are its own mechanics, else generated and cached by content hash
-    (:func:`trackmj.track.mjcf.cache.cached_mjcf`)."""
+    when ``params`` are its own mechanics (:func:`reference_mjcf`), else generated and
+    cached by content hash (:func:`trackmj.track.mjcf.cache.cached_mjcf`)."""
     machine = resolve(machine)
-    if machine.reference_mjcf is not None and is_own(params, machine):
-        return read_mjcf(machine.reference_mjcf)
+    reference = reference_mjcf(params, machine)
+    if reference is not None:
+        return read_mjcf(reference)
     return cached_mjcf(params, machine.name)

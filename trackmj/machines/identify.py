@@ -30,7 +30,15 @@ from scipy.optimize import least_squares
 from scipy.signal import csd, welch
 
 from trackmj.elements.prescribed import ConstantForce, ForceHistory
-from trackmj.machines.assembly import mechanics, model_mjcf, names, resolve
+from trackmj.machines.assembly import (
+    Machine,
+    command_argument,
+    is_shipped,
+    mechanics,
+    model_mjcf,
+    names,
+    resolve,
+)
 from trackmj.machines.idler import (
     IDENTIFICATION,
     EquivalentIdler,
@@ -44,7 +52,7 @@ from trackmj.machines.idler import (
 )
 from trackmj.machines.track_plant import load_plant
 from trackmj.ports import COUPLING_STEP_S
-from trackmj.track.mechanics import load_model_params, models_dir
+from trackmj.track.mechanics import load_model_params
 from trackmj.track.plant import TrackPlant
 from trackmj.validator import ParameterError
 
@@ -232,11 +240,10 @@ def identify_packaged_idler() -> EquivalentIdler:
                           min_mass_kg=idler.mass_kg + idler.carrier_mass_kg)
 
 
-def identify_machine_idler(name: str) -> tuple[EquivalentIdler, str, Identification]:
-    """Identify the equivalent idler of shipped machine ``name`` on its generated model at
-    force levels relative to its nominal tension (:func:`identification_for`); returns the
-    idler, the MJCF text and the identification arguments."""
-    machine = resolve(name)
+def identify_machine_idler(machine: Machine) -> tuple[EquivalentIdler, str, Identification]:
+    """Identify the equivalent idler of ``machine`` on its model (its reference MJCF, else
+    generated) at force levels relative to its nominal tension (:func:`identification_for`);
+    returns the idler, the MJCF text and the identification arguments."""
     params = mechanics(machine)
     text = model_mjcf(params, machine)
     arguments = identification_for(params.nominal_tension_N)
@@ -248,36 +255,43 @@ def identify_machine_idler(name: str) -> tuple[EquivalentIdler, str, Identificat
 
 def main(argv: list[str] | None = None) -> None:
     """Identify the idler on the packaged track and rewrite ``models/lf1352_idler.toml``;
-    with machine names (``python -m trackmj.machines.identify m113``), each shipped machine's
-    ``models/<name>_idler.toml`` from its generated model. A refused identification exits
-    with its one-line reason."""
+    with machines (``python -m trackmj.machines.identify m113 mine_machine.toml``), a
+    shipped machine's ``models/<name>_idler.toml`` or the file a machine file's ``idler``
+    key names, from its model. A refused identification exits with its one-line reason."""
     parser = argparse.ArgumentParser(
         prog="python -m trackmj.machines.identify",
-        description="Identify shipped machines' equivalent idlers on their generated tracks "
-                    "and rewrite models/<name>_idler.toml.")
-    parser.add_argument("machines", nargs="*", choices=names(), default=["lf1352"],
-                        metavar="MACHINE", help=f"shipped machines ({', '.join(names())}; "
-                        "default lf1352)")
+        description="Identify machines' equivalent idlers on their tracks and rewrite their "
+                    "idler files.")
+    parser.add_argument("machines", nargs="*", default=["lf1352"], metavar="MACHINE",
+                        help=f"shipped machines ({', '.join(names())}; default lf1352) or "
+                             "machine files naming an idler file")
     args = parser.parse_args(argv)
-    for name in args.machines:
+    try:
+        machines = [resolve(name) for name in args.machines]
+    except ParameterError as error:
+        parser.error(str(error))
+    for name, machine in zip(args.machines, machines, strict=True):
         try:
-            write = _identify_and_write(name)
+            write = _identify_and_write(machine)
         except ParameterError as error:   # IdentificationError is one
             raise SystemExit(f"{name}: {error}") from None
         print(write)
 
 
-def _identify_and_write(name: str) -> str:
-    """Identify shipped machine ``name``'s idler, write its file; the line to print."""
-    if name == "lf1352":
+def _identify_and_write(machine: Machine) -> str:
+    """Identify ``machine``'s idler, write its file; the line to print."""
+    if is_shipped(machine) and machine.name == "lf1352":
         idler = identify_packaged_idler()
-        path = write_idler_file(idler, default_idler_path())
+        path = write_idler_file(idler, default_idler_path(), params=load_model_params())
     else:
-        idler, text, arguments = identify_machine_idler(name)
-        machine = resolve(name)
-        path = write_idler_file(idler, models_dir() / f"{name}_idler.toml",
-                                machine.mechanics, identification=arguments,
-                                machine=name.upper(), model_text=text)
+        if machine.idler is None:
+            raise ParameterError(f"{machine.file.name} names no [machine].idler file to "
+                                 "write (add idler = \"NAME_idler.toml\")")
+        idler, text, arguments = identify_machine_idler(machine)
+        path = write_idler_file(idler, machine.idler, machine.mechanics, params=mechanics(machine),
+                                identification=arguments, machine=machine.name.upper(),
+                                model_text=text, regenerate="python -m trackmj.machines."
+                                f"identify {command_argument(machine)}")
     return (f"wrote {path}: k {idler.stiffness_N_m:.4g} N/m, M {idler.mass_kg:.4g} kg, "
             f"c {idler.damping_N_s_m:.4g} N s/m, fit R^2 {idler.fit_r2:.3f}")
 

@@ -16,7 +16,7 @@ from typing import TypedDict
 import numpy as np
 
 from trackmj.io import file_sha256
-from trackmj.track.mechanics import default_xml_path, models_dir
+from trackmj.track.mechanics import ModelParams, default_xml_path, mechanics_sha256, models_dir
 from trackmj.validator import Location, Parameters, load_file, param
 
 IDLER_FILE = "lf1352_idler.toml"
@@ -135,6 +135,11 @@ class IdentificationTable(Parameters):
     band_Hz: tuple[float, float] = param(0.0, 500.0, doc="band of the multisine lines")
     amplitude_N: float = param(0.0, 1e5, open_low=True, doc="multisine amplitude")
     seed: int = param(0, None, unit="1", doc="seed of the multisine phases")
+    mechanics_sha256: str = param(pattern="([0-9a-f]{64})?", default="",
+                                  doc="SHA-256 of the mechanics' values the model was "
+                                      "generated from (trackmj.track.mechanics."
+                                      "mechanics_sha256); optional: a file written before "
+                                      "it was recorded has none, and counts as stale")
 
     def cross_check(self, at: Location) -> None:
         if self.force_high_N <= self.force_low_N:
@@ -211,9 +216,10 @@ def load_identification(path: str | Path | None = None) -> IdentificationTable:
 
 
 def write_idler_file(idler: EquivalentIdler, path: str | Path,
-                     model_path: str | Path | None = None, *,
+                     model_path: str | Path | None = None, *, params: ModelParams,
                      identification: Identification | None = None,
-                     machine: str = "LF1352", model_text: str | None = None) -> Path:
+                     machine: str = "LF1352", model_text: str | None = None,
+                     regenerate: str = "python -m trackmj.machines.identify") -> Path:
     """Write ``idler`` as an idler file (with its generated-file header) to ``path``.
 
     Parameters
@@ -222,6 +228,9 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
         Usually :func:`identify_packaged_idler`.
     path : str or Path
         Target file.
+    params : ModelParams
+        The mechanics the model was generated from (their SHA-256 is recorded: a file of
+        other mechanics is refused as stale).
     model_path : str or Path, optional
         The model it was identified on (default the packaged ``lf1352.xml``); its name and
         SHA-256 are recorded.
@@ -229,6 +238,8 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
         The arguments used (default :data:`IDENTIFICATION`).
     machine : str
         The machine's name in the header.
+    regenerate : str
+        The command that regenerates the file, in the header.
     model_text : str, optional
         The generated MJCF identified on when no file is committed (its SHA-256 is
         recorded, ``model_path`` names the mechanics file it was generated from).
@@ -252,9 +263,8 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
         "# the stroke to a multisine force, fitted by a single-DOF model (k fixed) and by a",
         "# modal model. Written by trackmj.machines.idler.write_idler_file; regenerate after "
         "any",
-        ("# change of models/lf1352.xml with:  python -m trackmj.machines.identify"
-         if model_text is None else
-         f"# change of its mechanics with:  python -m trackmj.machines.identify {machine.lower()}"),
+        f"# change of {model.name if model_text is None else 'its mechanics'} with:  "
+        f"{regenerate}",
         "# tests/test_sim_config.py checks this file equals a fresh identification.",
         "# Read by trackmj.machines.idler.load_idler; the reduced plant of the controller takes",
         "# k, M and c from it (trackmj.sim.control_plant.reduced_plant_params). Units SI.",
@@ -274,6 +284,7 @@ def write_idler_file(idler: EquivalentIdler, path: str | Path,
         'source = "the arguments of trackmj.machines.identify.identify_idler used for [idler]"',
         f'model_file = "{model.name}"',
         f'model_sha256 = "{digest}"',
+        f'mechanics_sha256 = "{mechanics_sha256(params)}"',
         *(f"{name} = {value!r}" for name, value in arguments.items()),
         "",
     ]

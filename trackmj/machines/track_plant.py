@@ -13,7 +13,7 @@ from typing import Any
 
 import mujoco
 
-from trackmj.machines.assembly import is_own, mechanics, model_mjcf, resolve
+from trackmj.machines.assembly import mechanics, model_mjcf, reference_mjcf, resolve
 from trackmj.track.mechanics import load_model_params
 from trackmj.track.mjcf.builders import read_mjcf, with_heightfield
 from trackmj.track.plant import TrackPlant
@@ -43,7 +43,7 @@ def load_plant(xml_path: str | Path | None = None, param_path: str | Path | None
             raise FileNotFoundError(f"model file not found: {path}")
         text = read_mjcf(path)
     else:
-        path = mach.reference_mjcf if is_own(params, mach) else None
+        path = reference_mjcf(params, mach)
         text = model_mjcf(params, mach)
     try:
         if terrain is not None:

@@ -27,9 +27,10 @@ from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
 from trackmj.io import cache_dir, write_text_atomic
 from trackmj.machines.assembly import (
     Machine,
-    is_own,
+    idler_file,
     mechanics,
     model_mjcf,
+    reference_mjcf,
     resolve,
 )
 from trackmj.machines.default import DEFAULT_MACHINE
@@ -66,8 +67,9 @@ def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
     model (cached by content hash beside its generated MJCF) at force levels relative to its
     nominal tension (:func:`trackmj.machines.idler.identification_for`: 0.8 and 1.0 x nominal,
     the LF1352's 12 and 15 kN), the fitted mass floored at the idler and carrier's."""
-    if machine.idler is not None and is_own(params, machine):
-        return load_idler(machine.idler)
+    own = idler_file(params, machine)
+    if own is not None:
+        return load_idler(own)
     path = cache_dir() / f"{machine.name}-{model_key(params)[:32]}-idler.json"
     try:
         data = json.loads(path.read_text())
@@ -277,6 +279,8 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
     sets = overrides_by_kind(overrides)
     model_params = (load_model_params(model or mach.mechanics, overrides=sets["model"])
                     if model or sets["model"] else mechanics(mach))
+    reference_mjcf(model_params, mach)   # a stale generated file is refused before any work
+    idler_file(model_params, mach)
     hydraulics_params = load_hydraulic_params(hydraulics or mach.hydraulics,
                                               overrides=sets["hydraulics"])
     nominal = model_params.nominal_tension_N

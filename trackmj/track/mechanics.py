@@ -9,6 +9,7 @@ and out-of-range values naming the file, the table and the key; every table carr
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -39,6 +40,13 @@ def default_param_path() -> Path:
 
 def default_xml_path() -> Path:
     return models_dir() / f"{MODEL_NAME}.xml"
+
+
+def mechanics_sha256(params: ModelParams) -> str:
+    """SHA-256 (hex) of the validated mechanics' values (their ``repr``: every value in
+    declaration order, no ``source`` text): what a generated model and an identified idler
+    record of the mechanics they were made from, so that a stale one is refused."""
+    return hashlib.sha256(repr(params).encode()).hexdigest()
 
 
 @dataclass(frozen=True)

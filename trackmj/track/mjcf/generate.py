@@ -78,12 +78,13 @@ def scene_path(path: str | Path) -> Path:
 
 
 def write_model(path: str | Path | None = None, params: ModelParams | None = None,
-                name: str = MODEL_NAME) -> Path:
+                name: str = MODEL_NAME, *, origin: str) -> Path:
     """Generate the model and write its two parts atomically (Menagerie habit): the machine
     to ``path`` (default: packaged lf1352.xml) and the scene that includes it (ground,
-    light) to :func:`scene_path`. Returns the scene's path, the file to load."""
+    light) to :func:`scene_path`, both headed by ``origin`` (the mechanics file, the
+    command that regenerates them). Returns the scene's path, the file to load."""
     path = Path(path) if path is not None else default_xml_path()
-    machine, scene = split_mjcf(generate_mjcf(params, name), path.name)
+    machine, scene = split_mjcf(generate_mjcf(params, name), path.name, origin)
     write_text_atomic(path, machine)
     write_text_atomic(scene_path(path), scene)
     return scene_path(path)
