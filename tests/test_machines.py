@@ -142,6 +142,19 @@ def test_a_copied_machine_uses_its_copied_files_until_its_mechanics_change(tmp_p
         prepare("W1", machine=str(path))
 
 
+def test_a_machine_file_taking_a_shipped_name_for_other_files_is_refused(tmp_path) -> None:
+    c3 = resolve("compact3")
+    path = tmp_path / "m_machine.toml"
+    path.write_text(f'[machine]\nname = "lf1352"\ndescription = "d"\n'
+                    f'mechanics = "{c3.mechanics}"\nhydraulics = "{c3.hydraulics}"\n'
+                    f'control = "{resolve("lf1352").control}"\n')
+    with pytest.raises(ParameterError, match=r"^m_machine\.toml \[machine\]\.name = 'lf1352' "
+                                             r"is the shipped machine lf1352_machine\.toml's, "
+                                             r"but its files are not that machine's"):
+        resolve(str(path))
+    assert resolve(str(resolve("lf1352").file)) == resolve("lf1352")
+
+
 def test_a_missing_include_names_the_file_that_includes_it(tmp_path) -> None:
     path = _copy_lf1352(tmp_path)
     (tmp_path / "mine.xml").unlink()

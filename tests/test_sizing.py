@@ -3,6 +3,7 @@ machines' hydraulic files come from them, and the controller values follow each 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -13,9 +14,11 @@ from trackmj.hydraulics import load_hydraulic_params
 from trackmj.hydraulics.components import series_area
 from trackmj.machines import assembly as machines
 from trackmj.machines import sizing
+from trackmj.machines.identify import IdentificationError
 from trackmj.machines.idler import load_idler
+from trackmj.sim import setup
 from trackmj.sim.control_plant import nominal_plant_params
-from trackmj.sim.setup import machine_weights
+from trackmj.sim.setup import machine_weights, prepare
 
 SUPPLY_PA, TANK_PA, VALVE_DROP_PA, HOLD_S = 12e6, 0.2e6, 1e6, 0.030
 
@@ -123,3 +126,37 @@ def test_mpc_input_weights_keep_the_cost_per_tension_rate() -> None:
         assert wr / g ** 2 == pytest.approx(wr0 / g0 ** 2, rel=1e-12)
     cfg = load_config(nominal_tension_N=15e3)
     assert machine_weights(cfg, machines.resolve("lf1352")) is cfg
+
+
+def test_mpc_weights_follow_the_machine_files_not_its_name() -> None:
+    """compact3's files under lf1352's name get compact3's weights, not lf1352's tuned
+    ones; a machine file that takes a shipped name for other files is refused."""
+    compact3 = machines.resolve("compact3")
+    posing = dataclasses.replace(compact3, name="lf1352")
+    cfg = load_config(nominal_tension_N=machines.mechanics(compact3).nominal_tension_N)
+    assert machine_weights(cfg, posing).mpc == machine_weights(cfg, compact3).mpc
+    assert machine_weights(cfg, posing).mpc.weight_input != cfg.mpc.weight_input
+
+
+def test_mpc_weights_follow_the_run_overrides() -> None:
+    """The tension-rate gain the weights scale by is the run's plant: a lower supply
+    set-point (--set hydraulics.*) lowers the gain and so the weights; on lf1352's own
+    files they are the file's."""
+    own = prepare("W1", machine="lf1352").control.mpc
+    low = prepare("W1", machine="lf1352",
+                  overrides={"hydraulics.supply.setpoint_Pa": 9e6}).control.mpc
+    assert (own.weight_input, own.weight_input_rate) == (0.6, 2.0)
+    assert low.weight_input < 0.6 * 0.9 and low.weight_input_rate < 2.0 * 0.9
+
+
+def test_the_idler_identified_for_the_weights_is_the_run_model(monkeypatch) -> None:
+    """--set model.* reaches the identification the weights' gain is derived from, and a
+    refused identification names the machine file and the mechanics file it changed."""
+    def refuse(*args, **kwargs):
+        raise IdentificationError("the idler's stroke response over 1-50 Hz is no "
+                                  "mass-spring-damper")
+
+    monkeypatch.setattr(setup, "identify_idler", refuse)
+    with pytest.raises(IdentificationError, match=r"^compact3_machine\.toml: the idler "
+                       r"identified on compact3\.toml as the run changes it: the idler's "):
+        prepare("W1", machine="compact3", overrides={"model.tensioner.preload_N": 12345.0})

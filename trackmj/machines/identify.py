@@ -154,8 +154,9 @@ def check_single_dof(mass_kg: float, damping_N_s_m: float, skill: float,
             f"mass-spring-damper: the single-mode fit gives M = {mass_kg:.4g} kg, "
             f"c = {damping_N_s_m:.4g} N·s/m (bounds {MAX_MASS_KG:g} kg, "
             f"{MAX_DAMPING_N_S_M:g} N·s/m), {skill:.2f} of the static spring's error "
-            "removed; the controllers' reduced model cannot be built on it (look at the "
-            "layout's idler wrap and slide)")
+            "removed; the controllers' reduced model cannot be built on it: change the "
+            "idler's wrap and slide ([idler] x_m, z_m, slide_angle_rad) or the tension it "
+            "is identified at, 0.8-1.0 x [tensioner] nominal_tension_N (default preload_N)")
 
 
 def fit_modal(freq_Hz: np.ndarray, compliance: np.ndarray) -> tuple[ModalTerm, ...]:
@@ -288,10 +289,11 @@ def _identify_and_write(machine: Machine) -> str:
             raise ParameterError(f"{machine.file.name} names no [machine].idler file to "
                                  "write (add idler = \"NAME_idler.toml\")")
         idler, text, arguments = identify_machine_idler(machine)
-        path = write_idler_file(idler, machine.idler, machine.mechanics, params=mechanics(machine),
-                                identification=arguments, machine=machine.name.upper(),
-                                model_text=text, regenerate="python -m trackmj.machines."
-                                f"identify {command_argument(machine)}")
+        path = write_idler_file(idler, machine.idler, machine.mechanics,
+                                params=mechanics(machine), identification=arguments,
+                                machine=machine.name.upper(), model_text=text,
+                                regenerate="python -m trackmj.machines.identify "
+                                           f"{command_argument(machine)}")
     return (f"wrote {path}: k {idler.stiffness_N_m:.4g} N/m, M {idler.mass_kg:.4g} kg, "
             f"c {idler.damping_N_s_m:.4g} N s/m, fit R^2 {idler.fit_r2:.3f}")
 

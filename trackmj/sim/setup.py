@@ -34,7 +34,7 @@ from trackmj.machines.assembly import (
     resolve,
 )
 from trackmj.machines.default import DEFAULT_MACHINE
-from trackmj.machines.identify import identify_idler
+from trackmj.machines.identify import IdentificationError, identify_idler
 from trackmj.machines.idler import (
     SCALARS,
     EquivalentIdler,
@@ -77,10 +77,15 @@ def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
                                                             for m in data["modes"]))
     except (FileNotFoundError, ValueError, KeyError, TypeError):
         pass
-    idler = identify_idler(lambda: TrackPlant(
-        mujoco.MjModel.from_xml_string(model_mjcf(params, machine)), params),
-        **identification_for(params.nominal_tension_N),
-        min_mass_kg=params.idler.mass_kg + params.idler.carrier_mass_kg)
+    try:
+        idler = identify_idler(lambda: TrackPlant(
+            mujoco.MjModel.from_xml_string(model_mjcf(params, machine)), params),
+            **identification_for(params.nominal_tension_N),
+            min_mass_kg=params.idler.mass_kg + params.idler.carrier_mass_kg)
+    except IdentificationError as error:
+        changed = "" if params == mechanics(machine) else " as the run changes it"
+        raise IdentificationError(f"{machine.file.name}: the idler identified on "
+                                  f"{machine.mechanics.name}{changed}: {error}") from None
     record = {"idler": {name: float(getattr(idler, name)) for name in SCALARS},
               "modes": [dataclasses.asdict(m) for m in idler.modes]}
     try:
@@ -90,26 +95,36 @@ def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
     return idler
 
 
-@functools.cache
-def _rate_gain(machine: Machine) -> float:
-    """Tension-rate gain g [N/s per unit u] of the machine's reduced plant at its nominal
-    tension (mid stroke) and supply set-point, from its own files."""
-    params = mechanics(machine)
-    hyd = load_hydraulic_params(machine.hydraulics)
-    cfg = load_config(machine.control, nominal_tension_N=params.nominal_tension_N)
-    plant = nominal_plant_params(hyd, _idler(params, machine), cfg,
+def _rate_gain(params: ModelParams, hydraulics: HydraulicParams, cfg: ControlConfig,
+               machine: Machine) -> float:
+    """Tension-rate gain g [N/s per unit u] of the reduced plant of ``params`` (its idler:
+    :func:`_idler` on ``machine``), ``hydraulics`` and ``cfg`` at the nominal tension (mid
+    stroke) and the supply set-point."""
+    plant = nominal_plant_params(hydraulics, _idler(params, machine), cfg,
                                  force_N=params.nominal_tension_N,
-                                 supply_pressure_Pa=hyd.supply.setpoint_Pa)
+                                 supply_pressure_Pa=hydraulics.supply.setpoint_Pa)
     return ReducedModel(plant).tension_rate_gain(params.nominal_tension_N)
 
 
-def machine_weights(cfg: ControlConfig, machine: Machine) -> ControlConfig:
-    """``cfg`` with the MPC's u and u-rate weights scaled by (g/g_tuned)² from the machine
-    they were tuned on ([mpc].tuned_on_machine) to ``machine`` (unchanged on that one)."""
-    tuned = cfg.mpc.tuned_on_machine
-    if tuned == machine.name:
+def machine_weights(cfg: ControlConfig, machine: Machine, params: ModelParams | None = None,
+                    hydraulics: HydraulicParams | None = None) -> ControlConfig:
+    """``cfg`` with the MPC's u and u-rate weights scaled by (g/g_tuned)²: g of the run's
+    plant (``params`` and ``hydraulics`` with the run's overrides; default the machine's own
+    files), g_tuned of the own files of the machine they were tuned on
+    ([mpc].tuned_on_machine). Decided by content, not by name: ``cfg`` itself where the two
+    gains are the same."""
+    tuned = resolve(cfg.mpc.tuned_on_machine)
+    params = mechanics(machine) if params is None else params
+    hydraulics = load_hydraulic_params(machine.hydraulics) if hydraulics is None else hydraulics
+    tuned_params = mechanics(tuned)
+    gain = _rate_gain(params, hydraulics, cfg, machine)
+    tuned_gain = _rate_gain(tuned_params, load_hydraulic_params(tuned.hydraulics),
+                            load_config(tuned.control,
+                                        nominal_tension_N=tuned_params.nominal_tension_N),
+                            tuned)
+    if gain == tuned_gain:
         return cfg
-    scale = input_weight_scale(_rate_gain(machine), _rate_gain(resolve(tuned)))
+    scale = input_weight_scale(gain, tuned_gain)
     mpc = dataclasses.replace(cfg.mpc, weight_input=cfg.mpc.weight_input * scale,
                               weight_input_rate=cfg.mpc.weight_input_rate * scale)
     return dataclasses.replace(cfg, mpc=mpc)
@@ -331,7 +346,8 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
         files["controller"] = str(controller_file.file)
     control_config = machine_weights(
         load_config(control or mach.control, overrides=sets["control"],
-                    nominal_tension_N=model_params.nominal_tension_N), mach)
+                    nominal_tension_N=model_params.nominal_tension_N), mach,
+        model_params, hydraulics_params)
     _check_bands_agree(sc, control_config, files["control"])
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,
