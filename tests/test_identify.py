@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 
+from trackmj.machines import identify
 from trackmj.machines.identify import (
     MAX_DAMPING_N_S_M,
     IdentificationError,
@@ -147,3 +148,15 @@ def test_the_identification_cli_refuses_an_unknown_machine_in_one_line() -> None
     assert run.returncode == 2
     assert "Traceback" not in run.stderr
     assert "machine 'lf1353': not a shipped machine" in run.stderr and "lf1352" in run.stderr
+
+
+def test_a_stroke_that_does_not_grow_with_the_force_is_refused_in_one_line(monkeypatch) -> None:
+    """A preload too small to tension the track (100 N on compact3) settles the idler
+    further in at the higher force: a negative static stiffness, refused naming the keys
+    before the fit takes its square root."""
+    strokes = iter([0.0385, 0.0381])
+    monkeypatch.setattr(identify, "_settled_stroke", lambda plant, force, settle: next(strokes))
+    with pytest.raises(IdentificationError, match=r"^the idler's settled stroke does not grow "
+                       r"with the force \(38\.50 mm at 80 N, 38\.10 mm at 100 N\).*"
+                       r"\[tensioner\] nominal_tension_N \(default preload_N\)"):
+        identify_idler(lambda: None, 80.0, 100.0)

@@ -204,7 +204,8 @@ def identify_idler(make_plant: Callable[[], TrackPlant], force_low_N: float = 12
                    amplitude_N: float = 1_500.0, seed: int = 0,
                    min_mass_kg: float = 1e-3) -> EquivalentIdler:
     """Identify the equivalent idler on a standing track (sprocket held at 0 rad/s);
-    IdentificationError if the single-mode fit is none (:func:`check_single_dof`).
+    IdentificationError if the stroke does not grow between the force levels or the
+    single-mode fit is none (:func:`check_single_dof`).
 
     make_plant: returns a fresh ``TrackPlant`` at its home keyframe. The multisine of
     ``amplitude_N`` [N] (rms amplitude/√2) runs about the mean of the two force levels;
@@ -213,6 +214,13 @@ def identify_idler(make_plant: Callable[[], TrackPlant], force_low_N: float = 12
     plant = make_plant()
     stroke_low = _settled_stroke(plant, force_low_N, settle_s)
     stroke_high = _settled_stroke(plant, force_high_N, settle_s)
+    if not stroke_high > stroke_low:
+        raise IdentificationError(
+            f"the idler's settled stroke does not grow with the force ({stroke_low * 1e3:.2f} "
+            f"mm at {force_low_N:g} N, {stroke_high * 1e3:.2f} mm at {force_high_N:g} N): no "
+            "static stiffness for the controllers' reduced model; the forces, 0.8-1.0 x "
+            "[tensioner] nominal_tension_N (default preload_N), must be ones that tension "
+            "the track")
     stiffness = (force_high_N - force_low_N) / (stroke_high - stroke_low)
     mean = 0.5 * (force_low_N + force_high_N)
     _settled_stroke(plant, mean, settle_s)
