@@ -155,6 +155,18 @@ def test_a_machine_file_taking_a_shipped_name_for_other_files_is_refused(tmp_pat
     assert resolve(str(resolve("lf1352").file)) == resolve("lf1352")
 
 
+def test_a_layout_stroke_beyond_the_cylinder_is_refused_naming_both_files() -> None:
+    """The mechanics' stroke at the layout must fit the hydraulic file's cylinder: refused
+    at load by model info, drive (load_plant) and a run (prepare), before any generation."""
+    message = (r"^compact3\.toml \[idler\]\.stroke_at_layout_m = 0\.5 m is beyond the "
+               r"cylinder's stroke, compact3_hydraulics\.toml \[cylinder\]\.stroke_max_m = "
+               r"0\.08 m: allowed \[0, 0\.08\] m")
+    with pytest.raises(ParameterError, match=message):
+        load_plant(machine="compact3", overrides={"idler.stroke_at_layout_m": 0.5})
+    with pytest.raises(ParameterError, match=message):
+        prepare("W1", machine="compact3", overrides={"model.idler.stroke_at_layout_m": 0.5})
+
+
 def test_a_missing_include_names_the_file_that_includes_it(tmp_path) -> None:
     path = _copy_lf1352(tmp_path)
     (tmp_path / "mine.xml").unlink()

@@ -26,6 +26,7 @@ import functools
 from dataclasses import dataclass
 from pathlib import Path
 
+from trackmj.hydraulics.params import HydraulicParams
 from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.machines.idler import load_identification
 from trackmj.track.mechanics import ModelParams, load_model_params, mechanics_sha256, models_dir
@@ -214,6 +215,18 @@ def idler_file(params: ModelParams, machine: Machine) -> Path | None:
             f"`python -m trackmj.machines.identify {command_argument(machine)}` (or remove "
             "the key: the idler is then identified and cached)")
     return machine.idler
+
+
+def check_cylinder_stroke(params: ModelParams, model_file: str, hydraulics: HydraulicParams,
+                          hydraulics_file: str) -> None:
+    """ParameterError naming both files' keys unless the mechanics' cylinder stroke at the
+    layout ([idler].stroke_at_layout_m [m]) lies within the hydraulic file's cylinder
+    stroke ([cylinder].stroke_max_m [m]): the two files describe one cylinder."""
+    stroke, top = params.idler.stroke_at_layout_m, hydraulics.cylinder.stroke_max_m
+    if stroke > top:
+        raise ParameterError(f"{model_file} [idler].stroke_at_layout_m = {stroke:g} m is beyond "
+                             f"the cylinder's stroke, {hydraulics_file} [cylinder].stroke_max_m "
+                             f"= {top:g} m: allowed [0, {top:g}] m (or a longer cylinder)")
 
 
 def model_mjcf(params: ModelParams, machine: Machine | None = None) -> str:

@@ -13,7 +13,14 @@ from typing import Any
 
 import mujoco
 
-from trackmj.machines.assembly import mechanics, model_mjcf, reference_mjcf, resolve
+from trackmj.hydraulics.params import load_hydraulic_params
+from trackmj.machines.assembly import (
+    check_cylinder_stroke,
+    mechanics,
+    model_mjcf,
+    reference_mjcf,
+    resolve,
+)
 from trackmj.track.mechanics import load_model_params
 from trackmj.track.mjcf.builders import read_mjcf, with_heightfield
 from trackmj.track.plant import TrackPlant
@@ -25,7 +32,9 @@ def load_plant(xml_path: str | Path | None = None, param_path: str | Path | None
                overrides: Mapping[str, Any] | None = None) -> TrackPlant:
     """Load a machine's track (default the packaged LF1352).
 
-    machine: a shipped machine's name or a machine file (:mod:`trackmj.machines.assembly`);
+    machine: a shipped machine's name or a machine file (:mod:`trackmj.machines.assembly`),
+    whose hydraulic file's cylinder stroke the mechanics' must fit
+    (:func:`~trackmj.machines.assembly.check_cylinder_stroke`);
     param_path: a model parameter file replacing the machine's mechanics; overrides:
     ``{dotted key: value}`` of the model file (``--set model.KEY=VALUE``); xml_path: an
     MJCF file to load instead of the model of those parameters (the machine's committed
@@ -37,6 +46,8 @@ def load_plant(xml_path: str | Path | None = None, param_path: str | Path | None
     mach = resolve(machine)
     params = (load_model_params(param_path or mach.mechanics, overrides=overrides)
               if param_path is not None or overrides else mechanics(mach))
+    check_cylinder_stroke(params, Path(param_path or mach.mechanics).name,
+                          load_hydraulic_params(mach.hydraulics), mach.hydraulics.name)
     if xml_path is not None:
         path: Path | None = Path(xml_path)
         if not path.is_file():

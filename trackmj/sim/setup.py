@@ -27,6 +27,7 @@ from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
 from trackmj.io import cache_dir, write_text_atomic
 from trackmj.machines.assembly import (
     Machine,
+    check_cylinder_stroke,
     idler_file,
     mechanics,
     model_mjcf,
@@ -298,6 +299,8 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
     idler_file(model_params, mach)
     hydraulics_params = load_hydraulic_params(hydraulics or mach.hydraulics,
                                               overrides=sets["hydraulics"])
+    check_cylinder_stroke(model_params, Path(model or mach.mechanics).name, hydraulics_params,
+                          Path(hydraulics or mach.hydraulics).name)
     nominal = model_params.nominal_tension_N
     if isinstance(scenario, Scenario) and (sets["scenario"]
                                            or scenario.nominal_tension_N != nominal):
