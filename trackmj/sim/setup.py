@@ -96,6 +96,7 @@ def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
     return idler
 
 
+@functools.cache
 def _rate_gain(params: ModelParams, hydraulics: HydraulicParams, cfg: ControlConfig,
                machine: Machine) -> float:
     """Tension-rate gain g [N/s per unit u] of the reduced plant of ``params`` (its idler:
