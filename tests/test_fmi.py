@@ -19,7 +19,7 @@ from scipy.signal import butter, filtfilt
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE / "fmus"))
 
-from build import build_gas_cylinder, gas_force_N  # noqa: E402
+from build import build_gas_cylinder, gas_force_N, gas_pressure_Pa  # noqa: E402
 
 from trackmj.cli.main import main  # noqa: E402
 from trackmj.sim.setup import prepare  # noqa: E402
@@ -152,6 +152,51 @@ def test_c_fmu_gas_cylinder_as_the_drive_tensioner(fmus, tmp_path, fmu, interfac
     assert m["mujoco_warnings"] == 0 and m["derailment_checks_failed"] == 0
     energy = m["track_energy"]
     assert abs(energy["residual_J"]) <= 1e-3 * abs(energy["drive_work_J"])
+
+
+def test_an_fmu_without_a_rod_pressure_has_its_rods_at_tank(fmus, tmp_path) -> None:
+    """An FMU that outputs its head pressure but no rod pressure (the README's [fmu]
+    example) closes the loop (W2, 0.3 s): the sensors read the FMU's head pressure and the
+    rods at the hydraulic file's tank pressure, as a single-acting cylinder vented to tank."""
+    from trackmj import simulate
+
+    toml = _tensioner(tmp_path / "head.toml", str(fmus / "gas2.fmu"), inputs=GAS_IO["inputs"],
+                      outputs={"force": "force_N", "pressure": "p_head_Pa"})
+    result = simulate("W2", duration=0.3, set={"scenario.evaluation.start_s": 0.1},
+                      controller="pid", tensioner=toml)
+    cols = result.columns()
+    head = np.array([gas_pressure_Pa(s) for s in cols["stroke_m"]])
+    assert cols["t_s"][-1] == pytest.approx(0.3)
+    assert cols["p_head_Pa"] == pytest.approx(head, rel=1e-9)
+    assert np.all(cols["p_rod_Pa"] == prepare("W2").hydraulics.tank_pressure_Pa)
+
+
+@pytest.mark.parametrize(("outputs", "cylinder"), [
+    ({"pressure": "p_head_Pa"}, (1e-3, 5e-4, 2e5)),
+    ({"pressure": "p_rod_Pa"}, (1e-3, 5e-4, 2e5)),
+    ({}, (1e-3, 5e-4, 2e5)),
+    ({"pressure": "p_head_Pa"}, None),
+])
+def test_chamber_pressures_the_fmu_does_not_output_are_stated(fmus, tmp_path, outputs,
+                                                               cylinder) -> None:
+    """A missing rod pressure is the tank pressure (0 gauge without a hydraulic file); a
+    missing head pressure the equivalent of the FMU's force on the hydraulic file's
+    cylinders with that rod pressure, (F + A_r·p_rod)/A_h (NaN without one)."""
+    from trackmj.elements.fmu import FmuElement
+    from trackmj.elements.tensioner_file import load_tensioner
+
+    toml = _tensioner(tmp_path / "p.toml", str(fmus / "gas2.fmu"), inputs=GAS_IO["inputs"],
+                      outputs={"force": "force_N"} | outputs)
+    element = FmuElement(load_tensioner(toml), 0.06, "strong", equivalent=cylinder)
+    log = element.log()
+    area_head, area_rod, tank = cylinder or (np.nan, np.nan, 0.0)
+    gas = gas_pressure_Pa(0.06)
+    rod = gas if "p_rod_Pa" in outputs.values() else tank
+    head = gas if "p_head_Pa" in outputs.values() else (log.force_N + area_rod * rod) / area_head
+    assert log.force_N == pytest.approx(gas_force_N(0.06), rel=1e-12)
+    assert log.p_rod_Pa == rod
+    assert log.p_head_Pa == pytest.approx(head, rel=1e-12, nan_ok=True)
+    element.inst.close()
 
 
 @pytest.fixture(scope="session")

@@ -26,13 +26,19 @@ _INPUTS = (("stroke", 1, 0.05), ("velocity", 2, 0.0))
 _PARAMS = tuple((name, 7 + i, value) for i, (name, value) in enumerate(GAS_DEFAULTS.items()))
 
 
-def gas_force_N(stroke_m: float, velocity_m_s: float = 0.0, **overrides: float) -> float:
-    """The gas cylinder's force law (model.c): A·(p0·(V0/V)^n − p_atm) − c·v with
-    V = V0 + A·(s − s_ref) [N]."""
+def gas_pressure_Pa(stroke_m: float, **overrides: float) -> float:
+    """The gas cylinder's head-side gauge pressure (model.c): p0·(V0/V)^n − p_atm with
+    V = V0 + A·(s − s_ref) [Pa]."""
     p = GAS_DEFAULTS | overrides
     volume = p["V0"] + p["area"] * (stroke_m - p["s_ref"])
-    return (p["area"] * (p["p0"] * (p["V0"] / volume) ** p["n"] - p["p_atm"])
-            - p["c"] * velocity_m_s)
+    return p["p0"] * (p["V0"] / volume) ** p["n"] - p["p_atm"]
+
+
+def gas_force_N(stroke_m: float, velocity_m_s: float = 0.0, **overrides: float) -> float:
+    """The gas cylinder's force law (model.c): A·p(s) − c·v, p the head-side gauge pressure
+    of :func:`gas_pressure_Pa` [N]."""
+    p = GAS_DEFAULTS | overrides
+    return p["area"] * gas_pressure_Pa(stroke_m, **overrides) - p["c"] * velocity_m_s
 
 
 def _fmi2_xml(directional: bool, roll_back: bool) -> str:
@@ -53,6 +59,8 @@ def _fmi2_xml(directional: bool, roll_back: bool) -> str:
     rows += [f'<ScalarVariable name="{n}" valueReference="{vr}" causality="parameter" '
              f'variability="fixed" initial="exact"><Real start="{s!r}"/></ScalarVariable>'
              for n, vr, s in _PARAMS]
+    rows += ['<ScalarVariable name="pressure" valueReference="16" causality="output" '
+             'variability="continuous" initial="calculated"><Real/></ScalarVariable>']
     dd = ' providesDirectionalDerivative="true"' if directional else ""
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="GasCylinder" guid="{TOKEN}"
@@ -64,10 +72,10 @@ def _fmi2_xml(directional: bool, roll_back: bool) -> str:
     {chr(10).join(rows)}
   </ModelVariables>
   <ModelStructure>
-    <Outputs><Unknown index="6"/><Unknown index="7"/></Outputs>
+    <Outputs><Unknown index="6"/><Unknown index="7"/><Unknown index="17"/></Outputs>
     <Derivatives><Unknown index="5"/></Derivatives>
     <InitialUnknowns><Unknown index="4"/><Unknown index="5"/><Unknown index="6"/>
-      <Unknown index="7"/></InitialUnknowns>
+      <Unknown index="7"/><Unknown index="17"/></InitialUnknowns>
   </ModelStructure>
 </fmiModelDescription>
 """
@@ -84,6 +92,7 @@ def _fmi3_xml(directional: bool, roll_back: bool) -> str:
              '<Float64 name="power" valueReference="6" causality="output"/>']
     rows += [f'<Float64 name="{n}" valueReference="{vr}" causality="parameter" '
              f'variability="fixed" start="{s!r}"/>' for n, vr, s in _PARAMS]
+    rows += ['<Float64 name="pressure" valueReference="16" causality="output"/>']
     dd = f' providesDirectionalDerivatives="{"true" if directional else "false"}"'
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="3.0" modelName="GasCylinder" instantiationToken="{TOKEN}"
@@ -95,10 +104,11 @@ def _fmi3_xml(directional: bool, roll_back: bool) -> str:
     {chr(10).join(rows)}
   </ModelVariables>
   <ModelStructure>
-    <Output valueReference="5"/><Output valueReference="6"/>
+    <Output valueReference="5"/><Output valueReference="6"/><Output valueReference="16"/>
     <ContinuousStateDerivative valueReference="4"/>
     <InitialUnknown valueReference="3"/><InitialUnknown valueReference="4"/>
     <InitialUnknown valueReference="5"/><InitialUnknown valueReference="6"/>
+    <InitialUnknown valueReference="16"/>
   </ModelStructure>
 </fmiModelDescription>
 """

@@ -27,10 +27,11 @@ def equivalent_cylinder(hydraulics: HydraulicParams) -> tuple[float, float, floa
     return 2.0 * cyl.area_head_m2, 2.0 * cyl.area_rod_m2, hydraulics.tank_pressure_Pa
 
 
-def equivalent_pressures(force_N: float,
-                         cylinder: tuple[float, float, float]) -> tuple[float, float]:
+def equivalent_pressures(force_N: float, cylinder: tuple[float, float, float],
+                         rod_Pa: float | None = None) -> tuple[float, float]:
     """(head, rod) pressure [Pa gauge] holding ``force_N`` on the lumped ``cylinder`` of
-    :func:`equivalent_cylinder`, the rods at tank."""
+    :func:`equivalent_cylinder`, the rods at ``rod_Pa`` (None: at tank)."""
     area_head, area_rod, tank = cylinder
-    return (force_N + area_rod * tank) / area_head, tank
+    rod = tank if rod_Pa is None else rod_Pa
+    return (force_N + area_rod * rod) / area_head, rod
 

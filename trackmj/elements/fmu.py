@@ -82,9 +82,14 @@ class FmuElement:
     supply_Pa : float
         Supply set value before the first step [Pa gauge].
     equivalent : tuple of float, optional
-        (lumped head area [m²], lumped rod area [m²], tank pressure [Pa]): where the FMU
-        outputs no head pressure the log shows the equivalent head pressure of its force,
-        (F + A_r·p_t)/A_h, and the rods at tank (what the sensors then measure, as in dp-b).
+        (lumped head area A_h [m²], lumped rod area A_r [m²], tank pressure p_t [Pa gauge])
+        of the hydraulic file's cylinders. A chamber pressure the FMU does not output is
+        logged (and measured by the sensors) as: the rod chamber at tank, p_t (a cylinder
+        model without a rod-side pressure is taken as single-acting, its rod side vented
+        to tank, as dp-b's rods are); the head chamber at the equivalent head pressure of
+        the FMU's force, (F + A_r·p_rod)/A_h, with the rod pressure the FMU outputs or p_t.
+        Without it (no hydraulic file: ``trackmj drive``) an unmapped rod pressure is
+        0 gauge and an unmapped head pressure NaN (nothing measures it).
     """
 
     def __init__(self, tensioner: TensionerFile, stroke_m: float, coupling: str,
@@ -190,13 +195,12 @@ class FmuElement:
         self.wall_s += time.perf_counter() - start
 
     def log(self) -> ElementLog:
-        out = self._outputs
-        pressures = dict(zip(self.inst.output_names, out, strict=True))
-        p_head = pressures.get("p_head_Pa", NAN)
-        p_rod = pressures.get("p_rod_Pa", NAN)
-        if "p_head_Pa" not in pressures and self.equivalent is not None:
-            p_head, tank = equivalent_pressures(self.force_N, self.equivalent)
-            p_rod = pressures.get("p_rod_Pa", tank)
+        pressures = dict(zip(self.inst.output_names, self._outputs, strict=True))
+        p_head, p_rod = pressures.get("p_head_Pa", NAN), pressures.get("p_rod_Pa", 0.0)
+        if self.equivalent is not None:
+            head, p_rod = equivalent_pressures(self.force_N, self.equivalent,
+                                               pressures.get("p_rod_Pa"))
+            p_head = pressures.get("p_head_Pa", head)
         return ElementLog(self.t_s, p_head, p_rod, pressures.get("p_supply_Pa", NAN), NAN,
                           self.force_N, NAN, NAN, self.mech_work_J)
 
@@ -412,8 +416,9 @@ class FmuElement:
 
 
 def build(ctx: ElementContext) -> Element:
-    """The FMU of the run's tensioner file on the mechanics' stroke; pressures the FMU does
-    not output are shown as the equivalent of its force on the hydraulic file's cylinders."""
+    """The FMU of the run's tensioner file on the mechanics' stroke; chamber pressures the
+    FMU does not output are the rods at tank and the head at the equivalent of its force on
+    the hydraulic file's cylinders (see :class:`FmuElement`)."""
     if ctx.tensioner is None:
         raise ValueError("the element 'fmu' needs a tensioner file with an [fmu] table")
     return FmuElement(ctx.tensioner, ctx.stroke_m, ctx.coupling, ctx.setup.supply0_Pa,

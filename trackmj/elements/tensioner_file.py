@@ -41,8 +41,8 @@ FMU_INPUTS: dict[str, str] = {
 """Port quantities an FMU input can be mapped to (what trackmj sets before each step)."""
 FMU_OUTPUTS: dict[str, str] = {
     "force_N": "force on the idler carrier, > 0 outward [N] (required)",
-    "p_head_Pa": "head chamber pressure [Pa gauge]",
-    "p_rod_Pa": "rod chamber pressure [Pa gauge]",
+    "p_head_Pa": "head chamber pressure [Pa gauge] (not output: the equivalent of force_N)",
+    "p_rod_Pa": "rod chamber pressure [Pa gauge] (not output: the tank pressure)",
     "p_supply_Pa": "supply pressure [Pa gauge]",
     "port_power_W": "the FMU's own mechanical port power F·v [W], booked beside ∫F·v dt",
 }

@@ -17,7 +17,8 @@
 
 typedef enum {
     vr_time, vr_stroke, vr_velocity, vr_x, vr_der_x, vr_force, vr_power,
-    vr_area, vr_p0, vr_V0, vr_s_ref, vr_n, vr_c, vr_p_atm, vr_fail_time, vr_nan_time
+    vr_area, vr_p0, vr_V0, vr_s_ref, vr_n, vr_c, vr_p_atm, vr_fail_time, vr_nan_time,
+    vr_pressure
 } ValueReference;
 
 typedef struct {
@@ -35,6 +36,7 @@ typedef struct {
     double p_atm;      /* ambient pressure on the rod side [Pa] */
     double fail_time;  /* from this time on every evaluation fails (test of errors) [s] */
     double nan_time;   /* from this time on the force is NaN (test of the guards) [s] */
+    double pressure;   /* output: gas pressure less p_atm, the head side's gauge pressure [Pa] */
 } ModelData;
 
 #endif /* config_h */

@@ -1,5 +1,6 @@
-/* A passive gas-charged cylinder: F = A (p0 (V0 / V)^n - p_atm) - c v, V = V0 + A (x - s_ref),
-   with the state x the cylinder's own stroke (dx/dt = v). Static force law: F(s) at v = 0. */
+/* A passive gas-charged cylinder: F = A p - c v with the head side's gauge pressure
+   p = p0 (V0 / V)^n - p_atm, V = V0 + A (x - s_ref), the state x the cylinder's own stroke
+   (dx/dt = v); its rod side is open to the atmosphere. Static force law: F(s) at v = 0. */
 #include <math.h>
 #include "config.h"
 #include "model.h"
@@ -31,7 +32,8 @@ Status calculateValues(ModelInstance *comp) {
         return Error;
     }
     double V = volume(comp);
-    M(force) = M(area) * (M(p0) * pow(M(V0) / V, M(n)) - M(p_atm)) - M(c) * M(velocity);
+    M(pressure) = M(p0) * pow(M(V0) / V, M(n)) - M(p_atm);
+    M(force) = M(area) * M(pressure) - M(c) * M(velocity);
     if (comp->time >= M(nan_time)) M(force) = NAN;
     M(power) = M(force) * M(velocity);
     comp->isDirtyValues = false;
@@ -61,6 +63,7 @@ Status getFloat64(ModelInstance* comp, ValueReference vr, double values[], size_
         case vr_p_atm: *v = M(p_atm); break;
         case vr_fail_time: *v = M(fail_time); break;
         case vr_nan_time: *v = M(nan_time); break;
+        case vr_pressure: *v = M(pressure); break;
         default:
             logError(comp, "Get Float64 is not allowed for value reference %u.", vr);
             return Error;
