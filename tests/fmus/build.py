@@ -1,7 +1,8 @@
-"""Builds the tests' FMUs from C with the system compiler: the gas-charged cylinder of
-``gas_cylinder/`` against the vendored Reference FMUs framework (``reference_fmus/``), as
+"""Builds the tests' FMUs from C with the system compiler against the vendored Reference
+FMUs framework (``reference_fmus/``): the gas-charged cylinder of ``gas_cylinder/``, as
 FMI 2.0 or 3.0, model exchange + co-simulation (state save and restore by copying the
-instance), with or without directional derivatives."""
+instance), with or without directional derivatives; and the Reference FMUs' own models
+vendored beside the framework (``reference_fmus/Feedthrough``: a variable of every type)."""
 
 from __future__ import annotations
 
@@ -114,6 +115,22 @@ def _fmi3_xml(directional: bool, roll_back: bool) -> str:
 """
 
 
+def _compile(sources: Path, identifier: str, version: int, work: Path,
+             flags: tuple[str, ...] = ()) -> Path:
+    """The shared library of the model in ``sources`` (``config.h``, ``model.c``) for FMI
+    ``version``, compiled in ``work``."""
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "all.c").write_text(f'#define FMI_VERSION {version}\n'
+                                f'#include "fmi{version}Functions.c"\n'
+                                '#include "model.c"\n#include "cosimulation.c"\n')
+    library = work / f"{identifier}.so"
+    subprocess.run(["cc", "-shared", "-fPIC", "-O2", "-DDISABLE_PREFIX", *flags,
+                    f"-I{sources}", f"-I{FRAMEWORK / 'include'}", f"-I{FMI_HEADERS}",
+                    f"-I{FRAMEWORK / 'src'}", str(work / "all.c"), "-o", str(library), "-lm"],
+                   check=True, capture_output=True)
+    return library
+
+
 def build_gas_cylinder(out: Path, *, version: int = 2, directional: bool = True,
                        roll_back: bool = True, platform_binary: bool = True) -> Path:
     """Compile the gas cylinder into the FMU ``out`` (FMI ``version`` 2 or 3; ``roll_back``
@@ -121,17 +138,8 @@ def build_gas_cylinder(out: Path, *, version: int = 2, directional: bool = True,
     ``platform_binary`` False the binary goes under a Windows folder instead, an FMU with
     no binary for this platform)."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    work = out.with_suffix(".build")
-    work.mkdir(exist_ok=True)
-    (work / "all.c").write_text(f'#define FMI_VERSION {version}\n'
-                                f'#include "fmi{version}Functions.c"\n'
-                                '#include "model.c"\n#include "cosimulation.c"\n')
-    library = work / "GasCylinder.so"
-    flags = ["-DDISABLE_PREFIX", *(["-DGET_PARTIAL_DERIVATIVE"] if directional else [])]
-    subprocess.run(["cc", "-shared", "-fPIC", "-O2", *flags, f"-I{GAS}",
-                    f"-I{FRAMEWORK / 'include'}", f"-I{FMI_HEADERS}", f"-I{FRAMEWORK / 'src'}",
-                    str(work / "all.c"), "-o", str(library), "-lm"], check=True,
-                   capture_output=True)
+    library = _compile(GAS, "GasCylinder", version, out.with_suffix(".build"),
+                       ("-DGET_PARTIAL_DERIVATIVE",) if directional else ())
     folder = ("linux64" if version == 2 else "x86_64-linux") if platform_binary else \
         ("win64" if version == 2 else "x86_64-windows")
     suffix = ".so" if platform_binary else ".dll"
@@ -139,4 +147,18 @@ def build_gas_cylinder(out: Path, *, version: int = 2, directional: bool = True,
     with zipfile.ZipFile(out, "w") as zf:
         zf.writestr("modelDescription.xml", xml)
         zf.write(library, f"binaries/{folder}/GasCylinder{suffix}")
+    return out
+
+
+def build_reference(model: str, out: Path, *, version: int = 3) -> Path:
+    """Compile the vendored Reference FMU ``model`` (``reference_fmus/<model>``: its
+    ``config.h``, ``model.c`` and ``FMI<version>.xml``, unchanged) into the FMU ``out``
+    (FMI ``version`` 2 or 3, binary for this platform)."""
+    sources = FRAMEWORK / model
+    out.parent.mkdir(parents=True, exist_ok=True)
+    library = _compile(sources, model, version, out.with_suffix(".build"))
+    folder = "linux64" if version == 2 else "x86_64-linux"
+    with zipfile.ZipFile(out, "w") as zf:
+        zf.writestr("modelDescription.xml", (sources / f"FMI{version}.xml").read_text())
+        zf.write(library, f"binaries/{folder}/{model}.so")
     return out

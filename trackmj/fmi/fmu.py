@@ -5,11 +5,12 @@ version-neutral call surface.
 file exists and is a zip with a modelDescription fmpy can read, FMI 2.0 or 3.0, the
 interface asked for is offered, a binary for this platform is inside, every mapped variable
 exists with the causality and type its role needs, every parameter value fits its
-variable's type. Each refusal is a :class:`~trackmj.validator.ParameterError` naming the file,
-the key and the variable.
+variable's type (an integer its range). Each refusal is a
+:class:`~trackmj.validator.ParameterError` naming the file, the key and the variable.
 
 :class:`FmuInstance` wraps fmpy's ``FMU2Slave``/``FMU2Model``/``FMU3Slave``/``FMU3Model``:
-values are set and read by port quantity, and any failing call raises
+values are set and read by port quantity, each with the call of its variable's declared
+type (FMI 3.0's ``setFloat32``, ``getInt8``, ...), and any failing call raises
 :class:`~trackmj.errors.FmuError` naming the FMU, the call, the time and what the FMU itself
 logged ("the FMU cyl.fmu: instantiate at t = 0.000 s failed: Failed to instantiate model;
 the FMU logged: [Error] Wrong GUID."). Its messages are kept (:class:`FmuLog`), not printed.
@@ -45,9 +46,15 @@ from typing import Any
 from trackmj.errors import FmuError
 from trackmj.validator import Location, ParameterError
 
-REAL_TYPES = ("Real", "Float64", "Float32")
-INTEGER_TYPES = ("Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "Int32",
-                 "UInt32", "Int64", "UInt64")
+KINDS: dict[str, str] = {
+    "Float64": "real", "Float32": "real", "Real": "real",
+    "Int8": "int", "Int16": "int", "Int32": "int", "Int64": "int", "Integer": "int",
+    "UInt8": "uint", "UInt16": "uint", "UInt32": "uint", "UInt64": "uint",
+    "Enumeration": "enum", "Boolean": "bool", "String": "str"}
+"""Declared variable type (FMI 2.0 and 3.0) -> its kind: real, signed integer, unsigned
+integer, enumeration, boolean, string. A type not here (Binary, Clock) is never mapped."""
+FMI2_TYPES = ("Real", "Integer", "Enumeration", "Boolean", "String")
+"""FMI 2.0's variable types (the others of :data:`KINDS` are FMI 3.0's)."""
 INPUT_CAUSALITIES = ("input",)
 PARAMETER_CAUSALITIES = ("parameter", "input", "structuralParameter")
 UNZIPPED_PREFIX = "trackmj-fmu-"
@@ -58,12 +65,13 @@ SHARED_LIBRARIES = (".so", ".dll", ".dylib")
 
 @dataclass(frozen=True)
 class Channel:
-    """One mapped FMU variable: its name, value reference and kind ("real", "int", "bool",
-    "str")."""
+    """One mapped FMU variable: its name, value reference, kind (a value of :data:`KINDS`)
+    and declared type (``Float32``, ``Int8``, ``Integer``, ...)."""
 
     name: str
     vr: int
     kind: str
+    type: str
 
 
 @dataclass(frozen=True)
@@ -100,11 +108,34 @@ class FmuDescription:
 
 
 def _kind(type_name: str) -> str:
-    if type_name in REAL_TYPES:
-        return "real"
-    if type_name in INTEGER_TYPES:
-        return "int"
-    return {"Boolean": "bool", "String": "str"}.get(type_name, "other")
+    return KINDS.get(type_name, "other")
+
+
+def _type_names(kinds: Sequence[str], version: str) -> str:
+    """The declared types of ``kinds`` in FMI ``version``, for messages ("Float64,
+    Float32, Int8, Int16, Int32 or Int64")."""
+    fmi2 = version.startswith("2")
+    names = [t for t, k in KINDS.items() if k in kinds and (t in FMI2_TYPES) == fmi2]
+    return ", ".join(names[:-1]) + " or " + names[-1] if len(names) > 1 else names[0]
+
+
+def integer_range(type_name: str, version: str) -> tuple[int, int]:
+    """The values an integer variable of ``type_name`` holds in FMI ``version`` (FMI 2.0's
+    Integer and Enumeration are 32-bit, FMI 3.0's Enumeration 64-bit)."""
+    bits = {"Integer": 32, "Enumeration": 32 if version.startswith("2") else 64}.get(
+        type_name) or int(type_name.removeprefix("U").removeprefix("Int"))
+    if type_name.startswith("U"):
+        return 0, 2 ** bits - 1
+    return -(2 ** (bits - 1)), 2 ** (bits - 1) - 1
+
+
+def accessor(type_name: str, version: str) -> str:
+    """The name of fmpy's get/set call for a variable of ``type_name`` (``getFloat32``,
+    ``setInt8``, ...: FMI 3.0 has one per type, an Enumeration's is Int64's; FMI 2.0's
+    Enumeration is read and set as Integer)."""
+    if type_name == "Enumeration":
+        return "Integer" if version.startswith("2") else "Int64"
+    return type_name
 
 
 def _fmi3_directional(path: Path, interface: str) -> bool:
@@ -205,8 +236,10 @@ def _check_platform(path: Path, version: str, identifier: str, where: str) -> No
 def map_variables(md: Any, mapping: Mapping[str, str], role: str, at: Location, table: str,
                   kinds: Mapping[str, tuple[str, ...]], fmu_name: str) -> dict[str, Channel]:
     """Port quantity -> Channel for ``mapping`` (FMU name -> quantity) of table ``table``;
-    each variable must exist with causality ``role`` and a kind of ``kinds[quantity]``."""
+    each variable must exist with causality ``role`` and a kind of ``kinds[quantity]``
+    (refused naming the declared types those kinds allow)."""
     variables = {v.name: v for v in md.modelVariables}
+    version = str(md.fmiVersion)
     out = {}
     for name, quantity in mapping.items():
         var = variables.get(name)
@@ -222,18 +255,21 @@ def map_variables(md: Any, mapping: Mapping[str, str], role: str, at: Location, 
         kind = _kind(var.type)
         if kind not in kinds[quantity]:
             raise ParameterError(f"{key}: {fmu_name}'s variable {name!r} is of type {var.type}; "
-                                 f"{quantity!r} needs {' or '.join(kinds[quantity])}")
+                                 f"{quantity!r} needs "
+                                 f"{_type_names(kinds[quantity], version)}")
         if var.shape or var.dimensions:
             raise ParameterError(f"{key}: {fmu_name}'s variable {name!r} is an array; map a "
                                  "scalar")
-        out[quantity] = Channel(name, var.valueReference, kind)
+        out[quantity] = Channel(name, var.valueReference, kind, var.type)
     return out
 
 
 def map_parameters(md: Any, values: Mapping[str, Any], at: Location,
                    fmu_name: str) -> tuple[tuple[Channel, Any], ...]:
-    """(Channel, value) for every ``[... .parameters]`` entry, its type checked."""
+    """(Channel, value) for every ``[... .parameters]`` entry, its type checked (an integer
+    within its type's range)."""
     variables = {v.name: v for v in md.modelVariables}
+    version = str(md.fmiVersion)
     out = []
     for name, value in values.items():
         var = variables.get(name)
@@ -248,13 +284,19 @@ def map_parameters(md: Any, values: Mapping[str, Any], at: Location,
                                  f"{var.causality!r}, variability {var.variability!r}) cannot "
                                  "be set before initialisation")
         kind = _kind(var.type)
-        ok = {"real": isinstance(value, int | float) and not isinstance(value, bool),
-              "int": isinstance(value, int) and not isinstance(value, bool),
-              "bool": isinstance(value, bool), "str": isinstance(value, str)}.get(kind, False)
+        integer = isinstance(value, int) and not isinstance(value, bool)
+        ok = {"real": integer or isinstance(value, float), "int": integer, "uint": integer,
+              "enum": integer, "bool": isinstance(value, bool),
+              "str": isinstance(value, str)}.get(kind, False)
         if not ok:
             raise ParameterError(f"{key} = {value!r}: {fmu_name}'s variable {name!r} is of type "
                                  f"{var.type}")
-        out.append((Channel(name, var.valueReference, kind),
+        if kind in ("int", "uint", "enum"):
+            lo, hi = integer_range(var.type, version)
+            if not lo <= value <= hi:
+                raise ParameterError(f"{key} = {value!r}: {fmu_name}'s variable {name!r} is of "
+                                     f"type {var.type}, which holds integers in [{lo}, {hi}]")
+        out.append((Channel(name, var.valueReference, kind, var.type),
                     float(value) if kind == "real" else value))
     return tuple(out)
 
@@ -421,12 +463,16 @@ class FmuInstance:
             derivatives = d.md.derivatives
             self.state_vrs = [u.variable.derivative.valueReference for u in derivatives]
             self.derivative_vrs = [u.variable.valueReference for u in derivatives]
-            self._setters = self._accessors("set")
-            self._getters = self._accessors("get")
-            self._in = {q: (c.vr, self._setters[c.kind]) for q, c in d.inputs.items()}
-            self._out = [(q, c.vr, self._getters[c.kind]) for q, c in d.outputs.items()]
-            self._real_out = [c.vr for c in d.outputs.values() if c.kind == "real"]
-            self._out_names = [q for q, c in d.outputs.items() if c.kind == "real"]
+            self._in = {q: (c, self._accessor("set", c)) for q, c in d.inputs.items()}
+            real = [(q, c) for q, c in d.outputs.items() if c.kind == "real"]
+            self._out_names = [q for q, _ in real]
+            groups: dict[str, tuple[list[int], list[int]]] = {}
+            for i, (_, c) in enumerate(real):
+                vrs, where = groups.setdefault(accessor(c.type, d.version), ([], []))
+                vrs.append(c.vr)
+                where.append(i)
+            self._real_groups = [(getattr(self.fmu, "get" + name), vrs, where)
+                                 for name, (vrs, where) in groups.items()]
             self.next_event_s = math.inf
         except BaseException:
             self.close()
@@ -447,18 +493,14 @@ class FmuInstance:
             return fn()
         except FmuError:
             raise
-        except Exception as exc:
-            detail = str(exc) or type(exc).__name__
+        except Exception as exc:   # fmpy's message ends in a full stop: ours goes on
+            detail = (str(exc) or type(exc).__name__).rstrip(".")
             raise FmuError(f"the FMU {self.d.name}: {what} at t = {self.t:.3f} s failed: "
                            f"{detail}{self.log.reason(since)}") from exc
 
-    def _accessors(self, verb: str) -> dict[str, Callable[..., Any]]:
-        f = self.fmu
-        if self.fmi3:
-            names = {"real": "Float64", "int": "Int32", "bool": "Boolean", "str": "String"}
-        else:
-            names = {"real": "Real", "int": "Integer", "bool": "Boolean", "str": "String"}
-        return {kind: getattr(f, verb + name) for kind, name in names.items()}
+    def _accessor(self, verb: str, channel: Channel) -> Callable[..., Any]:
+        """fmpy's ``verb`` ("get"/"set") call for ``channel``'s declared type."""
+        return getattr(self.fmu, verb + accessor(channel.type, self.d.version))
 
     # ----------------------------------------------------------------- life cycle
     def start(self, t0_s: float, inputs: Mapping[str, float]) -> None:
@@ -482,8 +524,9 @@ class FmuInstance:
         if not self.fmi3:
             self._call("fmi2SetupExperiment", lambda: f.setupExperiment(startTime=t0_s))
         for channel, value in d.parameters:
+            setter = self._accessor("set", channel)
             self._call(f"setting parameter {channel.name}",
-                       lambda c=channel, v=value: self._setters[c.kind]([c.vr], [v]))
+                       lambda c=channel, v=value, f=setter: f([c.vr], [v]))
         self.set_inputs(inputs)
         if self.fmi3:
             self._call("fmi3EnterInitializationMode",
@@ -540,18 +583,24 @@ class FmuInstance:
         for quantity, value in values.items():
             entry = self._in.get(quantity)
             if entry is not None:
-                vr, setter = entry
+                c, setter = entry
+                fmu_value = round(value) if c.kind == "int" else value
                 self._call(f"setting input {quantity}",
-                           lambda vr=vr, setter=setter, value=value: setter([vr], [value]))
+                           lambda c=c, setter=setter, v=fmu_value: setter([c.vr], [v]))
 
     def read(self, channel: Channel) -> Any:
         """The value of one mapped variable."""
-        getter = self._getters[channel.kind]
+        getter = self._accessor("get", channel)
         return self._call(f"reading {channel.name}", lambda: getter([channel.vr]))[0]
 
     def real_outputs(self) -> list[float]:
-        """The real outputs in :attr:`output_names` order."""
-        return self._call("reading the outputs", lambda: self._getters["real"](self._real_out))
+        """The real outputs in :attr:`output_names` order (one call per declared type)."""
+        values = [0.0] * len(self._out_names)
+        for getter, vrs, where in self._real_groups:
+            read = self._call("reading the outputs", lambda g=getter, v=vrs: g(v))
+            for i, value in zip(where, read, strict=True):
+                values[i] = value
+        return values
 
     @property
     def output_names(self) -> list[str]:
