@@ -326,6 +326,113 @@ def test_an_integer_parameter_outside_its_type_is_refused_at_load(feedthrough,
         load_controller_file(toml)
 
 
+GAS_UNITS = {"stroke": "m", "velocity": "m/s", "force": "N", "pressure": "Pa",
+             "stroke_mm": "mm", "velocity_mm_s": "mm/s", "force_kN": "kN", "pressure_MPa": "MPa"}
+"""The units the gas cylinder's variables declare in :func:`unit_fmus` (kN without a BaseUnit,
+the others with one)."""
+
+
+@pytest.fixture(scope="session")
+def unit_fmus(tmp_path_factory) -> Path:
+    """The gas cylinder declaring :data:`GAS_UNITS`, FMI 2.0 with directional derivatives
+    and 3.0 without; one declaring its pressure in absolute bar (a unit with an offset)."""
+    d = tmp_path_factory.mktemp("units")
+    build_gas_cylinder(d / "gas2.fmu", version=2, directional=True, units=GAS_UNITS)
+    build_gas_cylinder(d / "gas3.fmu", version=3, directional=False, units=GAS_UNITS)
+    build_gas_cylinder(d / "gas2_abs.fmu", version=2, units={"pressure": "bar_abs"})
+    return d
+
+
+@pytest.mark.parametrize(("fmu", "interface"), [
+    ("gas2.fmu", "co-simulation"), ("gas2.fmu", "model-exchange"),
+    ("gas3.fmu", "model-exchange")])
+def test_declared_units_are_converted_to_si(unit_fmus, tmp_path, fmu, interface) -> None:
+    """The cylinder through its variables in mm, mm/s, kN and MPa gives, step by step, the
+    force law and head pressure it gives through its SI variables: strong co-simulation,
+    implicit model exchange with directional derivatives (taken in the FMU's units) and with
+    finite differences. Its declared units ignored, the force came out in kN as N."""
+    from trackmj.elements.fmu import FmuElement
+    from trackmj.elements.tensioner_file import load_tensioner
+
+    mappings = {"si": ("stroke", "velocity", "force", "pressure"),
+                "scaled": ("stroke_mm", "velocity_mm_s", "force_kN", "pressure_MPa")}
+    elements = {}
+    for name, (stroke, velocity, force, pressure) in mappings.items():
+        toml = _tensioner(tmp_path / f"{name}.toml", str(unit_fmus / fmu),
+                          inputs={stroke: "stroke_m", velocity: "velocity_m_s"},
+                          outputs={force: "force_N", pressure: "p_head_Pa"},
+                          extra=f'interface = "{interface}"')
+        elements[name] = FmuElement(load_tensioner(toml), 0.06, "strong")
+    si, scaled = elements["si"], elements["scaled"]
+    d = scaled.description
+    assert [c.factor for c in (*d.inputs.values(), *d.outputs.values())] == \
+        pytest.approx([1e-3, 1e-3, 1e3, 1e6], rel=1e-15)
+    stroke, h = 0.06, 1e-3
+    for k in range(20):
+        velocity = 0.05 * np.sin(2 * np.pi * 5 * k * h)
+        laws = [e.force_law(k * h, stroke, velocity) for e in (si, scaled)]
+        assert laws[1].force_N == pytest.approx(laws[0].force_N, rel=1e-9)
+        assert laws[1].damping_N_s_m == pytest.approx(laws[0].damping_N_s_m, rel=1e-6)
+        stroke += h * velocity
+        for e in (si, scaled):
+            e.complete_step((k + 1) * h, stroke, velocity)
+        assert scaled.log().p_head_Pa == pytest.approx(si.log().p_head_Pa, rel=1e-12)
+    assert scaled.force_N == pytest.approx(gas_force_N(stroke, velocity), rel=1e-3)
+    for e in (si, scaled):
+        e.inst.close()
+
+
+@pytest.mark.parametrize(("fmu", "table", "variable", "quantity", "expected"), [
+    ("gas2.fmu", "outputs", "pressure_MPa", "force_N",
+     "has unit 'MPa' (kg m-1 s-2); 'force_N' needs N (kg m s-2) or a multiple of it"),
+    ("gas2.fmu", "inputs", "stroke_mm", "velocity_m_s",
+     "has unit 'mm' (m); 'velocity_m_s' needs m/s (m s-1) or a multiple of it"),
+    ("gas2.fmu", "outputs", "force_kN", "p_head_Pa",
+     "has unit 'kN', defined without a BaseUnit (unit 'kN' (kilonewton, a force) is not a "
+     "pressure); 'p_head_Pa' needs Pa (kg m-1 s-2) or a multiple of it"),
+    ("gas2_abs.fmu", "outputs", "pressure", "p_head_Pa",
+     "has unit 'bar_abs', with an offset (in SI 100000·value − 101325); 'p_head_Pa' needs Pa "
+     "(kg m-1 s-2) or a multiple of it, without an offset"),
+])
+def test_a_unit_of_another_dimension_or_with_an_offset_is_refused_at_load(
+        unit_fmus, tmp_path, fmu, table, variable, quantity, expected) -> None:
+    """One line naming the file, the variable, its unit and the unit the port needs."""
+    from trackmj.elements.tensioner_file import load_tensioner
+    from trackmj.validator import ParameterError
+
+    io = {"inputs": {"stroke": "stroke_m"}, "outputs": {"force": "force_N"}}
+    io[table] = {k: v for k, v in io[table].items() if v != quantity} | {variable: quantity}
+    toml = _tensioner(tmp_path / "t.toml", str(unit_fmus / fmu), **io)
+    with pytest.raises(ParameterError) as refused:
+        load_tensioner(toml)
+    assert str(refused.value) == (f"t.toml [fmu.{table}].{variable}: {fmu}'s variable "
+                                  f"{variable!r} {expected}")
+
+
+def test_a_controller_fmu_sees_and_gives_values_in_its_declared_units(feedthrough,
+                                                                       tmp_path) -> None:
+    """The reference in kN and the opening in %: 50 kN reaches the FMU as 50, whose 50 %
+    is u = 0.5; a kN input mapped to the stroke is refused at load."""
+    from trackmj.fmi.controller_fmu import load_controller_file
+    from trackmj.validator import ParameterError
+
+    fmu = build_reference("Feedthrough", tmp_path / "ft3_units.fmu", units={
+        "Float64_continuous_input": "kN", "Float64_continuous_output": "%"})
+    toml = _controller(tmp_path / "c.toml", fmu,
+                       inputs={"Float64_continuous_input": "F_ref_N",
+                               "Float32_continuous_input": "stroke_m"},
+                       outputs={"Float64_continuous_output": "u"})
+    assert _control(toml, stroke_m=0.05, reference_N=50e3) == pytest.approx(0.5, rel=1e-15)
+    toml = _controller(tmp_path / "bad.toml", fmu,
+                       inputs={"Float64_continuous_input": "stroke_m"},
+                       outputs={"Float64_continuous_output": "u"})
+    with pytest.raises(ParameterError, match=r"^bad\.toml \[controller\.inputs\]\."
+                       r"Float64_continuous_input: ft3_units\.fmu's variable "
+                       r"'Float64_continuous_input' has unit 'kN', defined without a BaseUnit "
+                       r"\(.*\); 'stroke_m' needs m \(m\) or a multiple of it$"):
+        load_controller_file(toml)
+
+
 @pytest.fixture(scope="session")
 def plant_fmu(tmp_path_factory) -> Path:
     from trackmj.fmi.export import export

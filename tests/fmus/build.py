@@ -7,7 +7,9 @@ vendored beside the framework (``reference_fmus/Feedthrough``: a variable of eve
 from __future__ import annotations
 
 import subprocess
+import xml.etree.ElementTree as ET
 import zipfile
+from collections.abc import Mapping
 from pathlib import Path
 
 import trackmj.fmi.native
@@ -25,6 +27,20 @@ GAS_DEFAULTS = {"area": 2.0e-3, "p0": 6.6e6, "V0": 1.2e-4, "s_ref": 0.05, "n": 1
 """The gas cylinder's parameters (model.c's start values), name -> SI value."""
 _INPUTS = (("stroke", 1, 0.05), ("velocity", 2, 0.0))
 _PARAMS = tuple((name, 7 + i, value) for i, (name, value) in enumerate(GAS_DEFAULTS.items()))
+_MORE = (("pressure", 16, None), ("stroke_mm", 17, 50.0), ("velocity_mm_s", 18, 0.0),
+         ("force_kN", 19, None), ("pressure_MPa", 20, None))
+"""After the parameters: the head-side gauge pressure [Pa], then stroke, velocity (inputs:
+a start value), force and pressure (outputs) in mm, mm/s, kN and MPa."""
+_OUTPUT_VRS = (5, 6, *(vr for _, vr, start in _MORE if start is None))
+UNITS: dict[str, dict[str, str] | None] = {
+    "m": {"m": "1"}, "mm": {"m": "1", "factor": "0.001"}, "m/s": {"m": "1", "s": "-1"},
+    "mm/s": {"m": "1", "s": "-1", "factor": "0.001"}, "N": {"kg": "1", "m": "1", "s": "-2"},
+    "kN": None, "Pa": {"kg": "1", "m": "-1", "s": "-2"},
+    "MPa": {"kg": "1", "m": "-1", "s": "-2", "factor": "1e6"},
+    "bar_abs": {"kg": "1", "m": "-1", "s": "-2", "factor": "1e5", "offset": "-101325"},
+    "%": {"factor": "0.01"}}
+"""Units a test FMU may declare -> the attributes of their UnitDefinition's BaseUnit (None:
+defined without one, as FMI allows)."""
 
 
 def gas_pressure_Pa(stroke_m: float, **overrides: float) -> float:
@@ -60,8 +76,15 @@ def _fmi2_xml(directional: bool, roll_back: bool) -> str:
     rows += [f'<ScalarVariable name="{n}" valueReference="{vr}" causality="parameter" '
              f'variability="fixed" initial="exact"><Real start="{s!r}"/></ScalarVariable>'
              for n, vr, s in _PARAMS]
-    rows += ['<ScalarVariable name="pressure" valueReference="16" causality="output" '
-             'variability="continuous" initial="calculated"><Real/></ScalarVariable>']
+    rows += [f'<ScalarVariable name="{n}" valueReference="{vr}" causality="input" '
+             f'variability="continuous"><Real start="{s}"/></ScalarVariable>' if s is not None
+             else f'<ScalarVariable name="{n}" valueReference="{vr}" causality="output" '
+             'variability="continuous" initial="calculated"><Real/></ScalarVariable>'
+             for n, vr, s in _MORE]
+    index = {vr: i + 1 for i, vr in enumerate((0, 1, 2, 3, 4, 5, 6,
+                                                *(vr for _, vr, _ in _PARAMS + _MORE)))}
+    outputs = "".join(f'<Unknown index="{index[vr]}"/>' for vr in _OUTPUT_VRS)
+    initial = "".join(f'<Unknown index="{index[vr]}"/>' for vr in (3, 4, *_OUTPUT_VRS))
     dd = ' providesDirectionalDerivative="true"' if directional else ""
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="GasCylinder" guid="{TOKEN}"
@@ -73,10 +96,9 @@ def _fmi2_xml(directional: bool, roll_back: bool) -> str:
     {chr(10).join(rows)}
   </ModelVariables>
   <ModelStructure>
-    <Outputs><Unknown index="6"/><Unknown index="7"/><Unknown index="17"/></Outputs>
+    <Outputs>{outputs}</Outputs>
     <Derivatives><Unknown index="5"/></Derivatives>
-    <InitialUnknowns><Unknown index="4"/><Unknown index="5"/><Unknown index="6"/>
-      <Unknown index="7"/><Unknown index="17"/></InitialUnknowns>
+    <InitialUnknowns>{initial}</InitialUnknowns>
   </ModelStructure>
 </fmiModelDescription>
 """
@@ -93,7 +115,12 @@ def _fmi3_xml(directional: bool, roll_back: bool) -> str:
              '<Float64 name="power" valueReference="6" causality="output"/>']
     rows += [f'<Float64 name="{n}" valueReference="{vr}" causality="parameter" '
              f'variability="fixed" start="{s!r}"/>' for n, vr, s in _PARAMS]
-    rows += ['<Float64 name="pressure" valueReference="16" causality="output"/>']
+    rows += [f'<Float64 name="{n}" valueReference="{vr}" causality="input" start="{s}"/>'
+             if s is not None else
+             f'<Float64 name="{n}" valueReference="{vr}" causality="output"/>'
+             for n, vr, s in _MORE]
+    outputs = "".join(f'<Output valueReference="{vr}"/>' for vr in _OUTPUT_VRS)
+    initial = "".join(f'<InitialUnknown valueReference="{vr}"/>' for vr in (3, 4, *_OUTPUT_VRS))
     dd = f' providesDirectionalDerivatives="{"true" if directional else "false"}"'
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="3.0" modelName="GasCylinder" instantiationToken="{TOKEN}"
@@ -105,14 +132,32 @@ def _fmi3_xml(directional: bool, roll_back: bool) -> str:
     {chr(10).join(rows)}
   </ModelVariables>
   <ModelStructure>
-    <Output valueReference="5"/><Output valueReference="6"/><Output valueReference="16"/>
+    {outputs}
     <ContinuousStateDerivative valueReference="4"/>
-    <InitialUnknown valueReference="3"/><InitialUnknown valueReference="4"/>
-    <InitialUnknown valueReference="5"/><InitialUnknown valueReference="6"/>
-    <InitialUnknown valueReference="16"/>
+    {initial}
   </ModelStructure>
 </fmiModelDescription>
 """
+
+
+def _declare_units(xml: str, units: Mapping[str, str]) -> str:
+    """The modelDescription ``xml`` with ``units`` (variable name -> a unit of :data:`UNITS`)
+    declared: the variables' ``unit`` attributes and their UnitDefinitions."""
+    root = ET.fromstring(xml)
+    fmi3 = root.get("fmiVersion", "").startswith("3")
+    for variable in root.iter("ModelVariables"):
+        for var in variable:
+            if var.get("name") in units:
+                (var if fmi3 else var[0]).set("unit", units[var.get("name", "")])
+    definitions = ET.Element("UnitDefinitions")
+    for name in dict.fromkeys(units.values()):
+        unit, base = ET.SubElement(definitions, "Unit", name=name), UNITS[name]
+        if base is not None:
+            ET.SubElement(unit, "BaseUnit", base)
+    last = max(i for i, child in enumerate(root)
+               if child.tag in ("ModelExchange", "CoSimulation"))
+    root.insert(last + 1, definitions)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode")
 
 
 def _compile(sources: Path, identifier: str, version: int, work: Path,
@@ -132,11 +177,13 @@ def _compile(sources: Path, identifier: str, version: int, work: Path,
 
 
 def build_gas_cylinder(out: Path, *, version: int = 2, directional: bool = True,
-                       roll_back: bool = True, platform_binary: bool = True) -> Path:
+                       roll_back: bool = True, platform_binary: bool = True,
+                       units: Mapping[str, str] | None = None) -> Path:
     """Compile the gas cylinder into the FMU ``out`` (FMI ``version`` 2 or 3; ``roll_back``
     False declares its co-simulation unable to get and set its state; with
     ``platform_binary`` False the binary goes under a Windows folder instead, an FMU with
-    no binary for this platform)."""
+    no binary for this platform; ``units``: variable name -> the unit it declares, from
+    :data:`UNITS`, else none)."""
     out.parent.mkdir(parents=True, exist_ok=True)
     library = _compile(GAS, "GasCylinder", version, out.with_suffix(".build"),
                        ("-DGET_PARTIAL_DERIVATIVE",) if directional else ())
@@ -144,21 +191,28 @@ def build_gas_cylinder(out: Path, *, version: int = 2, directional: bool = True,
         ("win64" if version == 2 else "x86_64-windows")
     suffix = ".so" if platform_binary else ".dll"
     xml = (_fmi2_xml if version == 2 else _fmi3_xml)(directional, roll_back)
+    if units:
+        xml = _declare_units(xml, units)
     with zipfile.ZipFile(out, "w") as zf:
         zf.writestr("modelDescription.xml", xml)
         zf.write(library, f"binaries/{folder}/GasCylinder{suffix}")
     return out
 
 
-def build_reference(model: str, out: Path, *, version: int = 3) -> Path:
+def build_reference(model: str, out: Path, *, version: int = 3,
+                    units: Mapping[str, str] | None = None) -> Path:
     """Compile the vendored Reference FMU ``model`` (``reference_fmus/<model>``: its
     ``config.h``, ``model.c`` and ``FMI<version>.xml``, unchanged) into the FMU ``out``
-    (FMI ``version`` 2 or 3, binary for this platform)."""
+    (FMI ``version`` 2 or 3, binary for this platform); ``units``: variable name -> the unit
+    it declares, from :data:`UNITS`."""
     sources = FRAMEWORK / model
     out.parent.mkdir(parents=True, exist_ok=True)
     library = _compile(sources, model, version, out.with_suffix(".build"))
     folder = "linux64" if version == 2 else "x86_64-linux"
+    xml = (sources / f"FMI{version}.xml").read_text()
+    if units:
+        xml = _declare_units(xml, units)
     with zipfile.ZipFile(out, "w") as zf:
-        zf.writestr("modelDescription.xml", (sources / f"FMI{version}.xml").read_text())
+        zf.writestr("modelDescription.xml", xml)
         zf.write(library, f"binaries/{folder}/{model}.so")
     return out

@@ -33,7 +33,9 @@ with exit 3): a non-finite output, |F| beyond ``force_limit_N``, the stroke outs
 ``travel_m``. A failing FMI call is an :class:`~trackmj.errors.FmuError` (exit 3).
 
 Inputs are set before every step: stroke at the end of the step (less ``stroke_offset_m``),
-the step's velocity, and the valve command (mode, u, supply set value) in force.
+the step's velocity, and the valve command (mode, u, supply set value) in force; in and
+out, values are converted between SI and the units the FMU declares
+(:class:`~trackmj.fmi.fmu.FmuInstance`).
 """
 
 from __future__ import annotations
@@ -311,20 +313,21 @@ class FmuElement:
     def _me_jacobian(self, x: list[float], s1: float, v: float, f0: np.ndarray,
                      out0: list[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """(∂f/∂x (n, n), ∂F/∂x (n,), ∂f/∂v (n,), ∂F/∂v) at (x, v), the stroke moving h·dv
-        with the velocity; directional derivatives or forward differences."""
+        with the velocity, F in N and v in m/s whatever units the FMU declares; directional
+        derivatives (in the FMU's units, scaled) or forward differences."""
         inst, h, i = self.inst, self.h, self._i_force
         n = inst.n_states
-        motion = [c.vr for q, c in self.description.inputs.items()
+        motion = [(q, c) for q, c in self.description.inputs.items()
                   if q in ("stroke_m", "velocity_m_s")]
-        seed = [h if q == "stroke_m" else 1.0 for q in self.description.inputs
-                if q in ("stroke_m", "velocity_m_s")]
         if self.description.directional:
-            unknowns = [*inst.derivative_vrs, self.description.outputs["force_N"].vr]
+            force = self.description.outputs["force_N"]
+            unknowns = [*inst.derivative_vrs, force.vr]
             # column j of the Jacobian of (f, F) on the states, one call per state
             jac = np.array([inst.directional(unknowns, [inst.state_vrs[j]], [1.0])
                             for j in range(n)]).reshape(n, n + 1).T
-            col_v = np.array(inst.directional(unknowns, motion, seed))
-            return jac[:n], jac[n], col_v[:n], float(col_v[n])
+            seed = [(h if q == "stroke_m" else 1.0) / c.factor for q, c in motion]
+            col_v = np.array(inst.directional(unknowns, [c.vr for _, c in motion], seed))
+            return jac[:n], force.factor * jac[n], col_v[:n], force.factor * float(col_v[n])
         a = np.zeros((n, n))
         dfx = np.zeros(n)
         for j in range(n):

@@ -16,7 +16,10 @@ A tensioner file holds exactly one of two tables:
 
 Sign conventions at the interface are trackmj's (:mod:`trackmj.ports`): stroke s [m] grows
 outward, velocity v = ds/dt [m/s], force F [N] > 0 pushes the idler outward; the FMU sees
-``s − stroke_offset_m``. SI units throughout.
+``s − stroke_offset_m``. SI units at the port (:data:`FMU_UNITS`): a mapped variable's
+declared unit is converted to its quantity's (mm, kN, MPa, bar; one of another dimension or
+with an offset is refused at load, :func:`trackmj.fmi.fmu.unit_factor`), a variable without
+a unit is taken as SI. ``[fmu.parameters]`` are set as written, in the FMU's own units.
 """
 
 from __future__ import annotations
@@ -47,6 +50,12 @@ FMU_OUTPUTS: dict[str, str] = {
     "port_power_W": "the FMU's own mechanical port power F·v [W], booked beside ∫F·v dt",
 }
 """Port quantities an FMU output can be mapped to (what trackmj reads after each step)."""
+FMU_UNITS: dict[str, str] = {
+    "stroke_m": "m", "velocity_m_s": "m/s", "valve_mode": "1", "u": "1",
+    "supply_pressure_Pa": "Pa", "force_N": "N", "p_head_Pa": "Pa", "p_rod_Pa": "Pa",
+    "p_supply_Pa": "Pa", "port_power_W": "W"}
+"""Port quantity -> its SI unit (a key of :data:`trackmj.fmi.fmu.PORT_UNITS`), to which a
+mapped variable's declared unit is converted."""
 INTERFACES = ("auto", "co-simulation", "model-exchange")
 
 
@@ -128,12 +137,13 @@ class FmuTable(Parameters):
 
 def check_fmu(table: FmuTable, base: Path, at: Location) -> FmuDescription:
     """Check a tensioner file's ``[fmu]`` table against its FMU (``path`` relative to
-    ``base``, the file's folder): the mapped variables exist with the port's kinds."""
+    ``base``, the file's folder): the mapped variables exist with the port's kinds and
+    units of its quantities' dimensions."""
     real = ("real",)
     input_kinds = {q: real for q in FMU_INPUTS} | {"valve_mode": ("real", "int")}
     output_kinds = {q: real for q in FMU_OUTPUTS}
     return describe((base / table.path).resolve(), table.interface, at, table.inputs,
-                    table.outputs, table.parameters, input_kinds, output_kinds)
+                    table.outputs, table.parameters, input_kinds, output_kinds, FMU_UNITS)
 
 
 @dataclass(frozen=True)

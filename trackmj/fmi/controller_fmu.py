@@ -5,7 +5,10 @@ The controller file's ``[controller]`` table names the FMU (``path``, relative t
 FMI 2.0 or 3.0 co-simulation), its ``period_s`` (an integer multiple of the 1 ms coupling
 step), ``[controller.inputs]`` FMU name = one of :data:`CONTROLLER_INPUTS`,
 ``[controller.outputs]`` FMU name = ``"u"`` (opening in [−1, 1]) or ``"valve_mode"``
-(+1/0/−1), and ``[controller.parameters]`` set before initialisation.
+(+1/0/−1), and ``[controller.parameters]`` set before initialisation. Values cross the
+port in SI (:data:`CONTROLLER_UNITS`): a mapped variable's declared unit is converted (kN,
+bar, %, ...; another dimension or an offset is refused at load), one without a unit is
+taken as SI.
 
 Every period at t the FMU's inputs are set (the measurements as the run's estimator gives
 them: its mean over the past period, and the reference F_ref(t)) and it is stepped from t
@@ -48,6 +51,11 @@ CONTROLLER_INPUTS: dict[str, str] = {
 CONTROLLER_OUTPUTS = {"u": "valve opening in [−1, 1] [-]",
                       "valve_mode": "valve mode +1 pressurize, 0 hold, −1 release [-]"}
 """Port quantities a controller FMU output can be mapped to (exactly one)."""
+CONTROLLER_UNITS = {"p_head_Pa": "Pa", "p_rod_Pa": "Pa", "stroke_m": "m",
+                    "stroke_velocity_m_s": "m/s", "F_ref_N": "N", "supply_pressure_Pa": "Pa",
+                    "u": "1", "valve_mode": "1"}
+"""Port quantity -> its SI unit (a key of :data:`trackmj.fmi.fmu.PORT_UNITS`), to which a
+mapped variable's declared unit is converted."""
 
 
 @dataclass(frozen=True)
@@ -94,7 +102,7 @@ class ControllerFile(Parameters):
 
 def load_controller_file(path: str | Path) -> ControllerFile:
     """Read and validate a controller file and check its FMU (co-simulation; the mapped
-    variables' causality and type) before any run."""
+    variables' causality, type and unit) before any run."""
     path = Path(path)
     loaded = load_file(ControllerFile, path)
     table = loaded.controller
@@ -103,7 +111,7 @@ def load_controller_file(path: str | Path) -> ControllerFile:
                            Location(file=path.name, path=("controller",)), table.inputs,
                            table.outputs, table.parameters,
                            dict.fromkeys(CONTROLLER_INPUTS, real),
-                           {"u": real, "valve_mode": number})
+                           {"u": real, "valve_mode": number}, CONTROLLER_UNITS)
     object.__setattr__(loaded, "file", path)
     object.__setattr__(loaded, "description", description)
     return loaded

@@ -4,13 +4,15 @@ version-neutral call surface.
 :func:`describe` runs when a tensioner or controller file is loaded, before any work: the
 file exists and is a zip with a modelDescription fmpy can read, FMI 2.0 or 3.0, the
 interface asked for is offered, a binary for this platform is inside, every mapped variable
-exists with the causality and type its role needs, every parameter value fits its
-variable's type (an integer its range). Each refusal is a
-:class:`~trackmj.validator.ParameterError` naming the file, the key and the variable.
+exists with the causality and type its role needs and a unit of its port quantity's
+dimension (:func:`unit_factor`), every parameter value fits its variable's type (an integer
+its range). Each refusal is a :class:`~trackmj.validator.ParameterError` naming the file,
+the key and the variable.
 
 :class:`FmuInstance` wraps fmpy's ``FMU2Slave``/``FMU2Model``/``FMU3Slave``/``FMU3Model``:
-values are set and read by port quantity, each with the call of its variable's declared
-type (FMI 3.0's ``setFloat32``, ``getInt8``, ...), and any failing call raises
+values are set and read by port quantity in SI, each with the call of its variable's
+declared type (FMI 3.0's ``setFloat32``, ``getInt8``, ...) and converted to and from its
+declared unit, and any failing call raises
 :class:`~trackmj.errors.FmuError` naming the FMU, the call, the time and what the FMU itself
 logged ("the FMU cyl.fmu: instantiate at t = 0.000 s failed: Failed to instantiate model;
 the FMU logged: [Error] Wrong GUID."). Its messages are kept (:class:`FmuLog`), not printed.
@@ -55,6 +57,13 @@ KINDS: dict[str, str] = {
 integer, enumeration, boolean, string. A type not here (Binary, Clock) is never mapped."""
 FMI2_TYPES = ("Real", "Integer", "Enumeration", "Boolean", "String")
 """FMI 2.0's variable types (the others of :data:`KINDS` are FMI 3.0's)."""
+BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+"""FMI's SI base units, whose exponents a UnitDefinition's BaseUnit gives."""
+PORT_UNITS: dict[str, dict[str, int]] = {
+    "1": {}, "m": {"m": 1}, "m/s": {"m": 1, "s": -1}, "N": {"kg": 1, "m": 1, "s": -2},
+    "Pa": {"kg": 1, "m": -1, "s": -2}, "W": {"kg": 1, "m": 2, "s": -3}}
+"""A port quantity's SI unit (pint's spelling; "1": dimensionless) -> its exponents of
+:data:`BASE_UNITS`."""
 INPUT_CAUSALITIES = ("input",)
 PARAMETER_CAUSALITIES = ("parameter", "input", "structuralParameter")
 UNZIPPED_PREFIX = "trackmj-fmu-"
@@ -65,13 +74,15 @@ SHARED_LIBRARIES = (".so", ".dll", ".dylib")
 
 @dataclass(frozen=True)
 class Channel:
-    """One mapped FMU variable: its name, value reference, kind (a value of :data:`KINDS`)
-    and declared type (``Float32``, ``Int8``, ``Integer``, ...)."""
+    """One mapped FMU variable: its name, value reference, kind (a value of :data:`KINDS`),
+    declared type (``Float32``, ``Int8``, ``Integer``, ...) and ``factor``: its value in its
+    declared unit times ``factor`` is the port quantity's value in SI (1: no unit, or SI)."""
 
     name: str
     vr: int
     kind: str
     type: str
+    factor: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -233,11 +244,55 @@ def _check_platform(path: Path, version: str, identifier: str, where: str) -> No
                          f"{', '.join(platforms) or 'none'}{sources}")
 
 
+def _exponents(exponents: Mapping[str, int]) -> str:
+    """SI base-unit exponents as text: "kg m-1 s-2"; "1" for none."""
+    return " ".join(u if e == 1 else f"{u}{e}" for u, e in exponents.items()) or "1"
+
+
+def unit_factor(md: Any, var: Any, quantity: str, si_unit: str, key: str,
+                fmu_name: str) -> float:
+    """Factor taking the values of ``var`` (fmpy's model variable) in its declared unit (its
+    own ``unit``, else its declared type's) to ``si_unit``, the SI unit of the port
+    ``quantity`` it is mapped to (a key of :data:`PORT_UNITS`): 1 without a unit (taken as
+    SI); its UnitDefinition's BaseUnit factor where the base-unit exponents are the port's;
+    pint's (:func:`trackmj.results.measured.si_factor`) for a unit defined without a
+    BaseUnit. Refused (ParameterError naming ``key``, the variable, its unit and the unit
+    needed): another dimension, an offset (an absolute pressure, °C)."""
+    unit = var.unit or (var.declaredType.unit if var.declaredType is not None else None)
+    if unit is None:
+        return 1.0
+    needs = (f"{quantity!r} is dimensionless (no unit, 1 or %)" if si_unit == "1" else
+             f"{quantity!r} needs {si_unit} ({_exponents(PORT_UNITS[si_unit])}) or a "
+             "multiple of it")
+    where = f"{key}: {fmu_name}'s variable {var.name!r} has unit {unit!r}"
+    defined = next((u for u in md.unitDefinitions if u.name == unit), None)
+    base = defined.baseUnit if defined is not None else None
+    if base is None:
+        # function-local: pint and the log readers load only for a unit without a BaseUnit
+        from trackmj.results.measured import si_factor
+
+        try:
+            return si_factor(unit, si_unit)
+        except ValueError as exc:
+            raise ParameterError(f"{where}, defined without a BaseUnit ({exc}); "
+                                 f"{needs}") from None
+    exponents = {u: getattr(base, u) for u in BASE_UNITS if getattr(base, u)}
+    if exponents != PORT_UNITS[si_unit]:
+        raise ParameterError(f"{where} ({_exponents(exponents)}); {needs}")
+    if base.offset:
+        sign = "+" if base.offset > 0 else "−"
+        raise ParameterError(f"{where}, with an offset (in SI {base.factor:g}·value {sign} "
+                             f"{abs(base.offset):g}); {needs}, without an offset")
+    return float(base.factor)
+
+
 def map_variables(md: Any, mapping: Mapping[str, str], role: str, at: Location, table: str,
-                  kinds: Mapping[str, tuple[str, ...]], fmu_name: str) -> dict[str, Channel]:
+                  kinds: Mapping[str, tuple[str, ...]], units: Mapping[str, str],
+                  fmu_name: str) -> dict[str, Channel]:
     """Port quantity -> Channel for ``mapping`` (FMU name -> quantity) of table ``table``;
-    each variable must exist with causality ``role`` and a kind of ``kinds[quantity]``
-    (refused naming the declared types those kinds allow)."""
+    each variable must exist with causality ``role``, a kind of ``kinds[quantity]``
+    (refused naming the declared types those kinds allow) and, a real, a unit that
+    converts to ``units[quantity]`` (:func:`unit_factor`)."""
     variables = {v.name: v for v in md.modelVariables}
     version = str(md.fmiVersion)
     out = {}
@@ -260,7 +315,9 @@ def map_variables(md: Any, mapping: Mapping[str, str], role: str, at: Location, 
         if var.shape or var.dimensions:
             raise ParameterError(f"{key}: {fmu_name}'s variable {name!r} is an array; map a "
                                  "scalar")
-        out[quantity] = Channel(name, var.valueReference, kind, var.type)
+        factor = unit_factor(md, var, quantity, units[quantity], key, fmu_name) \
+            if kind == "real" else 1.0
+        out[quantity] = Channel(name, var.valueReference, kind, var.type, factor)
     return out
 
 
@@ -304,8 +361,10 @@ def map_parameters(md: Any, values: Mapping[str, Any], at: Location,
 def describe(path: Path, interface: str, at: Location, inputs: Mapping[str, str],
              outputs: Mapping[str, str], parameters: Mapping[str, Any],
              input_kinds: Mapping[str, tuple[str, ...]],
-             output_kinds: Mapping[str, tuple[str, ...]]) -> FmuDescription:
-    """Every check of the module docstring; the checked FMU."""
+             output_kinds: Mapping[str, tuple[str, ...]],
+             units: Mapping[str, str]) -> FmuDescription:
+    """Every check of the module docstring; the checked FMU. ``units``: port quantity ->
+    its SI unit (a key of :data:`PORT_UNITS`), inputs and outputs alike."""
     where = at.key("path")
     md = open_description(path, where)
     version = str(md.fmiVersion)
@@ -316,8 +375,8 @@ def describe(path: Path, interface: str, at: Location, inputs: Mapping[str, str]
     part = md.coSimulation if used == "co-simulation" else md.modelExchange
     _check_platform(path, version, part.modelIdentifier, where)
     name = path.name
-    ins = map_variables(md, inputs, "input", at, "inputs", input_kinds, name)
-    outs = map_variables(md, outputs, "output", at, "outputs", output_kinds, name)
+    ins = map_variables(md, inputs, "input", at, "inputs", input_kinds, units, name)
+    outs = map_variables(md, outputs, "output", at, "outputs", output_kinds, units, name)
     params = map_parameters(md, parameters, at, name)
     cs = md.coSimulation
     can_roll_back = used == "co-simulation" and bool(cs.canGetAndSetFMUstate)
@@ -466,6 +525,7 @@ class FmuInstance:
             self._in = {q: (c, self._accessor("set", c)) for q, c in d.inputs.items()}
             real = [(q, c) for q, c in d.outputs.items() if c.kind == "real"]
             self._out_names = [q for q, _ in real]
+            self._out_factors = [c.factor for _, c in real]
             groups: dict[str, tuple[list[int], list[int]]] = {}
             for i, (_, c) in enumerate(real):
                 vrs, where = groups.setdefault(accessor(c.type, d.version), ([], []))
@@ -579,27 +639,29 @@ class FmuInstance:
 
     # ----------------------------------------------------------------- values
     def set_inputs(self, values: Mapping[str, float]) -> None:
-        """Set the mapped inputs among ``values`` (quantity -> value)."""
+        """Set the mapped inputs among ``values`` (quantity -> value in SI)."""
         for quantity, value in values.items():
             entry = self._in.get(quantity)
             if entry is not None:
                 c, setter = entry
-                fmu_value = round(value) if c.kind == "int" else value
+                fmu_value = round(value) if c.kind == "int" else value / c.factor
                 self._call(f"setting input {quantity}",
                            lambda c=c, setter=setter, v=fmu_value: setter([c.vr], [v]))
 
     def read(self, channel: Channel) -> Any:
-        """The value of one mapped variable."""
+        """The value of one mapped variable (a real in SI)."""
         getter = self._accessor("get", channel)
-        return self._call(f"reading {channel.name}", lambda: getter([channel.vr]))[0]
+        value = self._call(f"reading {channel.name}", lambda: getter([channel.vr]))[0]
+        return value * channel.factor if channel.kind == "real" else value
 
     def real_outputs(self) -> list[float]:
-        """The real outputs in :attr:`output_names` order (one call per declared type)."""
-        values = [0.0] * len(self._out_names)
+        """The real outputs in :attr:`output_names` order, in SI (one call per declared
+        type)."""
+        values, factors = [0.0] * len(self._out_names), self._out_factors
         for getter, vrs, where in self._real_groups:
             read = self._call("reading the outputs", lambda g=getter, v=vrs: g(v))
             for i, value in zip(where, read, strict=True):
-                values[i] = value
+                values[i] = value * factors[i]
         return values
 
     @property

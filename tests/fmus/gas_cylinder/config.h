@@ -18,7 +18,7 @@
 typedef enum {
     vr_time, vr_stroke, vr_velocity, vr_x, vr_der_x, vr_force, vr_power,
     vr_area, vr_p0, vr_V0, vr_s_ref, vr_n, vr_c, vr_p_atm, vr_fail_time, vr_nan_time,
-    vr_pressure
+    vr_pressure, vr_stroke_mm, vr_velocity_mm_s, vr_force_kN, vr_pressure_MPa
 } ValueReference;
 
 typedef struct {
@@ -37,6 +37,8 @@ typedef struct {
     double fail_time;  /* from this time on every evaluation fails (test of errors) [s] */
     double nan_time;   /* from this time on the force is NaN (test of the guards) [s] */
     double pressure;   /* output: gas pressure less p_atm, the head side's gauge pressure [Pa] */
+    /* stroke_mm, velocity_mm_s (inputs), force_kN, pressure_MPa (outputs): stroke,
+       velocity, force and pressure in mm, mm/s, kN and MPa (tests of declared units) */
 } ModelData;
 
 #endif /* config_h */

@@ -64,6 +64,10 @@ Status getFloat64(ModelInstance* comp, ValueReference vr, double values[], size_
         case vr_fail_time: *v = M(fail_time); break;
         case vr_nan_time: *v = M(nan_time); break;
         case vr_pressure: *v = M(pressure); break;
+        case vr_stroke_mm: *v = 1e3 * M(stroke); break;
+        case vr_velocity_mm_s: *v = 1e3 * M(velocity); break;
+        case vr_force_kN: *v = 1e-3 * M(force); break;
+        case vr_pressure_MPa: *v = 1e-6 * M(pressure); break;
         default:
             logError(comp, "Get Float64 is not allowed for value reference %u.", vr);
             return Error;
@@ -82,7 +86,12 @@ Status setFloat64(ModelInstance* comp, ValueReference vr, const double values[],
             M(stroke) = v;
             if (initialising) M(x) = v;   /* the state starts at the stroke it is given */
             break;
+        case vr_stroke_mm:
+            M(stroke) = 1e-3 * v;
+            if (initialising) M(x) = M(stroke);
+            break;
         case vr_velocity: M(velocity) = v; break;
+        case vr_velocity_mm_s: M(velocity) = 1e-3 * v; break;
         case vr_area: M(area) = v; break;
         case vr_p0: M(p0) = v; break;
         case vr_V0: M(V0) = v; break;
@@ -139,13 +148,15 @@ Status getPartialDerivative(ModelInstance *comp, ValueReference unknown, ValueRe
     calculateValues(comp);
     double V = volume(comp);
     double dF_dx = -M(n) * M(area) * M(area) * M(p0) * pow(M(V0) / V, M(n)) / V;
-    double d = 0.0;
+    double d = 0.0, scale = 1.0;   /* the variables in mm/s and kN: SI's partials scaled */
+    if (known == vr_velocity_mm_s) { known = vr_velocity; scale *= 1e-3; }
+    if (unknown == vr_force_kN) { unknown = vr_force; scale *= 1e-3; }
     if (unknown == vr_der_x && known == vr_velocity) d = 1.0;
     else if (unknown == vr_force && known == vr_x) d = dF_dx;
     else if (unknown == vr_force && known == vr_velocity) d = -M(c);
     else if (unknown == vr_power && known == vr_x) d = dF_dx * M(velocity);
     else if (unknown == vr_power && known == vr_velocity) d = M(force) - M(c) * M(velocity);
-    *partialDerivative = d;
+    *partialDerivative = scale * d;
     return OK;
 }
 #endif
