@@ -433,6 +433,24 @@ def test_a_controller_fmu_sees_and_gives_values_in_its_declared_units(feedthroug
         load_controller_file(toml)
 
 
+@pytest.mark.parametrize("inputs", [{}, {"Float64_continuous_input": "F_ref_N",
+                                        "Float64_discrete_input": "supply_pressure_Pa"}])
+def test_a_controller_fmu_without_a_measurement_is_refused_at_load(feedthrough, tmp_path,
+                                                                   inputs) -> None:
+    """No input, or only the reference and the supply set value: it would run open loop
+    and, holding, pass unnoticed; refused in one line naming the file and the quantities."""
+    from trackmj.fmi.controller_fmu import load_controller_file
+    from trackmj.validator import ParameterError
+
+    toml = _controller(tmp_path / "c.toml", feedthrough / "ft2.fmu", inputs=inputs,
+                       outputs={"Float64_continuous_output": "u"})
+    with pytest.raises(ParameterError) as refused:
+        load_controller_file(toml)
+    assert str(refused.value) == (
+        "c.toml [controller]: map an FMU input to a measurement (p_head_Pa, p_rod_Pa, "
+        "stroke_m, stroke_velocity_m_s); without one the controller runs open loop")
+
+
 @pytest.fixture(scope="session")
 def plant_fmu(tmp_path_factory) -> Path:
     from trackmj.fmi.export import export

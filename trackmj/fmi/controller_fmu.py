@@ -3,12 +3,12 @@
 
 The controller file's ``[controller]`` table names the FMU (``path``, relative to the file;
 FMI 2.0 or 3.0 co-simulation), its ``period_s`` (an integer multiple of the 1 ms coupling
-step), ``[controller.inputs]`` FMU name = one of :data:`CONTROLLER_INPUTS`,
-``[controller.outputs]`` FMU name = ``"u"`` (opening in [−1, 1]) or ``"valve_mode"``
-(+1/0/−1), and ``[controller.parameters]`` set before initialisation. Values cross the
-port in SI (:data:`CONTROLLER_UNITS`): a mapped variable's declared unit is converted (kN,
-bar, %, ...; another dimension or an offset is refused at load), one without a unit is
-taken as SI.
+step), ``[controller.inputs]`` FMU name = one of :data:`CONTROLLER_INPUTS` (at least one of
+the :data:`MEASUREMENTS`), ``[controller.outputs]`` FMU name = ``"u"`` (opening in [−1, 1])
+or ``"valve_mode"`` (+1/0/−1), and ``[controller.parameters]`` set before initialisation.
+Values cross the port in SI (:data:`CONTROLLER_UNITS`): a mapped variable's declared unit
+is converted (kN, bar, %, ...; another dimension or an offset is refused at load), one
+without a unit is taken as SI.
 
 Every period at t the FMU's inputs are set (the measurements as the run's estimator gives
 them: its mean over the past period, and the reference F_ref(t)) and it is stepped from t
@@ -48,6 +48,9 @@ CONTROLLER_INPUTS: dict[str, str] = {
     "supply_pressure_Pa": "supply pressure set value [Pa gauge]",
 }
 """Port quantities a controller FMU input can be mapped to."""
+MEASUREMENTS = ("p_head_Pa", "p_rod_Pa", "stroke_m", "stroke_velocity_m_s")
+"""The inputs that measure the plant: a controller FMU maps at least one (else it runs open
+loop)."""
 CONTROLLER_OUTPUTS = {"u": "valve opening in [−1, 1] [-]",
                       "valve_mode": "valve mode +1 pressurize, 0 hold, −1 release [-]"}
 """Port quantities a controller FMU output can be mapped to (exactly one)."""
@@ -66,8 +69,8 @@ class ControllerTable(Parameters):
     period_s: float = param(1e-3, 10.0, doc="the controller's period, an integer multiple "
                             "of the 1 ms coupling step")
     inputs: Mapping[str, str] = param(doc="FMU input name = measurement (p_head_Pa, "
-                                      "p_rod_Pa, stroke_m, stroke_velocity_m_s, F_ref_N, "
-                                      "supply_pressure_Pa)")
+                                      "p_rod_Pa, stroke_m, stroke_velocity_m_s: at least "
+                                      "one), F_ref_N or supply_pressure_Pa")
     outputs: Mapping[str, str] = param(doc="FMU output name = u or valve_mode (one)")
     parameters: Mapping[str, Any] = param(default_factory=dict, doc="FMU variable name = "
                                           "value set before initialisation (default none)")
@@ -82,6 +85,10 @@ class ControllerTable(Parameters):
                 if quantity not in allowed:
                     raise at.error((table, name), quantity,
                                    f"is not a port quantity; allowed: {', '.join(allowed)}")
+        if not set(MEASUREMENTS) & set(self.inputs.values()):
+            raise ParameterError(f"{at.table()}: map an FMU input to a measurement "
+                                 f"({', '.join(MEASUREMENTS)}); without one the controller "
+                                 "runs open loop")
         if len(self.outputs) != 1:
             raise ParameterError(f"{at.table()}: map exactly one FMU output, to \"u\" or "
                                  f"\"valve_mode\" (got {len(self.outputs)})")
