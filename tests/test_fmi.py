@@ -451,6 +451,31 @@ def test_a_controller_fmu_without_a_measurement_is_refused_at_load(feedthrough, 
         "stroke_m, stroke_velocity_m_s); without one the controller runs open loop")
 
 
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_controller_fmu_with_a_fixed_step_runs_only_at_that_period(tmp_path,
+                                                                     version) -> None:
+    """An FMU that cannot handle a variable communication step, its DefaultExperiment
+    stepSize 20 ms (a fixed sample time, as Simulink exports have; stepped every 10 ms such
+    an FMU discards the first doStep): a 10 ms period is refused at load naming both, a
+    20 ms one runs."""
+    from trackmj.fmi.controller_fmu import load_controller_file
+    from trackmj.validator import ParameterError
+
+    fmu = build_reference("Feedthrough", tmp_path / f"ft{version}_fixed.fmu", version=version,
+                          fixed_step_s=0.02)
+    io = dict(inputs={"Float64_continuous_input": "stroke_m"},
+              outputs={"Float64_continuous_output": "u"})
+    toml = _controller(tmp_path / "c10.toml", fmu, **io, period_s=0.01)
+    with pytest.raises(ParameterError) as refused:
+        load_controller_file(toml)
+    assert str(refused.value) == (
+        f"c10.toml [controller].period_s = 0.01 s differs from ft{version}_fixed.fmu's "
+        "DefaultExperiment stepSize 0.02 s, the only step it takes (it cannot handle a "
+        "variable communication step): set period_s = 0.02")
+    toml = _controller(tmp_path / "c20.toml", fmu, **io, period_s=0.02)
+    assert _control(toml, stroke_m=0.25) == 0.25
+
+
 @pytest.fixture(scope="session")
 def plant_fmu(tmp_path_factory) -> Path:
     from trackmj.fmi.export import export

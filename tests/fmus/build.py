@@ -157,6 +157,23 @@ def _declare_units(xml: str, units: Mapping[str, str]) -> str:
     last = max(i for i, child in enumerate(root)
                if child.tag in ("ModelExchange", "CoSimulation"))
     root.insert(last + 1, definitions)
+    return _text(root)
+
+
+def _fixed_step(xml: str, step_s: float) -> str:
+    """The modelDescription ``xml`` of a co-simulation that takes only the step ``step_s``
+    [s]: canHandleVariableCommunicationStepSize false, DefaultExperiment stepSize."""
+    root = ET.fromstring(xml)
+    for node, key, value in (("CoSimulation", "canHandleVariableCommunicationStepSize", "false"),
+                             ("DefaultExperiment", "stepSize", repr(step_s))):
+        found = root.find(node)
+        if found is None:
+            raise ValueError(f"the modelDescription has no {node}")
+        found.set(key, value)
+    return _text(root)
+
+
+def _text(root: ET.Element) -> str:
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode")
 
 
@@ -200,11 +217,13 @@ def build_gas_cylinder(out: Path, *, version: int = 2, directional: bool = True,
 
 
 def build_reference(model: str, out: Path, *, version: int = 3,
-                    units: Mapping[str, str] | None = None) -> Path:
+                    units: Mapping[str, str] | None = None,
+                    fixed_step_s: float | None = None) -> Path:
     """Compile the vendored Reference FMU ``model`` (``reference_fmus/<model>``: its
     ``config.h``, ``model.c`` and ``FMI<version>.xml``, unchanged) into the FMU ``out``
     (FMI ``version`` 2 or 3, binary for this platform); ``units``: variable name -> the unit
-    it declares, from :data:`UNITS`."""
+    it declares, from :data:`UNITS`; ``fixed_step_s``: the only communication step [s] its
+    co-simulation declares it takes."""
     sources = FRAMEWORK / model
     out.parent.mkdir(parents=True, exist_ok=True)
     library = _compile(sources, model, version, out.with_suffix(".build"))
@@ -212,6 +231,8 @@ def build_reference(model: str, out: Path, *, version: int = 3,
     xml = (sources / f"FMI{version}.xml").read_text()
     if units:
         xml = _declare_units(xml, units)
+    if fixed_step_s is not None:
+        xml = _fixed_step(xml, fixed_step_s)
     with zipfile.ZipFile(out, "w") as zf:
         zf.writestr("modelDescription.xml", xml)
         zf.write(library, f"binaries/{folder}/{model}.so")

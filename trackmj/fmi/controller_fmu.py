@@ -3,12 +3,13 @@
 
 The controller file's ``[controller]`` table names the FMU (``path``, relative to the file;
 FMI 2.0 or 3.0 co-simulation), its ``period_s`` (an integer multiple of the 1 ms coupling
-step), ``[controller.inputs]`` FMU name = one of :data:`CONTROLLER_INPUTS` (at least one of
-the :data:`MEASUREMENTS`), ``[controller.outputs]`` FMU name = ``"u"`` (opening in [−1, 1])
-or ``"valve_mode"`` (+1/0/−1), and ``[controller.parameters]`` set before initialisation.
-Values cross the port in SI (:data:`CONTROLLER_UNITS`): a mapped variable's declared unit
-is converted (kN, bar, %, ...; another dimension or an offset is refused at load), one
-without a unit is taken as SI.
+step; an FMU that cannot handle a variable communication step has its DefaultExperiment
+stepSize as period), ``[controller.inputs]`` FMU name = one of :data:`CONTROLLER_INPUTS`
+(at least one of the :data:`MEASUREMENTS`), ``[controller.outputs]`` FMU name = ``"u"``
+(opening in [−1, 1]) or ``"valve_mode"`` (+1/0/−1), and ``[controller.parameters]`` set
+before initialisation. Values cross the port in SI (:data:`CONTROLLER_UNITS`): a mapped
+variable's declared unit is converted (kN, bar, %, ...; another dimension or an offset is
+refused at load), one without a unit is taken as SI.
 
 Every period at t the FMU's inputs are set (the measurements as the run's estimator gives
 them: its mean over the past period, and the reference F_ref(t)) and it is stepped from t
@@ -24,6 +25,7 @@ there, counted and reported (``controller_output_clipped`` in metrics.json, see
 
 from __future__ import annotations
 
+import math
 import time
 import weakref
 from collections.abc import Mapping
@@ -107,18 +109,36 @@ class ControllerFile(Parameters):
                              metadata={"loader": "fmu"})
 
 
+def fixed_step_s(md: Any) -> float | None:
+    """The one communication step [s] the co-simulation FMU of ``md`` (fmpy's model
+    description) takes: its DefaultExperiment stepSize where it cannot handle a variable
+    step (canHandleVariableCommunicationStepSize false, FMI's default); None otherwise."""
+    experiment = md.defaultExperiment
+    if md.coSimulation.canHandleVariableCommunicationStepSize or experiment is None \
+            or experiment.stepSize is None:
+        return None
+    return float(experiment.stepSize)
+
+
 def load_controller_file(path: str | Path) -> ControllerFile:
     """Read and validate a controller file and check its FMU (co-simulation; the mapped
-    variables' causality, type and unit) before any run."""
+    variables' causality, type and unit; an FMU with a fixed step has it as ``period_s``)
+    before any run."""
     path = Path(path)
     loaded = load_file(ControllerFile, path)
     table = loaded.controller
     real, number = ("real",), ("real", "int")
-    description = describe((path.parent / table.path).resolve(), "co-simulation",
-                           Location(file=path.name, path=("controller",)), table.inputs,
-                           table.outputs, table.parameters,
+    at = Location(file=path.name, path=("controller",))
+    description = describe((path.parent / table.path).resolve(), "co-simulation", at,
+                           table.inputs, table.outputs, table.parameters,
                            dict.fromkeys(CONTROLLER_INPUTS, real),
                            {"u": real, "valve_mode": number}, CONTROLLER_UNITS)
+    step = fixed_step_s(description.md)
+    if step is not None and not math.isclose(step, table.period_s, rel_tol=1e-9):
+        raise at.error("period_s", table.period_s,
+                       f"s differs from {description.name}'s DefaultExperiment stepSize "
+                       f"{step:g} s, the only step it takes (it cannot handle a variable "
+                       f"communication step): set period_s = {step:g}")
     object.__setattr__(loaded, "file", path)
     object.__setattr__(loaded, "description", description)
     return loaded
