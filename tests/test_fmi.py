@@ -476,6 +476,25 @@ def test_a_controller_fmu_with_a_fixed_step_runs_only_at_that_period(tmp_path,
     assert _control(toml, stroke_m=0.25) == 0.25
 
 
+def test_a_failing_step_of_a_controller_fmu_names_its_default_step(tmp_path) -> None:
+    """A controller of a fixed 20 ms sample time that declares a variable step (as pythonfmu
+    does) loads with a 10 ms period and discards its first doStep: the error names the
+    call, its DefaultExperiment stepSize and period_s."""
+    from pythonfmu.builder import FmuBuilder
+
+    from trackmj.errors import FmuError
+
+    fmu = FmuBuilder.build_FMU(HERE / "fmus" / "FixedStepController.py", dest=tmp_path)
+    toml = _controller(tmp_path / "c.toml", fmu, inputs={"stroke": "stroke_m"},
+                       outputs={"u": "u"}, period_s=0.01)
+    with pytest.raises(FmuError) as failed:
+        _control(toml, stroke_m=0.25)
+    assert str(failed.value) == (
+        "the FMU FixedStepController.fmu: fmi2DoStep at t = 0.000 s failed: fmi2DoStep failed "
+        "with status 2 (discard); its DefaultExperiment stepSize is 0.02 s, period_s 0.01 s: "
+        "if it runs at a fixed sample time, set period_s = 0.02")
+
+
 @pytest.fixture(scope="session")
 def plant_fmu(tmp_path_factory) -> Path:
     from trackmj.fmi.export import export

@@ -109,15 +109,21 @@ class ControllerFile(Parameters):
                              metadata={"loader": "fmu"})
 
 
-def fixed_step_s(md: Any) -> float | None:
-    """The one communication step [s] the co-simulation FMU of ``md`` (fmpy's model
-    description) takes: its DefaultExperiment stepSize where it cannot handle a variable
-    step (canHandleVariableCommunicationStepSize false, FMI's default); None otherwise."""
+def default_step_s(md: Any) -> float | None:
+    """The DefaultExperiment stepSize [s] of ``md`` (fmpy's model description); None if it
+    gives none."""
     experiment = md.defaultExperiment
-    if md.coSimulation.canHandleVariableCommunicationStepSize or experiment is None \
-            or experiment.stepSize is None:
+    if experiment is None or experiment.stepSize is None:
         return None
     return float(experiment.stepSize)
+
+
+def fixed_step_s(md: Any) -> float | None:
+    """The one communication step [s] the co-simulation FMU of ``md`` takes: its
+    DefaultExperiment stepSize where it cannot handle a variable step
+    (canHandleVariableCommunicationStepSize false, FMI's default); None otherwise."""
+    return None if md.coSimulation.canHandleVariableCommunicationStepSize else \
+        default_step_s(md)
 
 
 def load_controller_file(path: str | Path) -> ControllerFile:
@@ -163,6 +169,10 @@ class FmuController:
         self._supply_Pa = 0.0
         inst.start(0.0, dict.fromkeys(d.inputs, 0.0))   # closes the instance if it fails
         self._output, self._channel = next(iter(d.outputs.items()))
+        step = default_step_s(d.md)
+        self._step_note = "" if step is None or math.isclose(step, self.period_s) else (
+            f"; its DefaultExperiment stepSize is {step:g} s, period_s {self.period_s:g} s: "
+            f"if it runs at a fixed sample time, set period_s = {step:g}")
 
     def close(self) -> None:
         """Free the FMU and remove its unzipped copy (again: nothing)."""
@@ -181,7 +191,10 @@ class FmuController:
                               "stroke_velocity_m_s": velocity,
                               "F_ref_N": float(reference_preview[0]),
                               "supply_pressure_Pa": self._supply_Pa})
-        self.inst.do_step(t, self.period_s)
+        try:
+            self.inst.do_step(t, self.period_s)
+        except FmuError as exc:   # say what a step the FMU refuses may be about
+            raise FmuError(f"{exc}{self._step_note}") from exc
         u = float(self.inst.read(self._channel))
         if not np.isfinite(u):
             raise FmuError(f"the FMU {self.description.name} output {self._output} = {u!r} "
