@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -12,7 +13,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-DOCS = Path(__file__).resolve().parents[1] / "docs" / "tensioner-fmu"
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs" / "tensioner-fmu"
+COMMAND = re.compile(r"trackmj (?:run|compare) (W\d)\b[^`#\n]*?--duration (\d+(?:\.\d*)?)")
+"""A documented run or compare of a shipped scenario with a duration: (scenario, seconds)."""
 
 
 def _gas_force_N(stroke_m: float, velocity_m_s: float) -> float:
@@ -49,3 +53,22 @@ def test_python_tensioner_fmu_example_holds_its_law_on_the_track(tmp_path: Path)
     assert 5e3 < force < 2e4
     assert force == pytest.approx(_gas_force_N(stroke, velocity), rel=5e-3)
     assert np.isfinite(table.column("stroke_m").to_numpy()).all()
+
+
+def test_documented_runs_last_long_enough_for_their_scenario() -> None:
+    """Every ``trackmj run`` or ``compare`` of a shipped scenario with a ``--duration`` in
+    the README and the docs keeps the scenario's events (``run`` refuses a duration that
+    cuts one off, exit 2)."""
+    from trackmj.scenarios.events import check_duration
+    from trackmj.scenarios.load import load_scenario
+    from trackmj.validator import ParameterError
+
+    files = [ROOT / "README.md", *sorted(ROOT.glob("*/**/*.md"))]
+    found = [(path.name, *match.groups()) for path in files if ".venv" not in path.parts
+             for match in COMMAND.finditer(path.read_text())]
+    assert len(found) >= 4, found
+    for name, scenario, duration in found:
+        try:
+            check_duration(load_scenario(scenario), float(duration))
+        except ParameterError as exc:
+            pytest.fail(f"{name}: trackmj run {scenario} --duration {duration}: {exc}")
