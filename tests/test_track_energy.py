@@ -126,3 +126,22 @@ def test_the_integrator_creates_little_energy_at_speed(machine: str, speed_m_s: 
     assert abs(e["residual_J"]) <= 1e-6 * e["drive_work_J"]
     for partner in (*CONTACTS, "pins"):   # the allowance of the test above
         assert e["contact_work_J"][partner] <= 0.005 * e["drive_work_J"], partner
+
+
+@pytest.mark.slow
+def test_drive_fails_where_the_integrator_creates_energy(tmp_path, capsys) -> None:
+    """compact3 at W2's 2.0 m/s: the 1 ms step pumps its pins' soft rows (+8.7 % of the drive
+    work over 10 s, models/README.md; +8.1 % over 4 s): the drive says so and exits 1;
+    at 1.5 m/s (+0.9 %) it does not."""
+    from trackmj.cli.main import main
+    from trackmj.sim.drive import INTEGRATOR_CREATION_MAX_REL
+
+    args = ["drive", "--machine", "compact3", "--duration", "4"]
+    assert main([*args, "--speed", "2.0", "--out", str(tmp_path / "fast")]) == 1
+    out = capsys.readouterr().out
+    created = json.loads((tmp_path / "fast" / "metrics.json").read_text())[
+        "integrator_created_rel"]
+    assert created > INTEGRATOR_CREATION_MAX_REL
+    assert f"integrator         created {100 * created:.1f} % of the drive work" in out
+    assert main([*args, "--speed", "1.5", "--out", str(tmp_path / "slow")]) == 0
+    assert "integrator" not in capsys.readouterr().out
