@@ -219,9 +219,9 @@ class MpcParams(Parameters):
                                               doc="weight on the soft F_min/F_max slack")
     tuned_on_machine: str = param(pattern=r"[a-z0-9][a-z0-9_-]*", max_len=40,
                                   doc="the shipped machine on whose plant the weights were "
-                                  "tuned; on a plant of another tension-rate gain g (another "
-                                  "machine, or --set/--model/--hydraulics changes) the u and "
-                                  "u-rate weights are scaled by (g/g_tuned)²")
+                                  "tuned; on a machine whose files give another tension-rate "
+                                  "gain g the u and u-rate weights are scaled by (g/g_tuned)² "
+                                  "(a run's --set changes do not retune them)")
     max_iter: int = param(1, 1000, doc="NMPC SQP iterations per period, at most")
     accept_iter: int = param(1, 1000, doc="NMPC SQP iterations after which a plan feasible "
                              "within the feasibility tolerance is used without more")

@@ -138,25 +138,26 @@ def test_mpc_weights_follow_the_machine_files_not_its_name() -> None:
     assert machine_weights(cfg, posing).mpc.weight_input != cfg.mpc.weight_input
 
 
-def test_mpc_weights_follow_the_run_overrides() -> None:
-    """The tension-rate gain the weights scale by is the run's plant: a lower supply
-    set-point (--set hydraulics.*) lowers the gain and so the weights; on lf1352's own
-    files they are the file's."""
+def test_mpc_weights_are_the_machines_not_the_runs_overrides() -> None:
+    """A run's --set hydraulics.* changes the plant, not the controller's tuning: a lower
+    supply set-point keeps lf1352's tuned weights (a sensitivity study, W5's variants or a
+    calibration's truth run, puts the tuned controller against a changed plant)."""
     own = prepare("W1", machine="lf1352").control.mpc
     low = prepare("W1", machine="lf1352",
-                  overrides={"hydraulics.supply.setpoint_Pa": 9e6}).control.mpc
+                  overrides={"hydraulics.supply.setpoint_Pa": 10e6}).control.mpc
     assert (own.weight_input, own.weight_input_rate) == (0.6, 2.0)
-    assert low.weight_input < 0.6 * 0.9 and low.weight_input_rate < 2.0 * 0.9
+    assert (low.weight_input, low.weight_input_rate) == (0.6, 2.0)
 
 
-def test_the_idler_identified_for_the_weights_is_the_run_model(monkeypatch) -> None:
-    """--set model.* reaches the identification the weights' gain is derived from, and a
-    refused identification names the machine file and the mechanics file it changed."""
+def test_the_idler_identified_for_a_run_is_the_run_model(monkeypatch) -> None:
+    """--set model.* reaches the identification of the run's reduced plant, and a refused
+    identification names the machine file and the mechanics file it changed."""
     def refuse(*args, **kwargs):
         raise IdentificationError("the idler's stroke response over 1-50 Hz is no "
                                   "mass-spring-damper")
 
     monkeypatch.setattr(setup, "identify_idler", refuse)
+    run = prepare("W1", machine="compact3", overrides={"model.tensioner.preload_N": 12345.0})
     with pytest.raises(IdentificationError, match=r"^compact3_machine\.toml: the idler "
                        r"identified on compact3\.toml as the run changes it: the idler's "):
-        prepare("W1", machine="compact3", overrides={"model.tensioner.preload_N": 12345.0})
+        assert run.idler

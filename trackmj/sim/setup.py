@@ -108,22 +108,25 @@ def _rate_gain(params: ModelParams, hydraulics: HydraulicParams, cfg: ControlCon
     return ReducedModel(plant).tension_rate_gain(params.nominal_tension_N)
 
 
-def machine_weights(cfg: ControlConfig, machine: Machine, params: ModelParams | None = None,
-                    hydraulics: HydraulicParams | None = None) -> ControlConfig:
-    """``cfg`` with the MPC's u and u-rate weights scaled by (g/g_tuned)²: g of the run's
-    plant (``params`` and ``hydraulics`` with the run's overrides; default the machine's own
-    files), g_tuned of the own files of the machine they were tuned on
-    ([mpc].tuned_on_machine). Decided by content, not by name: ``cfg`` itself where the two
-    gains are the same."""
-    tuned = resolve(cfg.mpc.tuned_on_machine)
-    params = mechanics(machine) if params is None else params
-    hydraulics = load_hydraulic_params(machine.hydraulics) if hydraulics is None else hydraulics
-    tuned_params = mechanics(tuned)
-    gain = _rate_gain(params, hydraulics, cfg, machine)
-    tuned_gain = _rate_gain(tuned_params, load_hydraulic_params(tuned.hydraulics),
-                            load_config(tuned.control,
-                                        nominal_tension_N=tuned_params.nominal_tension_N),
-                            tuned)
+def _own_rate_gain(machine: Machine) -> float:
+    """g of ``machine``'s own files (:func:`_rate_gain`): its mechanics, hydraulics and
+    control file."""
+    params = mechanics(machine)
+    return _rate_gain(params, load_hydraulic_params(machine.hydraulics),
+                      load_config(machine.control, nominal_tension_N=params.nominal_tension_N),
+                      machine)
+
+
+def machine_weights(cfg: ControlConfig, machine: Machine) -> ControlConfig:
+    """``cfg`` with the MPC's u and u-rate weights scaled by (g/g_tuned)²: g of the
+    machine's own files, g_tuned of those of the machine they were tuned on
+    ([mpc].tuned_on_machine); ``cfg`` itself where the two gains are the same (decided by
+    the files' content, not by the name). A run's --set/--model/--hydraulics changes do
+    not retune them: the controller is tuned for the machine as its files describe it, and
+    a changed plant is what a sensitivity study (W5's variants, a calibration's truth run)
+    puts it against."""
+    gain, tuned_gain = _own_rate_gain(machine), _own_rate_gain(
+        resolve(cfg.mpc.tuned_on_machine))
     if gain == tuned_gain:
         return cfg
     scale = input_weight_scale(gain, tuned_gain)
@@ -350,8 +353,7 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
         files["controller"] = str(controller_file.file)
     control_config = machine_weights(
         load_config(control or mach.control, overrides=sets["control"],
-                    nominal_tension_N=model_params.nominal_tension_N), mach,
-        model_params, hydraulics_params)
+                    nominal_tension_N=model_params.nominal_tension_N), mach)
     _check_bands_agree(sc, control_config, files["control"])
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,
