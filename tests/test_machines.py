@@ -23,7 +23,12 @@ from trackmj.track.mechanics import load_model_params
 from trackmj.track.mjcf.cache import cached_mjcf
 from trackmj.track.mjcf.generate import generate_mjcf
 from trackmj.track.mjcf.geometry import derive_geometry
-from trackmj.track.mjcf.layout import chords_fitting, compute_layout, slide_axis
+from trackmj.track.mjcf.layout import (
+    chords_fitting,
+    compute_layout,
+    slide_axis,
+    tooth_pin_distance_m,
+)
 from trackmj.track.plant import PassiveTensioner, TrackPlant
 from trackmj.validator import ParameterError
 
@@ -212,12 +217,76 @@ def test_infeasible_link_count_names_the_counts_that_close(tmp_path) -> None:
     ({"sprocket.z_m": 0.15}, r"sprocket\]?\.z_m = 0\.15 puts the sprocket's lowest pin "
                              r"below the ground line"),
     ({"road_wheels.count": 1, "road_wheels.x_m": [0.0]}, r"count = 1 .*\[2, 10\]"),
-    ({"sprocket.tooth_radius_m": 0.03}, r"tooth_radius_m = 0\.03 does not fit between two "
-                                        r"seated pins: at most 0\.0246 m with 14 teeth"),
+    ({"sprocket.tooth_radius_m": 0.03}, r"tooth_radius_m = 0\.03 overlaps a pin running onto "
+                                        r"or off the sprocket: .*allowed tooth_radius_m <= "
+                                        r"0\.0224 m"),
 ])
 def test_implausible_layouts_are_refused_naming_the_key(overrides, message) -> None:
     with pytest.raises(ParameterError, match=message):
         load_model_params(overrides=overrides)
+
+
+def test_a_tooth_that_fits_the_seated_pins_but_not_a_pin_running_on_is_refused(
+        tmp_path, capsys) -> None:
+    """LF1352's seated pins are 38.62 mm from a tooth centre, a pin on the strand running
+    onto or off the sprocket comes to 36.37 mm: a 24 mm tooth on its 14 mm pins fits the
+    first (the check before) and not the second (laid, 1.5 mm deep: a penetration at
+    generation naming no key). A machine file with it is refused at load, in one line
+    naming the file, the keys and the largest tooth radius that fits."""
+    path = _copy_lf1352(tmp_path, reference=False)
+    _edit(tmp_path / "mine.toml", (("tooth_radius_m = 0.020", "tooth_radius_m = 0.024"),))
+    assert main(["model", "info", "--machine", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert ("mine.toml [sprocket].tooth_radius_m = 0.024 overlaps a pin running onto or off "
+            "the sprocket: with tooth_radial_offset_m = 0.005 m, 14 teeth and "
+            "[track].pitch_m = 0.075 m that pin comes 0.0364 m from a tooth centre, less "
+            "than tooth_radius_m + [track].pin_radius_m = 0.0380 m: allowed tooth_radius_m "
+            "<= 0.0224 m") in err
+
+
+@pytest.mark.parametrize(("name", "sprocket_z_m"), [
+    ("lf1352", None), ("lf1352", 0.30), ("m113", None), ("compact3", None)])
+def test_tooth_pin_distance_is_the_nearest_a_laid_pin_comes(name, sprocket_z_m) -> None:
+    """The pins the generator lays come no nearer a tooth centre (compiled model) than
+    tooth_pin_distance_m, within 1 mm of it (the layout is one phase of the wrap), and all
+    nearer than the pocket between two seated pins, sqrt(r_p² + r_t² − 2 r_p r_t cos(π/N))."""
+    base = mechanics(resolve(name))
+    p = (base if sprocket_z_m is None
+         else load_model_params(resolve(name).mechanics, overrides={"sprocket.z_m": sprocket_z_m}))
+    from trackmj.track.mjcf.builders import build_mjcf
+
+    model = mujoco.MjModel.from_xml_string(build_mjcf(p, compute_layout(p)))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    s = p.sprocket
+    teeth = data.geom_xpos[[model.geom(f"sprocket_tooth_{j:02d}").id
+                            for j in range(s.tooth_count)]][:, [0, 2]]
+    pins = data.geom_xpos[[model.geom(f"link_{k:02d}_pin").id
+                           for k in range(p.track.link_count)]][:, [0, 2]]
+    nearest = np.linalg.norm(pins[:, None, :] - teeth[None, :, :], axis=2).min()
+    reach = tooth_pin_distance_m(s.tooth_count, p.track.pitch_m, s.tooth_radial_offset_m)
+    rp, rt = p.sprocket_pitch_radius_m, p.sprocket_pitch_radius_m + s.tooth_radial_offset_m
+    pocket = math.sqrt(rp * rp + rt * rt - 2.0 * rp * rt * math.cos(math.pi / s.tooth_count))
+    assert reach - 1e-6 <= nearest < min(pocket, reach + 1e-3)
+
+
+def test_tooth_pin_distance_closed_forms() -> None:
+    """By hand (tooth_pin_distance_m's docstring): M113, 10 teeth of 154 mm, r_p =
+    0.154/(2 sin 18°) = 0.249177 m, r_t = 0.259477 m lies within [r_p cos 18°, r_p/cos 18°]
+    = [0.23698, 0.26200] m, so the pin swinging in about its seated neighbour comes to
+    p − c, c the pocket; LF1352 (r_t = 0.173523 m > r_p/cos(π/14) = 0.172857 m): below the
+    link tangent at the seated pin, sqrt(c² − p²·e/r_p), by less than 0.1 mm; a tooth
+    inside the chord (e = −0.02 m on LF1352's sprocket): the pocket."""
+    rp = 0.154 / (2.0 * math.sin(math.pi / 10))
+    c = math.sqrt(rp ** 2 + (rp + 0.0103) ** 2 - 2 * rp * (rp + 0.0103) * math.cos(math.pi / 10))
+    assert tooth_pin_distance_m(10, 0.154, 0.0103) == pytest.approx(0.154 - c, abs=1e-7)
+    rp = 0.075 / (2.0 * math.sin(math.pi / 14))
+    c = math.sqrt(rp ** 2 + (rp + 0.005) ** 2 - 2 * rp * (rp + 0.005) * math.cos(math.pi / 14))
+    tangent = math.sqrt(c * c - 0.075 ** 2 * 0.005 / rp)
+    assert tangent - 1e-4 < tooth_pin_distance_m(14, 0.075, 0.005) < tangent
+    c = math.sqrt(rp ** 2 + (rp - 0.02) ** 2 - 2 * rp * (rp - 0.02) * math.cos(math.pi / 14))
+    assert tooth_pin_distance_m(14, 0.075, -0.02) == pytest.approx(c, abs=1e-7)
 
 
 def test_cli_refuses_a_layout_with_one_line_and_exit_2(capsys) -> None:

@@ -23,6 +23,7 @@ from trackmj.track.mjcf.layout import (
     check_closure,
     road_wheel_z,
     sprocket_outer_radius,
+    tooth_pin_distance_m,
 )
 from trackmj.validator import Location, Parameters, load_file, param, sources_field
 
@@ -332,14 +333,20 @@ def _check_layout(p: ModelParams, at: Location) -> None:
             raise at.error(("road_wheels", "x_m"), rw.x_m, f"entry {k} ({x:g} m) touches the "
                            f"sprocket teeth: keep its centre {spr_reach:.3f} m from the "
                            "sprocket's")
-    # a tooth sits between two seated pins, half a tooth pitch round from each
-    rp, rt = p.sprocket_pitch_radius_m, p.sprocket_pitch_radius_m + s.tooth_radial_offset_m
-    pocket = math.sqrt(rp * rp + rt * rt - 2.0 * rp * rt * math.cos(math.pi / s.tooth_count))
-    if s.tooth_radius_m + r_pin > pocket:
+    # a tooth sits between two pins: seated ones, and those running on and off the sprocket
+    reach = tooth_pin_distance_m(s.tooth_count, p.track.pitch_m, s.tooth_radial_offset_m)
+    if s.tooth_radius_m + r_pin > reach:
+        room = reach - r_pin
+        allowed = (f"allowed tooth_radius_m <= {room:.4f} m" if room > 0.0
+                   else "no tooth_radius_m fits")
         raise at.error(("sprocket", "tooth_radius_m"), s.tooth_radius_m,
-                       f"does not fit between two seated pins: at most {pocket - r_pin:.4f} m "
-                       f"with {s.tooth_count} teeth, pitch {p.track.pitch_m:g} m and pin radius "
-                       f"{r_pin:g} m")
+                       f"overlaps a pin running onto or off the sprocket: with "
+                       f"tooth_radial_offset_m = {s.tooth_radial_offset_m:g} m, "
+                       f"{s.tooth_count} teeth and [track].pitch_m = {p.track.pitch_m:g} m "
+                       f"that pin comes {reach:.4f} m from a tooth centre, less than "
+                       f"tooth_radius_m + [track].pin_radius_m = "
+                       f"{s.tooth_radius_m + r_pin:.4f} m: {allowed} (a smaller "
+                       "tooth_radial_offset_m or pin_radius_m leaves more room)")
     floor = r_pin
     if s.z_m - p.sprocket_pitch_radius_m < floor:
         raise at.error(("sprocket", "z_m"), s.z_m, f"puts the sprocket's lowest pin below "

@@ -90,6 +90,42 @@ def sprocket_outer_radius(p: ModelParams) -> float:
     return p.sprocket_pitch_radius_m + s.tooth_radial_offset_m + s.tooth_radius_m
 
 
+ENGAGEMENT_PHASES = 1025
+"""Phases of the strand's tangent point over one tooth pitch that
+:func:`tooth_pin_distance_m` samples (an error below 1e-6 m on the shipped sprockets)."""
+
+
+def tooth_pin_distance_m(tooth_count: int, pitch_m: float, offset_m: float) -> float:
+    """Least distance [m] from a tooth centre to a pin centre of a track wrapping the
+    sprocket, over every phase of the wrap: a tooth (``tooth_radius_m``) fits a pin
+    (``pin_radius_m``) iff their radii sum to no more than it.
+
+    Pins seat on the pitch circle r_p = p/(2 sin(π/N)) at 2πk/N, the teeth on r_t = r_p + e
+    (e = ``offset_m``) half a seat between them; seated pins alone leave the pocket
+    c = sqrt(r_p² + r_t² − 2·r_p·r_t·cos(π/N)). The strands leave the circle along a
+    tangent, and the pins on it are nearer: with the tangent point at α ∈ [0, 2π/N] past
+    the last seated pin, the strand's pins lie s_k = s_1 + (k − 1)·p along the tangent,
+    s_1 = r_p·(sqrt(sin²α + 2·(cos α − cos(2π/N))) − sin α) (one chord p from the seated
+    pin), and a pin at s from the tangent point is d² = r_p² + s² + r_t² −
+    2·r_t·(r_p·cos δ + s·sin δ) from a tooth δ ahead of that point; the least d over α
+    (:data:`ENGAGEMENT_PHASES` samples), the pins and the teeth. The first strand pin
+    swings about the seated one at radius p: where its swing faces the tooth
+    (r_p·cos(π/N) <= r_t <= r_p/cos(π/N)) the least d is p − c; further out, the link
+    tangent at the seated pin already gives d² = c² − p²·e/r_p and the next pin, shortly
+    before it seats, slightly less (LF1352: 36.37 against 36.39 mm); further in, c."""
+    seat = 2.0 * math.pi / tooth_count
+    rp = pitch_m / (2.0 * math.sin(math.pi / tooth_count))
+    rt = rp + offset_m
+    alpha = np.linspace(0.0, seat, ENGAGEMENT_PHASES)[:, None, None]
+    sin_a = np.sin(alpha)
+    s1 = rp * (np.sqrt(sin_a ** 2 + 2.0 * (np.cos(alpha) - math.cos(seat))) - sin_a)
+    # pins on the tangent up to |r_t| + p out: any further one is more than p from a tooth
+    s = s1 + pitch_m * np.arange(2 + math.ceil(abs(rt) / pitch_m))[None, :, None]
+    delta = (0.5 * seat + seat * np.arange(tooth_count))[None, None, :] - alpha
+    d2 = rp * rp + s * s + rt * rt - 2.0 * rt * (rp * np.cos(delta) + s * np.sin(delta))
+    return math.sqrt(max(float(d2.min()), 0.0))
+
+
 def _circles(p: ModelParams, idler_x: float) -> list[tuple[float, float, float]]:
     """Pin-vertex circles (x, z, radius) around which the loop is laid."""
     rw_v = vertex_radius(p, p.road_wheels.radius_m)
