@@ -289,6 +289,34 @@ def test_tooth_pin_distance_closed_forms() -> None:
     assert tooth_pin_distance_m(14, 0.075, -0.02) == pytest.approx(c, abs=1e-7)
 
 
+@pytest.mark.parametrize(("geom", "grow_m", "message"), [
+    ("sprocket_tooth_03", 0.004, r"penetrates by 1\.51 mm \(limit 1\.0 mm\): link_09_pin into "
+     r"sprocket_tooth_03: check \[track\]\.pin_radius_m, \[sprocket\]\.tooth_radius_m, "
+     r"\[sprocket\]\.tooth_radial_offset_m in the mechanics file$"),
+    ("idler_wheel", 0.003, r"penetrates by 3\.00 mm \(limit 1\.0 mm\): idler_wheel into "
+     r"link_\d+_rail: check \[idler\]\.radius_m, \[idler\]\.x_m, \[idler\]\.z_m, "
+     r"\[track\]\.rail_radius_m in the mechanics file$"),
+])
+def test_an_initial_penetration_names_both_geoms_and_their_keys(geom, grow_m, message) -> None:
+    """A geom grown past what the load checks admit (compact3's model, one tooth by 4 mm:
+    1.51 mm into the nearest pin; the idler by 3 mm) is refused before settling, naming the
+    two geoms and the mechanics keys that size and place them."""
+    import xml.etree.ElementTree as ET
+
+    from trackmj.track.mjcf.builders import build_mjcf
+    from trackmj.track.mjcf.generate import settle
+
+    p = mechanics(resolve("compact3"))
+    root = ET.fromstring(build_mjcf(p, compute_layout(p)))
+    element = root.find(f".//geom[@name='{geom}']")
+    assert element is not None
+    size = float(element.get("size") or p.sprocket.tooth_radius_m)   # a tooth: its class's
+    element.set("size", repr(size + grow_m))
+    model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+    with pytest.raises(ParameterError, match=r"^initial layout " + message):
+        settle(model, p, 0.0)
+
+
 def test_cli_refuses_a_layout_with_one_line_and_exit_2(capsys) -> None:
     assert main(["drive", "--duration", "0.1", "--set", "model.track.link_count=40"]) == 2
     err = capsys.readouterr().err

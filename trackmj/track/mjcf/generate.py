@@ -11,6 +11,7 @@ implicit.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import mujoco
@@ -27,6 +28,21 @@ from trackmj.validator import ParameterError
 
 SETTLE_DURATION_S = 3.0
 MAX_INITIAL_PENETRATION_M = 1e-3
+GEOM_KEYS = ((r"link_\d+_pin", ("[track].pin_radius_m",)),
+             (r"link_\d+_rail", ("[track].rail_radius_m",)),
+             (r"sprocket_tooth_\d+", ("[sprocket].tooth_radius_m",
+                                      "[sprocket].tooth_radial_offset_m")),
+             (r"sprocket_hub", ("[track].pitch_m", "[sprocket].tooth_count")),
+             (r"idler_wheel", ("[idler].radius_m", "[idler].x_m", "[idler].z_m")),
+             (r"road_wheel_\d+_collision", ("[road_wheels].radius_m", "[road_wheels].x_m")),
+             (r"return_roller_\d+_collision", ("[return_rollers].radius_m",
+                                               "[return_rollers].x_m", "[return_rollers].z_m")))
+"""Mechanics keys that size or place a collision geom (by name pattern); the ground has none."""
+
+
+def geom_keys(name: str) -> tuple[str, ...]:
+    """The mechanics keys of :data:`GEOM_KEYS` that set geom ``name`` (none for the ground)."""
+    return next((keys for pattern, keys in GEOM_KEYS if re.fullmatch(pattern, name)), ())
 
 
 def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> mujoco.MjData:
@@ -45,11 +61,15 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
     model.actuator_biasprm[tensioner, :3] = (0.0, -t.stiffness_N_m, -t.damping_N_s_m)
     data.ctrl[tensioner] = t.preload_N
     mujoco.mj_forward(model, data)
-    worst = min((c.dist for c in data.contact[: data.ncon]), default=0.0)
-    if worst < -MAX_INITIAL_PENETRATION_M:
-        raise ParameterError(f"initial layout penetrates by {-worst * 1e3:.2f} mm "
-                             f"(limit {MAX_INITIAL_PENETRATION_M * 1e3:.1f} mm): check radii "
-                             "and positions in the model file")
+    worst = min(data.contact[: data.ncon], key=lambda c: c.dist, default=None)
+    if worst is not None and worst.dist < -MAX_INITIAL_PENETRATION_M:
+        names = [model.geom(g).name for g in (worst.geom1, worst.geom2)]
+        keys = dict.fromkeys(k for name in names for k in geom_keys(name))
+        raise ParameterError(f"initial layout penetrates by {-worst.dist * 1e3:.2f} mm "
+                             f"(limit {MAX_INITIAL_PENETRATION_M * 1e3:.1f} mm): "
+                             f"{names[0]} into {names[1]}: check "
+                             f"{', '.join(keys) or 'radii and positions'} in the mechanics "
+                             "file")
     steps = round(duration_s / model.opt.timestep)
     for _ in range(steps):
         step(model, data, foundation, springs)
