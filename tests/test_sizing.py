@@ -19,6 +19,7 @@ from trackmj.machines.idler import load_idler
 from trackmj.sim import setup
 from trackmj.sim.control_plant import nominal_plant_params
 from trackmj.sim.setup import machine_weights, prepare
+from trackmj.validator import ParameterError
 
 SUPPLY_PA, TANK_PA, VALVE_DROP_PA, HOLD_S = 12e6, 0.2e6, 1e6, 0.030
 
@@ -161,3 +162,74 @@ def test_the_idler_identified_for_a_run_is_the_run_model(monkeypatch) -> None:
     with pytest.raises(IdentificationError, match=r"^compact3_machine\.toml: the idler "
                        r"identified on compact3\.toml as the run changes it: the idler's "):
         assert run.idler
+
+
+# ----------------------------------------------------------------------------- holding force
+
+def _m113_at(folder, nominal_N: float):
+    """M113's files copied to ``folder`` with [tensioner].nominal_tension_N = ``nominal_N``
+    (its preload stays 20 kN); the machine file's path (no idler or reference: nothing is
+    generated before the checks)."""
+    m113 = machines.resolve("m113")
+    mechanics = m113.mechanics.read_text()
+    assert "\npreload_N = 20000.0" in mechanics
+    (folder / "big.toml").write_text(mechanics.replace(
+        "\npreload_N = 20000.0", f"\nnominal_tension_N = {nominal_N!r}\npreload_N = 20000.0"))
+    (folder / "big_hydraulics.toml").write_text(m113.hydraulics.read_text())
+    path = folder / "big_machine.toml"
+    path.write_text(f'[machine]\nname = "big"\ndescription = "M113 at another tension"\n'
+                    f'mechanics = "big.toml"\nhydraulics = "big_hydraulics.toml"\n'
+                    f'control = "{m113.control}"\n')
+    return path
+
+
+def test_cylinders_that_cannot_hold_the_band_top_are_refused_at_load(tmp_path) -> None:
+    """M113's two 40/25 mm cylinders on a 40 kN machine (the probe's long_machine): by hand,
+    2·(1.2566e-3 m²·(12 − 1) MPa − 7.658e-4 m²·0.2 MPa) = 27.34 kN against the band's top
+    4/3·40 = 53.33 kN; the head area that would hold it with this annulus is
+    (53.33/2 kN + 7.658e-4·0.2e6 N)/11 MPa = 2.438e-3 m², the set-point 1 MPa +
+    26.82 kN/1.2566e-3 m² = 22.34 MPa (at M113's own 20 kN, a 26.67 kN top, the shipped
+    machine loads: below)."""
+    held = 2 * (0.0012566 * (12e6 - 1e6) - 0.0007658 * 0.2e6)
+    assert held == pytest.approx(27338.88, abs=0.01)
+    assert sizing.holding_force_N(0.0012566, 0.0007658, 12e6, 0.2e6) == pytest.approx(held)
+    area = (4 / 3 * 40e3 / 2 + 0.0007658 * 0.2e6) / 11e6
+    setpoint = 1e6 + (4 / 3 * 40e3 / 2 + 0.0007658 * 0.2e6) / 0.0012566
+    assert (round(area, 6), round(setpoint / 1e6, 2)) == (0.002438, 22.34)
+    message = (r"^big_hydraulics\.toml \[cylinder\]\.area_head_m2 = 0\.0012566 m², "
+               r"area_rod_m2 = 0\.0007658 m²: the 2 cylinders hold 27\.34 kN at "
+               r"\[supply\]\.setpoint_Pa = 12 MPa less 1 MPa across the metering \(rods at "
+               r"tank, 0\.2 MPa\), below the band's top 53\.33 kN \(4/3 of big\.toml "
+               r"\[tensioner\]\.nominal_tension_N = 40 kN\): allowed area_head_m2 >= "
+               r"0\.002438 m² \(this annulus\) or setpoint_Pa >= 22\.34 MPa")
+    with pytest.raises(ParameterError, match=message):
+        prepare("W1", machine=str(_m113_at(tmp_path, 40e3)))
+
+
+@pytest.mark.parametrize(("overrides", "message"), [
+    ({"hydraulics.supply.setpoint_Pa": 9e6},     # 2·(1.2566e-3·8e6 − 7.658e-4·0.2e6)
+     r"hold 19\.80 kN at \[supply\]\.setpoint_Pa = 9 MPa .* below the band's top 20\.00 kN "
+     r"\(4/3 of lf1352\.toml \[tensioner\]\.nominal_tension_N = 15 kN\)"),
+    ({"scenario.limits.force_max_N": 28e3, "control.controller.force_max_N": 28e3},
+     r"hold 27\.34 kN at .* below the band's top 28\.00 kN \(the control file's "
+     r"\[controller\]\.force_max_N; lf1352\.toml \[tensioner\]\.nominal_tension_N = 15 kN\)"),
+])
+def test_the_holding_force_is_checked_at_the_runs_set_point_and_band(overrides,
+                                                                      message) -> None:
+    """The run's hydraulic set-point (--set included) and the band the control file sets."""
+    with pytest.raises(ParameterError, match=message):
+        prepare("W1", machine="lf1352", overrides=overrides)
+
+
+@pytest.mark.parametrize("name", machines.names())
+def test_shipped_machines_hold_their_band_top_and_run_their_supply_drops(name: str) -> None:
+    """Every shipped hydraulic file holds 4/3 of its nominal tension at its set-point less
+    1 MPa; W4 and NL1, which drop the set-point to 0.75 x (M113: 9 MPa, 22.3 kN against
+    26.7 kN), still load: a scenario's drop is not the machine's supply."""
+    machine = machines.resolve(name)
+    hyd = load_hydraulic_params(machine.hydraulics)
+    top = BAND_REL[1] * machines.mechanics(machine).nominal_tension_N
+    assert sizing.holding_force_N(hyd.cylinder.area_head_m2, hyd.cylinder.area_rod_m2,
+                                  hyd.supply.setpoint_Pa, hyd.tank_pressure_Pa) >= top
+    for scenario in ("W1", "W4", "NL1"):
+        prepare(scenario, machine=name)

@@ -23,12 +23,15 @@ Every other module asks here which files a machine is made of.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from trackmj.control.params import BAND_REL
 from trackmj.hydraulics.params import HydraulicParams
 from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.machines.idler import load_identification
+from trackmj.machines.sizing import CYLINDER_COUNT, VALVE_DROP_PA, holding_force_N
 from trackmj.track.mechanics import ModelParams, load_model_params, mechanics_sha256, models_dir
 from trackmj.track.mjcf.builders import mjcf_parts, read_mjcf, recorded_mechanics_sha256
 from trackmj.track.mjcf.cache import cached_mjcf
@@ -227,6 +230,45 @@ def check_cylinder_stroke(params: ModelParams, model_file: str, hydraulics: Hydr
         raise ParameterError(f"{model_file} [idler].stroke_at_layout_m = {stroke:g} m is beyond "
                              f"the cylinder's stroke, {hydraulics_file} [cylinder].stroke_max_m "
                              f"= {top:g} m: allowed [0, {top:g}] m (or a longer cylinder)")
+
+
+def check_cylinder_force(params: ModelParams, model_file: str, hydraulics: HydraulicParams,
+                         hydraulics_file: str, band_top_N: float) -> None:
+    """ParameterError naming both files' keys unless the hydraulic file's cylinders hold the
+    band's top ``band_top_N`` [N] (the control file's [controller].force_max_N, which a
+    scenario's [limits] must equal: 4/3 of the nominal tension unless given) with the heads
+    at the file's supply set-point less :data:`~trackmj.machines.sizing.VALVE_DROP_PA`
+    across the metering and the rods at tank
+    (:func:`~trackmj.machines.sizing.holding_force_N`): the rule every shipped hydraulic
+    file is sized by (:func:`~trackmj.machines.sizing.size_cylinders`).
+
+    The set-point is the hydraulic file's (with its --set overrides), not a scenario's:
+    NL1 and W4 drop it to 0.75 x on purpose, to run where the supply binds (M113's heads
+    hold 22.3 kN at 9 MPa against its 26.7 kN top); a machine is sized for its own supply,
+    and a scenario's [[supply.drops]] is how a run studies a lower one."""
+    cyl, tank = hydraulics.cylinder, hydraulics.tank_pressure_Pa
+    supply = hydraulics.supply.setpoint_Pa
+    held = holding_force_N(cyl.area_head_m2, cyl.area_rod_m2, supply, tank)
+    if held >= band_top_N:
+        return
+    t = params.tensioner
+    nominal = (f"{model_file} [tensioner]."
+               f"{'preload_N' if t.nominal_tension_N is None else 'nominal_tension_N'} = "
+               f"{params.nominal_tension_N / 1e3:g} kN")
+    band = (f"4/3 of {nominal}" if math.isclose(band_top_N, BAND_REL[1] * params.nominal_tension_N)
+            else f"the control file's [controller].force_max_N; {nominal}")
+    per_cylinder = band_top_N / CYLINDER_COUNT + cyl.area_rod_m2 * tank
+    allowed = f"setpoint_Pa >= {(VALVE_DROP_PA + per_cylinder / cyl.area_head_m2) / 1e6:.4g} MPa"
+    if supply > VALVE_DROP_PA:
+        allowed = (f"area_head_m2 >= {per_cylinder / (supply - VALVE_DROP_PA):.4g} m² "
+                   f"(this annulus) or {allowed}")
+    raise ParameterError(
+        f"{hydraulics_file} [cylinder].area_head_m2 = {cyl.area_head_m2:g} m², area_rod_m2 = "
+        f"{cyl.area_rod_m2:g} m²: the {CYLINDER_COUNT} cylinders hold {held / 1e3:.2f} kN at "
+        f"[supply].setpoint_Pa = {supply / 1e6:g} MPa less {VALVE_DROP_PA / 1e6:g} MPa across "
+        f"the metering (rods at tank, {tank / 1e6:g} MPa), below the band's top "
+        f"{band_top_N / 1e3:.2f} kN ({band}): allowed {allowed} "
+        "(trackmj.machines.sizing.size_cylinders)")
 
 
 def model_mjcf(params: ModelParams, machine: Machine | None = None) -> str:

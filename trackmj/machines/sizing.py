@@ -25,6 +25,12 @@ ISO_3320_RODS_M = tuple(d * 1e-3 for d in (
 """Piston-rod diameters of ISO 3320 [m]."""
 AREA_RATIO = 1.6
 """Head over annulus area phi of the ISO 7181 series (1.25, 1.4, 1.6, 2, 2.5) chosen."""
+VALVE_DROP_PA = 1.0e6
+"""Pressure drop Δp_v [Pa] the sizing leaves across the metering at the band's top: a
+design margin for the tension rate there (docs/sizing.md; the governor's ceiling leaves
+0.5 MPa)."""
+CYLINDER_COUNT = 2
+"""Identical tensioner cylinders acting in parallel (a hydraulic file's [cylinder] is one)."""
 PULSE_REL = 0.0075
 """Tension change of one minimum-hold pulse at full pressurizing opening over the nominal
 tension, the metering the shipped machines are sized for (LF1352's restrictors give
@@ -48,8 +54,17 @@ class CylinderSize:
         return math.pi * (self.bore_m ** 2 - self.rod_m ** 2) / 4.0
 
 
+def holding_force_N(area_head_m2: float, area_rod_m2: float, supply_Pa: float,
+                    tank_Pa: float, valve_drop_Pa: float = VALVE_DROP_PA,
+                    count: int = CYLINDER_COUNT) -> float:
+    """Force [N] of ``count`` cylinders in parallel (per-cylinder head area ``area_head_m2``
+    and annulus ``area_rod_m2`` [m²]) with the heads at the supply less the valve drop and
+    the rods at tank: count·(A_h·(p_s − Δp_v) − A_r·p_t), pressures gauge [Pa]."""
+    return count * (area_head_m2 * (supply_Pa - valve_drop_Pa) - area_rod_m2 * tank_Pa)
+
+
 def size_cylinders(force_N: float, supply_Pa: float, tank_Pa: float, valve_drop_Pa: float,
-                   count: int = 2) -> CylinderSize:
+                   count: int = CYLINDER_COUNT) -> CylinderSize:
     """Smallest ISO 3320 bore of which ``count`` cylinders in parallel hold ``force_N`` [N]
     with the supply ``supply_Pa`` less ``valve_drop_Pa`` in the heads and the rods at tank:
     count·(A_h·(p_s − Δp_v) − A_r·p_t) >= F, A_r = A_h/φ; the rod is the ISO 3320 rod

@@ -20,13 +20,14 @@ from typing import Any
 import mujoco
 
 from trackmj.control.model import ReducedModel
-from trackmj.control.params import ControlConfig, load_config
+from trackmj.control.params import ControlConfig, load_config, resolved
 from trackmj.elements.tensioner_file import TensionerFile, load_tensioner
 from trackmj.fmi.controller_fmu import load_controller_file
 from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
 from trackmj.io import cache_dir, write_text_atomic
 from trackmj.machines.assembly import (
     Machine,
+    check_cylinder_force,
     check_cylinder_stroke,
     idler_file,
     mechanics,
@@ -351,10 +352,13 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
         files["tensioner"] = str(tensioner)
     if controller_file is not None:
         files["controller"] = str(controller_file.file)
-    control_config = machine_weights(
-        load_config(control or mach.control, overrides=sets["control"],
-                    nominal_tension_N=model_params.nominal_tension_N), mach)
-    _check_bands_agree(sc, control_config, files["control"])
+    control_params = load_config(control or mach.control, overrides=sets["control"],
+                                 nominal_tension_N=model_params.nominal_tension_N)
+    _check_bands_agree(sc, control_params, files["control"])
+    check_cylinder_force(model_params, Path(model or mach.mechanics).name, hydraulics_params,
+                         Path(hydraulics or mach.hydraulics).name,
+                         resolved(control_params.controller, "force_max_N"))
+    control_config = machine_weights(control_params, mach)
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,
         estimator=estimator, seed=seed, duration_s=duration_s, model=model_params,
