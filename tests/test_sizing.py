@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import pytest
 
@@ -19,7 +20,6 @@ from trackmj.machines.idler import load_idler
 from trackmj.sim import setup
 from trackmj.sim.control_plant import nominal_plant_params
 from trackmj.sim.setup import machine_weights, prepare
-from trackmj.validator import ParameterError
 
 SUPPLY_PA, TANK_PA, VALVE_DROP_PA, HOLD_S = 12e6, 0.2e6, 1e6, 0.030
 
@@ -183,7 +183,7 @@ def _m113_at(folder, nominal_N: float):
     return path
 
 
-def test_cylinders_that_cannot_hold_the_band_top_are_refused_at_load(tmp_path) -> None:
+def test_cylinders_that_cannot_hold_the_band_top_are_named_at_load(tmp_path) -> None:
     """M113's two 40/25 mm cylinders on a 40 kN machine (the probe's long_machine): by hand,
     2·(1.2566e-3 m²·(12 − 1) MPa − 7.658e-4 m²·0.2 MPa) = 27.34 kN against the band's top
     4/3·40 = 53.33 kN; the head area that would hold it with this annulus is
@@ -200,10 +200,15 @@ def test_cylinders_that_cannot_hold_the_band_top_are_refused_at_load(tmp_path) -
                r"area_rod_m2 = 0\.0007658 m²: the 2 cylinders hold 27\.34 kN at "
                r"\[supply\]\.setpoint_Pa = 12 MPa less 1 MPa across the metering \(rods at "
                r"tank, 0\.2 MPa\), below the band's top 53\.33 kN \(4/3 of big\.toml "
-               r"\[tensioner\]\.nominal_tension_N = 40 kN\): allowed area_head_m2 >= "
-               r"0\.002438 m² \(this annulus\) or setpoint_Pa >= 22\.34 MPa")
-    with pytest.raises(ParameterError, match=message):
-        prepare("W1", machine=str(_m113_at(tmp_path, 40e3)))
+               r"\[tensioner\]\.nominal_tension_N = 40 kN\); the run goes on, the band's top out "
+               r"of the cylinders' reach: to hold it, area_head_m2 >= 0\.002438 m² \(this "
+               r"annulus\) or setpoint_Pa >= 22\.34 MPa")
+    big = machines.resolve(str(_m113_at(tmp_path, 40e3)))
+    params = machines.mechanics(big)
+    line = machines.cylinder_force_shortfall(params, "big.toml",
+                                             load_hydraulic_params(big.hydraulics),
+                                             "big_hydraulics.toml", BAND_REL[1] * 40e3)
+    assert line is not None and re.match(message, line), line
 
 
 @pytest.mark.parametrize(("overrides", "message"), [
@@ -214,11 +219,24 @@ def test_cylinders_that_cannot_hold_the_band_top_are_refused_at_load(tmp_path) -
      r"hold 27\.34 kN at .* below the band's top 28\.00 kN \(the control file's "
      r"\[controller\]\.force_max_N; lf1352\.toml \[tensioner\]\.nominal_tension_N = 15 kN\)"),
 ])
-def test_the_holding_force_is_checked_at_the_runs_set_point_and_band(overrides,
-                                                                      message) -> None:
-    """The run's hydraulic set-point (--set included) and the band the control file sets."""
-    with pytest.raises(ParameterError, match=message):
-        prepare("W1", machine="lf1352", overrides=overrides)
+def test_the_holding_force_is_checked_at_the_runs_set_point_and_band(overrides, message,
+                                                                      capsys, tmp_path) -> None:
+    """The run's hydraulic set-point (--set included) and the band the control file sets:
+    said once on stderr, and the run is prepared (a sizing study runs such cylinders to
+    see them fail); not said with a tensioner file, which replaces the cylinders."""
+    setup._say_once.cache_clear()
+    prepare("W1", machine="lf1352", overrides=overrides)
+    prepare("W1", machine="lf1352", overrides=overrides)
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and re.search(message, err), err
+    assert "the run goes on, the band's top out of the cylinders' reach" in err
+    setup._say_once.cache_clear()
+    spring = tmp_path / "spring.toml"
+    spring.write_text('[passive]\nsource = "tests: a spring-damper"\npreload_N = 13000.0\n'
+                      'stiffness_N_m = 2.0e5\ndamping_N_s_m = 2.0e4\nstroke_ref_m = 0.05\n'
+                      'travel_m = [-0.005, 0.105]\n')
+    prepare("W1", machine="lf1352", overrides=overrides, tensioner=spring)
+    assert capsys.readouterr().err == ""
 
 
 @pytest.mark.parametrize("name", machines.names())

@@ -232,9 +232,10 @@ def check_cylinder_stroke(params: ModelParams, model_file: str, hydraulics: Hydr
                              f"= {top:g} m: allowed [0, {top:g}] m (or a longer cylinder)")
 
 
-def check_cylinder_force(params: ModelParams, model_file: str, hydraulics: HydraulicParams,
-                         hydraulics_file: str, band_top_N: float) -> None:
-    """ParameterError naming both files' keys unless the hydraulic file's cylinders hold the
+def cylinder_force_shortfall(params: ModelParams, model_file: str,
+                             hydraulics: HydraulicParams, hydraulics_file: str,
+                             band_top_N: float) -> str | None:
+    """One line naming both files' keys, or None if the hydraulic file's cylinders hold the
     band's top ``band_top_N`` [N] (the control file's [controller].force_max_N, which a
     scenario's [limits] must equal: 4/3 of the nominal tension unless given) with the heads
     at the file's supply set-point less :data:`~trackmj.machines.sizing.VALVE_DROP_PA`
@@ -245,12 +246,13 @@ def check_cylinder_force(params: ModelParams, model_file: str, hydraulics: Hydra
     The set-point is the hydraulic file's (with its --set overrides), not a scenario's:
     NL1 and W4 drop it to 0.75 x on purpose, to run where the supply binds (M113's heads
     hold 22.3 kN at 9 MPa against its 26.7 kN top); a machine is sized for its own supply,
-    and a scenario's [[supply.drops]] is how a run studies a lower one."""
+    and a scenario's [[supply.drops]] is how a run studies a lower one. A shortfall is not
+    refused: a sizing study runs cylinders that cannot hold the band, to see them fail."""
     cyl, tank = hydraulics.cylinder, hydraulics.tank_pressure_Pa
     supply = hydraulics.supply.setpoint_Pa
     held = holding_force_N(cyl.area_head_m2, cyl.area_rod_m2, supply, tank)
     if held >= band_top_N:
-        return
+        return None
     t = params.tensioner
     nominal = (f"{model_file} [tensioner]."
                f"{'preload_N' if t.nominal_tension_N is None else 'nominal_tension_N'} = "
@@ -262,13 +264,13 @@ def check_cylinder_force(params: ModelParams, model_file: str, hydraulics: Hydra
     if supply > VALVE_DROP_PA:
         allowed = (f"area_head_m2 >= {per_cylinder / (supply - VALVE_DROP_PA):.4g} m² "
                    f"(this annulus) or {allowed}")
-    raise ParameterError(
+    return (
         f"{hydraulics_file} [cylinder].area_head_m2 = {cyl.area_head_m2:g} m², area_rod_m2 = "
         f"{cyl.area_rod_m2:g} m²: the {CYLINDER_COUNT} cylinders hold {held / 1e3:.2f} kN at "
         f"[supply].setpoint_Pa = {supply / 1e6:g} MPa less {VALVE_DROP_PA / 1e6:g} MPa across "
         f"the metering (rods at tank, {tank / 1e6:g} MPa), below the band's top "
-        f"{band_top_N / 1e3:.2f} kN ({band}): allowed {allowed} "
-        "(trackmj.machines.sizing.size_cylinders)")
+        f"{band_top_N / 1e3:.2f} kN ({band}); the run goes on, the band's top out of the "
+        f"cylinders' reach: to hold it, {allowed} (trackmj.machines.sizing.size_cylinders)")
 
 
 def model_mjcf(params: ModelParams, machine: Machine | None = None) -> str:

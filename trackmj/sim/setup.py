@@ -12,6 +12,7 @@ import dataclasses
 import functools
 import json
 import math
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,8 +28,8 @@ from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
 from trackmj.io import cache_dir, write_text_atomic
 from trackmj.machines.assembly import (
     Machine,
-    check_cylinder_force,
     check_cylinder_stroke,
+    cylinder_force_shortfall,
     idler_file,
     mechanics,
     model_mjcf,
@@ -278,6 +279,14 @@ def _check_bands_agree(sc: Scenario, control: ControlConfig, control_file: str) 
             "--set control.controller.force_max_N=...)")
 
 
+@functools.cache
+def _say_once(line: str | None) -> None:
+    """Print ``line`` (if any) on stderr, once per process (a sweep prepares a run per
+    point)."""
+    if line is not None:
+        print(f"trackmj: {line}", file=sys.stderr)
+
+
 def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_ARCHITECTURE,
             controller: str | None = None, estimator: str | None = None, seed: int = 0,
             duration: float | None = None, variant: str = "nominal",
@@ -355,9 +364,11 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
     control_params = load_config(control or mach.control, overrides=sets["control"],
                                  nominal_tension_N=model_params.nominal_tension_N)
     _check_bands_agree(sc, control_params, files["control"])
-    check_cylinder_force(model_params, Path(model or mach.mechanics).name, hydraulics_params,
-                         Path(hydraulics or mach.hydraulics).name,
-                         resolved(control_params.controller, "force_max_N"))
+    if tensioner_file is None:
+        _say_once(cylinder_force_shortfall(
+            model_params, Path(model or mach.mechanics).name, hydraulics_params,
+            Path(hydraulics or mach.hydraulics).name,
+            resolved(control_params.controller, "force_max_N")))
     control_config = machine_weights(control_params, mach)
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,
