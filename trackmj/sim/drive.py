@@ -221,15 +221,19 @@ def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnerg
     check_every = round(DERAILMENT_CHECK_S / COUPLING_STEP_S)
     checks: list[tuple[int, DerailmentStatus]] = []
     plant_wall = 0.0
+    # the ledger books every MuJoCo step: inside the coupling step when it takes several
+    # (then inside the plant's wall time too), after it otherwise
+    per_substep = ledger.after_step if plant.substeps > 1 else None
     start = time.perf_counter()
     for k in range(steps):
         pull = hitch_pull_N * min(1.0, plant.time_s / (2.0 * ramp_s))
         plant.apply(StepInputs(speed_m_s * min(1.0, plant.time_s / ramp_s), pull, 0.0,
                                math.nan))   # no supply: the tensioner is passive or a file's
         before = time.perf_counter()
-        plant.step(element)
+        plant.step(element, on_substep=per_substep)
         plant_wall += time.perf_counter() - before
-        ledger.after_step()
+        if per_substep is None:
+            ledger.after_step()
         strands = plant.strand_tensions_N()
         row = (plant.time_s, plant.idler_force_N, plant.stroke_m, plant.stroke_velocity_m_s,
                plant.track_speed_m_s, float(plant.chassis_velocity[0]), strands.upper_N,

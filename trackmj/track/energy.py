@@ -242,8 +242,9 @@ def _book_foundation(state: np.ndarray, jac: np.ndarray, pins: np.ndarray, dofs:
 
 
 class TrackEnergyLedger:
-    """Books the track's energy terms after every :meth:`TrackPlant.step` (call
-    :meth:`after_step`), then :meth:`finish` for the totals.
+    """Books the track's energy terms after every MuJoCo step (call :meth:`after_step`: after
+    each :meth:`TrackPlant.step` of one MuJoCo step, or as its ``on_substep`` when a
+    coupling step takes several), then :meth:`finish` for the totals.
 
     Sets MuJoCo's energy flag on ``plant.model`` and runs one ``mj_forward`` to start from
     the current state. Per step it reads what the step left in ``plant.data``: the
@@ -255,9 +256,7 @@ class TrackEnergyLedger:
         m, d = plant.model, plant.data
         m.opt.enableflags |= int(mujoco.mjtEnableBit.mjENBL_ENERGY)
         mujoco.mj_forward(m, d)
-        self._h = float(m.opt.timestep) * plant.substeps
-        if plant.substeps != 1:
-            raise ValueError("the ledger books one MuJoCo step per coupling step")
+        self._h = float(m.opt.timestep)
         self._start_energy = d.energy.copy()
         self._v_prev = d.qvel.copy()
         self._drive = m.actuator("sprocket_drive").id
@@ -314,7 +313,7 @@ class TrackEnergyLedger:
         self._steps = 0
 
     def after_step(self) -> None:
-        """Book the step the plant just took."""
+        """Book the MuJoCo step the plant just took."""
         m, d, t = self.plant.model, self.plant.data, self._terms
         h, v1 = self._h, d.qvel
         if self._steps:

@@ -643,8 +643,11 @@ class TrackPlant:
         return np.concatenate([d.xmat[body], d.site_xpos[self._hitch_site], d.xipos[body]])
 
     # ------------------------------------------------------------------ stepping
-    def step(self, element: TensionerElement) -> ForceLaw:
-        """Advance one 1 ms coupling step with ``element`` acting on the idler carrier.
+    def step(self, element: TensionerElement,
+             on_substep: Callable[[], None] | None = None) -> ForceLaw:
+        """Advance one 1 ms coupling step with ``element`` acting on the idler carrier;
+        ``on_substep`` is called after each MuJoCo step of it (an energy ledger's
+        :meth:`~trackmj.track.energy.TrackEnergyLedger.after_step`).
 
         With several MuJoCo substeps the law is held and the element is completed with
         the mean velocity over the step (displacement / step), which keeps the work
@@ -658,15 +661,17 @@ class TrackPlant:
             raise ValueError(f"tensioner returned a non-finite force law {law}")
         self._ctrl[self._tensioner] = force
         self._biasprm[self._tensioner, 2] = damping
+        self.last_law = law   # what idler_force_N reads, in on_substep too
         for _ in range(self.substeps):
             foundation_step(m, d, self.foundation, self.springs, self._saved_state)
+            if on_substep is not None:
+                on_substep()
         stroke = self.stroke_m
         if self.substeps == 1:
             velocity = self.stroke_velocity_m_s
         else:
             velocity = (stroke - stroke0) / COUPLING_STEP_S
         self.time_s += COUPLING_STEP_S
-        self.last_law = law
         element.complete_step(self.time_s, stroke, velocity)
         return law
 
