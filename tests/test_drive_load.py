@@ -4,6 +4,7 @@ it as a known input instead of discovering it in its disturbance state."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -91,14 +92,21 @@ def held_gains(name: str, overrides: dict[str, float] | None = None) -> tuple[fl
     """Machine ``name`` driven at 1.5 m/s with its idler held (:func:`held_stroke`), without
     and with each hitch load: the held-stroke gain (ΔF − k·Δy)/ΔT [1/m] on the side the
     layout formula calls tight and on the other, as multiples of its σ·G/r [-]. k is the
-    identified idler stiffness, for the micrometres the stroke still moves."""
+    identified idler stiffness, for the micrometres the stroke still moves. Once per
+    machine and overrides in a session (two tests ask for LF1352's shipped gains)."""
+    return _held_gains(name, tuple(sorted((overrides or {}).items())))
+
+
+@functools.cache
+def _held_gains(name: str, overrides: tuple[tuple[str, float], ...]) -> tuple[float, float]:
+    """:func:`held_gains` with the overrides as sorted (key, value) pairs."""
     mach = machines.resolve(name)
     law = drive_load(machines.mechanics(mach))
     k = load_idler(mach.idler).stiffness_N_m
     means = {}
     for case, pull in {"none": 0.0, **HITCH_N}.items():
         series = drive(1.5, DRIVE_S, machine=name, hitch_pull_N=pull,
-                       overrides={**held_stroke(name), **(overrides or {})}).timeseries
+                       overrides={**held_stroke(name), **dict(overrides)}).timeseries
         keep = series["t_s"] >= MEAN_FROM_S
         means[case] = {c: float(series[c][keep].mean())
                        for c in ("idler_force_N", "stroke_m", "drive_torque_N_m")}
