@@ -322,3 +322,17 @@ def test_a_verdict_claims_only_what_was_judged() -> None:
                            windows(disturbances=((6.0, 8.0),))), band, 2.0, 0.02)
     assert v.edges_judged == 2
     assert "back within ±5 % in 2 s of every edge; steady offset below 2 %" in v.text()
+
+
+def test_an_edge_not_back_before_the_next_is_said_so() -> None:
+    """Two pulses 1 s apart (edges 2, 3, 4, 5 s) and a mean back 1.05 s after the 3 s edge:
+    the 3 s edge is judged up to the 4 s edge, and the verdict says it was not back before
+    it, where it said "never" (a newcomer's short W3)."""
+    ref = 15e3
+    t = time_grid(8.0)
+    y = np.full_like(t, ref)
+    y[(t >= 3.0) & (t < 4.3)] += 2000.0
+    w = windows(disturbances=((2.0, 3.0), (4.0, 5.0)))
+    v = verdict(acceptance(t, y, np.full_like(t, ref), w), (10e3, 20e3), 2.0, 0.02)
+    assert v.edge_times == ("2", "3", "4", "5")
+    assert "not back after the 3 s edge before the next one at 4 s" in v.text()

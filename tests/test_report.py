@@ -266,3 +266,12 @@ def test_report_plan_carries_files_and_overrides_and_its_header_names_them() -> 
     assert M._header(results)[2].startswith(
         f"Machine: compact3; files control {control}; on every run "
         "`control.mpc.max_iter = 8`. 2 runs, seeds [0, 1]")
+
+
+def test_a_refused_report_leaves_no_out_folder(tmp_path, capsys) -> None:
+    """An unknown scenario is refused in one line (exit 2) before --out is made: no empty
+    folder is left behind for the next report to trip over."""
+    out = tmp_path / "report"
+    assert main(["report", "--scenarios", "W1,W9", "--seeds", "1", "--out", str(out)]) == 2
+    assert "W9" in capsys.readouterr().err
+    assert not out.exists()

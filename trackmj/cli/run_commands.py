@@ -194,12 +194,13 @@ def cmd_report(args: argparse.Namespace) -> int:
     archs, baselines = _report_choices(args, REPORT_ARCHS)
     # the machine is refused here, before any run, if it is bad
     machine = DEFAULT_MACHINE if args.machine is None else resolve(args.machine).name
-    out = check_report_dir(Path(args.out or f"runs/report{_machine_suffix(machine)}"))
     if args.tensioner is not None:
         load_tensioner(args.tensioner)   # refused here, before any run, if it is bad
     specs = plan(args.scenarios.split(","), list(range(args.seeds)), args.duration, archs,
                  baselines, tensioner=args.tensioner, machine=_machine_spec(args.machine),
                  files=_parameter_files(args), overrides=overrides_tuple(args.set))
+    # after the plan: a refused scenario or key leaves no empty --out behind
+    out = check_report_dir(Path(args.out or f"runs/report{_machine_suffix(machine)}"))
     matrix = run_matrix(specs, out, workers=args.workers, scheduler=args.scheduler)
     path = write_report(matrix.results, out, matrix)
     print(f"{len(matrix.results)} runs ({matrix.resumed} resumed, {len(matrix.failed)} failed) "

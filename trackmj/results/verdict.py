@@ -25,8 +25,8 @@ class Verdict:
     back later than ``recovery_within_s`` [s], its recovery time [s] (NaN: never); the worst
     steady offset against its limit (shares of the reference, NaN: no steady window); the
     trailing mean's window [s] and the recovery band (share of the reference) the figures
-    were taken with; how many edges were judged (a run without disturbances, or one that
-    ends before an edge can be judged, has none)."""
+    were taken with; the edges judged, keyed by their times (a run without disturbances, or
+    one that ends before an edge can be judged, has none)."""
 
     mean_range_N: tuple[float, float]
     band_N: tuple[float, float]
@@ -36,7 +36,23 @@ class Verdict:
     steady_offset_max_rel: float
     mean_window_s: float = 0.5
     recovery_band_rel: float = 0.05
-    edges_judged: int = 0
+    edge_times: tuple[str, ...] = ()
+
+    @property
+    def edges_judged(self) -> int:
+        """How many disturbance edges were judged."""
+        return len(self.edge_times)
+
+    def _late(self, edge: str, s: float) -> str:
+        """A late edge in words: NaN is "not back before the next edge" (the recovery is
+        judged up to it) or, after the last, "never"."""
+        if not math.isnan(s):
+            return f"{s:.2f} s after the {edge} s edge"
+        later = [e for e in self.edge_times if float(e) > float(edge)]
+        if later:
+            following = min(later, key=float)
+            return f"not back after the {edge} s edge before the next one at {following} s"
+        return f"never after the {edge} s edge"
 
     @property
     def broken(self) -> list[str]:
@@ -72,9 +88,7 @@ class Verdict:
             why.append(f"band: {span}, outside {band}")
         if "recovery" in self.broken:
             why.append(f"recovery within {back}: " + ", ".join(
-                f"never after the {edge} s edge" if math.isnan(s)
-                else f"{s:.2f} s after the {edge} s edge"
-                for edge, s in self.late_edges.items()))
+                self._late(edge, s) for edge, s in self.late_edges.items()))
         if "steady offset" in self.broken:
             why.append(f"steady offset {100 * self.steady_offset_rel:.2f} % (limit "
                        f"{100 * self.steady_offset_max_rel:g} %)")
@@ -95,7 +109,7 @@ def verdict(figures: Mapping[str, Any], band_N: tuple[float, float],
                    band_N, late, recovery_within_s,
                    _number(figures.get("steady_offset_max_rel")), steady_offset_max_rel,
                    figures.get("mean_window_s", 0.5), figures.get("recovery_band_rel", 0.05),
-                   len(recovery))
+                   tuple(recovery))
 
 
 def never_back(figures: Mapping[str, Any]) -> list[str]:
