@@ -266,6 +266,10 @@ def test_report_plan_carries_files_and_overrides_and_its_header_names_them() -> 
     assert M._header(results)[2].startswith(
         f"Machine: compact3; files control {control}; on every run "
         "`control.mpc.max_iter = 8`. 2 runs, seeds [0, 1]")
+    # the study's figures are LF1352's: on another crawler the claims say what they mean
+    caveat = "The study's figures are of the LF1352; these runs are of compact3"
+    assert caveat in "\n".join(M._claims_table([], ["compact3"]))
+    assert caveat not in "\n".join(M._claims_table([], ["lf1352"]))
 
 
 def test_a_refused_report_leaves_no_out_folder(tmp_path, capsys) -> None:

@@ -59,7 +59,7 @@ def report_lines(m: Matrix, findings: Sequence[Finding], results: Sequence[Resul
     lines = _header(results)
     if timing is not None:
         lines += _invocation(timing)
-    lines += _claims_table(findings)
+    lines += _claims_table(findings, sorted({r.metadata.get("machine", "?") for r in results}))
     for scenario in m.scenarios:
         lines += _condition_section(m, scenario, out)
     lines += _controller_section(m, out)
@@ -127,10 +127,18 @@ def _invocation(timing: MatrixRun) -> list[str]:
     return lines
 
 
-def _claims_table(findings: Sequence[Finding]) -> list[str]:
-    """The study's claims: the verdict rules, one row per finding, what the study leaves
-    undefined."""
-    lines = ["## Study claims", "", VERDICT_RULES,
+STUDY_MACHINE = "lf1352"
+"""The crawler the study's figures are of (its only machine)."""
+
+
+def _claims_table(findings: Sequence[Finding], crawlers: Sequence[str]) -> list[str]:
+    """The study's claims: the verdict rules (and, for another crawler than the study's,
+    what its verdicts then mean), one row per finding, what the study leaves undefined."""
+    others = [c for c in crawlers if c != STUDY_MACHINE]
+    caveat = ([f"The study's figures are of the LF1352; these runs are of {', '.join(others)}: "
+               "a verdict here says how another crawler compares with them, not whether "
+               "trackmj reproduces the study.", ""] if others else [])
+    lines = ["## Study claims", "", *caveat, VERDICT_RULES,
              "", "| claim | study | ours | verdict | reason |", "|---|---|---|---|---|"]
     for f in findings:
         lines.append(f"| {f.claim} | {f.study} | {f.ours} | **{f.verdict}** | {f.reason} |")
