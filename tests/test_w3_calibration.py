@@ -26,6 +26,7 @@ from trackmj.sim.setup import RunSetup, prepare
 from trackmj.sim.w3_hitch import (
     REFERENCE_MACHINE,
     TIPPING_SHARE,
+    OutOfReach,
     Rig,
     calibrated_setup,
     calibration_pulse,
@@ -35,6 +36,7 @@ from trackmj.sim.w3_hitch import (
     idler_force_history,
     input_hashes,
     load_change_N,
+    search,
     side_weight_N,
     tipping_forces_N,
 )
@@ -248,3 +250,20 @@ def test_w3_recovers_within_one_second_after_each_edge(machine: str) -> None:
     recovery = result.metrics["acceptance"]["edge_recovery_s"]
     assert set(recovery) == {"6", "8", "18", "20"}
     assert all(r <= 1.0 for r in recovery.values()), recovery
+
+
+def test_a_pulse_out_of_reach_says_which_way_its_limit_moves_the_load() -> None:
+    """A target of -1.3 kN on a layout where every force raises the idler load (compact3's
+    tow): the refusal names the tow at the limit with its sign and says the change goes the
+    wrong way; one whose change grows towards the target but not far enough is 'short of'
+    it."""
+    def raises(f: float) -> float:          # [N]: the load rises with either sign of force
+        return 0.1 * abs(f)
+
+    with pytest.raises(OutOfReach, match=r"at the limit, a (tow of \+|push of -)\d+ N along "
+                       r"the chain, the idler load changes by \+\d\.\d{3} kN, the wrong way "
+                       r"from -1\.300 kN"):
+        search(raises, -1300.0, 4000.0, (6000.0, 12000.0), what="W3 load pulse 1")
+    with pytest.raises(OutOfReach, match=r"at the limit, a push of -6000 N along the chain, "
+                       r"the idler load changes by -0\.600 kN, short of -1\.300 kN"):
+        search(lambda f: 0.1 * f, -1300.0, -4000.0, (6000.0, 12000.0), what="W3 load pulse 1")

@@ -373,8 +373,10 @@ def search(change: Callable[[float], float], target_N: float, start_N: float,
     lo = (0.0, 0.0)
     while towards(d) < abs(target_N):        # short: step out along the direction
         if abs(f) >= limit(f):
-            raise OutOfReach(what, f"at the limit {abs(f):.0f} N along the chain the idler "
-                             f"load changes by {d / 1e3:+.3f} kN, short of "
+            side = "the wrong way from" if towards(d) <= 0.0 else "short of"
+            kind = "push" if f < 0.0 else "tow"
+            raise OutOfReach(what, f"at the limit, a {kind} of {f:+.0f} N along the chain, "
+                             f"the idler load changes by {d / 1e3:+.3f} kN, {side} "
                              f"{target_N / 1e3:+.3f} kN; {trials()}", tried)
         if len(tried) >= MAX_RUNS:
             raise give_up(f"not bracketed in {MAX_RUNS} runs")
