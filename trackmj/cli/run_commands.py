@@ -208,6 +208,11 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 1 if matrix.failed else 0
 
 
+def _count(n: int, noun: str) -> str:
+    """``n`` and ``noun``, plural unless one ("1 figure", "2 figures")."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     """``trackmj sweep``: every point of a sweep spec, resumed, or ``--plot`` to redraw its
     figures; exit code 1 if a run failed."""
@@ -219,7 +224,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             raise ValueError("give a sweep spec to run, or --plot DIR to redraw, not both")
         print(summary_markdown(summarize_sweep(args.plot)))
         figures = plot_sweep(args.plot, diagnostics=args.diagnostics)
-        print(f"summary.md, summary.csv, {len(figures)} figures -> {Path(args.plot)}")
+        print(f"summary.md, summary.csv, {_count(len(figures), 'figure')} -> {Path(args.plot)}")
         return 0
     if args.spec is None:
         raise ValueError("sweep needs a spec file (or --plot DIR); see 'trackmj sweep -h'")
@@ -230,7 +235,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                     diagnostics=args.diagnostics)
     print(summary_markdown(summary.table))
     print(summary)
-    print(f"summary.md, summary.csv, {len(summary.figures)} figures -> {out}")
+    print(f"summary.md, summary.csv, {_count(len(summary.figures), 'figure')} -> {out}")
     return 1 if summary.failed else 0
 
 
