@@ -474,6 +474,12 @@ def fit_warnings(problem: Problem, undetermined: Mapping[str, str],
     return lines
 
 
+def _finite_or_none(value: float) -> float | None:
+    """``value`` as a float, or None (JSON's null) where it is not finite: an undetermined
+    key's standard error and correlations."""
+    return float(value) if math.isfinite(value) else None
+
+
 def fit(problem: Problem, start: Mapping[str, float]) -> dict[str, Any]:
     """Least-squares fit from ``start``; estimates, 95 % intervals (within the bounds),
     which keys the logs determine, residual RMS, and :func:`fit_warnings`."""
@@ -506,8 +512,8 @@ def fit(problem: Problem, start: Mapping[str, float]) -> dict[str, Any]:
         "estimates": fitted,
         "intervals": {k: [float(low[i]), float(high[i])] for i, k in enumerate(problem.keys)},
         "determined": flags,
-        "standard_errors": {k: float(sd[i]) for i, k in enumerate(problem.keys)},
-        "correlation": np.where(np.isfinite(correlation), correlation, np.nan).tolist(),
+        "standard_errors": {k: _finite_or_none(sd[i]) for i, k in enumerate(problem.keys)},
+        "correlation": [[_finite_or_none(c) for c in row] for row in correlation],
         "at_bound": {k: bool(sol.x[i] <= 1e-6 or sol.x[i] >= 1 - 1e-6)
                      for i, k in enumerate(problem.keys)},
         "residual_rms": final["residual_rms"],
@@ -580,7 +586,8 @@ def calibrate(spec_path: str | Path, logs: Sequence[str | Path], out: str | Path
                          "estimates": {key: key_unit(key) for key in problem.keys}},
                "runs": problem.runs, "wall_time_s": time.perf_counter() - wall}
         writer.commit_files(
-            {CALIBRATION_JSON: (json.dumps(doc, indent=2, sort_keys=True) + "\n").encode()},
+            {CALIBRATION_JSON: (json.dumps(doc, indent=2, sort_keys=True, allow_nan=False)
+                                + "\n").encode()},
             extras={CALIBRATION_PNG: lambda path: calibration_figure(
                 [FittedLog(log.file, log.sha256, log.channels, s, f)
                  for log, s, f in zip(loaded, start_sim, fitted_sim, strict=True)], doc, path)})
