@@ -4,6 +4,7 @@ log and channel the measured trace against the start and the fitted run, with th
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,10 +64,13 @@ def calibration_figure(logs: Sequence[FittedLog], doc: Mapping[str, Any], path: 
     fitted with its RMS over the fitted samples; the estimates with units in the title."""
     t = run_grid(float(doc["duration_s"]))
     names = [c for c in CHANNEL_DISPLAY if any(c in log.measured for log in logs)]
-    lines = estimate_lines(doc)
+    width_in = max(9.0, 7.0 * len(logs))
+    # the title's lines wrapped to the figure (~11 characters an inch at its size): a long
+    # key with an interval and "not determined" ran off both edges of a one-log figure
+    lines = [part for line in estimate_lines(doc)
+             for part in textwrap.wrap(line, int(11 * width_in), subsequent_indent="    ")]
     fig, axes = plt.subplots(2 * len(names), len(logs), squeeze=False, sharex=True,
-                             figsize=(max(9.0, 7.0 * len(logs)), 3.0 * len(names) + 0.9
-                                      + 0.2 * len(lines)),
+                             figsize=(width_in, 3.0 * len(names) + 0.9 + 0.2 * len(lines)),
                              height_ratios=[2.0, 1.0] * len(names), layout="constrained")
     for j, log in enumerate(logs):
         for i, channel in enumerate(names):
