@@ -48,12 +48,19 @@ def test_shipped_machines_listed_one_line_each(capsys) -> None:
         assert m.mechanics.is_file() and m.hydraulics.is_file() and m.control.is_file()
 
 
+def _machine_file(path: Path, name: str, mechanics: Path, hydraulics: Path,
+                  control: Path) -> Path:
+    """A machine file at ``path`` naming machine ``name`` and its three files."""
+    path.write_text(f'[machine]\nname = "{name}"\ndescription = "a test machine"\n'
+                    f'mechanics = "{mechanics}"\nhydraulics = "{hydraulics}"\n'
+                    f'control = "{control}"\n')
+    return path
+
+
 def test_machine_file_resolves_relative_paths_and_names_a_missing_file(tmp_path) -> None:
     lf = resolve("lf1352")
-    path = tmp_path / "mine_machine.toml"
-    path.write_text(f'[machine]\nname = "mine"\ndescription = "a copy"\n'
-                    f'mechanics = "{lf.mechanics}"\nhydraulics = "{lf.hydraulics}"\n'
-                    f'control = "{lf.control}"\n')
+    path = _machine_file(tmp_path / "mine_machine.toml", "mine", lf.mechanics, lf.hydraulics,
+                         lf.control)
     mine = resolve(str(path))
     assert mine.name == "mine" and mine.mechanics == lf.mechanics
     assert mine.idler is None and mine.reference_mjcf is None
@@ -149,10 +156,8 @@ def test_a_copied_machine_uses_its_copied_files_until_its_mechanics_change(tmp_p
 
 def test_a_machine_file_taking_a_shipped_name_for_other_files_is_refused(tmp_path) -> None:
     c3 = resolve("compact3")
-    path = tmp_path / "m_machine.toml"
-    path.write_text(f'[machine]\nname = "lf1352"\ndescription = "d"\n'
-                    f'mechanics = "{c3.mechanics}"\nhydraulics = "{c3.hydraulics}"\n'
-                    f'control = "{resolve("lf1352").control}"\n')
+    path = _machine_file(tmp_path / "m_machine.toml", "lf1352", c3.mechanics, c3.hydraulics,
+                         resolve("lf1352").control)
     with pytest.raises(ParameterError, match=r"^m_machine\.toml \[machine\]\.name = 'lf1352' "
                                              r"is the shipped machine lf1352_machine\.toml's, "
                                              r"but its files are not that machine's"):
