@@ -82,6 +82,24 @@ def test_supply_track_and_hitch_from_files_are_the_signals_in_si(tmp_path):
     assert sc.distance_m(2.5) == pytest.approx(0.75 + 1.5 * 1.5, rel=1e-6)
 
 
+def test_a_shuttle_speed_trace_travels_both_ways_and_a_speed_past_5_m_s_is_refused(tmp_path):
+    """A dozer's shuttle from a file: 1 s forward at 1 m/s, then back at -1.5 m/s (linear
+    edges of 0.2 s): it goes 0.1 + 0.8 + 0.04 = 0.94 m ahead (turning at 1.08 s), then
+    0.09 + 2.7 m back, to -1.85 m; a trace reaching -6 m/s is refused naming the file,
+    column, the first value outside and the range."""
+    t = 1e-3 * np.arange(0, 3001)
+    edge = np.clip(t / 0.2, 0.0, 1.0) - 2.5 * np.clip((t - 1.0) / 0.2, 0.0, 1.0)
+    write_csv(tmp_path / "v.csv", {"t_s": t, "speed_m_s": edge})
+    track = "[track]\nspeed_m_s = 1.5\nramp_s = 1.0\n"
+    sc = load_scenario(scenario_with(tmp_path, {track: '[track]\nfrom_file = "v.csv"\n'}))
+    assert sc.travel_range_m(3.0) == pytest.approx((-1.85, 0.94), abs=2e-3)
+    write_csv(tmp_path / "v.csv", {"t_s": t, "speed_m_s": 4.0 * edge})
+    with pytest.raises(ParameterError) as info:
+        load_scenario(scenario_with(tmp_path, {track: '[track]\nfrom_file = "v.csv"\n'}))
+    assert "v.csv column 'speed_m_s' (track speed): -5.05 m/s at t = 1.181 s" in str(info.value)
+    assert "must stay in [-5, 5] m/s over the run" in str(info.value)
+
+
 @pytest.mark.parametrize(("columns", "words"), [
     ({"t_s": [0.0, 0.002, 0.001, 3.0], "F_ref_N": [12e3] * 4},
      ["ref.csv column 't_s'", "not strictly increasing"]),

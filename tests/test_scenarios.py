@@ -136,6 +136,32 @@ def test_w2_road_band_maps_to_1_20_hz_and_is_seeded() -> None:
     assert len(s.terrain_profile(0, duration_s=5.0).z_m) < len(a.z_m)
 
 
+def test_a_reversing_run_drives_onto_road_behind_it_and_the_forward_roads_are_unchanged(
+) -> None:
+    """W2 at -2 m/s backs 59 m in 30 s: its road reaches margin_m behind that, is level
+    under the home layout (|x| <= flat_until_m) and as rough as class D behind it; the
+    forward W2 road of each seed is the one earlier runs drove (grid from x_start_m)."""
+    forward = load_scenario("W2")
+    reverse = load_scenario("W2", {"track.speed_m_s": -2.0})
+    road = forward.terrain
+    assert reverse.travel_range_m(30.0) == pytest.approx((-2.0 * 29.5, 0.0))
+    assert forward.travel_range_m(30.0) == pytest.approx((0.0, 2.0 * 29.5))
+    back = reverse.terrain_profile(0)
+    assert back is not None
+    assert back.x_m[0] <= -2.0 * 29.5 - road.margin_m + road.dx_m
+    assert back.x_m[-1] >= -road.x_start_m - road.dx_m
+    assert np.all(back.z_m[np.abs(back.x_m) <= road.flat_until_m] == 0.0)
+    rough = back.z_m[back.x_m < -4.0]
+    assert np.std(rough) == pytest.approx(band_rms_m("D", 0.5, 10.0), rel=0.2)
+    ahead = forward.terrain_profile(0)
+    assert ahead is not None and ahead.x_start_m == road.x_start_m
+    assert ahead.x_m[-1] == pytest.approx(2.0 * 29.5 + road.margin_m, abs=road.dx_m)
+    windows = reverse.metric_windows(link_pitch_m=0.075)
+    assert windows.tooth_passing_band_Hz == pytest.approx((2.0 / 0.075 * 0.9,
+                                                            2.0 / 0.075 * 1.1))
+    assert windows.road_band_Hz == pytest.approx((1.0, 20.0))
+
+
 def test_w5_variants() -> None:
     s = load_scenario("W5")
     names = [v.name for v in s.variants]
@@ -213,7 +239,7 @@ MALFORMED = [
     ("W1", "speed_m_s = 1.5", "speed_m_s = true",
      r"\[track\]\.speed_m_s = True: expected a number, got a boolean"),
     ("W1", "speed_m_s = 1.5", "speed_m_s = 7.5",
-     r"\[track\]\.speed_m_s = 7\.5 is outside the allowed range \[0, 5\] m/s"),
+     r"\[track\]\.speed_m_s = 7\.5 is outside the allowed range \[-5, 5\] m/s"),
     ("W1", "speed_m_s = 1.5", "speed_m_s = inf", r"\[track\]\.speed_m_s = inf: must be finite"),
     ("W1", "[track]", "[trak]",
      r"^bad\.toml: unknown table \[trak\]; did you mean 'track'\?"),
@@ -408,7 +434,7 @@ def test_overrides_change_the_loaded_scenario_and_are_checked() -> None:
                        r"'2' is out of range; \[load_pulses\] has 2 entries$"):
         load_scenario("W3", overrides={"load_pulses.2.hitch_N": 1.0})
     with pytest.raises(ParameterError, match=r"^--set scenario\.track\.speed_m_s = 9\.0 is outside "
-                       r"the allowed range \[0, 5\] m/s$"):
+                       r"the allowed range \[-5, 5\] m/s$"):
         load_scenario("W1", overrides={"track.speed_m_s": 9.0})
     with pytest.raises(ParameterError, match=r"^--set scenario\.trak\.speed_m_s: the file has no "
                        r"key 'trak'; did you mean 'track'\?"):

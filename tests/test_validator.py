@@ -46,7 +46,7 @@ KINDS: dict[str, tuple[Callable[..., Any], Path, str, str, float, str]] = {
     "control": (functools.partial(load_config, nominal_tension_N=15e3), control_path(), "mpc",
                 "weight_input", -1.0, r"\[0, 1e\+06\]"),
     "scenario": (load_scenario, scenario_path("W1"), "track", "speed_m_s", 6.0,
-                 r"\[0, 5\] m/s"),
+                 r"\[-5, 5\] m/s"),
 }
 
 

@@ -20,6 +20,7 @@ from trackmj.results.metric_windows import MetricWindows
 from trackmj.scenarios.inputs import INPUT_NAMES, read_inputs
 from trackmj.scenarios.schema import (
     REFERENCE_MAX_N,
+    TRACK_SPEED_MAX_M_S,
     Evaluation,
     Header,
     Hitch,
@@ -140,18 +141,24 @@ class Scenario:
 
     def check_inputs(self, duration_s: float) -> None:
         """ParameterError naming the file and column if a from_file input does not cover a
-        run of ``duration_s`` [s] or F_ref from a file leaves [0, 50 kN]."""
+        run of ``duration_s`` [s], F_ref from a file leaves [0, 50 kN] or a track speed from
+        a file leaves ±5 m/s."""
         for what, signal in self.signals.items():
             signal.check_covers(duration_s, INPUT_NAMES[what])
-        ref = self.signals.get("reference")
-        if ref is not None:
-            keep = ref.t_s <= duration_s + COUPLING_STEP_S
-            bad = (ref.values < 0.0) | (ref.values > REFERENCE_MAX_N)
-            if (bad & keep).any():
-                k = int(np.argmax(bad & keep))
-                raise ParameterError(f"{ref.file} column {ref.column!r} (reference F_ref): "
-                                     f"{ref.values[k]:.6g} N at t = {ref.t_s[k]:.6g} s; it "
-                                     f"must stay in [0, {REFERENCE_MAX_N:g}] N over the run")
+        for what, low, high, unit in (("reference", 0.0, REFERENCE_MAX_N, "N"),
+                                      ("track", -TRACK_SPEED_MAX_M_S, TRACK_SPEED_MAX_M_S,
+                                       "m/s")):
+            signal = self.signals.get(what)
+            if signal is None:
+                continue
+            keep = signal.t_s <= duration_s + COUPLING_STEP_S
+            bad = ((signal.values < low) | (signal.values > high)) & keep
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise ParameterError(f"{signal.file} column {signal.column!r} "
+                                     f"({INPUT_NAMES[what]}): {signal.values[k]:.6g} {unit} at "
+                                     f"t = {signal.t_s[k]:.6g} s; it must stay in [{low:g}, "
+                                     f"{high:g}] {unit} over the run")
 
     def check_machine(self, machine: str) -> None:
         """ParameterError (one line, the reason) if the condition does not apply to
@@ -218,6 +225,19 @@ class Scenario:
         speed, ramp = self._constant_track()
         return speed * max(duration_s - 0.5 * ramp, 0.0)
 
+    def travel_range_m(self, duration_s: float) -> tuple[float, float]:
+        """How far the track carries the vehicle back and forth from its start within
+        ``duration_s`` [s]: (least, greatest) displacement [m], least <= 0 <= greatest
+        (negative: reversing)."""
+        if "track" not in self.signals:          # one way at a constant speed
+            distance = self.distance_m(duration_s)
+            return min(distance, 0.0), max(distance, 0.0)
+        t = np.linspace(0.0, duration_s, max(2, round(duration_s / COUPLING_STEP_S) + 1))
+        speed = self.track_speed_m_s(t)
+        travelled = np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1])
+                                                     * np.diff(t))))
+        return float(min(travelled.min(), 0.0)), float(max(travelled.max(), 0.0))
+
     def steady_speed_m_s(self, duration_s: float) -> float:
         """Mean commanded track speed over the steady window [steady_start_s, duration] [m/s]
         (the speed of a file's trace there; the constant speed otherwise)."""
@@ -261,12 +281,17 @@ class Scenario:
             return None
         road = tr.road()
         duration = self.duration_s if duration_s is None else duration_s
-        distance = self.distance_m(duration)
-        length = distance + road.margin_m - road.x_start_m
+        backward, forward = self.travel_range_m(duration)
         rng = np.random.default_rng([seed, TERRAIN_SEED_SALT])
+        if backward >= 0.0:                      # forward only: from x_start_m behind it
+            length = forward + road.margin_m - road.x_start_m
+            start = road.x_start_m
+        else:                                    # reversing: the road covers both ways
+            start = min(backward - road.margin_m, road.x_start_m)
+            length = max(forward + road.margin_m, -road.x_start_m) - start
         prof = road_profile(length, road.dx_m, road.road_class, rng, n_min=road.n_min_cycles_m,
-                            n_max=road.n_max_cycles_m, x_start_m=road.x_start_m)
-        return taper_start(prof, road.flat_until_m, road.taper_m)
+                            n_max=road.n_max_cycles_m, x_start_m=start)
+        return taper_start(prof, road.flat_until_m, road.taper_m, both_ways=backward < 0.0)
 
     def variant(self, name: str) -> Variant:
         """The variant called ``name``; KeyError listing the available ones."""
@@ -356,18 +381,18 @@ class Scenario:
 
     def _tooth_band_Hz(self, speed_m_s: float,
                        link_pitch_m: float | None) -> tuple[float, float] | None:
-        """Tooth-passing band v/pitch·(1 ± tooth_band_rel) [Hz]; None without a pitch or
-        standing still."""
-        if link_pitch_m is not None and speed_m_s > 0.0:
-            f_tooth = speed_m_s / link_pitch_m
+        """Tooth-passing band |v|/pitch·(1 ± tooth_band_rel) [Hz], either way the track
+        turns; None without a pitch or standing still."""
+        if link_pitch_m is not None and speed_m_s != 0.0:
+            f_tooth = abs(speed_m_s) / link_pitch_m
             rel = self.evaluation.tooth_band_rel
             return (f_tooth * (1.0 - rel), f_tooth * (1.0 + rel))
         return None
 
     def _road_band_Hz(self, speed_m_s: float) -> tuple[float, float] | None:
-        """The band an iso8608 road excites, speed × [n_min, n_max] cycles/m [Hz]; None on
-        flat ground."""
+        """The band an iso8608 road excites, |speed| × [n_min, n_max] cycles/m [Hz]; None
+        on flat ground."""
         if self.terrain.kind != "iso8608":
             return None
         road = self.terrain.road()
-        return (speed_m_s * road.n_min_cycles_m, speed_m_s * road.n_max_cycles_m)
+        return (abs(speed_m_s) * road.n_min_cycles_m, abs(speed_m_s) * road.n_max_cycles_m)

@@ -64,6 +64,8 @@ NAME_PATTERN = r"[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 """Scenario and variant names: they become parts of run directory names."""
 REFERENCE_MAX_N = 50e3
 """F_ref must stay within [0, REFERENCE_MAX_N] over the run [N]."""
+TRACK_SPEED_MAX_M_S = 5.0
+"""The commanded track speed stays within ±TRACK_SPEED_MAX_M_S [m/s] (negative: reverse)."""
 HITCH_LIMIT_N = 30e3
 """A load pulse's hitch force stays within ±HITCH_LIMIT_N [N]."""
 
@@ -132,9 +134,9 @@ class Track(Parameters):
     """Sprocket-driven track speed, reached by a linear ramp from standstill, or read from
     a file (``from_file``, a column in m/s)."""
 
-    speed_m_s: float | None = param(0.0, 5.0, default=None,
-                                    doc="track speed commanded to the sprocket servo "
-                                    "(required without from_file)")
+    speed_m_s: float | None = param(-TRACK_SPEED_MAX_M_S, TRACK_SPEED_MAX_M_S, default=None,
+                                    doc="track speed commanded to the sprocket servo, "
+                                    "negative in reverse (required without from_file)")
     ramp_s: float | None = param(0.0, 10.0, default=None,
                                  doc="duration of the linear start from standstill "
                                  "(required without from_file)")
@@ -276,8 +278,11 @@ _ISO8608_KEYS = tuple(f.name for f in fields(Road))
 class Terrain(Parameters):
     """Ground: ``flat`` or an ``iso8608`` random road of road_class over the spatial band
     [n_min, n_max] cycles/m on a grid of dx_m [m] from x_start_m; flat up to flat_until_m
-    and blended in over taper_m [m]; extends margin_m [m] past the distance driven. The
-    iso8608 keys are required for ``iso8608`` and optional (unused) for ``flat``."""
+    and blended in over taper_m [m]; extends margin_m [m] past the distance driven. A run
+    that reverses behind its start gets the road both ways: from margin_m behind the
+    furthest it backs (or x_start_m) to margin_m past the furthest it goes forward (or
+    −x_start_m), level for |x| <= flat_until_m. The iso8608 keys are required for
+    ``iso8608`` and optional (unused) for ``flat``."""
 
     kind: Literal["flat", "iso8608"] = param(doc="ground model")
     road_class: str | None = param(choices=tuple(ISO8608_GD_N0_M3), default=None,

@@ -43,6 +43,7 @@ from trackmj.machines.track_plant import load_plant
 from trackmj.ports import COUPLING_STEP_S, Command, Readout, StepInputs, TensionerElement
 from trackmj.results.figure_drive import drive_figure
 from trackmj.results.store import ResultWriter, metrics_as_read, parquet_bytes
+from trackmj.scenarios.schema import TRACK_SPEED_MAX_M_S
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.plant import DerailmentStatus, PassiveTensioner, TrackPlant
 
@@ -69,7 +70,6 @@ DERAILMENT_CHECKS = ("slack_strand", "links_off_envelope", "sprocket_disengaged"
 """The checks of the ``derailment`` table, ``derailed`` last (any of the others fails)."""
 DRIVE_FIGURE = "drive.png"
 
-MAX_SPEED_M_S = 5.0
 MAX_DURATION_S = 3600.0
 MAX_HITCH_N = 1e6
 """Largest hitch load ``trackmj drive`` takes [N] (a bound on typing errors: the track's
@@ -180,9 +180,9 @@ def _check_drive(speed_m_s: float, duration_s: float, tensioner: str | Path | No
                  preload_N: float | None, hitch_pull_N: float) -> None:
     """ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s, a hitch
     load outside ±:data:`MAX_HITCH_N` or both a preload and a tensioner file."""
-    if not (math.isfinite(speed_m_s) and abs(speed_m_s) <= MAX_SPEED_M_S):
-        raise ValueError(f"speed {speed_m_s!r} m/s: allowed [-{MAX_SPEED_M_S}, "
-                         f"{MAX_SPEED_M_S}]")
+    if not (math.isfinite(speed_m_s) and abs(speed_m_s) <= TRACK_SPEED_MAX_M_S):
+        raise ValueError(f"speed {speed_m_s!r} m/s: allowed [-{TRACK_SPEED_MAX_M_S}, "
+                         f"{TRACK_SPEED_MAX_M_S}]")
     if not (math.isfinite(duration_s) and 0.0 < duration_s <= MAX_DURATION_S):
         raise ValueError(f"duration {duration_s!r} s: allowed (0, {MAX_DURATION_S}]")
     if not (math.isfinite(hitch_pull_N) and abs(hitch_pull_N) <= MAX_HITCH_N):

@@ -97,12 +97,15 @@ def road_profile(length_m: float, dx_m: float, road_class: str,
     return RoadProfile(float(x_start_m), float(dx_m), z)
 
 
-def taper_start(profile: RoadProfile, flat_until_m: float, taper_m: float) -> RoadProfile:
-    """Profile held at 0 for x <= flat_until_m, blended in by a raised cosine over taper_m [m].
+def taper_start(profile: RoadProfile, flat_until_m: float, taper_m: float, *,
+                both_ways: bool = False) -> RoadProfile:
+    """Profile held at 0 for x <= flat_until_m, blended in by a raised cosine over taper_m [m]
+    (``both_ways``: for |x| <= flat_until_m, blended in over taper_m on either side).
 
-    Lets a vehicle start its run on level ground under its home layout.
+    Lets a vehicle start its run on level ground under its home layout, whichever way it
+    drives off.
     """
-    x = profile.x_m
+    x = np.abs(profile.x_m) if both_ways else profile.x_m
     s = np.clip((x - flat_until_m) / max(taper_m, 1e-12), 0.0, 1.0)
     return RoadProfile(profile.x_start_m, profile.dx_m,
                        profile.z_m * 0.5 * (1.0 - np.cos(np.pi * s)))
