@@ -152,3 +152,35 @@ def test_reversing_pulls_in_the_upper_strand_by_the_drive_torque() -> None:
     assert split == pytest.approx(torque / radius, rel=0.15)
     assert m["mujoco_warnings"] == 0
     assert 10e3 <= m["acceptance"]["mean_min_N"] <= m["acceptance"]["mean_max_N"] <= 20e3
+
+
+def test_a_grade_loads_the_drive_by_the_weights_downhill_share() -> None:
+    """LF1352 at 1 m/s up and down a 1 in 5 grade (tests/data/climb.toml): the drive
+    torque's difference between the two is the weight's component along the slope twice,
+    (T_up − T_down)/(2r) = m·g·sin θ, θ = atan 0.2 (the rolling resistance cancels; measured
+    −2.1 %); down the slope the rear sprocket brakes (T < 0) and pulls in the upper strand."""
+    import math
+    from pathlib import Path
+
+    import mujoco
+
+    from trackmj.sim.setup import prepare
+
+    climb = Path(__file__).parent / "data" / "climb.toml"
+    setup = prepare(climb)
+    model = mujoco.MjModel.from_xml_string(setup.track_mjcf())
+    g = float(np.linalg.norm(model.opt.gravity))
+    assert model.opt.gravity[0] == pytest.approx(-g * math.sin(math.atan(0.2)))
+    downhill_N = float(model.body_subtreemass[0]) * g * math.sin(math.atan(0.2))
+    radius = setup.model.sprocket_pitch_radius_m
+    torques, splits = [], []
+    for grade in (0.2, -0.2):
+        result = simulate(climb, set={"scenario.terrain.grade": grade}, channels="all")
+        cols = result.columns()
+        moving = cols["t_s"] > 1.5
+        torques.append(cols["drive_torque_N_m"][moving].mean())
+        splits.append((cols["lower_strand_tension_N"]
+                       - cols["upper_strand_tension_N"])[moving].mean())
+        assert result.metrics["mujoco_warnings"] == 0
+    assert (torques[0] - torques[1]) / (2.0 * radius) == pytest.approx(downhill_N, rel=0.05)
+    assert torques[1] < 0.0 and splits[1] < -0.5 * downhill_N < 0.5 * downhill_N < splits[0]

@@ -19,9 +19,10 @@ them)::
                   [[reference.ramps]] start_s, rate_N_s | rate_rel_s, end_s (optional)
     [supply]      model (optional); [[supply.drops]] start_s, end_s,
                   pressure_Pa | pressure_rel, transition_s
-    [terrain]     kind; for kind = "iso8608" also road_class, n_min_cycles_m, n_max_cycles_m,
-                  dx_m, x_start_m, flat_until_m, taper_m, margin_m (for "flat" they are
-                  optional and unused, so ``--set scenario.terrain.kind=flat`` works on W2)
+    [terrain]     kind, grade (optional, default 0: level); for kind = "iso8608" also
+                  road_class, n_min_cycles_m, n_max_cycles_m, dx_m, x_start_m, flat_until_m,
+                  taper_m, margin_m (for "flat" they are optional and unused, so
+                  ``--set scenario.terrain.kind=flat`` works on W2)
     [[load_pulses]] start_s, end_s, delta_N | delta_rel, pull_angle_deg, rise_s,
                   hitch_N (optional: calibrated for the machine)
     [[variants]]  name, bulk_modulus_scale, friction_scale, contact_stiffness_scale,
@@ -282,9 +283,13 @@ class Terrain(Parameters):
     that reverses behind its start gets the road both ways: from margin_m behind the
     furthest it backs (or x_start_m) to margin_m past the furthest it goes forward (or
     −x_start_m), level for |x| <= flat_until_m. The iso8608 keys are required for
-    ``iso8608`` and optional (unused) for ``flat``."""
+    ``iso8608`` and optional (unused) for ``flat``. Either ground lies on a slope of
+    ``grade`` (default 0, level)."""
 
     kind: Literal["flat", "iso8608"] = param(doc="ground model")
+    grade: float = param(-1.0, 1.0, default=0.0, unit="1",
+                         doc="slope driven on, tan θ (rise over run; > 0 uphill driving "
+                         "forward): gravity tilted by θ, the ground the model's x axis")
     road_class: str | None = param(choices=tuple(ISO8608_GD_N0_M3), default=None,
                                    doc="ISO 8608 road class (iso8608)")
     n_min_cycles_m: float | None = param(1e-3, 100.0, open_low=True, default=None,

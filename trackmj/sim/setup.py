@@ -55,7 +55,7 @@ from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.entries import by_name
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE, REPLACEABLE_ELEMENT
 from trackmj.track.mechanics import ModelParams, load_model_params
-from trackmj.track.mjcf.builders import with_heightfield
+from trackmj.track.mjcf.builders import on_grade, with_heightfield
 from trackmj.track.mjcf.cache import model_key
 from trackmj.track.plant import TrackPlant
 from trackmj.track.terrain import RoadProfile
@@ -205,9 +205,13 @@ class RunSetup:
         return self.mjcf(self.scenario.terrain_profile(self.seed, self.duration_s))
 
     def mjcf(self, terrain: RoadProfile | None) -> str:
-        """MJCF text of the run's track model, on ``terrain`` (None: flat ground)."""
+        """MJCF text of the run's track model, on ``terrain`` (None: flat ground), on the
+        scenario's grade."""
         text = model_mjcf(self.model, self.machine)
-        return text if terrain is None else with_heightfield(text, terrain)
+        if terrain is not None:
+            text = with_heightfield(text, terrain)
+        grade = self.scenario.terrain.grade
+        return text if grade == 0.0 else on_grade(text, grade)
 
 
 Overrides = Sequence[str] | Mapping[str, Any]

@@ -195,7 +195,8 @@ def idler_force_history(scenario: Scenario, pulse: LoadPulse, rig: Rig) -> np.nd
 
 def side_weight_N(plant: TrackPlant) -> float:
     """Weight of the plant's track side [N]: the mass of every body of its model (chassis
-    share, track, wheels, idler and carrier) times gravity."""
+    share, track, wheels, idler and carrier) times gravity's component normal to the ground
+    (m·g·cos θ on a scenario's grade)."""
     model = plant.model
     return float(model.body_subtreemass[0]) * float(-model.opt.gravity[2])
 

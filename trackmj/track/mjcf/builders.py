@@ -560,6 +560,19 @@ def mjcf_parts(path: str | Path) -> list[tuple[Path, str]]:
     return [(path, text), (part, part.read_text())]
 
 
+def on_grade(mjcf: str, grade: float) -> str:
+    """``mjcf`` on a slope of ``grade`` = tan θ [-] (rise over run, > 0 uphill driving
+    forward, +x): the ground stays the model's x axis and gravity tilts by θ in the x–z
+    plane, g·(−sin θ, 0, −cos θ), its magnitude the model's."""
+    root = ET.fromstring(_strip_comment(mjcf))
+    option = find(root, "option")
+    g = float(np.linalg.norm([float(v) for v in attribute(option, "gravity").split()]))
+    theta = math.atan(grade)
+    option.set("gravity", _fmt(-g * math.sin(theta), 0.0, -g * math.cos(theta)))
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
 def with_heightfield(mjcf: str, profile: RoadProfile) -> str:
     """Replace the flat ground of ``mjcf`` by the heightfield of road ``profile``.
 
