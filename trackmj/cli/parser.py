@@ -192,6 +192,9 @@ def _add_drive(sub: Subcommands) -> None:
     drive.add_argument("--hitch-pull", type=float, default=0.0, metavar="N",
                        help="horizontal rear-hitch load [N]: > 0 a towed load (the sprocket "
                        "drives harder), < 0 a push (it brakes); e.g. 8e3")
+    drive.add_argument("--grade", type=float, default=0.0, metavar="TAN",
+                       help="slope driven on, tan θ (rise over run, > 0 uphill driving "
+                       "forward, in [-1, 1]); e.g. 0.2")
     drive.add_argument("--out", metavar="DIR", help="directory for metrics.json, "
                        "timeseries.parquet and the figure drive.png (default: "
                        "runs/drive-MACHINE-SPEEDmps-HASH, HASH of the other inputs)")

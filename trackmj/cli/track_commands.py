@@ -231,7 +231,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
     out = args.out or _drive_folder(args)
     result = drive(args.speed, args.duration, model=args.model, mjcf=args.mjcf,
                    preload_N=args.preload, out_dir=out, tensioner=args.tensioner,
-                   machine=args.machine, overrides=overrides, hitch_pull_N=args.hitch_pull)
+                   machine=args.machine, overrides=overrides, hitch_pull_N=args.hitch_pull,
+                   grade=args.grade)
     m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
     print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s: {m['real_time_factor']:.2f}x "
           f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
@@ -244,7 +245,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
     print(f"vehicle speed      {s['vehicle_speed_mean_m_s']:.3f} m/s "
           f"(sprocket pitch speed {s['track_speed_mean_m_s']:.3f} m/s)")
     print(f"drive torque       mean {s['drive_torque_mean_N_m'] / 1e3:.3f} kN·m"
-          + (f" (hitch load {args.hitch_pull / 1e3:g} kN)" if args.hitch_pull else ""))
+          + (f" (hitch load {args.hitch_pull / 1e3:g} kN)" if args.hitch_pull else "")
+          + (f" (grade {args.grade:g})" if args.grade else ""))
     contacts = sum(e["contact_work_J"].values())
     print(f"energy [kJ]        drive {e['drive_work_J'] / 1e3:.3f}, tensioner "
           f"{e['tensioner_work_J'] / 1e3:.3f}, suspension {e['suspension_loss_J'] / 1e3:.3f}, "
@@ -268,13 +270,15 @@ def cmd_drive(args: argparse.Namespace) -> int:
 
 def _drive_folder(args: argparse.Namespace) -> str:
     """Default folder of ``drive``: ``runs/drive-MACHINE-SPEED`` and the first 8 digits of
-    the SHA-256 of its other inputs (duration, preload, a hitch load, ``--set``, and the
+    the SHA-256 of its other inputs (duration, preload, a hitch load, a grade, ``--set``, and the
     content of the model, MJCF and tensioner files), so drives of other inputs never share a
     folder and a drive of the same inputs replaces its old result."""
     inputs: dict[str, object] = {"duration_s": args.duration, "preload_N": args.preload,
                                  "set": sorted(args.set)}
     if args.hitch_pull:
         inputs["hitch_pull_N"] = args.hitch_pull
+    if args.grade:
+        inputs["grade"] = args.grade
     for option in ("model", "mjcf", "tensioner", "machine"):
         given = getattr(args, option)
         if given is not None and Path(given).is_file():

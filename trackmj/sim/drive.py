@@ -108,25 +108,30 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
           mjcf: str | Path | None = None, preload_N: float | None = None,
           out_dir: str | Path | None = None,
           tensioner: str | Path | None = None, machine: str | Path | None = None,
-          overrides: dict[str, Any] | None = None, hitch_pull_N: float = 0.0) -> DriveResult:
+          overrides: dict[str, Any] | None = None, hitch_pull_N: float = 0.0,
+          grade: float = 0.0) -> DriveResult:
     """Drive the track at ``speed_m_s`` [m/s] (ramped over min(1 s, duration/4)) for
     ``duration_s`` [s] with the passive tensioner (its ``preload_N`` [N] if given) or the
     ``tensioner`` file's, book the energy ledger from rest and check derailment every
     :data:`DERAILMENT_CHECK_S`; write ``out_dir`` (metrics, timeseries, figure) if given.
     ``hitch_pull_N`` [N]: a horizontal load on the rear hitch, rearward (a towed load: the
     sprocket drives harder) or, < 0, forward (a push: it brakes), ramped up over twice the
-    speed ramp.
+    speed ramp. ``grade`` [-]: the slope driven on, tan θ (> 0 uphill driving forward):
+    gravity tilted by θ as a scenario's ``[terrain] grade`` tilts it.
     ``machine``, ``model`` (a model parameter TOML replacing the machine's mechanics),
     ``overrides`` (``{dotted key: value}`` of the model file) and ``mjcf`` (an MJCF file)
     as in :func:`trackmj.machines.track_plant.load_plant`.
 
-    Raises ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s or a
-    hitch load outside ±:data:`MAX_HITCH_N`,
+    Raises ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s, a
+    hitch load outside ±:data:`MAX_HITCH_N` or a grade outside [−1, 1],
     ParameterError for a bad tensioner file (before any work), PhysicsError if the track
     leaves physics, PhysicsError or FmuError if an FMU tensioner leaves physics or fails.
     """
-    _check_drive(speed_m_s, duration_s, tensioner, preload_N, hitch_pull_N)
+    _check_drive(speed_m_s, duration_s, tensioner, preload_N, hitch_pull_N, grade)
     plant = load_plant(mjcf, model, machine=machine, overrides=overrides)
+    if grade != 0.0:
+        g, theta = float(np.linalg.norm(plant.model.opt.gravity)), math.atan(grade)
+        plant.model.opt.gravity[:] = (-g * math.sin(theta), 0.0, -g * math.cos(theta))
     element, described, passive_preload_N = _drive_tensioner(plant, tensioner, preload_N)
     ramp_s = min(1.0, duration_s / 4.0)
     steps = round(duration_s / COUPLING_STEP_S)
@@ -141,7 +146,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     energy = ledger.finish()
     metrics = {
         "speed_m_s": speed_m_s, "duration_s": duration_s, "ramp_s": ramp_s,
-        "hitch_pull_N": hitch_pull_N,
+        "hitch_pull_N": hitch_pull_N, "grade": grade,
         "machine": resolve(machine).name,
         "model_file": None if model is None else str(model),
         "mjcf_file": None if mjcf is None else str(mjcf),
@@ -177,9 +182,10 @@ def integrator_created_rel(numerical_J: float, drive_work_J: float) -> float:
 
 
 def _check_drive(speed_m_s: float, duration_s: float, tensioner: str | Path | None,
-                 preload_N: float | None, hitch_pull_N: float) -> None:
+                 preload_N: float | None, hitch_pull_N: float, grade: float) -> None:
     """ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s, a hitch
-    load outside ±:data:`MAX_HITCH_N` or both a preload and a tensioner file."""
+    load outside ±:data:`MAX_HITCH_N`, a grade outside [−1, 1] or both a preload and a
+    tensioner file."""
     if not (math.isfinite(speed_m_s) and abs(speed_m_s) <= TRACK_SPEED_MAX_M_S):
         raise ValueError(f"speed {speed_m_s!r} m/s: allowed [-{TRACK_SPEED_MAX_M_S}, "
                          f"{TRACK_SPEED_MAX_M_S}]")
@@ -188,6 +194,8 @@ def _check_drive(speed_m_s: float, duration_s: float, tensioner: str | Path | No
     if not (math.isfinite(hitch_pull_N) and abs(hitch_pull_N) <= MAX_HITCH_N):
         raise ValueError(f"hitch pull {hitch_pull_N!r} N: allowed [-{MAX_HITCH_N:g}, "
                          f"{MAX_HITCH_N:g}]")
+    if not (math.isfinite(grade) and abs(grade) <= 1.0):
+        raise ValueError(f"grade {grade!r}: allowed [-1, 1] (tan θ)")
     if tensioner is not None and preload_N is not None:
         raise ValueError("give a preload or a tensioner file, not both")
 
