@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from trackmj.ports import unit_suffix
-from trackmj.results.verdict import never_back, run_verdict
+from trackmj.results.verdict import not_back_texts, run_verdict
 
 SUMMARY_METRICS = ("rmse_lp_N", "rmse_N", "ripple_rms_N", "ripple_band_rms_N.tooth_passing",
                    "ripple_band_rms_N.body_mode", "peak_error_lp_N", "peak_error_N",
@@ -35,8 +35,9 @@ DISTURBANCE_METRICS = ("disturbance_peak_error_lp_N", "recovery_time_lp_s")
 UNSETTLED = ("settling_time_lp_s", "recovery_time_lp_s")
 """Times that read "not within ±band" when they never came."""
 EDGE_RECOVERY = "acceptance.recovery_max_s"
-"""The acceptance's slowest return after a disturbance edge: reads "never after the E s
-edge" when the 0.5 s mean did not come back after some edge."""
+"""The acceptance's slowest return after a disturbance edge: where the 0.5 s mean did not
+come back after some edge, names those edges in the verdict's words ("not back after the
+E s edge before the next one at F s", "never after the E s edge")."""
 VALVE_METRICS = ("valve_switches", "valve_switch_rate_Hz")
 """Rows that read "n/a" for a run whose tensioner takes no valve mode
 (``valve_mode_applied`` false: a passive tensioner, an FMU without a valve_mode input)."""
@@ -51,7 +52,8 @@ def summary_table(results: list, title: str) -> str:
     with ``r=`` the result heads its column). Rows of a step or a disturbance appear only
     where the scenario has one; a settling or recovery time that never came reads "not
     within ±band" instead of a dash (the acceptance's edge recovery names the edges it
-    never came back after), a valve metric of a tensioner without valves "n/a".
+    did not come back after, as the verdict below does), a valve metric of a tensioner
+    without valves "n/a".
     Below the table, each run's acceptance verdict (:func:`acceptance_line`) and one
     warning line per flag of each run (:func:`warning_lines`)."""
     # start-up: --help and argument errors must not import SciPy
@@ -110,9 +112,9 @@ def _cell(value: float, metrics: Mapping[str, Any], window: dict, key: str,
     if key in UNSETTLED and "settle_band_rel" in window:
         return f"not within ±{100 * window['settle_band_rel']:g} %"
     if key == EDGE_RECOVERY:
-        never = never_back(metrics.get("acceptance") or {})
-        if never:
-            return f"never after the {', '.join(never)} s edge{'s' * (len(never) > 1)}"
+        not_back = not_back_texts(metrics.get("acceptance") or {})
+        if not_back:
+            return ", ".join(not_back)
     return "–"
 
 

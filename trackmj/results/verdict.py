@@ -6,7 +6,7 @@ stack."""
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,17 +43,6 @@ class Verdict:
         """How many disturbance edges were judged."""
         return len(self.edge_times)
 
-    def _late(self, edge: str, s: float) -> str:
-        """A late edge in words: NaN is "not back before the next edge" (the recovery is
-        judged up to it) or, after the last, "never"."""
-        if not math.isnan(s):
-            return f"{s:.2f} s after the {edge} s edge"
-        later = [e for e in self.edge_times if float(e) > float(edge)]
-        if later:
-            following = min(later, key=float)
-            return f"not back after the {edge} s edge before the next one at {following} s"
-        return f"never after the {edge} s edge"
-
     @property
     def broken(self) -> list[str]:
         """The rules broken, in order: "band", "recovery", "steady offset"."""
@@ -88,7 +77,8 @@ class Verdict:
             why.append(f"band: {span}, outside {band}")
         if "recovery" in self.broken:
             why.append(f"recovery within {back}: " + ", ".join(
-                self._late(edge, s) for edge, s in self.late_edges.items()))
+                late_edge_text(edge, s, self.edge_times)
+                for edge, s in self.late_edges.items()))
         if "steady offset" in self.broken:
             why.append(f"steady offset {100 * self.steady_offset_rel:.2f} % (limit "
                        f"{100 * self.steady_offset_max_rel:g} %)")
@@ -112,11 +102,25 @@ def verdict(figures: Mapping[str, Any], band_N: tuple[float, float],
                    tuple(recovery))
 
 
-def never_back(figures: Mapping[str, Any]) -> list[str]:
+def late_edge_text(edge: str, s: float, edges: Sequence[str]) -> str:
+    """A late disturbance edge in words (``edge`` and ``edges``, every edge judged, keyed by
+    their times [s]; ``s`` its recovery time [s]): NaN is "not back before the next edge"
+    (the recovery is judged up to it) or, after the last, "never"."""
+    if not math.isnan(s):
+        return f"{s:.2f} s after the {edge} s edge"
+    later = [e for e in edges if float(e) > float(edge)]
+    if later:
+        following = min(later, key=float)
+        return f"not back after the {edge} s edge before the next one at {following} s"
+    return f"never after the {edge} s edge"
+
+
+def not_back_texts(figures: Mapping[str, Any]) -> list[str]:
     """The disturbance edges (keyed by their time, as in ``figures["edge_recovery_s"]``)
-    after which the trailing mean never came back: a recovery that is None (read back from
-    JSON) or NaN."""
-    return [edge for edge, s in (figures.get("edge_recovery_s") or {}).items()
+    after which the trailing mean did not come back (a recovery that is None, read back
+    from JSON, or NaN), each in the verdict's words (:func:`late_edge_text`)."""
+    recovery = figures.get("edge_recovery_s") or {}
+    return [late_edge_text(edge, math.nan, tuple(recovery)) for edge, s in recovery.items()
             if math.isnan(_number(s))]
 
 
