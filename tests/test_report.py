@@ -89,6 +89,10 @@ def test_claims_on_synthetic_runs_state_what_they_measure(tmp_path) -> None:
         assert (tmp_path / figure).stat().st_size > 20_000
 
 
+WALL_S = {"tp": 3.0, "dp-a": 2.0, "dp-b": 1.0}
+"""The wall time [s] of a synthetic run in its worker, by architecture."""
+
+
 class _SyntheticExecutor:
     """Stands in for the Dask executor: synthetic runs of the asked-for specs."""
 
@@ -102,12 +106,13 @@ class _SyntheticExecutor:
             self.ran.append(spec)
             yield RunOutcome(spec, result=synthetic_result(
                 "W1", spec.architecture, seed=spec.seed, duration_s=spec.duration,
-                energy=energy_table()), wall_time_s=0.01)
+                energy=energy_table()), wall_time_s=WALL_S[spec.architecture])
 
 
 def test_report_resumes_done_runs_and_reruns_others(tmp_path) -> None:
     """Runs done in OUT (their identity in results.parquet and under runs/) are read back
-    without running; a run of another duration is not the same run."""
+    without running, and report.md gives their wall time as stored when they ran; a run of
+    another duration is not the same run."""
     runs = R.plan(["W1"], [0], 6.0, baselines=())
     assert [(r.spec.architecture, r.spec.controller) for r in runs] == [
         ("tp", "nmpc"), ("dp-a", "nmpc"), ("dp-b", "nmpc")]
@@ -116,8 +121,14 @@ def test_report_resumes_done_runs_and_reruns_others(tmp_path) -> None:
     assert (first.resumed, len(first.results), len(ex.ran)) == (0, 3, 3)
     assert sorted(p.name for p in (tmp_path / RUNS).iterdir() if not p.name.startswith(".")) \
         == ["W1-dp-a-nmpc-nominal-s0", "W1-dp-b-nmpc-nominal-s0", "W1-tp-nmpc-nominal-s0"]
+    walls = "dp-a 2.0 (1 run), dp-b 1.0 (1 run), tp 3.0 (1 run)."
+    assert f"Wall time of one run in its worker (mean, s): {walls}" in M._invocation(first)
     done = R.run_matrix(runs, tmp_path, progress=False, executor=ex)
     assert (done.resumed, len(done.results), len(ex.ran)) == (3, 3, 3)
+    said = M._invocation(done)
+    assert ("Wall time of one resumed run in its worker, as stored when it ran (mean, s): "
+            f"{walls}") in said
+    assert not any(line.startswith("Wall time of one run") for line in said)
     longer = R.run_matrix(R.plan(["W1"], [0], 8.0, baselines=())[:1], tmp_path,
                           progress=False, executor=ex)
     assert (longer.resumed, len(ex.ran)) == (0, 4)

@@ -144,26 +144,33 @@ def run_matrix(runs: Sequence[PlannedRun], out_dir: str | Path, *, workers: int 
     """Make the runs of a report in ``out_dir`` (a campaign of kind ``report``,
     :mod:`trackmj.study.campaign`): each run is written to ``OUT/runs/<name>/`` and its row to
     ``OUT/results.parquet`` as it finishes; a run already done there (same identity) is
-    read back instead. A failed run is reported and left out."""
+    read back instead, its wall time from its row. A failed run is reported and left out."""
     start = time.perf_counter()
     load_start = os.getloadavg()[0]
     run_wall: dict[str, list[float]] = defaultdict(list)
+    computed: set[str] = set()
 
     def on_outcome(run: PlannedRun, outcome: RunOutcome) -> None:
+        computed.add(run.key)
         run_wall[outcome.spec.architecture].append(outcome.wall_time_s)
         if not outcome.ok:
             print(f"trackmj: {run.name}: {outcome.error}", file=sys.stderr)
 
+    unique = list({r.key: r for r in runs}.values())
+    stored_wall: dict[str, list[float]] = defaultdict(list)
     with Store(out_dir, "report", markers=(RUNS, REPORT)) as store:
         made = run_campaign(store, runs, executor=executor, workers=workers,
                             scheduler=scheduler, progress="report" if progress else None,
                             need_results=True, on_outcome=on_outcome)
-    results = [made.results[r.key] for r in {r.key: r for r in runs}.values()
-               if r.key in made.results]
+        for r in unique:   # a resumed run's own wall time, from its row
+            wall = store.rows.get(r.key, {}).get("wall_time_s")
+            if r.key in made.results and r.key not in computed and wall is not None:
+                stored_wall[r.spec.architecture].append(float(wall))
+    results = [made.results[r.key] for r in unique if r.key in made.results]
     return MatrixRun(results, [(o.spec, o.error or "failed") for o in made.failed],
                      made.resumed, time.perf_counter() - start,
                      workers or (None if scheduler else os.cpu_count()),
-                     (load_start, os.getloadavg()[0]), dict(run_wall))
+                     (load_start, os.getloadavg()[0]), dict(run_wall), dict(stored_wall))
 
 
 def check_report_dir(out: str | Path) -> Path:

@@ -107,7 +107,8 @@ def _header(results: Sequence[Result]) -> list[str]:
 
 
 def _invocation(timing: MatrixRun) -> list[str]:
-    """This invocation: runs computed and resumed, wall time, load, failures."""
+    """This invocation: runs computed and resumed, wall time, load, each run's wall time
+    (a resumed run's as stored when it ran), failures."""
     computed = len(timing.results) - timing.resumed
     rate = computed / timing.wall_time_s * 3600.0 if timing.wall_time_s > 0 else math.nan
     lines = [f"This invocation: {computed} runs computed and {timing.resumed} resumed "
@@ -116,15 +117,23 @@ def _invocation(timing: MatrixRun) -> list[str]:
              f"{timing.load_average[0]:.1f} at the start, {timing.load_average[1]:.1f} "
              f"at the end; {len(timing.failed)} failed.", ""]
     if timing.run_wall_s:
-        lines += ["Wall time of one run in its worker (mean, s): " + ", ".join(
-            f"{a} {np.mean(w):.1f} ({len(w)} runs)" for a, w in
-            sorted(timing.run_wall_s.items())) + ".", ""]
+        lines += [f"Wall time of one run in its worker (mean, s): {_walls(timing.run_wall_s)}.",
+                  ""]
+    if timing.resumed_wall_s:
+        lines += ["Wall time of one resumed run in its worker, as stored when it ran (mean, "
+                  f"s): {_walls(timing.resumed_wall_s)}.", ""]
     for spec, error in timing.failed:
         lines.append(f"- failed: {spec.scenario} {spec.architecture} {spec.controller} "
                      f"{spec.variant} seed {spec.seed}: {error}")
     if timing.failed:
         lines.append("")
     return lines
+
+
+def _walls(by_arch: dict[str, list[float]]) -> str:
+    """Runs' wall times by architecture [s] as "tp 1.2 (3 runs), dp-a ..."."""
+    return ", ".join(f"{a} {np.mean(w):.1f} ({len(w)} run{'s' * (len(w) != 1)})"
+                     for a, w in sorted(by_arch.items()))
 
 
 STUDY_MACHINE = "lf1352"

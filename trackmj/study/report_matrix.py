@@ -22,8 +22,9 @@ from trackmj.study.executor import RunSpec
 class MatrixRun:
     """What :func:`trackmj.study.report.run_matrix` did: the results (resumed and new), the
     runs that failed (spec, error), how many were resumed, the wall time [s], the workers,
-    the 1-min load average at the start and the end, and each computed run's own wall time
-    in its worker by architecture [s]."""
+    the 1-min load average at the start and the end, each computed run's own wall time in
+    its worker by architecture [s], and each resumed run's, as its row in results.parquet
+    stored it when it ran [s]."""
 
     results: list[Result]
     failed: list[tuple[RunSpec, str]] = field(default_factory=list)
@@ -32,6 +33,7 @@ class MatrixRun:
     workers: int | None = None
     load_average: tuple[float, float] = (math.nan, math.nan)
     run_wall_s: dict[str, list[float]] = field(default_factory=dict)
+    resumed_wall_s: dict[str, list[float]] = field(default_factory=dict)
 
 
 def _variant(r: Result) -> str:
