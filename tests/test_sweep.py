@@ -96,6 +96,8 @@ def test_integer_keys_take_integers() -> None:
     ({"set": [f"{BULK}=1e9"], "parameters": [{"key": BULK, "values": [2e9]}]},
      r"is also fixed in \[sweep\].set"),
     ({"controllers": ["nmpc", "mpcc"]}, r"controllers\[1\] = 'mpcc' is not one of"),
+    ({"hydraulics": "my_hyd.toml"},
+     r"^study\.toml \[sweep\]\.hydraulics = 'my_hyd\.toml': no such file \S+/my_hyd\.toml$"),
 ])
 def test_spec_mistakes_are_named_before_any_run(tmp_path, table, message) -> None:
     path = tmp_path / "study.toml"
@@ -505,6 +507,25 @@ def test_a_failing_run_becomes_an_error_row(executor, tmp_path) -> None:
     assert "0 (1 failed)" in (tmp_path / "summary.md").read_text()
     again = sweep(spec, tmp_path, executor=executor, progress=False, plot=False)
     assert (again.ran, again.skipped) == (0, 2)
+
+
+def test_a_missing_machine_file_is_refused_naming_the_spec_key_and_path(tmp_path,
+                                                                        capsys) -> None:
+    """A machine file that is not there (in the spec or as --machine) is refused up front in
+    one line naming where it was given and the path looked for, not blamed on a run."""
+    spec = tmp_path / "study.toml"
+    spec.write_text('[sweep]\nscenario = "W1"\nmachine = "mini_machine.toml"\n')
+    out = tmp_path / "out"
+    assert main(["sweep", str(spec), "--out", str(out)]) == 2
+    missing = tmp_path / "mini_machine.toml"
+    assert capsys.readouterr().err == (f"trackmj: error: study.toml [sweep].machine = "
+                                       f"'mini_machine.toml': machine file not found: "
+                                       f"{missing}\n")
+    spec.write_text('[sweep]\nscenario = "W1"\n')
+    assert main(["sweep", str(spec), "--out", str(out), "--machine", str(missing)]) == 2
+    assert capsys.readouterr().err == f"trackmj: error: --machine: machine file not found: " \
+                                      f"{missing}\n"
+    assert not out.exists()
 
 
 def test_cli_sweep_refuses_a_bad_spec_naming_it(tmp_path, capsys) -> None:

@@ -35,8 +35,9 @@ Spec file (read by the one validator, :mod:`trackmj.validator`; every key but ``
 File paths are relative to the spec file. The runs are scenarios x parameter points x
 architectures x controllers x seeds. Swept keys are numeric keys of the model, hydraulics,
 control or scenario files; a key the file declares as an integer takes integral values (an
-LHS sample is rounded). Every run is validated before the first one starts: a bad key or
-value is an error naming the spec file, the parameter and the allowed range.
+LHS sample is rounded). Every run is validated before the first one starts: a missing file
+is an error naming the spec file, the key and the path; a bad key or value, one naming the
+spec file, the parameter and the allowed range.
 
 Output directory ``DIR``:
 
@@ -93,7 +94,7 @@ from typing import Any, Literal, TypedDict, TypeVar, overload
 import numpy as np
 
 from trackmj.io import write_text_atomic
-from trackmj.machines.assembly import names
+from trackmj.machines.assembly import names, resolve
 from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.results.columns import column_unit, is_key_column, key_field
 from trackmj.results.metrics import METRIC_DISPLAY, METRICS
@@ -283,7 +284,7 @@ class SweepSpec:
         """A file of the spec as an absolute path string (built-in scenario names stay)."""
         if value is None:
             return None
-        if value.upper() in {name.upper() for name in builtin_names()}:
+        if _builtin(value):
             return value
         path = Path(value).expanduser()
         return str(path if path.is_absolute() else (self.base / path).resolve())
@@ -293,6 +294,11 @@ class SweepSpec:
         the spec gives exactly one)."""
         names = self.table.scenarios or (_given(self.table.scenario, "scenario"),)
         return tuple(self.path(n) for n in names)
+
+
+def _builtin(scenario: str) -> bool:
+    """Whether ``scenario`` names a built-in scenario (any case), not a file."""
+    return scenario.upper() in {name.upper() for name in builtin_names()}
 
 
 def load_sweep(spec: str | Path | Mapping[str, Any] | SweepSpec) -> SweepSpec:
@@ -426,10 +432,31 @@ def _fixed_overrides(spec: SweepSpec) -> dict[str, Any]:
     return fixed
 
 
+def _check_files(spec: SweepSpec, files: _Files) -> None:
+    """Every file the spec names exists and its machine loads; else ParameterError naming
+    the spec, the key and the path, before the runs are validated (which would blame the
+    first run)."""
+    table = spec.table
+    named = ([("scenario", table.scenario)] if table.scenarios is None else
+             [(f"scenarios[{i}]", name) for i, name in enumerate(table.scenarios)])
+    named += [(kind, getattr(table, kind)) for kind in ("model", "hydraulics", "control",
+                                                        "tensioner")]
+    for key, value in named:
+        if value is not None and not _builtin(value) and not Path(spec.path(value)).is_file():
+            raise ParameterError(f"{spec.where()} [sweep].{key} = {value!r}: no such file "
+                                 f"{spec.path(value)}")
+    try:
+        resolve(files["machine"])
+    except ParameterError as exc:
+        raise ParameterError(f"{spec.where()} [sweep].machine = {table.machine!r}: "
+                             f"{exc}") from None
+
+
 def plan(spec: SweepSpec) -> list[PlannedRun]:
     """Every run of ``spec`` (:class:`trackmj.study.campaign.PlannedRun`), each validated by
     :func:`trackmj.sim.setup.prepare` (the same checks as ``trackmj run``); ParameterError
-    naming the spec and the run if one is invalid, before anything runs. A duration that
+    naming the spec and the key of a missing file or a bad machine, or the run if one is
+    invalid, before anything runs. A duration that
     would cut off one of a scenario's events moves the events inside the run
     (:func:`trackmj.scenarios.events.moved_events`); the moves are fixed overrides of the run."""
     table = spec.table
@@ -445,6 +472,7 @@ def plan(spec: SweepSpec) -> list[PlannedRun]:
         "control": spec.path(table.control), "tensioner": spec.path(table.tensioner),
         "machine": (table.machine if table.machine is None or table.machine in names()
                     else spec.path(table.machine))}
+    _check_files(spec, files)
     inputs = json.dumps({"files": {k: v for k, v in files.items() if v},
                          "set": list(table.set or ())}, sort_keys=True)
     runs = []
@@ -914,9 +942,15 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
     """
     spec = load_sweep(spec)
     if tensioner is not None:
+        if not Path(tensioner).is_file():
+            raise ParameterError(f"--tensioner: no such file {Path(tensioner).resolve()}")
         spec = dataclasses.replace(spec, table=dataclasses.replace(
             spec.table, tensioner=str(Path(tensioner).resolve())))
     if machine is not None:
+        try:
+            resolve(machine)
+        except ParameterError as exc:
+            raise ParameterError(f"--machine: {exc}") from None
         spec = dataclasses.replace(spec, table=dataclasses.replace(spec.table,
                                                                    machine=machine))
     runs = plan(spec)
