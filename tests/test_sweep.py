@@ -134,7 +134,8 @@ INPUTS = '{"files": {}, "set": []}'
 
 def _row(key: str, point: int, seed: int = 0, **cells) -> dict:
     """A results row as a sweep writes it (W1 tp nmpc/ekf, 1.5 s), ``cells`` on top."""
-    return {"run_key": key, "point": point, "scenario": "W1", "architecture": "tp",
+    return {"run_key": key, "point": point, "scenario": "W1", "machine": "lf1352",
+            "architecture": "tp",
             "controller": "nmpc", "estimator": "ekf", "variant": "nominal", "seed": seed,
             "duration_s": 1.5, "inputs": INPUTS, "evaluation.lowpass_cutoff_Hz": 2.0,
             "wall_time_s": 1.0, "error": None} | cells
@@ -184,6 +185,52 @@ def test_the_summary_has_a_row_per_point_in_display_units() -> None:
     text = summary_markdown(table)
     assert "tension RMSE, raw [kN]" in text.split("left out")[1]
     assert "seed 0" in text and "2 Hz" in text
+
+
+def test_machines_by_name_files_and_overrides_readable(tmp_path, monkeypatch) -> None:
+    """Rows of the packaged machine and of a machine file mini_machine.toml whose [machine]
+    name is "mini", given a hydraulics file and a fixed override: the summary (Markdown and
+    CSV) and the figure's legend name the machine "mini", the file by its name, the override
+    as given, and show no JSON."""
+    from trackmj.study.sweep import plot_sweep, summarize, summary_csv, summary_markdown
+
+    mini = json.dumps({"files": {"machine": "/w/mini_machine.toml",
+                                 "hydraulics": "/w/soft_hyd.toml"},
+                       "set": [f"{SPEED}=1.0"]}, sort_keys=True)
+    rows = [_row(f"a{i}", i, **{BULK: b, "rmse_lp_N": 100.0}) for i, b in enumerate((8e8, 16e8))]
+    rows += [_row(f"b{i}", i, machine="mini", inputs=mini, **{BULK: b, "rmse_lp_N": 200.0})
+             for i, b in enumerate((8e8, 16e8))]
+    table = summarize(rows)
+    markdown = summary_markdown(table)
+    head, _, *body = _table_lines(markdown)
+    assert head[:4] == ["machine", "hydraulics", "set", f"{BULK} [Pa]"]
+    assert [row[:3] for row in body] == [["lf1352", "", ""]] * 2 + [
+        ["mini", "soft_hyd.toml", f"{SPEED}=1.0"]] * 2
+    assert "hydraulics: the file its spec gave every run instead of the machine's own" in \
+        " ".join(markdown.split())
+    for text in (markdown, summary_csv(table)):
+        assert "{" not in text and "mini_machine" not in text
+    write_table(rows, tmp_path / "results.parquet")
+    drawn = _drawn(monkeypatch)
+    plot_sweep(tmp_path)
+    legend = [line.get_label() for line in drawn[f"{BULK}.png"].axes[0].get_lines()]
+    assert legend == ["lf1352", f"mini, soft_hyd.toml, {SPEED}=1.0"]
+
+
+def test_a_row_written_before_the_machine_column_is_named_by_its_machine_file() -> None:
+    """A results row of an earlier trackmj (no machine column, the machine file in inputs)
+    is named by the file's [machine] name and superseded by the newer row of its point."""
+    from trackmj.machines.assembly import resolve
+    from trackmj.study.sweep import summarize
+
+    inputs = json.dumps({"files": {"machine": str(resolve("compact3").file)}, "set": []})
+    old = _row("old", 0, inputs=inputs, rmse_lp_N=900.0)
+    del old["machine"]
+    table = summarize([old, _row("new", 0, machine="compact3", inputs=inputs,
+                                 rmse_lp_N=500.0)])
+    assert [(r.case["machine"], r.stats("rmse_lp_N")[0]) for r in table.rows] == [
+        ("compact3", 500.0)]
+    assert table.superseded == 1
 
 
 def test_the_markdown_table_parses() -> None:

@@ -166,12 +166,18 @@ def _shared_case(points: Sequence[SweepPoint]) -> tuple[str, list[str]]:
     case = points[0].case
     words = []
     for f in fields:
-        if f in varied or f == "inputs" or case.get(f) is None:
+        if f in varied or case.get(f) is None:
             continue
         value = case[f]
         words.append(f"{value:g} s runs" if f == "duration_s" and isinstance(value, float)
                      else str(value))
     return ", ".join(words), varied
+
+
+def _case_text(case: Mapping[str, Any], fields: Sequence[str]) -> str:
+    """The values of a point's case ``fields`` as a legend names its line or bar, those it
+    has not (e.g. no file given instead of the machine's) left out."""
+    return ", ".join(str(case[f]) for f in fields if case.get(f) is not None)
 
 
 def _style(j: int, labelled: bool) -> dict[str, Any]:
@@ -199,8 +205,7 @@ def _key_lines(points: Sequence[SweepPoint], key: str, others: list[str], varied
     lines: dict[tuple, list[SweepPoint]] = {}
     for p in points:
         if key in p.values:
-            ident = (tuple(str(p.case.get(f)) for f in varied),
-                     tuple(p.values.get(k) for k in others))
+            ident = (_case_text(p.case, varied), tuple(p.values.get(k) for k in others))
             lines.setdefault(ident, []).append(p)
     scattered = len(lines) > 1 and all(len(ps) == 1 for ps in lines.values())
     if scattered:   # e.g. Latin hypercube samples
@@ -211,9 +216,9 @@ def _key_lines(points: Sequence[SweepPoint], key: str, others: list[str], varied
     out = []
     for (case, other), ps in sorted(lines.items(), key=lambda item: (
             item[0][0], [(v is None, v if v is not None else 0.0) for v in item[0][1]])):
-        words = list(case) + [_key_value_text(k, v) for k, v in zip(others, other,
-                                                                   strict=False)
-                              if v is not None] + ([SCATTER_TEXT] if scattered else [])
+        words = ([case] if case else []) + [
+            _key_value_text(k, v) for k, v in zip(others, other, strict=False)
+            if v is not None] + ([SCATTER_TEXT] if scattered else [])
         out.append((", ".join(words) or "runs", sorted(ps, key=lambda p: p.values[key])))
     return out
 
@@ -278,7 +283,7 @@ def _case_figure(points: Sequence[SweepPoint], panels: Sequence[Panel], heading:
     shared, varied = _shared_case(points)
     scenarios = list(dict.fromkeys(str(p.case.get("scenario")) for p in points))
     fields = [f for f in varied if f != "scenario"]
-    bars = list(dict.fromkeys(", ".join(str(p.case.get(f)) for f in fields) for p in points))
+    bars = list(dict.fromkeys(_case_text(p.case, fields) for p in points))
     labels = bars if fields else []
     fig, axes, _ = _panel_grid(len(panels), _legend_rows(labels))
     width = 0.8 / len(bars)
@@ -287,7 +292,7 @@ def _case_figure(points: Sequence[SweepPoint], panels: Sequence[Panel], heading:
         for j, bar in enumerate(bars):
             stats = np.full((len(scenarios), 3), np.nan)
             for p in points:
-                if ", ".join(str(p.case.get(f)) for f in fields) == bar:
+                if _case_text(p.case, fields) == bar:
                     stats[scenarios.index(str(p.case.get("scenario")))] = p.stats(panel.key)
             color, hatch = BAR_STYLES[j % len(BAR_STYLES)]
             spread = stats[:, 2] >= 2

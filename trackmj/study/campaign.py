@@ -59,11 +59,11 @@ LOCK = ".campaign.lock"
 RUNS = "runs"
 WRITE_PERIOD_S = 2.0
 """results.parquet is rewritten at most this often while runs finish [s]."""
-IDENTITY = ("run_key", "point", "scenario", "architecture", "controller", "estimator",
-            "variant", "seed", "duration_s", "inputs")
-"""Columns naming a run, first in every row."""
-TEXT_COLUMNS = ("run_key", "scenario", "architecture", "controller", "estimator", "variant",
-                "inputs", "error")
+IDENTITY = ("run_key", "point", "scenario", "machine", "architecture", "controller",
+            "estimator", "variant", "seed", "duration_s", "inputs")
+"""Columns naming a run, first in every row (``machine``: the name in its machine file)."""
+TEXT_COLUMNS = ("run_key", "scenario", "machine", "architecture", "controller", "estimator",
+                "variant", "inputs", "error")
 
 
 # ----------------------------------------------------------------------------- the store
@@ -284,7 +284,8 @@ def plan_run(spec: RunSpec, *, setup: RunSetup | None = None, point: int | None 
         setup = prepare(**spec.prepare_kwargs())
     key = run_key(setup)
     row = {"run_key": key, "point": point, "scenario": setup.scenario.name,
-           "architecture": setup.architecture, "controller": setup.controller,
+           "machine": setup.machine.name, "architecture": setup.architecture,
+           "controller": setup.controller,
            "estimator": setup.estimator, "variant": setup.variant.name, "seed": setup.seed,
            "duration_s": setup.duration_s, "inputs": inputs, **dict(values or {})}
     if point is None:

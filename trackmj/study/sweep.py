@@ -44,11 +44,12 @@ Output directory ``DIR``:
 - ``results.parquet``: one row per run, rewritten atomically as runs finish (at most every
   2 s while they do, and at the end, also after Ctrl-C or an error).
   Columns: ``run_key`` (identity of the run's inputs), ``point`` (index of the parameter
-  point), ``scenario``, ``architecture``, ``controller``, ``estimator``, ``variant``,
-  ``seed``, ``duration_s``, ``inputs`` (JSON: files and fixed overrides of the spec), one
-  column per swept key (named by the key), every scalar metric (nested metric tables
-  flattened as ``table.key``, e.g. ``energy_J.pump``), ``wall_time_s`` (the run's wall time
-  in its worker) and ``error`` (null, or ``"Type: message"`` for a run that failed).
+  point), ``scenario``, ``machine`` (the name in its machine file), ``architecture``,
+  ``controller``, ``estimator``, ``variant``, ``seed``, ``duration_s``, ``inputs`` (JSON:
+  files and fixed overrides of the spec), one column per swept key (named by the key), every
+  scalar metric (nested metric tables flattened as ``table.key``, e.g. ``energy_J.pump``),
+  ``wall_time_s`` (the run's wall time in its worker) and ``error`` (null, or ``"Type:
+  message"`` for a run that failed).
   Each column's unit is in its Arrow field metadata (``unit``) where the name states one,
   and all of them in the schema metadata ``units`` (JSON); see :mod:`trackmj.study.campaign`.
 - ``summary.md`` and ``summary.csv`` (:func:`summarize`, :func:`summary_markdown`,
@@ -81,6 +82,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import io
 import itertools
 import json
@@ -531,13 +533,17 @@ def read_sweep(out_dir: str | Path) -> Any:
 
 SUMMARY_CSV = "summary.csv"
 SUMMARY_MD = "summary.md"
-CASE = ("scenario", "architecture", "controller", "estimator", "variant", "duration_s",
-        "inputs")
+CASE = ("scenario", "machine", "architecture", "controller", "estimator", "variant",
+        "duration_s", "inputs")
 """Columns of a results row that name its case; a case and the swept keys' values make a
 point of the summary (its seeds averaged)."""
+FILE_FIELDS = ("model", "hydraulics", "control", "tensioner")
+"""The files a spec gives every run (``inputs``), by kind."""
 CASE_FIELDS = ("scenario", "machine", "architecture", "controller", "estimator", "variant",
-               "duration_s", "inputs")
-"""The fields of a point's case: :data:`CASE` and the machine named in ``inputs``."""
+               "duration_s", *FILE_FIELDS, "set")
+"""The fields of a point's case as the summary shows them: :data:`CASE` with ``inputs``
+read: each of :data:`FILE_FIELDS` by its file name (its path where two files of a kind
+share a name; absent: the machine's own) and ``set``, the spec's fixed overrides."""
 ENGINEERING_METRICS = {
     "rmse_lp_N": "RMSE lp", "rmse_N": "RMSE raw", "peak_error_lp_N": "peak error lp",
     "ripple_rms_N": "ripple RMS", "overshoot_lp_N": "overshoot lp",
@@ -675,18 +681,45 @@ def _order(field: str, value: Any, builtin: Sequence[str]) -> tuple[int, float, 
     return (2, 0.0, str(value))
 
 
-def _case(case: tuple) -> dict[str, Any]:
-    """The case fields (:data:`CASE_FIELDS`) of a results row's :data:`CASE` values: the
-    machine is the one its ``inputs`` name (a shipped name, or a machine file's name), else
-    the default one."""
-    fields: dict[str, Any] = dict(zip(CASE, case, strict=True))
+def _machine(row: Mapping[str, Any]) -> str:
+    """The name of a results row's machine: the one the row holds; a row written before
+    that column: the machine ``inputs`` names (:func:`_machine_name`), else the default."""
+    if row.get("machine"):
+        return str(row["machine"])
+    given = json.loads(row.get("inputs") or "{}").get("files", {}).get("machine")
+    return _machine_name(given) if given else DEFAULT_MACHINE
+
+
+@functools.cache
+def _machine_name(given: str) -> str:
+    """The name of a shipped machine or machine file ``given``; a file that no longer
+    loads: its file name."""
     try:
-        files = json.loads(fields.get("inputs") or "{}").get("files", {})
-    except (json.JSONDecodeError, AttributeError):
-        files = {}
-    machine = files.get("machine") if isinstance(files, dict) else None
-    fields["machine"] = Path(machine).name if machine else DEFAULT_MACHINE
+        return resolve(given).name
+    except ParameterError:
+        return Path(given).name
+
+
+def _case(case: tuple) -> dict[str, Any]:
+    """The case fields (:data:`CASE_FIELDS`) of a results row's :data:`CASE` values (its
+    machine by name, :func:`_machine`), files as full paths."""
+    fields: dict[str, Any] = dict(zip(CASE, case, strict=True))
+    inputs = json.loads(fields.get("inputs") or "{}")
+    files, items = inputs.get("files", {}), inputs.get("set", [])
+    fields |= {kind: files.get(kind) for kind in FILE_FIELDS}
+    fields["set"] = ", ".join(items) or None
     return {f: fields.get(f) for f in CASE_FIELDS}
+
+
+def _file_names(cases: Sequence[dict[str, Any]]) -> None:
+    """Each file of ``cases`` (see :data:`FILE_FIELDS`) shown by its file name, in place;
+    by its full path where two files of one kind share a name."""
+    for kind in FILE_FIELDS:
+        paths = {c[kind] for c in cases if c[kind]}
+        names = [Path(p).name for p in paths]
+        for c in cases:
+            if c[kind] and names.count(Path(c[kind]).name) == 1:
+                c[kind] = Path(c[kind]).name
 
 
 def summarize(rows: Sequence[Mapping[str, Any]]) -> PointTable:
@@ -700,10 +733,12 @@ def summarize(rows: Sequence[Mapping[str, Any]]) -> PointTable:
     swept = list(dict.fromkeys(k for r in rows for k in r if is_key_column(k)))
     groups: dict[tuple[tuple, tuple], dict[Any, Mapping[str, Any]]] = {}
     for r in rows:
-        point = (tuple(r.get(c) for c in CASE), tuple(r.get(k) for k in swept))
+        case = tuple(_machine(r) if c == "machine" else r.get(c) for c in CASE)
+        point = (case, tuple(r.get(k) for k in swept))
         groups.setdefault(point, {})[r.get("seed")] = r     # the newest row of each seed
     superseded = len(rows) - sum(len(by_seed) for by_seed in groups.values())
     cases = {case: _case(case) for case, _ in groups}
+    _file_names(list(cases.values()))
     varied = tuple([f for f in CASE_FIELDS if len({str(c[f]) for c in cases.values()}) > 1]
                    + swept)
     keys = [*ENGINEERING_METRICS, *(c.key for c in DIAGNOSTICS)]
@@ -751,11 +786,12 @@ def _stat_cell(row: PointRow, column: Column) -> str:
 
 
 def _common_case(table: PointTable) -> str:
-    """The case fields every row shares, in words ("W1, tp, nmpc/ekf, nominal, 2 s runs")."""
+    """The case fields every row shares, in words ("W1, lf1352, tp, nmpc, ekf, nominal, 2 s
+    runs")."""
     if not table.rows:
         return ""
     case = table.rows[0].case
-    same = [c for c in CASE_FIELDS if c not in table.varied and c != "inputs"]
+    same = [c for c in CASE_FIELDS if c not in table.varied]
     parts = [f"{case[c]:g} s runs" if c == "duration_s" and isinstance(case[c], float)
              else str(case[c]) for c in same if case.get(c) is not None]
     return ", ".join(parts)
@@ -808,6 +844,12 @@ def _notes(table: PointTable) -> list[str]:
         cell = f"Each cell: the value of the point's one run (seed {_seed_list(seeds) or '–'})."
     named = "; ".join(f"{c.short}: {c.label}" for c in table.columns if c.short != c.label)
     notes = [cell, f"Columns: {named}."]
+    files = [f for f in FILE_FIELDS if f in table.varied]
+    if files:
+        notes.append(f"{', '.join(files)}: the file its spec gave every run instead of the "
+                     "machine's own (empty: the machine's own).")
+    if "set" in table.varied:
+        notes.append("set: the fixed overrides of its spec ([sweep].set; empty: none).")
     if table.lowpass_Hz:
         cutoff = ", ".join(f"{c:g}" for c in table.lowpass_Hz)
         notes.append(f"lp, low-pass: F_ten through a zero-phase 2nd-order Butterworth at "
