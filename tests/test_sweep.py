@@ -187,6 +187,16 @@ def test_the_summary_has_a_row_per_point_in_display_units() -> None:
     assert "seed 0" in text and "2 Hz" in text
 
 
+def _mini_rows() -> list[dict]:
+    """Rows of a 2-point bulk-modulus grid on machine "mini" (a machine file
+    mini_machine.toml), given a hydraulics file and a fixed override."""
+    mini = json.dumps({"files": {"machine": "/w/mini_machine.toml",
+                                 "hydraulics": "/w/soft_hyd.toml"},
+                       "set": [f"{SPEED}=1.0"]}, sort_keys=True)
+    return [_row(f"b{i}", i, machine="mini", inputs=mini, **{BULK: b, "rmse_lp_N": 200.0})
+            for i, b in enumerate((8e8, 16e8))]
+
+
 def test_machines_by_name_files_and_overrides_readable(tmp_path, monkeypatch) -> None:
     """Rows of the packaged machine and of a machine file mini_machine.toml whose [machine]
     name is "mini", given a hydraulics file and a fixed override: the summary (Markdown and
@@ -194,12 +204,8 @@ def test_machines_by_name_files_and_overrides_readable(tmp_path, monkeypatch) ->
     as given, and show no JSON."""
     from trackmj.study.sweep import plot_sweep, summarize, summary_csv, summary_markdown
 
-    mini = json.dumps({"files": {"machine": "/w/mini_machine.toml",
-                                 "hydraulics": "/w/soft_hyd.toml"},
-                       "set": [f"{SPEED}=1.0"]}, sort_keys=True)
     rows = [_row(f"a{i}", i, **{BULK: b, "rmse_lp_N": 100.0}) for i, b in enumerate((8e8, 16e8))]
-    rows += [_row(f"b{i}", i, machine="mini", inputs=mini, **{BULK: b, "rmse_lp_N": 200.0})
-             for i, b in enumerate((8e8, 16e8))]
+    rows += _mini_rows()
     table = summarize(rows)
     markdown = summary_markdown(table)
     head, _, *body = _table_lines(markdown)
@@ -423,6 +429,38 @@ def test_cli_plot_prints_and_writes_the_summary(tmp_path, capsys) -> None:
     assert (tmp_path / "figures" / "diagnostics.png").is_file()
     assert main(["sweep", "--plot", str(tmp_path / "none")]) == 2
     assert "no sweep results here" in capsys.readouterr().err
+
+
+class _SyntheticExecutor:
+    """Stands in for the Dask executor: synthetic runs of the asked-for specs."""
+
+    def as_completed(self, specs, progress=None):
+        from synthetic import synthetic_result
+
+        from trackmj.study.executor import RunOutcome
+
+        for spec in specs:
+            yield RunOutcome(spec, result=synthetic_result(
+                spec.scenario, spec.architecture, seed=spec.seed, duration_s=spec.duration),
+                wall_time_s=0.5)
+
+
+def test_a_sweep_into_a_folder_of_another_machine_shows_every_row(tmp_path) -> None:
+    """A sweep resumed into a folder holding another machine's rows prints and writes the
+    summary --plot makes of the folder (every row, each machine by its name) and says how
+    many of its points are not the spec's."""
+    from trackmj.study.sweep import summarize_sweep, summary_markdown
+
+    out = tmp_path / "out"
+    out.mkdir()
+    write_table(_mini_rows(), out / "results.parquet")
+    summary = sweep(_spec(parameters=[{"key": BULK, "values": [8e8, 16e8]}]), out,
+                    executor=_SyntheticExecutor(), progress=False, plot=False)
+    assert [r.case["machine"] for r in summary.table.rows] == ["lf1352"] * 2 + ["mini"] * 2
+    assert (summary.ran, summary.other_points) == (2, 2)
+    assert summary_markdown(summary.table) == (out / "summary.md").read_text() == \
+        summary_markdown(summarize_sweep(out))
+    assert f"2 of its 4 points are of earlier sweeps into {out}" in str(summary)
 
 
 def test_results_are_rewritten_at_most_every_period_and_flushed(tmp_path, monkeypatch) -> None:

@@ -53,8 +53,9 @@ Output directory ``DIR``:
   Each column's unit is in its Arrow field metadata (``unit``) where the name states one,
   and all of them in the schema metadata ``units`` (JSON); see :mod:`trackmj.study.campaign`.
 - ``summary.md`` and ``summary.csv`` (:func:`summarize`, :func:`summary_markdown`,
-  :func:`summary_csv`): one row per point (case and parameter point) of the spec's runs,
-  the varied case fields and swept keys first (values as given), then the engineering
+  :func:`summary_csv`): one row per point (case and parameter point) of every row in
+  ``results.parquet`` (this spec's and those of earlier sweeps into ``DIR``), the varied
+  case fields and swept keys first (values as given), then the engineering
   metrics (:data:`ENGINEERING_METRICS`) as mean ± std over seeds (population std, ddof = 0;
   one seed: the value) in display units (the CSV: ``KEY_mean`` / ``KEY_std`` in SI), the
   diagnostics (:data:`DIAGNOSTICS`: wall time, real-time factor, longest solve, overruns;
@@ -72,10 +73,11 @@ Resume: a run whose ``run_key`` already has a row is skipped (a failed one too, 
 validated model, hydraulic, control and scenario parameters after overrides, the variant,
 architecture, controller, estimator, seed, duration, tensioner and FMU file hashes and the
 hash of trackmj's source); a changed file or a changed code changes it. Rows of runs the
-current spec does not ask for are kept. A ``duration_s`` that would cut off a scenario's
-step, ramp, pulse or drop moves the events the spec does not set itself inside the run
-(:func:`trackmj.scenarios.events.moved_events`). Figures are drawn once: a resumed sweep
-that makes no run keeps the figures there are.
+current spec does not ask for are kept, and the summary and the figures show them beside
+the spec's (as ``--plot`` does; the sweep says how many points are not the spec's). A
+``duration_s`` that would cut off a scenario's step, ramp, pulse or drop moves the events
+the spec does not set itself inside the run (:func:`trackmj.scenarios.events.moved_events`).
+Figures are drawn once: a resumed sweep that makes no run keeps the figures there are.
 """
 
 from __future__ import annotations
@@ -924,7 +926,9 @@ def summarize_sweep(out_dir: str | Path, *, keys: set[str] | None = None) -> Poi
 class SweepSummary:
     """What a :func:`sweep` did: ``ran`` runs executed now (``failed`` of them with an
     error), ``skipped`` already in the results; ``results`` the parquet file; ``table`` its
-    summary (also in ``summary.csv`` and ``summary.md``); ``figures`` the figures drawn."""
+    summary, of every row in it (also in ``summary.csv`` and ``summary.md``, and what
+    ``--plot`` shows): ``other_points`` of its points hold no run of this spec (earlier
+    sweeps into ``out``: another spec or machine); ``figures`` the figures drawn."""
 
     out: Path
     results: Path
@@ -934,11 +938,19 @@ class SweepSummary:
     failed: int
     table: PointTable
     figures: list[Path]
+    other_points: int = 0
 
     def __str__(self) -> str:
         failed = f" ({self.failed} failed: their rows hold the error)" if self.failed else ""
-        return (f"{self.runs} runs: {self.ran} ran now{failed}, {self.skipped} already in "
+        said = (f"{self.runs} runs: {self.ran} ran now{failed}, {self.skipped} already in "
                 f"{self.results} -> {self.out}")
+        if self.other_points:
+            n = len(self.table.rows)
+            said += (f"\nthe summary and figures show every row of {self.results}: "
+                     f"{self.other_points} of its {n} points are of earlier sweeps into "
+                     f"{self.out} (another spec or machine); another --out keeps a study "
+                     "apart")
+        return said
 
 
 def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
@@ -1003,14 +1015,16 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
         made = run_campaign(store, runs, executor=executor, workers=workers,
                             scheduler=scheduler, progress="sweep" if progress else None,
                             keep_runs=keep_runs, retry_failed=retry_failed)
-        table = summarize(_rows(store.out, keys))
+        rows = _rows(store.out, None)
+        table = summarize(rows)   # the folder's every row, as --plot shows it
+        own = summarize([r for r in rows if r["run_key"] in keys])
         write_summary(store.out, table)
         figures = (_draw(table, store.out / FIGURES, redraw=bool(made.outcomes),
                          diagnostics=diagnostics) if plot else [])
     distinct = len(keys)   # LHS samples rounded onto one integer coincide
     ran = len(made.outcomes)
     return SweepSummary(store.out, store.results, distinct, ran, distinct - ran,
-                        len(made.failed), table, figures)
+                        len(made.failed), table, figures, len(table.rows) - len(own.rows))
 
 
 # ----------------------------------------------------------------------------- figures
