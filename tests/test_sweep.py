@@ -187,6 +187,11 @@ def test_the_summary_has_a_row_per_point_in_display_units() -> None:
     assert "seed 0" in text and "2 Hz" in text
 
 
+def _lf_rows() -> list[dict]:
+    """Rows of a 2-point bulk-modulus grid on the packaged machine."""
+    return [_row(f"a{i}", i, **{BULK: b, "rmse_lp_N": 100.0}) for i, b in enumerate((8e8, 16e8))]
+
+
 def _mini_rows() -> list[dict]:
     """Rows of a 2-point bulk-modulus grid on machine "mini" (a machine file
     mini_machine.toml), given a hydraulics file and a fixed override."""
@@ -204,8 +209,7 @@ def test_machines_by_name_files_and_overrides_readable(tmp_path, monkeypatch) ->
     as given, and show no JSON."""
     from trackmj.study.sweep import plot_sweep, summarize, summary_csv, summary_markdown
 
-    rows = [_row(f"a{i}", i, **{BULK: b, "rmse_lp_N": 100.0}) for i, b in enumerate((8e8, 16e8))]
-    rows += _mini_rows()
+    rows = _lf_rows() + _mini_rows()
     table = summarize(rows)
     markdown = summary_markdown(table)
     head, _, *body = _table_lines(markdown)
@@ -461,6 +465,27 @@ def test_a_sweep_into_a_folder_of_another_machine_shows_every_row(tmp_path) -> N
     assert summary_markdown(summary.table) == (out / "summary.md").read_text() == \
         summary_markdown(summarize_sweep(out))
     assert f"2 of its 4 points are of earlier sweeps into {out}" in str(summary)
+
+
+def test_cli_plot_with_a_machine_shows_that_machines_rows(tmp_path, capsys) -> None:
+    """``sweep --plot DIR --machine NAME`` prints, writes and draws only that machine's rows
+    and says so; a machine without rows there, or an option of a sweep that runs, is refused
+    in one line."""
+    write_table(_lf_rows() + _mini_rows(), tmp_path / "results.parquet")
+    assert main(["sweep", "--plot", str(tmp_path), "--machine", "mini"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("Sweep summary (W1, mini, tp, nmpc, ekf, nominal, 1.5 s runs, "
+                          f"soft_hyd.toml, {SPEED}=1.0): 2 points\n")
+    assert "- Only machine mini's runs (--machine): 2 other row(s) of results.parquet left " \
+           "out." in out
+    assert (tmp_path / "summary.md").read_text() in out
+    assert len((tmp_path / "summary.csv").read_text().splitlines()) == 1 + 2
+    assert main(["sweep", "--plot", str(tmp_path), "--machine", "compact3"]) == 2
+    assert capsys.readouterr().err == (f"trackmj: error: --machine compact3: no run of it in "
+                                       f"{tmp_path / 'results.parquet'} (machines there: "
+                                       "lf1352, mini)\n")
+    assert main(["sweep", "--plot", str(tmp_path), "--workers", "1"]) == 2
+    assert "--workers apply to a sweep that runs a spec" in capsys.readouterr().err
 
 
 def test_results_are_rewritten_at_most_every_period_and_flushed(tmp_path, monkeypatch) -> None:

@@ -280,8 +280,9 @@ def _add_sweep(sub: Subcommands) -> None:
                             "(default: runs/sweep-SPEC_NAME)")
     sweep.add_argument("--plot", metavar="DIR",
                        help="only redraw DIR/figures and DIR/summary.{csv,md} from "
-                            "DIR/results.parquet (a resumed sweep that makes no run keeps "
-                            "the figures that exist)")
+                            "DIR/results.parquet, every row, or with --machine only that "
+                            "machine's (a resumed sweep that makes no run keeps the figures "
+                            "that exist)")
     sweep.add_argument("--diagnostics", action="store_true",
                        help="also draw DIR/figures/diagnostics.png: wall time, real-time "
                             "factor, max solve time, controller overruns (machine-dependent; "

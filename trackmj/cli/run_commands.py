@@ -222,8 +222,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.plot is not None:
         if args.spec is not None:
             raise ValueError("give a sweep spec to run, or --plot DIR to redraw, not both")
-        print(summary_markdown(summarize_sweep(args.plot)))
-        figures = plot_sweep(args.plot, diagnostics=args.diagnostics)
+        running = [option for option, given in (
+            ("--out", args.out), ("--tensioner", args.tensioner), ("--keep-runs", args.keep_runs),
+            ("--retry-failed", args.retry_failed), ("--workers", args.workers),
+            ("--scheduler", args.scheduler)) if given]
+        if running:
+            raise ValueError(f"--plot DIR redraws from DIR/results.parquet and runs nothing: "
+                             f"{', '.join(running)} apply to a sweep that runs a spec")
+        print(summary_markdown(summarize_sweep(args.plot, machine=args.machine)))
+        figures = plot_sweep(args.plot, machine=args.machine, diagnostics=args.diagnostics)
         print(f"summary.md, summary.csv, {_count(len(figures), 'figure')} -> {Path(args.plot)}")
         return 0
     if args.spec is None:

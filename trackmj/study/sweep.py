@@ -643,7 +643,8 @@ class PointTable:
     ``metrics``: the engineering metrics with a value in some run; ``missing``: those with
     none (a step metric where nothing steps); ``lowpass_Hz``: the low-pass cut-offs of the
     runs' ``_lp`` metrics [Hz]; ``superseded``: rows left out for a newer one of the same
-    point and seed; ``diagnostics``: :data:`DIAGNOSTICS`."""
+    point and seed; ``diagnostics``: :data:`DIAGNOSTICS`; ``machine``: the one machine whose
+    rows it holds when asked for one (``--machine``), ``left_out`` the other machines' rows."""
 
     varied: tuple[str, ...]
     rows: tuple[PointRow, ...]
@@ -652,6 +653,8 @@ class PointTable:
     lowpass_Hz: tuple[float, ...] = ()
     superseded: int = 0
     diagnostics: tuple[Column, ...] = DIAGNOSTICS
+    machine: str | None = None
+    left_out: int = 0
 
     @property
     def columns(self) -> tuple[Column, ...]:
@@ -846,6 +849,9 @@ def _notes(table: PointTable) -> list[str]:
         cell = f"Each cell: the value of the point's one run (seed {_seed_list(seeds) or '–'})."
     named = "; ".join(f"{c.short}: {c.label}" for c in table.columns if c.short != c.label)
     notes = [cell, f"Columns: {named}."]
+    if table.machine is not None:
+        notes.insert(0, f"Only machine {table.machine}'s runs (--machine): {table.left_out} "
+                        f"other row(s) of {RESULTS} left out.")
     files = [f for f in FILE_FIELDS if f in table.varied]
     if files:
         notes.append(f"{', '.join(files)}: the file its spec gave every run instead of the "
@@ -903,19 +909,31 @@ def write_summary(out_dir: str | Path, table: PointTable) -> tuple[Path, Path]:
     return out / SUMMARY_CSV, out / SUMMARY_MD
 
 
-def _rows(out_dir: Path, keys: set[str] | None) -> list[dict[str, Any]]:
-    """The rows of ``DIR/results.parquet`` (only those of the runs ``keys``, if given)."""
-    return [r for r in read_rows(out_dir / RESULTS) if keys is None or r["run_key"] in keys]
+def _folder_table(out_dir: Path, machine: str | None) -> PointTable:
+    """:func:`summarize` of every row of ``DIR/results.parquet``, or with ``machine`` (a
+    machine's name, or a shipped machine or machine file) of that machine's rows only;
+    ParameterError naming the machines there if it has none."""
+    path = out_dir / RESULTS
+    rows = read_rows(path)
+    if machine is None:
+        return summarize(rows)
+    present = {_machine(r) for r in rows}
+    name = machine if machine in present else _machine_name(machine)
+    if name not in present:
+        raise ParameterError(f"--machine {machine}: no run of it in {path} (machines there: "
+                             f"{', '.join(sorted(present)) or 'none'})")
+    kept = [r for r in rows if _machine(r) == name]
+    return dataclasses.replace(summarize(kept), machine=name, left_out=len(rows) - len(kept))
 
 
-def summarize_sweep(out_dir: str | Path, *, keys: set[str] | None = None) -> PointTable:
+def summarize_sweep(out_dir: str | Path, *, machine: str | None = None) -> PointTable:
     """The summary of the sweep in ``DIR`` (:func:`summarize` of ``DIR/results.parquet``;
-    ``keys``: only the rows of these runs), written as ``DIR/summary.csv`` and
-    ``DIR/summary.md``."""
+    ``machine``: only that machine's rows, see :func:`_folder_table`), written as
+    ``DIR/summary.csv`` and ``DIR/summary.md``."""
     out = Path(out_dir)
     if not (out / RESULTS).is_file():
         raise FileNotFoundError(f"{out}: no sweep results here ({RESULTS} missing)")
-    table = summarize(_rows(out, keys))
+    table = _folder_table(out, machine)
     write_summary(out, table)
     return table
 
@@ -1015,7 +1033,7 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
         made = run_campaign(store, runs, executor=executor, workers=workers,
                             scheduler=scheduler, progress="sweep" if progress else None,
                             keep_runs=keep_runs, retry_failed=retry_failed)
-        rows = _rows(store.out, None)
+        rows = read_rows(store.results)
         table = summarize(rows)   # the folder's every row, as --plot shows it
         own = summarize([r for r in rows if r["run_key"] in keys])
         write_summary(store.out, table)
@@ -1029,16 +1047,17 @@ def sweep(spec: str | Path | Mapping[str, Any] | SweepSpec, out: str | Path, *,
 
 # ----------------------------------------------------------------------------- figures
 
-def plot_sweep(out_dir: str | Path, *, keys: set[str] | None = None, redraw: bool = True,
+def plot_sweep(out_dir: str | Path, *, machine: str | None = None, redraw: bool = True,
                diagnostics: bool = False) -> list[Path]:
     """Draw the figures of the sweep in ``DIR`` from ``DIR/results.parquet``
     (:func:`trackmj.results.figure_sweep.sweep_figures`): ``figures/<key>.png`` per swept
     key (without swept keys ``figures/cases.png``), the engineering metrics of
     :func:`summarize` as panels; with ``diagnostics`` also ``figures/diagnostics.png``.
-    ``keys``: only the rows of these runs (default: every row); ``redraw=False`` keeps the
-    figures that exist. Returns the paths of the figures (drawn now or kept)."""
+    ``machine``: only that machine's rows (default: every row; see :func:`_folder_table`);
+    ``redraw=False`` keeps the figures that exist. Returns the paths of the figures (drawn
+    now or kept)."""
     out = Path(out_dir)
-    return _draw(summarize(_rows(out, keys)), out / FIGURES, redraw=redraw,
+    return _draw(_folder_table(out, machine), out / FIGURES, redraw=redraw,
                  diagnostics=diagnostics)
 
 
