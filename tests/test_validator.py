@@ -14,6 +14,7 @@ from typing import Any
 
 import pytest
 
+from trackmj.cli.main import main
 from trackmj.control.params import ControlConfig, PlantParams, load_config
 from trackmj.control.params import default_path as control_path
 from trackmj.hydraulics.params import HydraulicParams, load_hydraulic_params
@@ -199,13 +200,28 @@ def test_valid_override_changes_the_loaded_value(kind: str, item: str, read) -> 
      r"multiple of block_steps = 3$"),
     ("model", "road_wheels.x_m.6", 1.0, r"^--set model\.road_wheels\.x_m\.6: index '6' is out of "
      r"range; \[road_wheels\.x_m\] has 6 entries$"),
+    ("model", "road_wheels.x_m.-1", 1.0, r"^--set model\.road_wheels\.x_m\.-1: '-1' is not an "
+     r"index; \[road_wheels\.x_m\] is an array \(indices 0-5\)$"),
+    ("hydraulics", "fluid.bulk-modulus_Pa", 1.0, r"^--set hydraulics\.fluid\.bulk-modulus_Pa: "
+     r"\[fluid\] has no key 'bulk-modulus_Pa'; did you mean 'bulk_modulus_Pa'\?"),
+    ("hydraulics", "fluidbulk_modulus_Pa", 1.0, r"^--set hydraulics\.fluidbulk_modulus_Pa: the "
+     r"file has no key 'fluidbulk_modulus_Pa'; did you mean hydraulics\.fluid\.bulk_modulus_Pa\?"),
+    ("hydraulics", "supply.bulk_modulus_Pa", 1.0, r"^--set hydraulics\.supply\.bulk_modulus_Pa: "
+     r"\[supply\] has no key 'bulk_modulus_Pa'; did you mean hydraulics\.fluid\.bulk_modulus_Pa"
+     r"\? \(allowed: default_model, setpoint_Pa, line_volume_m3\)$"),
+    ("model", "preload_N", 1.0, r"^--set model\.preload_N: the file has no key 'preload_N'; did "
+     r"you mean model\.tensioner\.preload_N\?"),
+    ("control", "max_iter", 1, r"^--set control\.max_iter: the file has no key 'max_iter'; did "
+     r"you mean control\.mpc\.max_iter\?"),
+    ("scenario", "load_pulses.x.hitch_N", 1.0, r"^--set scenario\.load_pulses\.x\.hitch_N: 'x' "
+     r"is not an index; \[load_pulses\] is an array \(no entries\)$"),
     ("model", "road_wheels.x_m.1", 20.0, r"^--set model\.road_wheels\.x_m\.1 = 20\.0 is outside "
      r"the allowed range \[-10, 10\] m$"),
 ])
 def test_invalid_override_is_named_by_its_option(kind: str, key: str, value: Any,
                                                  message: str) -> None:
     with pytest.raises(ParameterError, match=message):
-        KINDS[kind][0](overrides={key: value})
+        KINDS[kind][0](*(["W1"] if kind == "scenario" else []), overrides={key: value})
 
 
 def test_parse_overrides_reads_toml_values_and_refuses_malformed_items() -> None:
@@ -222,10 +238,15 @@ def test_parse_overrides_reads_toml_values_and_refuses_malformed_items() -> None
     for item, message in [
         ("hydraulics.fluid.bulk_modulus_Pa", r"--set 'hydraulics\.fluid\.bulk_modulus_Pa': "
          r"expected KIND\.TABLE\.KEY=VALUE"),
-        ("hydraulic.fluid.bulk_modulus_Pa=1", r"unknown file kind 'hydraulic'; allowed: model, "
-         r"hydraulics, control, scenario"),
-        ("hydraulics=1", r"expected a dotted key after 'hydraulics\.'"),
-        ("hydraulics.fluid..x=1", r"expected a dotted key"),
+        ("hydraulic.fluid.bulk_modulus_Pa=1", r"unknown file kind 'hydraulic'; did you mean "
+         r"'hydraulics'\? \(allowed: model, hydraulics, control, scenario\)$"),
+        ("hydraulicsfluid.bulk_modulus_Pa=1", r"unknown file kind 'hydraulicsfluid'; did you "
+         r"mean hydraulics\.fluid\.bulk_modulus_Pa\? \(allowed: "),
+        ("models.track.pitch_m=1", r"unknown file kind 'models'; did you mean 'model'\?"),
+        ("hydraulics=1", r"names no key; expected hydraulics\.TABLE\.KEY \(`trackmj keys "
+         r"hydraulics` lists them\)$"),
+        ("hydraulics.fluid..bulk_modulus_Pa=1", r"an empty key between two dots; did you mean "
+         r"hydraulics\.fluid\.bulk_modulus_Pa\?$"),
         ("scenario.track.speed_m_s=1.5 m/s", r"cannot read the value '1\.5 m/s'; write a TOML "
          r"value"),
         ("scenario.track.speed_m_s=", r"expected KIND\.TABLE\.KEY=VALUE"),
@@ -325,3 +346,21 @@ def test_shipped_files_cite_sources_a_user_has() -> None:
     for text in (f.read_text(encoding="utf-8") for f in files if f.parent == models_dir()):
         if "study" in text:
             assert "Ding et al" in text
+
+
+@pytest.mark.parametrize(("item", "nearest"), [
+    ("hydraulics.fluid.bulk-modulus_Pa=1e9", "[fluid] has no key 'bulk-modulus_Pa'; did you "
+     "mean 'bulk_modulus_Pa'?"),
+    ("hydraulicsfluid.bulk_modulus_Pa=1e9", "did you mean hydraulics.fluid.bulk_modulus_Pa?"),
+    ("model.sprockettooth_count=12", "did you mean model.sprocket.tooth_count?"),
+    ("control.mpc..max_iter=3", "did you mean control.mpc.max_iter?"),
+    ("scenario.load_pulses.x.hitch_N=1", "'x' is not an index; [load_pulses] is an array "
+     "(no entries)"),
+])
+def test_a_mistyped_set_key_is_answered_in_one_line_with_the_nearest_key(item, nearest,
+                                                                         capsys) -> None:
+    """What a newcomer types wrong in `trackmj run W1 --set ...` (a character, a dot left
+    out or doubled, an index) is refused before any work, exit 2, naming the valid key."""
+    assert main(["run", "W1", "--duration", "2", "--set", item]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and nearest in err and "Traceback" not in err

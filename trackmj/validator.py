@@ -610,12 +610,18 @@ def missing_key(cls: type, name: str, at: Location, hint: str = "") -> Parameter
     return ParameterError(_describe_missing(name, _schema(cls)[name], at) + hint)
 
 
+def _did_you_mean(word: str, names: Sequence[str]) -> str:
+    """``"; did you mean 'name'?"`` with the name of ``names`` nearest ``word`` (difflib's
+    closest), or '' if none is near."""
+    close = difflib.get_close_matches(word, names, n=1)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
 def _unknown(key: str, value: Any, names: Sequence[str], at: Location) -> ParameterError:
     what = (f"table {_path_text((*at.path, key))}" if isinstance(value, dict) and not at.path
             else f"key {key!r}")
-    close = difflib.get_close_matches(key, names, n=1)
-    hint = f"; did you mean {close[0]!r}?" if close else ""
-    return ParameterError(f"{at.table()}: unknown {what}{hint} (allowed: {', '.join(names)})")
+    return ParameterError(f"{at.table()}: unknown {what}{_did_you_mean(key, names)} "
+                          f"(allowed: {', '.join(names)})")
 
 
 def _build(cls: type, raw: Any, at: Location, require_source: bool,
@@ -684,7 +690,6 @@ def construct(cls: type[T], at: Location, /, **kwargs: Any) -> T:
 # ----------------------------------------------------------------------------- overrides
 
 _BARE_WORD = re.compile(r"[A-Za-z][A-Za-z0-9_.+-]*")
-_KEY = re.compile(r"[A-Za-z0-9_]+(\.[A-Za-z0-9_]+)*")
 
 
 def parse_overrides(items: Sequence[str]) -> dict[str, dict[str, Any]]:
@@ -713,17 +718,39 @@ def parse_overrides(items: Sequence[str]) -> dict[str, dict[str, Any]]:
         if not sep or not text or "\n" in item:
             raise ParameterError(f"--set {item!r}: expected KIND.TABLE.KEY=VALUE, e.g. "
                                  "hydraulics.fluid.bulk_modulus_Pa=1.2e9")
-        kind, _, dotted = key.partition(".")
-        if kind not in FILE_KINDS:
-            raise ParameterError(f"--set {item!r}: unknown file kind {kind!r}; allowed: "
-                                 f"{', '.join(FILE_KINDS)}")
-        if not _KEY.fullmatch(dotted):
-            raise ParameterError(f"--set {item!r}: expected a dotted key after "
-                                 f"'{kind}.', e.g. {kind}.TABLE.KEY")
+        kind, dotted = split_override_key(key, f"--set {item!r}")
         if dotted in out[kind]:
             raise ParameterError(f"--set {item!r}: {kind}.{dotted} is given twice")
         out[kind][dotted] = _parse_value(text, item)
     return out
+
+
+def split_override_key(key: str, where: str) -> tuple[str, str]:
+    """(kind, dotted key) of an override key ``KIND.TABLE.KEY``; an unknown kind, no key or
+    an empty one between dots is a ParameterError starting with ``where`` and naming the
+    nearest valid form. Whether the key exists is checked when its file is loaded."""
+    kind, _, dotted = key.partition(".")
+    if kind not in FILE_KINDS:
+        raise ParameterError(f"{where}: unknown file kind {kind!r}{_kind_hint(kind, dotted)} "
+                             f"(allowed: {', '.join(FILE_KINDS)})")
+    if not dotted.strip():
+        raise ParameterError(f"{where}: names no key; expected {kind}.TABLE.KEY (`trackmj "
+                             f"keys {kind}` lists them)")
+    if "" in dotted.split("."):
+        joined = ".".join(p for p in dotted.split(".") if p)
+        raise ParameterError(f"{where}: an empty key between two dots; did you mean "
+                             f"{kind}.{joined}?")
+    return kind, dotted
+
+
+def _kind_hint(kind: str, dotted: str) -> str:
+    """'; did you mean ...?' for an unknown file kind: the dot after a kind left out
+    ('hydraulicsfluid.x' -> hydraulics.fluid.x), else the nearest kind."""
+    glued = next((k for k in FILE_KINDS if kind.startswith(k)), None)
+    rest = "" if glued is None else kind[len(glued):].lstrip("_")
+    if glued is not None and len(rest) >= 3:     # not a plural: 'models' is 'model'
+        return f"; did you mean {glued}.{rest}{'.' + dotted if dotted else ''}?"
+    return _did_you_mean(kind, FILE_KINDS)
 
 
 def _parse_value(text: str, item: str) -> Any:
@@ -746,12 +773,15 @@ def apply_overrides(cls: type, data: dict[str, Any], overrides: Mapping[str, Any
     """
     applied: list[tuple[tuple[str | int, ...], str, Any]] = []
     for dotted, value in overrides.items():
-        option = f"--set {kind}.{dotted}" if kind else f"--set {dotted}"
+        prefix = f"{kind}." if kind else ""
+        option = f"--set {prefix}{dotted}"
         parts = dotted.split(".")
         node: Any = data
         hint: Any = cls
         path: list[str | int] = []
         for i, part in enumerate(parts):
+            if _table_kind(hint) == "table":
+                _check_key(option, prefix, cls, _optional_table(hint), path, parts[i:])
             step, hint = _override_step(option, node, hint, path, part)
             path.append(step)
             if i == len(parts) - 1:
@@ -764,6 +794,33 @@ def apply_overrides(cls: type, data: dict[str, Any], overrides: Mapping[str, Any
     return applied
 
 
+def _check_key(option: str, prefix: str, root: type, table: type, path: list[str | int],
+               rest: Sequence[str]) -> None:
+    """ParameterError unless ``rest[0]`` is a key of ``table`` (at ``path`` in the file of
+    ``root``; ``prefix`` the kind's, e.g. 'hydraulics.'), naming the nearest key: a table
+    name with its key glued on (a dot left out: 'fluidbulk_modulus_Pa'), the same key in
+    another table ('supply.bulk_modulus_Pa' -> fluid.bulk_modulus_Pa), else the closest
+    name."""
+    fields = file_fields(table)
+    part = rest[0]
+    if part in fields:
+        return
+    glued = [f"{name}.{part[len(name):].lstrip('_')}" for name, fld in fields.items()
+             if part.startswith(name) and _table_kind(fld.hint) == "table"
+             and part[len(name):].lstrip("_") in file_fields(_optional_table(fld.hint))]
+    tail = ".".join(rest)
+    elsewhere = [key.replace("[]", ".N") for key in (k.key for k in describe_schema(root))
+                 if key == tail or key.endswith("." + tail)]
+    here = _path_text(path) or "the file"
+    if glued or elsewhere:
+        rows = [".".join([*map(str, path), g, *rest[1:]]) for g in glued] or elsewhere[:2]
+        hint = f"; did you mean {' or '.join(prefix + row for row in rows)}?"
+    else:
+        hint = _did_you_mean(part, list(fields))
+    raise ParameterError(f"{option}: {here} has no key {part!r}{hint} "
+                         f"(allowed: {', '.join(fields)})")
+
+
 def _override_step(option: str, node: Any, hint: Any, path: list[str | int],
                    part: str) -> tuple[str | int, Any]:
     """One segment of an override path: (key or index, the type found there)."""
@@ -773,24 +830,23 @@ def _override_step(option: str, node: Any, hint: Any, path: list[str | int],
     if kind in ("table", "named") and not isinstance(node, dict):
         raise ParameterError(f"{option}: the file's {here} is {_kind(node)}, not a table")
     if kind == "table":
-        fields = file_fields(_optional_table(hint))
-        if part not in fields:
-            close = difflib.get_close_matches(part, list(fields), n=1)
-            raise ParameterError(f"{option}: {here} has no key {part!r}"
-                                 + (f"; did you mean {close[0]!r}?" if close else "")
-                                 + f" (allowed: {', '.join(fields)})")
-        return part, fields[part].hint
+        return part, file_fields(_optional_table(hint))[part].hint   # _check_key: it exists
     if kind == "named":
         if part not in node:
             raise ParameterError(f"{option}: the file has no table {_path_text((*path, part))}"
-                                 f" (has: {', '.join(node) or 'none'})")
+                                 f"{_did_you_mean(part, list(node))} (has: "
+                                 f"{', '.join(node) or 'none'})")
         return part, args[1]
     if kind == "array" or origin is tuple:
         if not isinstance(node, list):
             raise ParameterError(f"{option}: the file's {here} is {_kind(node)}, not an array")
         variable = kind == "array" or args[-1] is Ellipsis
         size = len(node) if variable else min(len(node), len(args))
-        if not part.isdigit() or int(part) >= size:
+        if not part.isdigit():
+            indices = f"indices 0-{size - 1}" if size else "no entries"
+            raise ParameterError(f"{option}: {part!r} is not an index; {here} is an array "
+                                 f"({indices})")
+        if int(part) >= size:
             raise ParameterError(f"{option}: index {part!r} is out of range; {here} has "
                                  f"{size} entries")
         return int(part), args[0] if variable else args[int(part)]

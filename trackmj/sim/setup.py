@@ -59,7 +59,7 @@ from trackmj.track.mjcf.builders import on_grade, with_heightfield
 from trackmj.track.mjcf.cache import model_key
 from trackmj.track.plant import TrackPlant
 from trackmj.track.terrain import RoadProfile
-from trackmj.validator import FILE_KINDS, ParameterError, parse_overrides
+from trackmj.validator import FILE_KINDS, ParameterError, parse_overrides, split_override_key
 
 MAX_DURATION_S = 3600.0
 
@@ -227,10 +227,7 @@ def overrides_by_kind(overrides: Overrides | None) -> dict[str, dict[str, Any]]:
     if isinstance(overrides, Mapping):
         out: dict[str, dict[str, Any]] = {kind: {} for kind in FILE_KINDS}
         for key, value in overrides.items():
-            kind, _, dotted = str(key).partition(".")
-            if kind not in FILE_KINDS or not dotted:
-                raise ParameterError(f"set[{key!r}]: expected 'KIND.TABLE.KEY' with KIND one "
-                                     f"of {', '.join(FILE_KINDS)}")
+            kind, dotted = split_override_key(str(key), f"set[{key!r}]")
             out[kind][dotted] = value
         return out
     return parse_overrides(list(overrides))
