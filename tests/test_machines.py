@@ -19,7 +19,7 @@ from trackmj.io import cache_dir
 from trackmj.machines.assembly import load_machine, mechanics, model_mjcf, resolve, shipped
 from trackmj.machines.track_plant import load_plant
 from trackmj.sim.setup import prepare
-from trackmj.track.mechanics import load_model_params
+from trackmj.track.mechanics import load_model_params, models_dir
 from trackmj.track.mjcf.cache import cached_mjcf
 from trackmj.track.mjcf.generate import generate_mjcf
 from trackmj.track.mjcf.geometry import derive_geometry
@@ -297,15 +297,15 @@ def test_tooth_pin_distance_closed_forms() -> None:
 @pytest.mark.parametrize(("geom", "grow_m", "message"), [
     ("sprocket_tooth_03", 0.004, r"penetrates by 1\.51 mm \(limit 1\.0 mm\): link_09_pin into "
      r"sprocket_tooth_03: check \[track\]\.pin_radius_m, \[sprocket\]\.tooth_radius_m, "
-     r"\[sprocket\]\.tooth_radial_offset_m in the mechanics file$"),
+     r"\[sprocket\]\.tooth_radial_offset_m$"),
     ("idler_wheel", 0.003, r"penetrates by 3\.00 mm \(limit 1\.0 mm\): idler_wheel into "
      r"link_\d+_rail: check \[idler\]\.radius_m, \[idler\]\.x_m, \[idler\]\.z_m, "
-     r"\[track\]\.rail_radius_m in the mechanics file$"),
+     r"\[track\]\.rail_radius_m$"),
 ])
 def test_an_initial_penetration_names_both_geoms_and_their_keys(geom, grow_m, message) -> None:
     """A geom grown past what the load checks admit (compact3's model, one tooth by 4 mm:
     1.51 mm into the nearest pin; the idler by 3 mm) is refused before settling, naming the
-    two geoms and the mechanics keys that size and place them."""
+    mechanics file, the two geoms and the keys that size and place them."""
     import xml.etree.ElementTree as ET
 
     from trackmj.track.mjcf.builders import build_mjcf
@@ -318,8 +318,20 @@ def test_an_initial_penetration_names_both_geoms_and_their_keys(geom, grow_m, me
     size = float(element.get("size") or p.sprocket.tooth_radius_m)   # a tooth: its class's
     element.set("size", repr(size + grow_m))
     model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
-    with pytest.raises(ParameterError, match=r"^initial layout " + message):
+    with pytest.raises(ParameterError, match=r"^compact3\.toml: initial layout " + message):
         settle(model, p, 0.0)
+
+
+def test_the_generator_names_the_mechanics_file_it_refuses(tmp_path) -> None:
+    """The generator's own checks name the file as the loader's do: a pin torsion spring past
+    the explicit limit in a newcomer's copy."""
+    text = (models_dir() / "compact3.toml").read_text()
+    mine = tmp_path / "mine.toml"
+    mine.write_text(re.sub(r"(?m)^torsional_stiffness_N_m_rad = 0\.0",
+                           "torsional_stiffness_N_m_rad = 1e5", text, count=1))
+    with pytest.raises(ParameterError, match=r"^mine\.toml \[pins\]\.torsional_stiffness_N_m_rad "
+                       r"= 100000\.0 exceeds the explicit limit \d+ N·m/rad"):
+        generate_mjcf(load_model_params(mine))
 
 
 def test_cli_refuses_a_layout_with_one_line_and_exit_2(capsys) -> None:

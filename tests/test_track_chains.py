@@ -265,8 +265,8 @@ def test_chains_refuse_the_torsional_bushings(model_params: ModelParams) -> None
     """The bushings' torsion tendons join pitch hinges the chained links do not have."""
     p = dataclasses.replace(model_params,
                             bushings=dataclasses.replace(model_params.bushings, enabled=True))
-    with pytest.raises(ParameterError, match=r"structure = \"slides\" does not take the "
-                                              r"\[bushings\] torsional"):
+    with pytest.raises(ParameterError, match=r"^ModelParams \[track\]\.structure = 'slides' "
+                       r"does not take the \[bushings\] torsional"):
         generate_mjcf(p)
 
 

@@ -259,6 +259,15 @@ class Location:
         return ParameterError(f"{self.key(*parts)} = {_show(value)} {text}")
 
 
+def origin_field() -> Any:
+    """Field of a parameter class that its checks fill with the :class:`Location` they name:
+    loaded, the file's (its name, the keys ``--set`` options changed); built in code, the
+    class name. A check made later (the MJCF generator's) names file and key through it as
+    the loader's checks do. Not a key of the file, not compared."""
+    return dataclasses.field(default=None, compare=False, repr=False,
+                             metadata={"loader": "origin"})
+
+
 _BUILDING: contextvars.ContextVar[tuple[type, Location] | None] = contextvars.ContextVar(
     "trackmj_params_building", default=None)
 
@@ -318,6 +327,9 @@ def check(obj: Any) -> None:
         new = _coerce(value, fld.hint, fld.spec, at, (name,))
         if new is not value:
             object.__setattr__(obj, name, new)
+    for name, fld in _schema(type(obj)).items():
+        if fld.loader == "origin":
+            object.__setattr__(obj, name, at)
     obj.cross_check(at)
 
 

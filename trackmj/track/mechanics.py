@@ -25,7 +25,14 @@ from trackmj.track.mjcf.layout import (
     sprocket_outer_radius,
     tooth_pin_distance_m,
 )
-from trackmj.validator import Location, Parameters, load_file, param, sources_field
+from trackmj.validator import (
+    Location,
+    Parameters,
+    load_file,
+    origin_field,
+    param,
+    sources_field,
+)
 
 MODEL_NAME = "lf1352"
 
@@ -232,6 +239,7 @@ class ModelParams(Parameters):
     tensioner: PassiveTensionerParams
     solver: SolverParams
     sources: Mapping[str, str] = sources_field()
+    origin: Location = origin_field()  # noqa: RUF009 (returns a dataclasses.Field)
 
     file_kind: ClassVar[str] = "model"
 

@@ -337,19 +337,19 @@ def _check_torsion(p: ModelParams) -> None:
     this model at 1 ms it diverges from 0.2 N·m·s/rad (0.15 holds); the limit is
     I/(20·h), about half of that.
     """
-    joint, where = p.pin_joint, f"model file [{p.pin_joint_table}]"
+    joint, table = p.pin_joint, p.pin_joint_table
     inertia, h = _link_inertia(p)[1], p.simulation.timestep_s
     stiffness_limit = inertia / (p.solver.soft_margin * h * h)
     damping_limit = inertia / (20.0 * h)
     if joint.torsional_stiffness_N_m_rad > stiffness_limit:
-        raise ParameterError(f"{where}.torsional_stiffness_N_m_rad = "
-                             f"{joint.torsional_stiffness_N_m_rad:g} exceeds the explicit "
-                             f"limit {stiffness_limit:.0f} N·m/rad (link pitch inertia / "
-                             "(soft_margin·timestep²))")
+        raise p.origin.error((table, "torsional_stiffness_N_m_rad"),
+                             joint.torsional_stiffness_N_m_rad,
+                             f"exceeds the explicit limit {stiffness_limit:.0f} N·m/rad (link "
+                             "pitch inertia / (soft_margin·timestep²))")
     if joint.torsional_damping_N_m_s_rad > damping_limit:
-        raise ParameterError(f"{where}.torsional_damping_N_m_s_rad = "
-                             f"{joint.torsional_damping_N_m_s_rad:g} exceeds "
-                             f"{damping_limit:.3f} N·m·s/rad (link pitch inertia / "
+        raise p.origin.error((table, "torsional_damping_N_m_s_rad"),
+                             joint.torsional_damping_N_m_s_rad,
+                             f"exceeds {damping_limit:.3f} N·m·s/rad (link pitch inertia / "
                              "(20·timestep)); larger values diverge at this timestep")
 
 
@@ -389,13 +389,14 @@ def soft_constraints(p: ModelParams, model: mujoco.MjModel) -> dict[str, SoftCon
                               float(model.geom_friction[g, 0]), float(model.opt.impratio))
         stiffness, damping, key = stated[kind]
         out[name] = soft_constraint(stiffness, damping, rows, diag, h, margin,
-                                    f"model file {key}")
+                                    f"{p.origin.table()} {key}")
     joint = p.pin_joint
     rows, diag = row_diag(2.0 * link, condim=1)
     for k, series in pin_series_count(p).items():   # pins in series on one connect
         out[pin_name(k)] = soft_constraint(joint.radial_stiffness_N_m / series,
                                            joint.radial_damping_N_s_m / series, rows, diag,
-                                           h, margin, f"model file [{p.pin_joint_table}]")
+                                           h, margin,
+                                           f"{p.origin.table()} [{p.pin_joint_table}]")
     return out
 
 

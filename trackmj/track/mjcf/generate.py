@@ -48,7 +48,8 @@ def geom_keys(name: str) -> tuple[str, ...]:
 def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> mujoco.MjData:
     """State after ``duration_s`` [s] from the layout, standing (sprocket servo at 0 rad/s),
     under the passive tensioner of ``params``, the pin slides' springs implicit as in the
-    plant's step; RuntimeError on MuJoCo warnings."""
+    plant's step; ParameterError naming the mechanics file on an initial penetration,
+    RuntimeError on MuJoCo warnings."""
     equalise_link_weights(model)
     data = mujoco.MjData(model)
     pins = [model.geom(link_name(k) + "_pin").id for k in range(params.track.link_count)]
@@ -65,17 +66,23 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
     if worst is not None and worst.dist < -MAX_INITIAL_PENETRATION_M:
         names = [model.geom(g).name for g in (worst.geom1, worst.geom2)]
         keys = dict.fromkeys(k for name in names for k in geom_keys(name))
-        raise ParameterError(f"initial layout penetrates by {-worst.dist * 1e3:.2f} mm "
-                             f"(limit {MAX_INITIAL_PENETRATION_M * 1e3:.1f} mm): "
-                             f"{names[0]} into {names[1]}: check "
-                             f"{', '.join(keys) or 'radii and positions'} in the mechanics "
-                             "file")
+        raise ParameterError(f"{_origin(params)}: initial layout penetrates by "
+                             f"{-worst.dist * 1e3:.2f} mm (limit "
+                             f"{MAX_INITIAL_PENETRATION_M * 1e3:.1f} mm): {names[0]} into "
+                             f"{names[1]}: check {', '.join(keys) or 'radii and positions'}")
     steps = round(duration_s / model.opt.timestep)
     for _ in range(steps):
         step(model, data, foundation, springs)
     if sum(w.number for w in data.warning):
         raise RuntimeError("MuJoCo warnings while settling the home keyframe")
     return data
+
+
+def _origin(params: ModelParams) -> str:
+    """The mechanics file of ``params`` with the run's --set changes to it, e.g.
+    'mine.toml with --set model.contacts.rail_stiffness_N_m' ('ModelParams' built in code)."""
+    changed = ", ".join(params.origin.overridden.values())
+    return params.origin.table() + (f" with {changed}" if changed else "")
 
 
 def generate_mjcf(params: ModelParams | None = None, name: str = MODEL_NAME) -> str:

@@ -318,7 +318,7 @@ def compute_layout(p: ModelParams) -> Layout:
     """Lay the pins on a closed loop around sprocket, rollers, idler and road wheels,
     moving the idler along its slide until the last chord closes the loop exactly."""
     count = p.track.link_count
-    at = Location(label="ModelParams")
+    at = p.origin
     lo, hi = p.idler.x_m - CLOSURE_WINDOW_M, p.idler.x_m + CLOSURE_WINDOW_M
     idler_x: float | None
     try:

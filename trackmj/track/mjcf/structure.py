@@ -50,7 +50,6 @@ import numpy as np
 from trackmj.track.mechanics import ModelParams
 from trackmj.track.mjcf.names import link_name, pin_name, stretch_name
 from trackmj.track.mjcf.tree import attribute, find
-from trackmj.validator import ParameterError
 
 
 def chain_sizes(link_count: int, max_links: int) -> list[int]:
@@ -132,9 +131,9 @@ def chain_links(root: ET.Element, p: ModelParams) -> None:
     longer have)."""
     joint = p.pin_joint
     if joint.torsional_stiffness_N_m_rad > 0.0 or joint.torsional_damping_N_m_s_rad > 0.0:
-        raise ParameterError(f"[track] structure = \"{p.track.structure}\" does not take "
-                             f"the [{p.pin_joint_table}] torsional spring-damper; use "
-                             "structure = \"free\" with it")
+        raise p.origin.error(("track", "structure"), p.track.structure,
+                             f"does not take the [{p.pin_joint_table}] torsional "
+                             "spring-damper; use structure = \"free\" with it")
 
     world = find(root, "worldbody")
     bodies = {b.get("name"): b for b in world.findall("body")}
