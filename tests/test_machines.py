@@ -323,8 +323,9 @@ def test_an_initial_penetration_names_both_geoms_and_their_keys(geom, grow_m, me
 
 
 def test_the_generator_names_the_mechanics_file_it_refuses(tmp_path) -> None:
-    """The generator's own checks name the file as the loader's do: a pin torsion spring past
-    the explicit limit in a newcomer's copy."""
+    """The generator's own checks name the file (and a --set option) as the loader's do: a
+    pin torsion spring past the explicit limit in a newcomer's copy, and a rail contact too
+    stiff for the 1 ms step, which diverges while settling (MuJoCo's BADQACC)."""
     text = (models_dir() / "compact3.toml").read_text()
     mine = tmp_path / "mine.toml"
     mine.write_text(re.sub(r"(?m)^torsional_stiffness_N_m_rad = 0\.0",
@@ -332,6 +333,12 @@ def test_the_generator_names_the_mechanics_file_it_refuses(tmp_path) -> None:
     with pytest.raises(ParameterError, match=r"^mine\.toml \[pins\]\.torsional_stiffness_N_m_rad "
                        r"= 100000\.0 exceeds the explicit limit \d+ N·m/rad"):
         generate_mjcf(load_model_params(mine))
+    stiff = load_model_params(models_dir() / "compact3.toml",
+                              overrides={"contacts.rail_stiffness_N_m": 1e9})
+    with pytest.raises(ParameterError, match=r"^compact3\.toml with --set model\.contacts\."
+                       r"rail_stiffness_N_m: the model goes unstable while settling its home "
+                       r"keyframe \(MuJoCo: BADQACC at link_\d+\): .*\[contacts\]"):
+        generate_mjcf(stiff)
 
 
 def test_cli_refuses_a_layout_with_one_line_and_exit_2(capsys) -> None:

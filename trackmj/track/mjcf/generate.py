@@ -48,8 +48,8 @@ def geom_keys(name: str) -> tuple[str, ...]:
 def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> mujoco.MjData:
     """State after ``duration_s`` [s] from the layout, standing (sprocket servo at 0 rad/s),
     under the passive tensioner of ``params``, the pin slides' springs implicit as in the
-    plant's step; ParameterError naming the mechanics file on an initial penetration,
-    RuntimeError on MuJoCo warnings."""
+    plant's step; ParameterError naming the mechanics file on an initial penetration or on
+    MuJoCo warnings while settling."""
     equalise_link_weights(model)
     data = mujoco.MjData(model)
     pins = [model.geom(link_name(k) + "_pin").id for k in range(params.track.link_count)]
@@ -73,8 +73,14 @@ def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> muj
     steps = round(duration_s / model.opt.timestep)
     for _ in range(steps):
         step(model, data, foundation, springs)
-    if sum(w.number for w in data.warning):
-        raise RuntimeError("MuJoCo warnings while settling the home keyframe")
+    warned = _warnings(model, data)
+    if warned:
+        h = params.simulation.timestep_s
+        raise ParameterError(f"{_origin(params)}: the model goes unstable while "
+                             f"settling its home keyframe (MuJoCo: {warned}): a stiffness or "
+                             f"damping too high for [simulation].timestep_s = {h:g} s; check "
+                             "[contacts], [ground], [pins] (or [bushings]) and "
+                             "[solver].soft_margin (models/README.md, Stiffness of the parts)")
     return data
 
 
@@ -83,6 +89,18 @@ def _origin(params: ModelParams) -> str:
     'mine.toml with --set model.contacts.rail_stiffness_N_m' ('ModelParams' built in code)."""
     changed = ", ".join(params.origin.overridden.values())
     return params.origin.table() + (f" with {changed}" if changed else "")
+
+
+def _warnings(model: mujoco.MjModel, data: mujoco.MjData) -> str:
+    """MuJoCo's warnings raised in ``data``, by name ('BADQACC at link_20'), '' if none."""
+    out = []
+    for i, w in enumerate(data.warning):
+        if w.number:
+            name = mujoco.mjtWarning(i).name.removeprefix("mjWARN_")
+            if i == mujoco.mjtWarning.mjWARN_BADQACC and 0 <= w.lastinfo < model.nv:
+                name += f" at {model.body(model.dof_bodyid[w.lastinfo]).name}"
+            out.append(name)
+    return ", ".join(out)
 
 
 def generate_mjcf(params: ModelParams | None = None, name: str = MODEL_NAME) -> str:
