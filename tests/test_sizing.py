@@ -164,6 +164,31 @@ def test_the_idler_identified_for_a_run_is_the_run_model(monkeypatch) -> None:
         assert run.idler
 
 
+def test_a_machine_whose_own_idler_is_refused_says_overrides_do_not_help(tmp_path,
+                                                                          monkeypatch) -> None:
+    """A newcomer's machine whose own mechanics cannot be identified (here: every
+    identification refused) run with --set model.* is refused in one line saying that the
+    MPC weights take the machine's own files, which the overrides leave as they are, and
+    where to write the changes; without overrides the refusal is the identification's."""
+    def refuse(*args, **kwargs):
+        raise IdentificationError("the idler's settled stroke does not grow with the force")
+
+    monkeypatch.setattr(setup, "identify_idler", refuse)
+    monkeypatch.setenv("TRACKMJ_CACHE", str(tmp_path / "cache"))
+    path = _m113_at(tmp_path, 7000.0)
+    with pytest.raises(IdentificationError, match=r"^big_machine\.toml: the idler identified "
+                       r"on big\.toml: the idler's settled stroke does not grow with the "
+                       r"force; this run's model changes \(--set model\.\*, --model\) do not "
+                       r"reach it: the MPC weights are scaled by the tension-rate gain of the "
+                       r"machine's own files, so write the changes into big\.toml, or into a "
+                       r"copy that a machine file of its own names$"):
+        prepare("W1", machine=path, overrides={"model.tensioner.preload_N": 9000.0})
+    with pytest.raises(IdentificationError, match=r"^big_machine\.toml: the idler identified "
+                       r"on big\.toml: the idler's settled stroke does not grow with the "
+                       r"force$"):
+        prepare("W1", machine=path)
+
+
 # ----------------------------------------------------------------------------- holding force
 
 def _m113_at(folder, nominal_N: float):

@@ -370,7 +370,16 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
             model_params, Path(model or mach.mechanics).name, hydraulics_params,
             Path(hydraulics or mach.hydraulics).name,
             resolved(control_params.controller, "force_max_N")))
-    control_config = machine_weights(control_params, mach)
+    try:
+        control_config = machine_weights(control_params, mach)
+    except IdentificationError as error:
+        if model_params == mechanics(mach):
+            raise
+        raise IdentificationError(
+            f"{error}; this run's model changes (--set model.*, --model) do not reach it: the "
+            "MPC weights are scaled by the tension-rate gain of the machine's own files, "
+            f"so write the changes into {mach.mechanics.name}, or into a copy that a machine "
+            "file of its own names") from None
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,
         estimator=estimator, seed=seed, duration_s=duration_s, model=model_params,
