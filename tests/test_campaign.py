@@ -130,6 +130,8 @@ def test_a_duration_that_cuts_an_event_is_refused_naming_it(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert "--duration 8 s cuts off W4.toml [[supply.drops]][0] (supply drop 12-20 s)" in err
+    assert err.rstrip().endswith("(a run is judged on its scenario's events; calibrate, "
+                                 "replaying logged valve commands, needs none)")
     assert not (tmp_path / "w4").exists()
     with pytest.raises(ParameterError, match=r"\[\[reference.steps\]\]\[0\] \(reference step "
                                              r"at 3 s\)"):

@@ -63,7 +63,10 @@ def cut_events(sc: Scenario, duration_s: float) -> list[Event]:
 def check_duration(sc: Scenario, duration_s: float) -> None:
     """ParameterError (one line naming the first event cut off, and the duration that holds
     every one of them) if a run of ``duration_s`` [s] would cut off one of ``sc``'s events;
-    the same rule as the scenario file's, where an event after ``duration_s`` is refused."""
+    the same rule as the scenario file's, where an event after ``duration_s`` is refused.
+    A closed-loop run is judged on the response to its events; ``trackmj calibrate``
+    replays logged valve commands for the logs' length and does not apply it, which the
+    line says (a 4 s W1 spec calibrates, ``run W1 --duration 4`` is refused)."""
     cut = cut_events(sc, duration_s)
     if cut:
         first, last = cut[0], max(cut, key=lambda e: e.needs_s)
@@ -74,7 +77,8 @@ def check_duration(sc: Scenario, duration_s: float) -> None:
         raise ParameterError(
             f"--duration {duration_s:g} s cuts off {sc.source.name} {first.what}{more}: "
             f"{needs} the run to last {least} s; give --duration {least}, or move "
-            f"the event with --set scenario.{first.times[0][0]}=...")
+            f"the event with --set scenario.{first.times[0][0]}=... (a run is judged on "
+            "its scenario's events; calibrate, replaying logged valve commands, needs none)")
 
 
 def moved_events(sc: Scenario, duration_s: float) -> dict[str, float]:
