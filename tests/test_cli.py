@@ -75,6 +75,9 @@ def test_keys_lists_the_set_keys_with_units_and_ranges(capsys) -> None:
     out = capsys.readouterr().out
     assert "hydraulics.fluid.bulk_modulus_Pa: a number, Pa, (0, 1e+11]" in out
     assert main(["keys", "pneumatics"]) == 2
+    assert main(["keys", "hydralics"]) == 2
+    assert "keys 'hydralics'; did you mean 'hydraulics'? (allowed: model, hydraulics, " in (
+        capsys.readouterr().err)
 
 
 def test_view_without_a_display_fails_with_a_reason(tmp_path, monkeypatch, capsys) -> None:

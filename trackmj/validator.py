@@ -622,7 +622,7 @@ def missing_key(cls: type, name: str, at: Location, hint: str = "") -> Parameter
     return ParameterError(_describe_missing(name, _schema(cls)[name], at) + hint)
 
 
-def _did_you_mean(word: str, names: Sequence[str]) -> str:
+def did_you_mean(word: str, names: Sequence[str]) -> str:
     """``"; did you mean 'name'?"`` with the name of ``names`` nearest ``word`` (difflib's
     closest), or '' if none is near."""
     close = difflib.get_close_matches(word, names, n=1)
@@ -632,7 +632,7 @@ def _did_you_mean(word: str, names: Sequence[str]) -> str:
 def _unknown(key: str, value: Any, names: Sequence[str], at: Location) -> ParameterError:
     what = (f"table {_path_text((*at.path, key))}" if isinstance(value, dict) and not at.path
             else f"key {key!r}")
-    return ParameterError(f"{at.table()}: unknown {what}{_did_you_mean(key, names)} "
+    return ParameterError(f"{at.table()}: unknown {what}{did_you_mean(key, names)} "
                           f"(allowed: {', '.join(names)})")
 
 
@@ -762,7 +762,7 @@ def _kind_hint(kind: str, dotted: str) -> str:
     rest = "" if glued is None else kind[len(glued):].lstrip("_")
     if glued is not None and len(rest) >= 3:     # not a plural: 'models' is 'model'
         return f"; did you mean {glued}.{rest}{'.' + dotted if dotted else ''}?"
-    return _did_you_mean(kind, FILE_KINDS)
+    return did_you_mean(kind, FILE_KINDS)
 
 
 def _parse_value(text: str, item: str) -> Any:
@@ -828,7 +828,7 @@ def _check_key(option: str, prefix: str, root: type, table: type, path: list[str
         rows = [".".join([*map(str, path), g, *rest[1:]]) for g in glued] or elsewhere[:2]
         hint = f"; did you mean {' or '.join(prefix + row for row in rows)}?"
     else:
-        hint = _did_you_mean(part, list(fields))
+        hint = did_you_mean(part, list(fields))
     raise ParameterError(f"{option}: {here} has no key {part!r}{hint} "
                          f"(allowed: {', '.join(fields)})")
 
@@ -846,7 +846,7 @@ def _override_step(option: str, node: Any, hint: Any, path: list[str | int],
     if kind == "named":
         if part not in node:
             raise ParameterError(f"{option}: the file has no table {_path_text((*path, part))}"
-                                 f"{_did_you_mean(part, list(node))} (has: "
+                                 f"{did_you_mean(part, list(node))} (has: "
                                  f"{', '.join(node) or 'none'})")
         return part, args[1]
     if kind == "array" or origin is tuple:

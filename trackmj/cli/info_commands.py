@@ -17,7 +17,7 @@ import textwrap
 
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.registry import ARCHITECTURES, ELEMENTS
-from trackmj.validator import FILE_KINDS, describe_schema
+from trackmj.validator import FILE_KINDS, describe_schema, did_you_mean
 
 VIEWER_START_S = 5.0
 """How long ``view`` waits for the viewer to fail before it reports it open [s]."""
@@ -84,7 +84,8 @@ def cmd_keys(args: argparse.Namespace) -> int:
 
     unknown = [k for k in args.kinds if k not in FILE_KINDS]
     if unknown:
-        raise ValueError(f"keys {unknown[0]!r}: allowed {', '.join(FILE_KINDS)}")
+        raise ValueError(f"keys {unknown[0]!r}{did_you_mean(unknown[0], FILE_KINDS)} "
+                         f"(allowed: {', '.join(FILE_KINDS)})")
     print("# --set KIND.TABLE.KEY=VALUE and sweep keys: type, unit, range - meaning; '[]' is "
           "an array of tables, give the index (scenario.load_pulses.0.hitch_N), '<name>' a "
           "named table")
