@@ -74,15 +74,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     # start-up: --help and argument errors must not import MuJoCo, CasADi, Rerun or Matplotlib
     from trackmj.results.figure_run import run_figure
     from trackmj.results.playback import RUN_RRD
-    from trackmj.scenarios.events import check_duration
     from trackmj.sim.run import measured_log, run
     from trackmj.sim.setup import prepare
     from trackmj.study.identity import inputs_key, run_key, stamped
 
     setup = prepare(args.scenario, architecture=args.arch, controller=args.controller,
                     estimator=args.estimator, seed=args.seed, duration=args.duration,
-                    variant=args.variant, **_files(args))
-    check_duration(setup.scenario, setup.duration_s)
+                    variant=args.variant, whole_events=True, **_files(args))
     log: str | None = args.measured
     measured = None if log is None else measured_log(setup, log, args.channels)
     key = inputs_key(setup, measured)
@@ -138,17 +136,16 @@ def cmd_compare(args: argparse.Namespace) -> int:
     """``trackmj compare``: every architecture (× ``--controllers``) on one scenario;
     exit code 1 if a run failed."""
     # start-up: --help and argument errors must not import MuJoCo, CasADi or Matplotlib
-    from trackmj.scenarios.events import check_duration
     from trackmj.sim.setup import prepare
     from trackmj.study.compare import compare, write_compare
 
     controllers = args.controllers.split(",") if args.controllers else [None]
     setups = [prepare(args.scenario, controller=c, estimator=args.estimator, seed=args.seed,
-                      duration=args.duration, **_files(args)) for c in controllers]
+                      duration=args.duration, whole_events=True, **_files(args))
+              for c in controllers]
     controllers = [str(c) if c else s.controller for c, s in zip(controllers, setups,
                                                                  strict=True)]
     scenario = setups[0].scenario
-    check_duration(scenario, setups[0].duration_s)
     scenario_machine = setups[0].machine.name
     out = Path(args.out or f"runs/compare-{scenario.name}{_machine_suffix(scenario_machine)}")
     base = _specs_base(args, str(args.scenario))

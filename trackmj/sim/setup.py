@@ -47,6 +47,7 @@ from trackmj.machines.idler import (
 )
 from trackmj.machines.sizing import input_weight_scale
 from trackmj.ports import COUPLING_STEP_S
+from trackmj.scenarios.events import check_duration
 from trackmj.scenarios.load import load_scenario
 from trackmj.scenarios.resolved import Scenario
 from trackmj.scenarios.schema import Variant
@@ -294,7 +295,8 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
             model: str | Path | None = None, hydraulics: str | Path | None = None,
             control: str | Path | None = None, overrides: Overrides | None = None,
             tensioner: str | Path | None = None,
-            machine: str | Path | Machine | None = None) -> RunSetup:
+            machine: str | Path | Machine | None = None,
+            whole_events: bool = False) -> RunSetup:
     """Load and validate every input of one run; ParameterError (a ValueError) naming the
     file, key or option and what is allowed, before anything is built.
 
@@ -304,7 +306,10 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
     checked here. ``controller`` may be ``"fmu:FILE.toml"`` (:mod:`trackmj.fmi.controller_fmu`).
     ``machine``: a shipped machine's name or a machine file (:mod:`trackmj.machines.assembly`;
     default lf1352) whose mechanics, hydraulics and control files the run takes unless
-    ``model``, ``hydraulics`` or ``control`` override them.
+    ``model``, ``hydraulics`` or ``control`` override them. ``whole_events``: refuse a
+    ``duration`` that cuts off one of the scenario's events
+    (:func:`trackmj.scenarios.events.check_duration`, what ``run`` and ``compare`` apply)
+    before any model is generated or identified.
     """
     mach = resolve(machine)
     sets = overrides_by_kind(overrides)
@@ -338,6 +343,8 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
         raise ParameterError(f"duration = {duration_s:g} s ends before the evaluation starts "
                              f"({sc.source.name} [evaluation].start_s = "
                              f"{sc.evaluation.start_s:g} s): no metric could be computed")
+    if whole_events:
+        check_duration(sc, duration_s)
     try:
         var = sc.variant(variant)
     except KeyError as exc:
