@@ -150,6 +150,18 @@ def test_the_identification_cli_refuses_an_unknown_machine_in_one_line() -> None
     assert "machine 'lf1353': not a shipped machine" in run.stderr and "lf1352" in run.stderr
 
 
+def test_the_identification_cli_names_the_mechanics_file_it_refuses(monkeypatch) -> None:
+    """A refused identification names the machine and its mechanics file, where the
+    [tensioner] keys the reason points to live."""
+    def refuse(*args, **kwargs):
+        raise IdentificationError("the idler's settled stroke does not grow with the force")
+
+    monkeypatch.setattr(identify, "identify_idler", refuse)
+    with pytest.raises(SystemExit, match=r"^lf1352: the idler identified on lf1352\.toml: the "
+                       r"idler's settled stroke does not grow with the force$"):
+        identify.main(["lf1352"])
+
+
 def test_a_stroke_that_does_not_grow_with_the_force_is_refused_in_one_line(monkeypatch) -> None:
     """A preload too small to tension the track (100 N on compact3) settles the idler
     further in at the higher force: a negative static stiffness, refused naming the keys

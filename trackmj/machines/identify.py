@@ -282,7 +282,10 @@ def main(argv: list[str] | None = None) -> None:
     for name, machine in zip(args.machines, machines, strict=True):
         try:
             write = _identify_and_write(machine)
-        except ParameterError as error:   # IdentificationError is one
+        except IdentificationError as error:   # the keys it names are the mechanics file's
+            raise SystemExit(f"{name}: the idler identified on {machine.mechanics.name}: "
+                             f"{error}") from None
+        except ParameterError as error:
             raise SystemExit(f"{name}: {error}") from None
         print(write)
 
