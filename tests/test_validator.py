@@ -213,6 +213,8 @@ def test_valid_override_changes_the_loaded_value(kind: str, item: str, read) -> 
      r"you mean model\.tensioner\.preload_N\?"),
     ("control", "max_iter", 1, r"^--set control\.max_iter: the file has no key 'max_iter'; did "
      r"you mean control\.mpc\.max_iter\?"),
+    ("scenario", "reference.steps.x.time_s", 5.0, r"^--set scenario\.reference\.steps\.x\.time_s: "
+     r"'x' is not an index; \[reference\.steps\] is an array \(index 0\)$"),
     ("scenario", "load_pulses.x.hitch_N", 1.0, r"^--set scenario\.load_pulses\.x\.hitch_N: 'x' "
      r"is not an index; \[load_pulses\] is an array \(no entries\)$"),
     ("model", "road_wheels.x_m.1", 20.0, r"^--set model\.road_wheels\.x_m\.1 = 20\.0 is outside "

@@ -855,7 +855,8 @@ def _override_step(option: str, node: Any, hint: Any, path: list[str | int],
         variable = kind == "array" or args[-1] is Ellipsis
         size = len(node) if variable else min(len(node), len(args))
         if not part.isdigit():
-            indices = f"indices 0-{size - 1}" if size else "no entries"
+            indices = ("no entries" if size == 0 else "index 0" if size == 1
+                       else f"indices 0-{size - 1}")
             raise ParameterError(f"{option}: {part!r} is not an index; {here} is an array "
                                  f"({indices})")
         if int(part) >= size:
