@@ -184,6 +184,19 @@ def test_cli_refuses_a_bad_spec_before_any_run(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_mistyped_spec_key_is_answered_with_the_nearest_kind(tmp_path):
+    """A spec key of a mistyped kind names the nearest one, not the pattern it failed."""
+    from trackmj.study.calibrate_spec import load_spec
+
+    spec = spec_file(tmp_path).read_text().replace(f'key = "{BULK}"',
+                                                   f'key = "hydraulic{BULK[10:]}"')
+    (tmp_path / "spec.toml").write_text(spec)
+    with pytest.raises(ParameterError, match=r"^spec\.toml \[\[calibrate\.parameters\]\]\[1\]"
+                       r"\.key = 'hydraulic\.fluid\.bulk_modulus_Pa': unknown file kind "
+                       r"'hydraulic'; did you mean 'hydraulics'\?"):
+        load_spec(tmp_path / "spec.toml")
+
+
 # ---------------------------------------------------------------------- run --measured
 
 def test_lag_by_cross_correlation_finds_a_known_delay():

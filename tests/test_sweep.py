@@ -92,7 +92,11 @@ def test_integer_keys_take_integers() -> None:
     ({"method": "lhs", "parameters": [{"key": BULK, "low": 1e9, "high": 2e9}]},
      r"method = 'lhs' needs samples"),
     ({"parameters": [{"key": "fluid.bulk_modulus_Pa", "values": [1e9]}]},
-     r"key = 'fluid.bulk_modulus_Pa' must match"),
+     r"key = 'fluid.bulk_modulus_Pa': unknown file kind 'fluid' \(allowed: model, "
+     r"hydraulics, control, scenario\)$"),
+    ({"parameters": [{"key": "hydraulic.fluid.bulk_modulus_Pa", "values": [1e9]}]},
+     r"key = 'hydraulic.fluid.bulk_modulus_Pa': unknown file kind 'hydraulic'; did you mean "
+     r"'hydraulics'\?"),
     ({"set": [f"{BULK}=1e9"], "parameters": [{"key": BULK, "values": [2e9]}]},
      r"is also fixed in \[sweep\].set"),
     ({"controllers": ["nmpc", "mpcc"]}, r"controllers\[1\] = 'mpcc' is not one of"),

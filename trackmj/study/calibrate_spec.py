@@ -21,14 +21,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-from trackmj.validator import FILE_KINDS, Location, ParameterError, Parameters, load_file, param
+from trackmj.validator import (
+    Location,
+    ParameterError,
+    Parameters,
+    load_file,
+    param,
+    split_override_key,
+)
 
 
 @dataclass(frozen=True)
 class FitParameter(Parameters):
     """One key fitted within its bounds."""
 
-    key: str = param(pattern=r"[a-z]+(\.[A-Za-z0-9_]+)+",
+    key: str = param(max_len=200,
                      doc="a --set key KIND.TABLE.KEY (trackmj keys lists them)")
     bounds: tuple[float, float] = param(unit="unit of the key",
                                         doc="[low, high] the fit stays within")
@@ -36,8 +43,7 @@ class FitParameter(Parameters):
                                 doc="optional start value; default: the files' value")
 
     def cross_check(self, at: Location) -> None:
-        if self.key.partition(".")[0] not in FILE_KINDS:
-            raise at.error("key", self.key, f"must start with one of {', '.join(FILE_KINDS)}")
+        split_override_key(self.key, f"{at.key('key')} = {self.key!r}")
         low, high = self.bounds
         if not high > low:
             raise at.error("bounds", list(self.bounds), "must be [low, high] with high > low")

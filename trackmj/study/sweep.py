@@ -130,13 +130,13 @@ from trackmj.validator import (
     load_file,
     param,
     parse_overrides,
+    split_override_key,
 )
 
 SPEC_COPY = "sweep.toml"
 FIGURES = "figures"
 MAX_RUNS = 100_000
 """Largest sweep accepted: a grid grows as the product of its value counts."""
-KEY_PATTERN = rf"({'|'.join(FILE_KINDS)})(\.[A-Za-z0-9_]+)+"
 T = TypeVar("T")
 
 
@@ -153,7 +153,7 @@ def _given(value: T | None, what: str) -> T:
 class SweptParameter(Parameters):
     """One ``[[sweep.parameters]]`` entry: a ``--set`` key and its values or range."""
 
-    key: str = param(pattern=KEY_PATTERN, max_len=200,
+    key: str = param(max_len=200,
                      doc="a --set key KIND.TABLE.KEY, KIND one of " + ", ".join(FILE_KINDS))
     values: tuple[float, ...] | None = param(default=None,
                                              doc="grid values (optional: or low/high)")
@@ -167,6 +167,7 @@ class SweptParameter(Parameters):
                                             doc="spacing of range points and samples")
 
     def cross_check(self, at: Location) -> None:
+        split_override_key(self.key, f"{at.key('key')} = {self.key!r}")
         ranged = self.low is not None or self.high is not None
         if self.values is not None and (ranged or self.count is not None):
             raise at.error("values", self.values, "excludes low, high and count: give either "
