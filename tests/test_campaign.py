@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import pytest
 from synthetic import energy_table, synthetic_result
@@ -130,7 +131,7 @@ def test_a_duration_that_cuts_an_event_is_refused_naming_it(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert "--duration 8 s cuts off W4.toml [[supply.drops]][0] (supply drop 12-20 s)" in err
-    assert err.rstrip().endswith("(a run is judged on its scenario's events; calibrate, "
+    assert err.rstrip().endswith("a run is judged on its scenario's events (calibrate, "
                                  "replaying logged valve commands, needs none)")
     assert not (tmp_path / "w4").exists()
     with pytest.raises(ParameterError, match=r"\[\[reference.steps\]\]\[0\] \(reference step "
@@ -143,6 +144,18 @@ def test_a_duration_that_cuts_an_event_is_refused_naming_it(tmp_path, capsys):
                                              r"\(load pulse 18-20 s\)\): they need the run to "
                                              r"last 20.1 or more s; give --duration 20.1 or more"):
         check_duration(load_scenario("W3"), 2.0)
+
+
+@pytest.mark.parametrize(("name", "duration_s"), [("W1", 4.0), ("W3", 10.0), ("W4", 15.0)])
+def test_the_moves_a_refusal_offers_fit_the_events_into_the_run(name, duration_s):
+    """A newcomer who copies the --set items of the refusal gets a run that holds every
+    event: the schedule compressed as report and sweep compress it."""
+    with pytest.raises(ParameterError) as info:
+        check_duration(load_scenario(name), duration_s)
+    offered = re.findall(r"--set scenario\.(\S+)=([0-9.]+)", str(info.value))
+    assert offered
+    moved = load_scenario(name, {key: float(value) for key, value in offered})
+    check_duration(moved, duration_s)
     check_duration(load_scenario("W3"), 20.1)
 
 

@@ -74,11 +74,15 @@ def check_duration(sc: Scenario, duration_s: float) -> None:
         starts_inside = last.times[0][1] >= last.needs_s   # a step or open ramp: start < end
         least = f"more than {last.needs_s:g}" if starts_inside else f"{last.needs_s:g} or more"
         needs = "they need" if len(cut) > 1 else "it needs"
+        current = {key: t for e in events(sc) for key, t in e.times}
+        sets = " ".join(f"--set scenario.{key}={t:g}"
+                        for key, t in moved_events(sc, duration_s).items()
+                        if current.get(key) != t)
         raise ParameterError(
             f"--duration {duration_s:g} s cuts off {sc.source.name} {first.what}{more}: "
-            f"{needs} the run to last {least} s; give --duration {least}, or move "
-            f"the event with --set scenario.{first.times[0][0]}=... (a run is judged on "
-            "its scenario's events; calibrate, replaying logged valve commands, needs none)")
+            f"{needs} the run to last {least} s; give --duration {least}, or move the "
+            f"events into the run as report and sweep do ({sets}); a run is judged on "
+            "its scenario's events (calibrate, replaying logged valve commands, needs none)")
 
 
 def moved_events(sc: Scenario, duration_s: float) -> dict[str, float]:
