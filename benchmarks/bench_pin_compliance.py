@@ -9,7 +9,17 @@ Candidates, built on the default machine's model file:
   ``[pins]`` as joint stiffness and damping, every connect carrying one pin; the plant
   integrates the slides' springs implicitly (``trackmj.track.foundation.ImplicitSprings``:
   no armature; the armature candidates ``+armX`` of the record were measured before that);
-* suffix ``+discrete`` (MuJoCo 4's ``discrete`` integrator instead of ``implicitfast``).
+* suffix ``+discrete`` (MuJoCo 4's ``discrete`` integrator instead of ``implicitfast``);
+* suffix ``+kin`` on ``chainsN``: every connect carries one pin's K and B (not its chain's
+  m pins in series), and after each step every hinged pin's stretch s moves towards T/K
+  kinematically: the child link's ``body_pos`` is its pitch offset plus s along it, s ←
+  s + α·(max(T, 0)/K − s) with α = :data:`KIN_RELAXATION`, T the pin's tension
+  interpolated along its chain between the tensions of the chain's two connects (exact on
+  a free span; a wheel or tooth loading a chain's inner link bends T there), all in one
+  compiled call (:func:`_kinematic_stretch`). No degree of freedom per pin: the chains'
+  nv. A lagged T/K without the relaxation diverges within 30 ms (the span between two
+  connects answers a stretch of its three hinged pins with 1.5 times its tension change).
+  Measured and not kept: benchmarks/README.md, "A stretch without a degree of freedom".
 
 Every candidate is generated through the project's builders and settled 3 s standing under
 the passive tensioner (``trackmj.track.mjcf.generate.settle``) for its ``home`` keyframe,
@@ -42,26 +52,34 @@ import statistics
 import time
 import xml.etree.ElementTree as ET
 from collections.abc import Callable
+from unittest.mock import patch
 
 import mujoco
+import numba
 import numpy as np
 from bench_structure import _component, idler_contact_N
 from scipy.signal import periodogram
 
 from trackmj.host import machine
 from trackmj.machines.assembly import model_mjcf, resolve
+from trackmj.ports import ForceLaw, TensionerElement
 from trackmj.track.mechanics import ModelParams, load_model_params
+from trackmj.track.mjcf import builders
 from trackmj.track.mjcf.builders import build_mjcf
 from trackmj.track.mjcf.generate import SETTLE_DURATION_S, settle
 from trackmj.track.mjcf.layout import compute_layout
+from trackmj.track.mjcf.names import link_name
+from trackmj.track.mjcf.structure import pin_series_count as structure_series
 from trackmj.track.mjcf.tree import find
-from trackmj.track.plant import PassiveTensioner, TrackPlant
+from trackmj.track.plant import PassiveTensioner, TrackPlant, _pin_tensions
 
 MACHINE = resolve(None)   # the default machine (LF1352)
 SPEED_M_S = 1.5
 COMB_PRELOAD_N = 12.5e3
 QUARTERS = (1, 3, 5, 7)
 BAND_HZ = 0.75
+KIN_RELAXATION = 0.3
+"""α of the ``+kin`` candidate's stretch update [-] per 1 ms step (0.1 measured the same)."""
 
 
 def _params(structure: str, links: int) -> ModelParams:
@@ -78,12 +96,17 @@ def candidate_mjcf(candidate: str) -> tuple[str, ModelParams]:
         raise SystemExit(f"unknown candidate {candidate!r}")
     links = int(head[len(structure):] or 4) if structure != "free" else 4
     params = _params(structure, links)
-    unknown = [o for o in options if o != "discrete"]
-    if unknown:
-        raise SystemExit(f"unknown candidate option {unknown[0]!r}")
+    unknown = [o for o in options if o not in ("discrete", "kin")]
+    if unknown or ("kin" in options and structure != "chains"):
+        raise SystemExit(f"unknown candidate option {(unknown or options)[0]!r}")
     if not options:
         return model_mjcf(params, MACHINE), params
-    root = ET.fromstring(build_mjcf(params, compute_layout(params)))
+    if "kin" in options:                     # every connect carries one pin
+        with patch.object(builders, "pin_series_count",
+                          lambda p: dict.fromkeys(structure_series(p), 1)):
+            root = ET.fromstring(build_mjcf(params, compute_layout(params)))
+    else:
+        root = ET.fromstring(build_mjcf(params, compute_layout(params)))
     if "discrete" in options:
         find(root, "option").set("integrator", "discrete")
     model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
@@ -98,7 +121,63 @@ def candidate_mjcf(candidate: str) -> tuple[str, ModelParams]:
 def build(candidate: str) -> TrackPlant:
     """The plant of ``candidate`` (module docstring) at its ``home`` keyframe."""
     text, params = candidate_mjcf(candidate)
-    return TrackPlant(mujoco.MjModel.from_xml_string(text), params)
+    plant = TrackPlant(mujoco.MjModel.from_xml_string(text), params)
+    if candidate.endswith("+kin"):
+        _stretch_kinematically(plant)
+    return plant
+
+
+@numba.njit(cache=True)
+def _kinematic_stretch(efc_force: np.ndarray, cfrc_int: np.ndarray, xmat: np.ndarray,
+                       link_body: np.ndarray, connect_of_pin: np.ndarray, tension: np.ndarray,
+                       ends: np.ndarray, weights: np.ndarray, stretch: np.ndarray,
+                       offset: np.ndarray, unit: np.ndarray, body_pos: np.ndarray,
+                       child: np.ndarray, relaxation: float, stiffness: float) -> None:
+    """The ``+kin`` update after a step: the connects' tensions [N], each hinged pin's
+    interpolated between its chain's two (``ends`` (h, 2) pin indices, ``weights`` (h, 2)),
+    its stretch [m] relaxed towards max(T, 0)/K, and its child link moved along its pitch
+    (``body_pos[child] = offset + unit·stretch``)."""
+    _pin_tensions(efc_force, cfrc_int, xmat, link_body, connect_of_pin, tension)
+    for j in range(len(child)):
+        t = weights[j, 0] * tension[ends[j, 0]] + weights[j, 1] * tension[ends[j, 1]]
+        stretch[j] += relaxation * (max(t, 0.0) / stiffness - stretch[j])
+        for c in range(3):
+            body_pos[child[j], c] = offset[j, c] + unit[j, c] * stretch[j]
+
+
+def _stretch_kinematically(plant: TrackPlant) -> None:
+    """Make ``plant.step`` the ``+kin`` candidate's: the step, then :func:`_kinematic_stretch`
+    (its connect tensions read from the step's ``efc_force``; ``cfrc_int`` is not updated,
+    the hinged pins' own entries are not used)."""
+    m, d, n = plant.model, plant.data, plant.link_count
+    link_body = np.array([m.body(link_name(k)).id for k in range(n)])
+    connect_of_pin = np.full(n, -1, dtype=np.int64)
+    connected = np.array([k for k in range(n) if m.body(link_name(k)).parentid == 0])
+    connect_of_pin[connected] = np.arange(len(connected))
+    hinged = np.array([k for k in range(n) if connect_of_pin[k] < 0])
+    first = np.searchsorted(connected, hinged, side="right") - 1
+    nxt = (first + 1) % len(connected)
+    start = connected[first]
+    end = np.where(nxt == 0, connected[0] + n, connected[nxt])
+    share = (hinged - start) / (end - start)
+    ends = np.stack([start, connected[nxt]], axis=1)
+    weights = np.stack([1.0 - share, share], axis=1)
+    child = link_body[hinged]
+    offset = m.body_pos[child].copy()
+    unit = offset / np.linalg.norm(offset, axis=1, keepdims=True)
+    stretch, tension = np.zeros(len(hinged)), np.zeros(n)
+    stiffness = plant.params.pin_joint.radial_stiffness_N_m
+    body_pos, step = m.body_pos, plant.step
+
+    def kinematic_step(element: TensionerElement,
+                       on_substep: Callable[[], None] | None = None) -> ForceLaw:
+        law = step(element, on_substep)
+        _kinematic_stretch(d.efc_force, d.cfrc_int, d.xmat, link_body, connect_of_pin,
+                           tension, ends, weights, stretch, offset, unit, body_pos, child,
+                           KIN_RELAXATION, stiffness)
+        return law
+
+    plant.step = kinematic_step    # type: ignore[method-assign]
 
 
 def pin_stretch_m(plant: TrackPlant) -> np.ndarray:
