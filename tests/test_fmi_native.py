@@ -44,6 +44,8 @@ from trackmj.sim.mechanics import settled_track
 from trackmj.sim.setup import prepare
 
 HERE = Path(__file__).resolve().parent
+CLIMB = HERE / "data" / "climb.toml"
+"""A scenario on a 1 in 5 grade (flat ground, gravity tilted): the FMU carries the tilt."""
 FMI_HEADERS = Path(toolchain.__file__).parent / "include"
 """The FMI headers the package ships (trackmj/fmi/native/include), for the tests' C hosts."""
 FORCE_N = 13e3
@@ -62,13 +64,16 @@ def force_at(t_s: float) -> float:
 
 @pytest.fixture(scope="session")
 def native(tmp_path_factory) -> dict[str, Path]:
-    """LF1352's track as native FMUs: flat ground FMI 2.0 and 3.0, W2's ISO road FMI 2.0."""
+    """LF1352's track as native FMUs: flat ground FMI 2.0 and 3.0, W2's ISO road and a
+    1 in 5 grade FMI 2.0."""
     d = tmp_path_factory.mktemp("native")
     return {
         "fmi2": export_track(d / "flat2.fmu", fmi_version=2, force_N=FORCE_N).path,
         "fmi3": export_track(d / "flat3.fmu", fmi_version=3, force_N=FORCE_N).path,
         "road": export_track(d / "road2.fmu", fmi_version=2, force_N=FORCE_N, terrain="W2",
                              platforms=("linux",)).path,
+        "grade": export_track(d / "grade2.fmu", fmi_version=2, force_N=FORCE_N,
+                              terrain=str(CLIMB), platforms=("linux",)).path,
     }
 
 
@@ -141,11 +146,11 @@ def drive(step: Callable[[float, float], tuple[float, float, float]], seconds: f
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("which", ["fmi2", "road"])
+@pytest.mark.parametrize("which", ["fmi2", "road", "grade"])
 def test_the_fmu_steps_as_the_python_plant(native, which) -> None:
-    """5 s at 1.5 m/s under the W1-like law, flat ground and W2's ISO road: stroke,
-    velocity and tension equal the Python plant's to 1e-9 relative."""
-    plant = python_plant("flat" if which == "fmi2" else "W2")
+    """5 s at 1.5 m/s under the W1-like law, flat ground, W2's ISO road and a 1 in 5 grade:
+    stroke, velocity and tension equal the Python plant's to 1e-9 relative."""
+    plant = python_plant({"fmi2": "flat", "road": "W2", "grade": str(CLIMB)}[which])
 
     def python_step(force: float, speed: float) -> tuple[float, float, float]:
         plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))

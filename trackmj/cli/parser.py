@@ -346,8 +346,8 @@ def _add_fmu(sub: Subcommands) -> None:
     native.add_argument("--machine", metavar="NAME|FILE", help="a shipped machine or a "
                         f"machine file *_machine.toml (default: {DEFAULT_MACHINE})")
     native.add_argument("--terrain", default="flat", metavar="flat|SCENARIO",
-                        help="flat, or a scenario whose road the track stands on (default "
-                        "flat)")
+                        help="flat, or a scenario whose road (and grade) the track stands "
+                        "on (default flat)")
     native.add_argument("--seed", type=int, default=0, help="seed of the terrain's road")
     native.add_argument("--force", type=float, metavar="N", help="tensioner force the track "
                         "is settled under [N] (default: the machine's W1 initial tension)")
