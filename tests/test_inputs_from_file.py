@@ -93,6 +93,13 @@ def test_a_shuttle_speed_trace_travels_both_ways_and_a_speed_past_5_m_s_is_refus
     track = "[track]\nspeed_m_s = 1.5\nramp_s = 1.0\n"
     sc = load_scenario(scenario_with(tmp_path, {track: '[track]\nfrom_file = "v.csv"\n'}))
     assert sc.travel_range_m(3.0) == pytest.approx((-1.85, 0.94), abs=2e-3)
+    # the tooth-passing band over a steady window from 0.5 s: the mean |v|, (0.5·1 + 0.13
+    # + 1.8·1.5)/2.5 = 1.332 m/s, where the signed mean (−0.9 m/s) would put it at 12 Hz
+    both = load_scenario(scenario_with(tmp_path, {track: '[track]\nfrom_file = "v.csv"\n'}),
+                         {"evaluation.steady_start_s": 0.5})
+    f_tooth = 1.332 / 0.075
+    assert both.metric_windows(3.0, link_pitch_m=0.075).tooth_passing_band_Hz == (
+        pytest.approx((0.9 * f_tooth, 1.1 * f_tooth), rel=2e-3))
     write_csv(tmp_path / "v.csv", {"t_s": t, "speed_m_s": 4.0 * edge})
     with pytest.raises(ParameterError) as info:
         load_scenario(scenario_with(tmp_path, {track: '[track]\nfrom_file = "v.csv"\n'}))

@@ -162,6 +162,15 @@ def test_a_reversing_run_drives_onto_road_behind_it_and_the_forward_roads_are_un
     assert windows.road_band_Hz == pytest.approx((1.0, 20.0))
 
 
+def test_a_grade_past_the_grounds_friction_is_refused_naming_both_keys() -> None:
+    """tan θ >= μ: no track holds (a compact3 W4 at 0.9 left physics at 1.8 s, a drive at
+    1.0 slid down at 3.5 m/s with its sprocket turning forward); refused before any work."""
+    with pytest.raises(ParameterError, match=r"^W1\.toml \[terrain\]\.grade = 0\.85: .*μ = "
+                       r"0\.8 \(lf1352\.toml \[track\]\.ground_friction\)"):
+        prepare("W1", overrides={"scenario.terrain.grade": 0.85})
+    assert prepare("W1", overrides={"scenario.terrain.grade": -0.7}).scenario.terrain.grade == -0.7
+
+
 def test_w5_variants() -> None:
     s = load_scenario("W5")
     names = [v.name for v in s.variants]

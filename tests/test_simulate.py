@@ -152,6 +152,14 @@ def test_reversing_pulls_in_the_upper_strand_by_the_drive_torque() -> None:
     assert split == pytest.approx(torque / radius, rel=0.15)
     assert m["mujoco_warnings"] == 0
     assert 10e3 <= m["acceptance"]["mean_min_N"] <= m["acceptance"]["mean_max_N"] <= 20e3
+    # the run says it reversed: its record and its figure's title
+    from trackmj.results.figure_run import run_title
+    from trackmj.results.store import running_of
+
+    running = running_of(result)
+    assert running is not None and running["speed_m_s"] == -1.5 and running["grade"] == 0.0
+    assert running["travel_m"][0] < -3.0 and running["travel_m"][1] == 0.0
+    assert run_title(result).endswith("seed 0, reversing at 1.5 m/s")
 
 
 def test_a_grade_loads_the_drive_by_the_weights_downhill_share() -> None:
@@ -164,6 +172,7 @@ def test_a_grade_loads_the_drive_by_the_weights_downhill_share() -> None:
 
     import mujoco
 
+    from trackmj.results.figure_run import run_title
     from trackmj.sim.setup import prepare
 
     climb = Path(__file__).parent / "data" / "climb.toml"
@@ -182,5 +191,7 @@ def test_a_grade_loads_the_drive_by_the_weights_downhill_share() -> None:
         splits.append((cols["lower_strand_tension_N"]
                        - cols["upper_strand_tension_N"])[moving].mean())
         assert result.metrics["mujoco_warnings"] == 0
+        assert f"on a grade of {grade:+g} (tan θ, {'up' if grade > 0 else 'down'}hill " \
+               "forward)" in run_title(result)
     assert (torques[0] - torques[1]) / (2.0 * radius) == pytest.approx(downhill_N, rel=0.05)
     assert torques[1] < 0.0 and splits[1] < -0.5 * downhill_N < 0.5 * downhill_N < splits[0]

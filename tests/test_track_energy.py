@@ -102,6 +102,15 @@ def test_drive_writes_metrics_and_timeseries_whole(tmp_path) -> None:
     t = table.column("t_s").to_numpy()
     np.testing.assert_allclose(np.diff(t), 1e-3, atol=1e-12)
     assert np.all(table.column("upper_strand_tension_N").to_numpy() > 1e3)
+    # standing there is no drive work to relate the integrator's energy to: that ratio is
+    # NaN in memory and null in strict JSON
+    drive(0.0, 0.4, out_dir=out)
+
+    def refuse(word: str) -> None:
+        raise AssertionError(f"metrics.json holds a bare {word}")
+
+    back = json.loads((out / "metrics.json").read_text(), parse_constant=refuse)
+    assert back["integrator_created_rel"] is None and back["speed_m_s"] == 0.0
 
 
 def test_a_climb_books_the_weights_work_as_potential_energy() -> None:
@@ -126,6 +135,9 @@ def test_drive_refuses_bad_input() -> None:
         drive(1.0, 0.0)
     with pytest.raises(ValueError, match=r"grade 1\.5: allowed \[-1, 1\]"):
         drive(1.0, 1.0, grade=1.5)
+    with pytest.raises(ValueError, match=r"grade -0\.9: .* friction μ = 0\.8 .*allowed "
+                                         r"\|grade\| < 0\.8$"):
+        drive(1.0, 1.0, grade=-0.9)    # the machine slid down at -3.5 m/s, 'healthy'
 
 
 @pytest.mark.slow

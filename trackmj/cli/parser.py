@@ -185,13 +185,15 @@ def _add_drive(sub: Subcommands) -> None:
                "line names it); 3 the run left physics or an FMU tensioner failed; 130 "
                "interrupted")
     _model_args(drive)
-    drive.add_argument("--speed", type=float, default=1.5, help="sprocket pitch speed [m/s]")
+    drive.add_argument("--speed", type=float, default=1.5,
+                       help="sprocket pitch speed [m/s], negative in reverse")
     drive.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
     drive.add_argument("--preload", type=float, metavar="N",
                        help="tensioner preload [N], e.g. 12e3")
     drive.add_argument("--hitch-pull", type=float, default=0.0, metavar="N",
-                       help="horizontal rear-hitch load [N]: > 0 a towed load (the sprocket "
-                       "drives harder), < 0 a push (it brakes); e.g. 8e3")
+                       help="horizontal rear-hitch load [N]: > 0 pulls the machine "
+                       "rearward (a towed load driving forward), < 0 pushes it forward; "
+                       "e.g. 8e3")
     drive.add_argument("--grade", type=float, default=0.0, metavar="TAN",
                        help="slope driven on, tan θ (rise over run, > 0 uphill driving "
                        "forward, in [-1, 1]); e.g. 0.2")

@@ -140,11 +140,14 @@ def _indicator(ax: Axes, t: np.ndarray, held: np.ndarray, rows: np.ndarray, labe
 
 
 def _title(metrics: Mapping[str, Any]) -> str:
-    """Machine, speed, tensioner and the derailment count, with how the checks are made."""
+    """Machine, speed (and grade), tensioner and the derailment count, with how the checks
+    are made."""
     tensioner = (f"preload {metrics['preload_N'] / 1e3:g} kN" if "preload_N" in metrics
                  else f"tensioner {metrics['tensioner'].get('file', '')}")
     failed = metrics["derailment_checks_failed"]
-    return (f"drive: {metrics['machine']}, {metrics['speed_m_s']:g} m/s, {tensioner}, "
+    grade = metrics.get("grade") or 0.0
+    slope = f" on a grade of {grade:+g} (tan θ)" if grade else ""
+    return (f"drive: {metrics['machine']}, {metrics['speed_m_s']:g} m/s{slope}, {tensioner}, "
             f"{metrics['duration_s']:g} s; derailment checks failed {failed} of "
             f"{metrics['derailment_checks']} (every "
             f"{metrics['derailment_check_interval_s']:g} s, values held between checks)")

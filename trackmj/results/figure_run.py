@@ -32,7 +32,7 @@ from trackmj.results.figure_style import (
 )
 from trackmj.results.metric_windows import MetricWindows, windows_of
 from trackmj.results.signals import lowpass
-from trackmj.results.store import Result
+from trackmj.results.store import Result, running_of, running_text
 
 MEASURED_PANELS = {"tension_N": "F_ten", "p_head_Pa": "p_head", "p_rod_Pa": "p_rod",
                    "p_supply_Pa": "p_supply", "stroke_m": "stroke", "valve_mode": "valve mode",
@@ -86,14 +86,16 @@ def run_figure(result: Result, path: str | Path,
 
 def run_title(result: Result, measured_channels: Sequence[str] = ()) -> str:
     """Title of a run's figure: "W1, machine m113: tp nmpc/ekf, seed 0" (the variant
-    unless nominal); with a measured log (its channels ``measured_channels``, or the
-    result's ``prediction_vs_measured``) a line naming the log and the tracking window,
-    then each channel's RMSE (raw and low-passed) and lag."""
+    unless nominal, and how the track ran unless forward on level ground: ", reversing at
+    1.5 m/s, on a grade of +0.2 ..."); with a measured log (its channels
+    ``measured_channels``, or the result's ``prediction_vs_measured``) a line naming the
+    log and the tracking window, then each channel's RMSE (raw and low-passed) and lag."""
     machine = machine_of(result)
     variant = result.metadata.get("variant", "nominal")
     title = (f"{result.scenario}{f', machine {machine}' if machine else ''}: "
              f"{result.architecture} {result.controller}/{result.estimator}, seed {result.seed}"
-             f"{'' if variant == 'nominal' else f', variant {variant}'}")
+             f"{'' if variant == 'nominal' else f', variant {variant}'}"
+             f"{running_text(running_of(result))}")
     errors = result.metrics.get("prediction_vs_measured")
     log = measured_log_of(result)
     if not (log or measured_channels or isinstance(errors, Mapping)):

@@ -136,6 +136,35 @@ def run_metadata(scenario: str, architecture: str, controller: str, estimator: s
                    for k, v in extra.items()}
 
 
+def running_text(running: Mapping[str, Any] | None) -> str:
+    """How a run's track ran, in words for titles and summaries (a run's ``running``
+    record, :meth:`trackmj.scenarios.resolved.Scenario.running`): "" driving forward on
+    level ground; else ", reversing at 1.5 m/s", ", forward and back (speed from a file)",
+    ", on a grade of +0.2 (tan θ, uphill forward)"."""
+    if not running:
+        return ""
+    parts = []
+    speed, (back, ahead) = running.get("speed_m_s"), running.get("travel_m") or (0.0, 0.0)
+    if speed is not None and speed < 0.0:
+        parts.append(f"reversing at {-speed:g} m/s")
+    elif speed is None and back < 0.0:
+        parts.append("forward and back (speed from a file)" if ahead > 0.0
+                     else "reversing (speed from a file)")
+    grade = running.get("grade") or 0.0
+    if grade:
+        parts.append(f"on a grade of {grade:+g} (tan θ, {'up' if grade > 0 else 'down'}hill "
+                     "forward)")
+    return "".join(f", {p}" for p in parts)
+
+
+def running_of(result: Result) -> dict[str, Any] | None:
+    """The ``running`` record of a run's metadata (None for runs made before it)."""
+    try:
+        return json.loads(result.metadata["running"])
+    except (KeyError, json.JSONDecodeError):
+        return None
+
+
 def _require(module: str, what: str, install: str) -> Any:
     """Import optional ``module`` for ``what``; ImportError saying what to install."""
     try:

@@ -10,6 +10,7 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -160,6 +161,18 @@ class Scenario:
                                      f"t = {signal.t_s[k]:.6g} s; it must stay in [{low:g}, "
                                      f"{high:g}] {unit} over the run")
 
+    def check_grade(self, ground_friction: float, where: str) -> None:
+        """ParameterError unless the grade is below the ground's friction, |tan θ| < μ
+        (``where`` names the key μ comes from): on a steeper slope no track holds, the
+        machine slides down whatever the sprocket does (Coulomb)."""
+        grade = self.terrain.grade
+        if abs(grade) >= ground_friction:
+            raise ParameterError(
+                f"{self.source.name} [terrain].grade = {grade:g}: a slope of tan θ = "
+                f"{abs(grade):g} is at or past the ground's friction μ = {ground_friction:g} "
+                f"({where}), so no track holds on it and the machine would slide down; "
+                f"allowed |grade| < {ground_friction:g}")
+
     def check_machine(self, machine: str) -> None:
         """ParameterError (one line, the reason) if the condition does not apply to
         ``machine`` (a shipped machine's name)."""
@@ -238,13 +251,24 @@ class Scenario:
                                                      * np.diff(t))))
         return float(min(travelled.min(), 0.0)), float(max(travelled.max(), 0.0))
 
-    def steady_speed_m_s(self, duration_s: float) -> float:
-        """Mean commanded track speed over the steady window [steady_start_s, duration] [m/s]
-        (the speed of a file's trace there; the constant speed otherwise)."""
+    def running(self, duration_s: float) -> dict[str, Any]:
+        """How the track runs over ``duration_s`` [s], for a run's record: ``speed_m_s`` the
+        constant commanded speed [m/s] (< 0 reversing; None for a file's trace),
+        ``travel_m`` the (least, greatest) displacement from the start [m] and ``grade``
+        (tan θ, > 0 uphill driving forward)."""
+        speed = None if "track" in self.signals else self._constant_track()[0]
+        return {"speed_m_s": speed, "travel_m": list(self.travel_range_m(duration_s)),
+                "grade": self.terrain.grade}
+
+    def steady_pace_m_s(self, duration_s: float) -> float:
+        """Mean commanded track speed, either way (|v|), over the steady window
+        [steady_start_s, duration] [m/s]: what sets the tooth-passing and road bands (the
+        |speed| of a file's trace averaged there, so a shuttle's two directions add; the
+        constant |speed| otherwise)."""
         if "track" not in self.signals:
-            return self._constant_track()[0]
+            return abs(self._constant_track()[0])
         t = np.arange(self.evaluation.steady_start_s, duration_s, COUPLING_STEP_S)
-        return float(np.mean(self.track_speed_m_s(t))) if len(t) else 0.0
+        return float(np.mean(np.abs(self.track_speed_m_s(t)))) if len(t) else 0.0
 
     def _constant_track(self) -> tuple[float, float]:
         """The [track] speed [m/s] and ramp [s] of a track speed not read from a file."""
@@ -312,7 +336,7 @@ class Scenario:
         road the band it excites, speed × [n_min, n_max] cycles/m, is recorded too."""
         duration = self.duration_s if duration_s is None else duration_s
         dist, labels = self._disturbances()
-        ev, speed = self.evaluation, self.steady_speed_m_s(duration)
+        ev, speed = self.evaluation, self.steady_pace_m_s(duration)
         return MetricWindows(
             force_min_N=present(self.limits.force_min_N, "limits.force_min_N"),
             force_max_N=present(self.limits.force_max_N, "limits.force_max_N"),

@@ -43,6 +43,7 @@ from trackmj.machines.track_plant import load_plant
 from trackmj.ports import COUPLING_STEP_S, Command, Readout, StepInputs, TensionerElement
 from trackmj.results.figure_drive import drive_figure
 from trackmj.results.store import ResultWriter, metrics_as_read, parquet_bytes
+from trackmj.results.store import _json_ready as json_ready  # the one JSON form of metrics
 from trackmj.scenarios.schema import TRACK_SPEED_MAX_M_S
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.plant import DerailmentStatus, PassiveTensioner, TrackPlant
@@ -123,12 +124,18 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     as in :func:`trackmj.machines.track_plant.load_plant`.
 
     Raises ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s, a
-    hitch load outside ±:data:`MAX_HITCH_N` or a grade outside [−1, 1],
+    hitch load outside ±:data:`MAX_HITCH_N`, a grade outside [−1, 1] or at or past the
+    ground's friction,
     ParameterError for a bad tensioner file (before any work), PhysicsError if the track
     leaves physics, PhysicsError or FmuError if an FMU tensioner leaves physics or fails.
     """
     _check_drive(speed_m_s, duration_s, tensioner, preload_N, hitch_pull_N, grade)
     plant = load_plant(mjcf, model, machine=machine, overrides=overrides)
+    friction = plant.params.track.ground_friction
+    if abs(grade) >= friction:
+        raise ValueError(f"grade {grade!r}: a slope of tan θ = {abs(grade):g} is at or past "
+                         f"the ground's friction μ = {friction:g} ([track].ground_friction), "
+                         f"so no track holds on it; allowed |grade| < {friction:g}")
     if grade != 0.0:
         g, theta = float(np.linalg.norm(plant.model.opt.gravity)), math.atan(grade)
         plant.model.opt.gravity[:] = (-g * math.sin(theta), 0.0, -g * math.cos(theta))
@@ -411,7 +418,9 @@ def write_drive(out_dir: str | Path, metrics: Mapping[str, Any],
                 series: Mapping[str, np.ndarray]) -> Path:
     """Write metrics.json, timeseries.parquet and the figure (:data:`DRIVE_FIGURE`) into
     ``out_dir`` as a whole, the same way a run's result directory is written
-    (:class:`trackmj.results.store.ResultWriter`: staged, locked and swapped in)."""
+    (:class:`trackmj.results.store.ResultWriter`: staged, locked and swapped in); strict
+    JSON, a number that is not finite written as null (standing, or braking down a grade,
+    there is no drive work to relate the integrator's energy to)."""
     fields = [pa.field(name, pa.float64(), metadata={"unit": TIMESERIES_UNITS[name]})
               for name in series]
     table = pa.Table.from_arrays([pa.array(v) for v in series.values()],
@@ -419,5 +428,6 @@ def write_drive(out_dir: str | Path, metrics: Mapping[str, Any],
     with ResultWriter(out_dir) as writer:
         return writer.commit_files(
             {"timeseries.parquet": parquet_bytes(table),
-             "metrics.json": (json.dumps(metrics, indent=2) + "\n").encode()},
+             "metrics.json": (json.dumps(json_ready(metrics), indent=2, allow_nan=False)
+                              + "\n").encode()},
             extras={DRIVE_FIGURE: lambda path: drive_figure(metrics, series, path)})

@@ -211,7 +211,8 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
                         setup.estimator, setup.seed, host_machine(),
                         machine=setup.machine.name, variant=setup.variant.name,
                         duration_s=setup.duration_s, files=setup.files,
-                        overrides=setup.overrides)
+                        overrides=setup.overrides,
+                        running=setup.scenario.running(setup.duration_s))
     result = Result(watch.recorder.table(meta, watch.extra), {})
     result.metrics = _run_metrics(setup, asm, result, watch.recorder, controller, wall,
                                   measured)

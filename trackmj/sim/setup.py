@@ -329,6 +329,8 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
           else load_scenario(scenario, overrides=sets["scenario"], nominal_tension_N=nominal,
                              supply_setpoint_Pa=hydraulics_params.supply.setpoint_Pa))
     sc.check_machine(mach.name)
+    sc.check_grade(model_params.track.ground_friction,
+                   f"{Path(model or mach.mechanics).name} [track].ground_friction")
     _choice("architecture", architecture, ARCHITECTURES)
     controller, controller_file = controller_choice(controller or sc.controller)
     estimator = _choice("estimator", estimator or sc.estimator, ESTIMATORS)

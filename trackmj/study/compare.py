@@ -18,7 +18,7 @@ from trackmj.results.figure_compare import overlay_figure, psd_figure
 from trackmj.results.figure_run import run_figure
 from trackmj.results.metric_windows import windows_of
 from trackmj.results.metrics import METRIC_DISPLAY, lookup
-from trackmj.results.store import Result
+from trackmj.results.store import Result, running_of, running_text
 from trackmj.results.store import _json_ready as jsonable  # the one JSON form of metrics
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 from trackmj.study.campaign import Store, check_campaign_dir, plan_run, run_campaign
@@ -103,8 +103,9 @@ def write_compare(run: CompareRun, out_dir: str | Path, scenario: Any,
                                           label_by="controller",
                                           title=f"{scenario.name} seed {mine[0].seed}, {a}: "
                                                 "controllers"))
+    running = running_of(run.results[0])
     doc = {"scenario": scenario.name, "title": scenario.title, "seed": run.results[0].seed,
-           "duration_s": duration_s, "host": machine(),
+           "duration_s": duration_s, "running": running, "host": machine(),
            "evaluation": run.results[0].metrics.get("evaluation"),
            "runs": {f"{r.architecture}-{r.controller}": {
                "architecture": r.architecture, "controller": r.controller,
@@ -118,7 +119,8 @@ def write_compare(run: CompareRun, out_dir: str | Path, scenario: Any,
     write_text_atomic(out / COMPARE, json.dumps(jsonable(doc), indent=2, allow_nan=False)
                       + "\n")
     lines = [f"# {scenario.name}: {scenario.title}", "",
-             f"seed {doc['seed']}, duration {duration_s:g} s, {machine()}", ""]
+             f"seed {doc['seed']}, duration {duration_s:g} s{running_text(running)}, "
+             f"{machine()}", ""]
     for c, preds in run.predictions.items():
         reduced = [a for a in preds if a != REFERENCE_ARCHITECTURE]
         lines += [f"Prediction error against {REFERENCE_ARCHITECTURE} ({c}, same seed):", "",
