@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import pytest
 from synthetic import energy_table, synthetic_result
@@ -290,3 +291,19 @@ def test_a_refused_report_leaves_no_out_folder(tmp_path, capsys) -> None:
     assert main(["report", "--scenarios", "W1,W9", "--seeds", "1", "--out", str(out)]) == 2
     assert "W9" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_report_of_a_scenario_file_reads_the_file_its_runs_ran(tmp_path, capsys) -> None:
+    """A newcomer's scenario file given by path (its runs named by the file's own name,
+    here steps_short) is reported: the report read the name back as a built-in scenario
+    and stopped with 'scenario file not found' after the runs were made."""
+    from trackmj.cli.main import main
+
+    scenario = Path(__file__).parent / "data" / "steps_short.toml"
+    out = tmp_path / "rep"
+    assert main(["report", "--scenarios", str(scenario), "--seeds", "1", "--archs", "tp",
+                 "--duration", "1",
+                 "--baselines", "", "--workers", "1", "--out", str(out)]) == 0, \
+        capsys.readouterr().err
+    text = (out / "report.md").read_text()
+    assert "## steps_short: tension step up and down, 2.5 s (tests)" in text

@@ -20,7 +20,6 @@ from trackmj.results.seed_stats import finite
 from trackmj.results.store import Result
 from trackmj.results.verdict import run_verdict
 from trackmj.scenarios.events import describe_moves
-from trackmj.scenarios.load import load_scenario
 from trackmj.sim.registry import REFERENCE_ARCHITECTURE as REFERENCE
 from trackmj.study.campaign import RUNS
 from trackmj.study.report_cases import event_moves, run_name
@@ -164,7 +163,7 @@ def _condition_section(m: Matrix, scenario: str, out: Path) -> list[str]:
     variant = None if scenario == "W5" else "nominal"
     runs = [r for (case, a), r in m.runs.items() if case[0] == scenario]
     seeds = sorted({r.seed for r in runs})
-    lines = _condition_intro(scenario, runs, seeds, variant)
+    lines = _condition_intro(m, scenario, runs, seeds, variant)
     lines += acceptance_lines(m, scenario)
     lines += _metric_table(m, scenario, archs, variant)
     reduced = [a for a in archs if a != REFERENCE]
@@ -176,16 +175,16 @@ def _condition_section(m: Matrix, scenario: str, out: Path) -> list[str]:
     return lines
 
 
-def _condition_intro(scenario: str, runs: Sequence[Result], seeds: Sequence[int],
+def _condition_intro(m: Matrix, scenario: str, runs: Sequence[Result], seeds: Sequence[int],
                      variant: str | None) -> list[str]:
     """Title, controller and seeds, and where shorter runs moved the scenario's events."""
-    sc = load_scenario(scenario)
+    sc = m.scenario(scenario)
     scope = "all variants × seeds" if variant is None else "seeds"
     lines = [f"## {scenario}: {sc.title}", "",
              f"{sc.controller} controller; mean ± std over {scope} {seeds}.", ""]
     durations = {float(r.metadata.get("duration_s", sc.duration_s)) for r in runs}
     for duration in sorted(durations):
-        moves = event_moves(scenario, duration)
+        moves = event_moves(m.source(scenario), duration)
         if moves:
             lines += [f"The {duration:g} s runs would cut off events of the {sc.duration_s:g} s "
                       f"scenario, so its schedule after the evaluation start "
@@ -258,7 +257,7 @@ def _condition_figures(m: Matrix, scenario: str, case: Case, archs: Sequence[str
     if scenario == "W2":
         psd = psd_figure(first, out / f"{scenario}-psd.png")
         lines += [f"![{scenario} spectra, seed {case[2]}]({psd.name})", ""]
-    names = [v.name for v in load_scenario(scenario).variants]
+    names = [v.name for v in m.scenario(scenario).variants]
     if len(names) > 1:
         lines += _variants_figure(m, scenario, names, archs, seeds, out)
     ref = m.runs.get((case, REFERENCE))

@@ -4,6 +4,7 @@ prediction error against the reference architecture of its case."""
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -14,6 +15,7 @@ from trackmj.results.metric_windows import windows_of
 from trackmj.results.metrics import lookup
 from trackmj.results.store import Result
 from trackmj.scenarios.load import load_scenario
+from trackmj.scenarios.resolved import Scenario
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 from trackmj.study.executor import RunSpec
 
@@ -71,9 +73,23 @@ class Matrix:
         found = {a for (case, a) in self.runs if case[0] == scenario}
         return [a for a in ARCHITECTURES if a in found]
 
+    def source(self, scenario: str) -> str:
+        """The file the runs named ``scenario`` read (each run records it): a scenario file
+        given by its path runs under the name inside it; the name itself if no run says."""
+        for (case, _), result in self.runs.items():
+            if case[0] == scenario:
+                given = json.loads(result.metadata.get("files") or "{}").get("scenario")
+                if given:
+                    return str(given)
+        return scenario
+
+    def scenario(self, scenario: str) -> Scenario:
+        """The scenario the runs named ``scenario`` ran (:meth:`source`)."""
+        return load_scenario(self.source(scenario))
+
     def controller(self, scenario: str) -> str:
         """The scenario's own controller (the one its architectures ran with)."""
-        return load_scenario(scenario).controller
+        return self.scenario(scenario).controller
 
     def values(self, scenario: str, arch: str, key: str, *, controller: str | None = None,
                variant: str | None = "nominal") -> dict[tuple[str, int], float]:
