@@ -307,3 +307,26 @@ def test_a_report_of_a_scenario_file_reads_the_file_its_runs_ran(tmp_path, capsy
         capsys.readouterr().err
     text = (out / "report.md").read_text()
     assert "## steps_short: tension step up and down, 2.5 s (tests)" in text
+
+
+def test_the_claims_say_when_the_runs_changed_the_studys_conditions() -> None:
+    """Runs backing up on a grade (a report with --set scenario.track.speed_m_s=-1.5 and
+    scenario.terrain.grade=-0.2) had their verdicts read as whether trackmj reproduces the
+    study; an event moved in time by a shorter report is not a changed condition."""
+
+    class Run:
+        def __init__(self, overrides: dict, running: dict) -> None:
+            self.metadata = {"overrides": json.dumps(overrides), "running": json.dumps(running)}
+
+    level = {"speed_m_s": 1.5, "travel_m": [0.0, 40.0], "grade": 0.0}
+    moved = Run({"scenario.reference.steps.0.time_s": 1.2}, level)
+    assert M._conditions_changed([moved]) == []
+    back = Run({"scenario.track.speed_m_s": -1.5, "scenario.terrain.grade": -0.2},
+               {"speed_m_s": -1.5, "travel_m": [-40.0, 0.0], "grade": -0.2})
+    changed = M._conditions_changed([moved, back])
+    assert changed == ["`scenario.terrain.grade`", "`scenario.track.speed_m_s`",
+                       "reversing at 1.5 m/s, on a grade of -0.2 (tan θ, downhill forward)"]
+    text = "\n".join(M._claims_table([], ["lf1352"], changed))
+    assert "These runs change the study's conditions (`scenario.terrain.grade`" in text
+    assert "not whether trackmj reproduces the study" in text
+    assert "not whether" not in "\n".join(M._claims_table([], ["lf1352"], []))

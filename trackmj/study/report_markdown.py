@@ -17,7 +17,7 @@ from trackmj.results.figure_compare import overlay_figure, psd_figure, variants_
 from trackmj.results.figure_run import run_figure
 from trackmj.results.metrics import METRIC_DISPLAY
 from trackmj.results.seed_stats import finite
-from trackmj.results.store import Result
+from trackmj.results.store import Result, running_of, running_text
 from trackmj.results.verdict import run_verdict
 from trackmj.scenarios.events import describe_moves
 from trackmj.sim.registry import REFERENCE_ARCHITECTURE as REFERENCE
@@ -58,7 +58,8 @@ def report_lines(m: Matrix, findings: Sequence[Finding], results: Sequence[Resul
     lines = _header(results)
     if timing is not None:
         lines += _invocation(timing)
-    lines += _claims_table(findings, sorted({r.metadata.get("machine", "?") for r in results}))
+    lines += _claims_table(findings, sorted({r.metadata.get("machine", "?") for r in results}),
+                           _conditions_changed(results))
     for scenario in m.scenarios:
         lines += _condition_section(m, scenario, out)
     lines += _controller_section(m, out)
@@ -139,13 +140,34 @@ STUDY_MACHINE = "lf1352"
 """The crawler the study's figures are of (its only machine)."""
 
 
-def _claims_table(findings: Sequence[Finding], crawlers: Sequence[str]) -> list[str]:
-    """The study's claims: the verdict rules (and, for another crawler than the study's,
-    what its verdicts then mean), one row per finding, what the study leaves undefined."""
+EVENT_TIMES = ("time_s", "start_s", "end_s", "rise_s", "transition_s")
+"""Scenario keys that place an event in time (a shorter report moves them)."""
+
+
+def _conditions_changed(results: Sequence[Result]) -> list[str]:
+    """What the runs changed of the study's conditions (a scenario override other than an
+    event's time, which the condition's intro explains; a reversed track or a grade), in
+    words; [] for runs of the conditions as the study states them."""
+    changed = sorted({k for r in results for k in json.loads(r.metadata.get("overrides", "{}"))
+                      if k.startswith("scenario.") and k.rsplit(".", 1)[-1] not in EVENT_TIMES})
+    how = sorted({text.lstrip(", ") for r in results
+                  if (text := running_text(running_of(r)))})
+    return [f"`{k}`" for k in changed] + how
+
+
+def _claims_table(findings: Sequence[Finding], crawlers: Sequence[str],
+                  changed: Sequence[str] = ()) -> list[str]:
+    """The study's claims: the verdict rules (and, for another crawler than the study's or
+    conditions the runs changed, what its verdicts then mean), one row per finding, what
+    the study leaves undefined."""
     others = [c for c in crawlers if c != STUDY_MACHINE]
     caveat = ([f"The study's figures are of the LF1352; these runs are of {', '.join(others)}: "
                "a verdict here says how another crawler compares with them, not whether "
                "trackmj reproduces the study.", ""] if others else [])
+    if changed:
+        caveat += [f"These runs change the study's conditions ({', '.join(changed)}): a "
+                   "verdict here compares those conditions with the study's figures, not "
+                   "whether trackmj reproduces the study.", ""]
     lines = ["## Study claims", "", *caveat, VERDICT_RULES,
              "", "| claim | study | ours | verdict | reason |", "|---|---|---|---|---|"]
     for f in findings:
