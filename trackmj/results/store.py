@@ -282,6 +282,18 @@ def _json_ready(value: Any) -> Any:
     return number if math.isfinite(number) else None
 
 
+def finite_or_null(value: Any) -> Any:
+    """``value`` for strict JSON: a float that is not finite becomes None, tables and lists
+    recursively; integers (pin indices, counts) stay integers."""
+    if isinstance(value, Mapping):
+        return {k: finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite_or_null(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def metrics_as_read(value: Any) -> Any:
     """Metrics as :func:`read_result` reads them from JSON: null (a non-finite number, or
     None) -> NaN, numbers -> float, tables recursively."""

@@ -42,7 +42,7 @@ from trackmj.machines.assembly import resolve
 from trackmj.machines.track_plant import load_plant
 from trackmj.ports import COUPLING_STEP_S, Command, Readout, StepInputs, TensionerElement
 from trackmj.results.figure_drive import drive_figure
-from trackmj.results.store import ResultWriter, metrics_as_read, parquet_bytes
+from trackmj.results.store import ResultWriter, finite_or_null, metrics_as_read, parquet_bytes
 from trackmj.scenarios.schema import TRACK_SPEED_MAX_M_S
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.plant import DerailmentStatus, PassiveTensioner, TrackPlant
@@ -413,18 +413,6 @@ def _steady_means(series: dict[str, np.ndarray], from_s: float) -> dict[str, flo
     return out
 
 
-def _strict(value: Any) -> Any:
-    """``value`` for strict JSON: a float that is not finite becomes None, tables and lists
-    recursively; integers (pin indices, counts) stay integers."""
-    if isinstance(value, Mapping):
-        return {k: _strict(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_strict(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 def write_drive(out_dir: str | Path, metrics: Mapping[str, Any],
                 series: Mapping[str, np.ndarray]) -> Path:
     """Write metrics.json, timeseries.parquet and the figure (:data:`DRIVE_FIGURE`) into
@@ -439,6 +427,6 @@ def write_drive(out_dir: str | Path, metrics: Mapping[str, Any],
     with ResultWriter(out_dir) as writer:
         return writer.commit_files(
             {"timeseries.parquet": parquet_bytes(table),
-             "metrics.json": (json.dumps(_strict(metrics), indent=2, allow_nan=False)
+             "metrics.json": (json.dumps(finite_or_null(metrics), indent=2, allow_nan=False)
                               + "\n").encode()},
             extras={DRIVE_FIGURE: lambda path: drive_figure(metrics, series, path)})
