@@ -36,7 +36,7 @@ from trackmj.scenarios.schema import (
     present,
     reference_signal,
 )
-from trackmj.track.terrain import RoadProfile, road_profile, taper_start
+from trackmj.track.terrain import RoadProfile, check_grade_held, road_profile, taper_start
 from trackmj.validator import Location, ParameterError, construct
 
 TERRAIN_SEED_SALT = 8608
@@ -162,16 +162,10 @@ class Scenario:
                                      f"{high:g}] {unit} over the run")
 
     def check_grade(self, ground_friction: float, where: str) -> None:
-        """ParameterError unless the grade is below the ground's friction, |tan θ| < μ
-        (``where`` names the key μ comes from): on a steeper slope no track holds, the
-        machine slides down whatever the sprocket does (Coulomb)."""
-        grade = self.terrain.grade
-        if abs(grade) >= ground_friction:
-            raise ParameterError(
-                f"{self.source.name} [terrain].grade = {grade:g}: a slope of tan θ = "
-                f"{abs(grade):g} is at or past the ground's friction μ = {ground_friction:g} "
-                f"({where}), so no track holds on it and the machine would slide down; "
-                f"allowed |grade| < {ground_friction:g}")
+        """ParameterError unless the grade is below the ground's friction (``where`` names
+        the key μ comes from; :func:`trackmj.track.terrain.check_grade_held`)."""
+        check_grade_held(self.terrain.grade, ground_friction,
+                         f"{self.source.name} [terrain].grade = ", where)
 
     def check_machine(self, machine: str) -> None:
         """ParameterError (one line, the reason) if the condition does not apply to

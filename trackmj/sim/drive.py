@@ -46,6 +46,7 @@ from trackmj.results.store import ResultWriter, finite_or_null, metrics_as_read,
 from trackmj.scenarios.schema import TRACK_SPEED_MAX_M_S
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.plant import DerailmentStatus, PassiveTensioner, TrackPlant
+from trackmj.track.terrain import check_grade_held, gravity_on_grade
 
 STEP_UNITS: dict[str, str] = {
     "t_s": "s", "idler_force_N": "N", "stroke_m": "m", "stroke_velocity_m_s": "m/s",
@@ -130,14 +131,10 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     """
     _check_drive(speed_m_s, duration_s, tensioner, preload_N, hitch_pull_N, grade)
     plant = load_plant(mjcf, model, machine=machine, overrides=overrides)
-    friction = plant.params.track.ground_friction
-    if abs(grade) >= friction:
-        raise ValueError(f"grade {grade!r}: a slope of tan θ = {abs(grade):g} is at or past "
-                         f"the ground's friction μ = {friction:g} ([track].ground_friction), "
-                         f"so no track holds on it; allowed |grade| < {friction:g}")
+    check_grade_held(grade, plant.params.track.ground_friction, "grade ",
+                     "[track].ground_friction")
     if grade != 0.0:
-        g, theta = float(np.linalg.norm(plant.model.opt.gravity)), math.atan(grade)
-        plant.model.opt.gravity[:] = (-g * math.sin(theta), 0.0, -g * math.cos(theta))
+        plant.model.opt.gravity[:] = gravity_on_grade(plant.model.opt.gravity, grade)
     element, described, passive_preload_N = _drive_tensioner(plant, tensioner, preload_N)
     ramp_s = min(1.0, duration_s / 4.0)
     steps = round(duration_s / COUPLING_STEP_S)

@@ -15,9 +15,13 @@ becomes a temporal frequency f = v·n, and the temporal PSD is G_d(f/v)/v.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+from trackmj.validator import ParameterError
 
 N0_CYCLES_M = 0.1
 """ISO 8608 reference spatial frequency n0 [cycles/m]."""
@@ -143,3 +147,22 @@ def heightfield(profile: RoadProfile, *, width_m: float = 2.0, nrow: int = 2,
     data = np.tile((z - low) / span, (nrow, 1))
     return Heightfield(data=data, size=(length / 2.0, width_m / 2.0, span, base_m),
                        pos=(profile.x_start_m + length / 2.0, 0.0, low))
+
+
+def gravity_on_grade(gravity: Sequence[float], grade: float) -> tuple[float, float, float]:
+    """Gravity [m/s²] on a slope of ``grade`` = tan θ [-] (rise over run, > 0 uphill driving
+    forward, +x): ``gravity``'s magnitude g tilted by θ in the x–z plane, g·(−sin θ, 0,
+    −cos θ); the ground stays the model's x axis."""
+    g, theta = math.hypot(*gravity), math.atan(grade)
+    return (-g * math.sin(theta), 0.0, -g * math.cos(theta))
+
+
+def check_grade_held(grade: float, ground_friction: float, given: str, where: str) -> None:
+    """ParameterError (``given``, e.g. "W1.toml [terrain].grade = ", then the grade) unless
+    |tan θ| < μ, ``where`` naming the key μ comes from: on a steeper slope no track holds,
+    the machine slides down whatever the sprocket does (Coulomb)."""
+    if abs(grade) >= ground_friction:
+        raise ParameterError(
+            f"{given}{grade:g}: a slope of tan θ = {abs(grade):g} is at or past the "
+            f"ground's friction μ = {ground_friction:g} ({where}), so no track holds on it "
+            f"and the machine would slide down; allowed |grade| < {ground_friction:g}")

@@ -61,7 +61,7 @@ from trackmj.track.mjcf.names import link_name, pin_name
 from trackmj.track.mjcf.soft import SoftConstraint, body_inv_weight, row_diag, soft_constraint
 from trackmj.track.mjcf.structure import chain_links, pin_series_count, stretch_armature_kg
 from trackmj.track.mjcf.tree import attribute, find
-from trackmj.track.terrain import RoadProfile, heightfield
+from trackmj.track.terrain import RoadProfile, gravity_on_grade, heightfield
 from trackmj.validator import ParameterError
 
 _RAIL, _PIN = 8, 16  # contype bits of link rails and pin spheres
@@ -563,13 +563,11 @@ def mjcf_parts(path: str | Path) -> list[tuple[Path, str]]:
 
 def on_grade(mjcf: str, grade: float) -> str:
     """``mjcf`` on a slope of ``grade`` = tan θ [-] (rise over run, > 0 uphill driving
-    forward, +x): the ground stays the model's x axis and gravity tilts by θ in the x–z
-    plane, g·(−sin θ, 0, −cos θ), its magnitude the model's."""
+    forward, +x): its gravity tilted (:func:`trackmj.track.terrain.gravity_on_grade`)."""
     root = ET.fromstring(_strip_comment(mjcf))
     option = find(root, "option")
-    g = float(np.linalg.norm([float(v) for v in attribute(option, "gravity").split()]))
-    theta = math.atan(grade)
-    option.set("gravity", _fmt(-g * math.sin(theta), 0.0, -g * math.cos(theta)))
+    level = [float(v) for v in attribute(option, "gravity").split()]
+    option.set("gravity", _fmt(*gravity_on_grade(level, grade)))
     ET.indent(root, space="  ")
     return ET.tostring(root, encoding="unicode") + "\n"
 
