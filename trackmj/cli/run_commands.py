@@ -23,7 +23,7 @@ from trackmj.cli.summary import (
 )
 from trackmj.elements.tensioner_file import load_tensioner
 from trackmj.machines.default import DEFAULT_MACHINE
-from trackmj.results.store import ResultWriter, running_text
+from trackmj.results.store import ResultWriter, running_of, running_text
 from trackmj.sim.controllers import CONTROLLERS
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 
@@ -97,7 +97,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                           result, path, None if measured is None else measured.columns)})
     print(f"{setup.scenario.name} ({setup.scenario.title}) on {setup.machine.name}, "
           f"{result.architecture}, {result.controller}/{result.estimator}, seed "
-          f"{result.seed}{running_text(setup.scenario.running(setup.duration_s))} -> {out}")
+          f"{result.seed}{running_text(running_of(result))} -> {out}")
     if result.metrics.get("tensioner", {}).get("element") == "fmu":
         print(tensioner_line(result.metrics["tensioner"]))
     if result.metrics.get("valve_mode_applied") is False and setup.tensioner is not None:
