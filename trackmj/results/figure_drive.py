@@ -18,6 +18,7 @@ from matplotlib.axes import Axes
 from matplotlib.ticker import MaxNLocator
 
 from trackmj.results.figure_style import legend_above, save_png
+from trackmj.results.store import running_text
 
 FAIL_COLOURS = {"slack_strand": "#E69F00", "links_off_envelope": "#CC79A7",
                 "sprocket_disengaged": "#0072B2", "derailed": "#D55E00"}
@@ -145,8 +146,7 @@ def _title(metrics: Mapping[str, Any]) -> str:
     tensioner = (f"preload {metrics['preload_N'] / 1e3:g} kN" if "preload_N" in metrics
                  else f"tensioner {metrics['tensioner'].get('file', '')}")
     failed = metrics["derailment_checks_failed"]
-    grade = metrics.get("grade") or 0.0
-    slope = f" on a grade of {grade:+g} (tan θ)" if grade else ""
+    slope = running_text({"grade": metrics.get("grade")})
     return (f"drive: {metrics['machine']}, {metrics['speed_m_s']:g} m/s{slope}, {tensioner}, "
             f"{metrics['duration_s']:g} s; derailment checks failed {failed} of "
             f"{metrics['derailment_checks']} (every "
