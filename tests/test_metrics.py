@@ -17,7 +17,7 @@ from trackmj.results import metrics as M
 from trackmj.results.acceptance import acceptance
 from trackmj.results.metric_windows import MetricWindows
 from trackmj.results.signals import lowpass
-from trackmj.results.verdict import verdict
+from trackmj.results.verdict import Verdict, verdict
 
 
 def test_compute_metrics_standard_set() -> None:
@@ -336,3 +336,39 @@ def test_an_edge_not_back_before_the_next_is_said_so() -> None:
     v = verdict(acceptance(t, y, np.full_like(t, ref), w), (10e3, 20e3), 2.0, 0.02)
     assert v.edge_times == ("2", "3", "4", "5")
     assert "not back after the 3 s edge before the next one at 4 s" in v.text()
+
+
+
+def test_a_band_breach_is_named_the_drives_only_where_its_floor_is_above_the_band() -> None:
+    """A front-sprocket machine (σ = +1, g = G/r = 8 1/m) whose drive torque rises 0 → 3.5
+    kN·m over 0-1 s and falls back by 2 s (a triangle), its idler load 2 kN above the drive's
+    floor g·max(σT, 0). The trailing 0.5 s mean peaks at 1.25 s, over the window [0.75,
+    1.25] centred on the apex: the torque's mean there is 3500·(1 − 0.125) = 3062.5 N·m (by
+    hand: the mean distance from the apex is 0.125 s), so the floor's mean is 24.5 kN and the
+    load's 26.5 kN. Against a 26 kN band top the breach is the tensioner's 2 kN; against a
+    24 kN top the drive alone breaches it, and the verdict says so. With the sprocket at the
+    rear (σ = −1) driving forward loads the other strands: floor 0, a plain breach."""
+    t = time_grid(6.0)
+    torque = 3500.0 * np.clip(np.minimum(t, 2.0 - t), 0.0, None)
+    y = 2e3 + 8.0 * torque
+    ref = np.full_like(t, 15e3)
+
+    def judged(top_N: float, sign: float) -> Verdict:
+        w = windows(force_min_N=10e3, force_max_N=top_N, evaluation_start_s=0.5,
+                    drive_load_gain_1_m=8.0, drive_tight_sign=sign)
+        return verdict(acceptance(t, y, ref, w, torque), (10e3, top_N), 2.0, 0.02)
+
+    tensioners = judged(26e3, +1.0)
+    assert tensioners.mean_max_s == pytest.approx(1.25, abs=2e-3)
+    assert tensioners.drive_floor_at_max_N == pytest.approx(24.5e3, rel=1e-3)
+    assert tensioners.mean_range_N[1] == pytest.approx(26.5e3, rel=1e-3)
+    assert "band" in tensioners.broken and not tensioners.band_forced_by_drive
+    assert "no tensioner" not in tensioners.text()
+    drives = judged(24e3, +1.0)
+    assert "band" in drives.broken and drives.band_forced_by_drive
+    assert "the drive's pull through the idler was 24.5 kN there (1.25 s" in drives.text()
+    rear = judged(24e3, -1.0)
+    assert rear.drive_floor_at_max_N == 0.0 and not rear.band_forced_by_drive
+    assert "no tensioner" not in rear.text()
+    unknown = acceptance(t, y, ref, windows(evaluation_start_s=0.5), torque)
+    assert math.isnan(unknown["drive_floor_at_max_N"])

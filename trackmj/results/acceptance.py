@@ -51,12 +51,29 @@ def _worst_steady_offset(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
     return worst
 
 
-def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
-               w: MetricWindows) -> dict[str, Any]:
+def drive_floor_N(drive_torque_N_m: np.ndarray, w: MetricWindows) -> np.ndarray | None:
+    """The drive's floor under the idler load [N], shape of ``drive_torque_N_m`` [N·m]: while
+    the idler's two strands are the drive's tight side (σ·T > 0), the sprocket's moment
+    balance T₁ − T₂ = T/r with the slack side at T₂ ≥ 0 leaves the tight side at least
+    T/r, and a frictionless idler passes it to both its strands, so no tensioner can hold
+    the idler below G·T/r = g·max(σ·T, 0) (statics: the strands' weight and inertia, which
+    add to it, neglected; :mod:`trackmj.machines.drive_load`). None if the windows carry no
+    drive load (g, σ)."""
+    if w.drive_load_gain_1_m is None or w.drive_tight_sign is None:
+        return None
+    torque = np.asarray(drive_torque_N_m, dtype=float)
+    return w.drive_load_gain_1_m * np.maximum(w.drive_tight_sign * torque, 0.0)
+
+
+def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray, w: MetricWindows,
+               drive_torque_N_m: np.ndarray | None = None) -> dict[str, Any]:
     """The tensioner's acceptance figures on the trailing ``mean_window_s`` mean of F_ten.
 
     - ``mean_min_N``, ``mean_max_N``: its extremes from the evaluation start (to be inside
-      [force_min_N, force_max_N]);
+      [force_min_N, force_max_N]); ``mean_max_s`` the time of the highest [s];
+    - ``drive_floor_at_max_N``: with the drive torque [N·m, shape (n,)] and the machine's
+      drive load in ``w``, the trailing mean of :func:`drive_floor_N` at that time (NaN
+      without them): how much of the highest mean the drive alone forced;
     - ``edge_recovery_s``: for each disturbance edge (onset and end of a load pulse or a
       supply drop, from the evaluation start; table keyed by the edge time), the time until
       the mean stays within ±``recovery_band_rel``·F_ref up to the next edge (0 if it never
@@ -76,10 +93,16 @@ def acceptance(t: np.ndarray, y: np.ndarray, ref: np.ndarray,
     recovery = _edge_recovery(t, err, ref, edges, w.recovery_band_rel)
     worst = _worst_steady_offset(t, y, ref,
                                  sorted({*edges, *w.reference_events_s, *w.drive_events_s}), w)
+    highest = int(np.argmax(np.where(ev, mean, -np.inf))) if ev.any() else None
+    floor = None if drive_torque_N_m is None else drive_floor_N(drive_torque_N_m, w)
+    floor_at_max = (math.nan if floor is None or highest is None
+                    else float(trailing_mean(t, floor, w.mean_window_s)[highest]))
     return {"mean_window_s": w.mean_window_s, "recovery_band_rel": w.recovery_band_rel,
             "steady_window_s": w.steady_window_s,
             "mean_min_N": float(mean[ev].min()) if ev.any() else math.nan,
             "mean_max_N": float(mean[ev].max()) if ev.any() else math.nan,
+            "mean_max_s": math.nan if highest is None else float(t[highest]),
+            "drive_floor_at_max_N": floor_at_max,
             "edge_recovery_s": recovery,
             "recovery_max_s": (max(recovery.values()) if recovery
                                and not any(map(math.isnan, recovery.values())) else math.nan),

@@ -46,6 +46,10 @@ class MetricWindows:
     drive_events_s: the end of the track's start ramp, which ends a steady window likewise
     (the drive's traction transient: on a front-sprocket machine the tight side loads the
     idler while the track accelerates).
+    drive_load_gain_1_m, drive_tight_sign: the machine's drive load g = G/r [1/m] and σ (+1
+    sprocket at the front, −1 at the rear; :mod:`trackmj.machines.drive_load`), from which
+    the acceptance takes the drive's floor under the idler load, g·max(σ·T, 0) for a drive
+    torque T; None: not known (a run without the track).
     """
 
     force_min_N: float
@@ -71,6 +75,8 @@ class MetricWindows:
     steady_offset_max_rel: float = STEADY_OFFSET_MAX_REL
     reference_events_s: tuple[float, ...] = ()
     drive_events_s: tuple[float, ...] = ()
+    drive_load_gain_1_m: float | None = None
+    drive_tight_sign: float | None = None
 
     def judges_edge(self, t_s: float, t_end_s: float) -> bool:
         """Whether a disturbance edge at ``t_s`` [s] is judged in a run ending at ``t_end_s``:

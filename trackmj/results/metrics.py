@@ -376,8 +376,9 @@ def real_time(run: RunSignals) -> dict[str, float]:
 
 def acceptance_figures(run: RunSignals) -> dict[str, Any]:
     """``acceptance``: the table of :func:`~trackmj.results.acceptance.acceptance` of the raw
-    F_ten."""
-    return {"acceptance": acceptance(run.t, run.tension, run.reference, run.windows)}
+    F_ten (with the drive torque, where the run recorded it)."""
+    return {"acceptance": acceptance(run.t, run.tension, run.reference, run.windows,
+                                     run.columns.get("drive_torque_N_m"))}
 
 
 def evaluation_table(run: RunSignals) -> dict[str, Any]:
@@ -502,6 +503,8 @@ METRICS: dict[str, Metric] = {
                                     Display("0.5 s mean, lowest", KN, "kN")),
     "acceptance.mean_max_N": Metric("N", acceptance_figures,
                                     Display("0.5 s mean, highest", KN, "kN")),
+    "acceptance.mean_max_s": Metric("s", acceptance_figures),
+    "acceptance.drive_floor_at_max_N": Metric("N", acceptance_figures),
     "acceptance.edge_recovery_s": Metric("s", acceptance_figures),
     "acceptance.recovery_max_s": Metric("s", acceptance_figures,
                                         Display("back within 5 % after an edge", 1.0, "s")),

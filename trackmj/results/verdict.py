@@ -26,7 +26,9 @@ class Verdict:
     steady offset against its limit (shares of the reference, NaN: no steady window); the
     trailing mean's window [s] and the recovery band (share of the reference) the figures
     were taken with; the edges judged, keyed by their times (a run without disturbances, or
-    one that ends before an edge can be judged, has none)."""
+    one that ends before an edge can be judged, has none); the time of the highest mean [s]
+    and the drive's floor under the idler load there [N]
+    (:func:`~trackmj.results.acceptance.drive_floor_N`; NaN: not known)."""
 
     mean_range_N: tuple[float, float]
     band_N: tuple[float, float]
@@ -37,6 +39,8 @@ class Verdict:
     mean_window_s: float = 0.5
     recovery_band_rel: float = 0.05
     edge_times: tuple[str, ...] = ()
+    mean_max_s: float = math.nan
+    drive_floor_at_max_N: float = math.nan
 
     @property
     def edges_judged(self) -> int:
@@ -52,6 +56,12 @@ class Verdict:
             ("recovery", bool(self.late_edges)),
             ("steady offset", self.steady_offset_rel >= self.steady_offset_max_rel))
             if broken]
+
+    @property
+    def band_forced_by_drive(self) -> bool:
+        """Whether the mean left the band's top where the drive alone held the idler above
+        it (its floor at the highest mean at or above F_max): no tensioner could keep it in."""
+        return self.mean_range_N[1] > self.band_N[1] <= self.drive_floor_at_max_N
 
     @property
     def holds(self) -> bool:
@@ -74,7 +84,12 @@ class Verdict:
             return f"holds ({span} in {band}; {edges}; {steady})"
         why = []
         if "band" in self.broken:
-            why.append(f"band: {span}, outside {band}")
+            pull_kN = self.drive_floor_at_max_N / 1e3
+            forced = (f"; the drive's pull through the idler was {pull_kN:.1f} kN there "
+                      f"({self.mean_max_s:.2f} s; G/r × the drive torque, the slack side "
+                      "unloaded), above the band: no tensioner could keep the mean in"
+                      if self.band_forced_by_drive else "")
+            why.append(f"band: {span}, outside {band}{forced}")
         if "recovery" in self.broken:
             why.append(f"recovery within {back}: " + ", ".join(
                 late_edge_text(edge, s, self.edge_times)
@@ -99,7 +114,8 @@ def verdict(figures: Mapping[str, Any], band_N: tuple[float, float],
                    band_N, late, recovery_within_s,
                    _number(figures.get("steady_offset_max_rel")), steady_offset_max_rel,
                    figures.get("mean_window_s", 0.5), figures.get("recovery_band_rel", 0.05),
-                   tuple(recovery))
+                   tuple(recovery), _number(figures.get("mean_max_s")),
+                   _number(figures.get("drive_floor_at_max_N")))
 
 
 def late_edge_text(edge: str, s: float, edges: Sequence[str]) -> str:

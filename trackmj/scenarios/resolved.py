@@ -320,14 +320,17 @@ class Scenario:
                        f"{[v.name for v in self.variants]}")
 
     def metric_windows(self, duration_s: float | None = None, *,
-                       link_pitch_m: float | None = None) -> MetricWindows:
+                       link_pitch_m: float | None = None,
+                       drive_load: tuple[float, float] | None = None) -> MetricWindows:
         """Windows for :func:`trackmj.results.metrics.compute_metrics`: the first reference step
         (evaluated until the next step or ramp start), load pulses and supply drops as
         disturbances, the steady window from steady_start_s to the end, and the
         ``[evaluation]`` settings. With the track's ``link_pitch_m`` [m] the tooth-passing
         band v/pitch·(1 ± tooth_band_rel) at the scenario's track speed (a link passes the
         sprocket every pitch); without it (or standing still) there is none. On an iso8608
-        road the band it excites, speed × [n_min, n_max] cycles/m, is recorded too."""
+        road the band it excites, speed × [n_min, n_max] cycles/m, is recorded too. With the
+        machine's ``drive_load`` (g [1/m], σ; :mod:`trackmj.machines.drive_load`) the
+        acceptance also takes the drive's floor under the idler load."""
         duration = self.duration_s if duration_s is None else duration_s
         dist, labels = self._disturbances()
         ev, speed = self.evaluation, self.steady_pace_m_s(duration)
@@ -347,7 +350,9 @@ class Scenario:
             steady_offset_max_rel=ev.steady_offset_max_rel,
             reference_events_s=tuple(sorted({*(s.time_s for s in self.reference.steps),
                                              *(r.start_s for r in self.reference.ramps)})),
-            drive_events_s=self._drive_events_s())
+            drive_events_s=self._drive_events_s(),
+            drive_load_gain_1_m=None if drive_load is None else drive_load[0],
+            drive_tight_sign=None if drive_load is None else drive_load[1])
 
     def _drive_events_s(self) -> tuple[float, ...]:
         """The end of the track's start ramp [s], where the drive's traction transient ends

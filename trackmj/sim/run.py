@@ -25,6 +25,7 @@ from trackmj.control.sensors import Sensors
 from trackmj.control.valves import ValveLogic
 from trackmj.host import machine as host_machine
 from trackmj.hydraulics.tensioner import FLOW_NAMES
+from trackmj.machines.drive_load import drive_load
 from trackmj.ports import (
     COLUMN_UNITS,
     COUPLING_STEP_S,
@@ -318,8 +319,10 @@ def _run_metrics(setup: RunSetup, asm: Assembly, result: Result, recorder: Recor
     """metrics.json of the run: the scenario's metrics over its windows, the element's,
     the controller's counts, MuJoCo's warnings and, with a measured log, the comparison and
     the log's record (file, SHA-256, columns used and ignored)."""
+    drive = drive_load(setup.model)
     windows = setup.scenario.metric_windows(setup.duration_s,
-                                            link_pitch_m=setup.model.track.pitch_m)
+                                            link_pitch_m=setup.model.track.pitch_m,
+                                            drive_load=(drive.gain_1_m, drive.tight_sign))
     m = compute_metrics(result.columns(), windows, control_period_s=controller.period_s,
                         solve_times_s=recorder.solve_times_s,
                         solve_success=recorder.solve_success, wall_time_s=wall_s,
