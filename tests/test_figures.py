@@ -3,6 +3,7 @@ the energy breakdown stacking the ledger's terms, zooms on each condition's even
 
 from __future__ import annotations
 
+import dataclasses
 import re
 
 import matplotlib.pyplot as plt
@@ -211,6 +212,58 @@ def test_zooms_follow_each_conditions_events(scenario: str, starts: list[float])
     zooms = figure_panels.zoom_windows(w, 30.0)
     assert [z[1] for z in zooms] == starts
     assert all(t1 > t0 for _, t0, t1 in zooms)
+
+
+@pytest.mark.parametrize(("running", "title"), [
+    ({"speed_m_s": 1.5, "travel_m": [0.0, 40.0], "grade": 0.0},
+     "steady running at 1.5 m/s, 5–6 s"),
+    ({"speed_m_s": -1.5, "travel_m": [-40.0, 0.0], "grade": 0.2},
+     "5–6 s, reversing at 1.5 m/s"),
+    ({"speed_m_s": None, "travel_m": [-1.85, 0.94], "grade": 0.0},
+     "5–6 s, forward and back (speed from a file)"),
+    ({"speed_m_s": None, "travel_m": [0.0, 12.0], "grade": 0.0},
+     "5–6 s, track speed from a file"),
+    ({"speed_m_s": 0.0, "travel_m": [0.0, 0.0], "grade": 0.0}, "standing still, 5–6 s"),
+    (None, "5–6 s, no step or disturbance"),
+])
+def test_a_zoom_without_events_says_how_the_track_runs_in_it(running, title) -> None:
+    """W2 has no step or disturbance: its zoom is a second from the steady window's start,
+    "steady running" only at a constant forward speed, else named by its time span and how
+    the track runs (a shuttle read from a file never runs steadily; the grade is the
+    figure title's)."""
+    w = load_scenario("W2").metric_windows(link_pitch_m=0.075)
+    assert figure_panels.zoom_windows(w, 30.0, running) == [(title, 5.0, 6.0)]
+
+
+def test_moved_pulses_keep_each_zoom_titles_time_and_unit(captured) -> None:
+    """W3 with its second pulse moved to 9.25-10.75 s and the hitch forces in its labels
+    (one out of reach): every zoom title names its edge's time with its unit, wrapped to
+    its panel so that none runs into the next panel's title or off the figure (the four
+    zooms side by side of the comparison figure clipped the last ones' "at 10.75 s")."""
+    tp = _runs("W3", duration_s=12.0)[0]
+    w = dataclasses.replace(
+        windows_of(tp), disturbances=((6.0, 8.0), (9.25, 10.75)),
+        disturbance_labels=("load pulse +1.73 kN (hitch -5.29 kN)",
+                            "load pulse -1.3 kN (hitch +4.13 kN, out of reach)"))
+    titles = [z[0] for z in figure_panels.zoom_windows(w, 12.0)]
+    assert [t.rsplit(", ", 1)[1] for t in titles] == ["onset at 6 s", "end at 8 s",
+                                                       "onset at 9.25 s", "end at 10.75 s"]
+    # a number stays with its unit, the time with its edge
+    assert figure_panels.wrap_title(f"zoom: {titles[3]}", 40).split("\n") == [
+        "zoom: load pulse -1.3 kN (hitch", "+4.13 kN, out of reach), end at 10.75 s"]
+    moved = Result(tp.timeseries, tp.metrics | {"evaluation": w.as_table()})
+    figure_compare.overlay_figure([moved], "unused.png")
+    figure_run.run_figure(moved, "unused.png")
+    for fig in captured:
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        shown = [ax._left_title for ax in fig.axes if ax.get_title(loc="left")]
+        assert [t.get_text().replace("\n", " ") for t in shown] == [
+            f"zoom: {t}" for t in titles]
+        boxes = [t.get_window_extent(renderer) for t in shown]
+        page = fig.bbox
+        assert all(page.x0 <= b.x0 and b.x1 <= page.x1 for b in boxes)
+        assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
 
 
 def test_envelope_holds_each_bins_extremes() -> None:

@@ -26,7 +26,12 @@ from matplotlib.figure import Figure, SubFigure
 from matplotlib.gridspec import GridSpecFromSubplotSpec
 
 from trackmj.results.figure_energy import energy_bars
-from trackmj.results.figure_panels import shade_events, tension_panel, zoom_windows
+from trackmj.results.figure_panels import (
+    shade_events,
+    tension_panel,
+    zoom_titles,
+    zoom_windows,
+)
 from trackmj.results.figure_style import (
     BAND_COLOUR,
     STYLES,
@@ -40,7 +45,7 @@ from trackmj.results.figure_style import (
 )
 from trackmj.results.metric_windows import MetricWindows, windows_of
 from trackmj.results.signals import lowpass
-from trackmj.results.store import Result
+from trackmj.results.store import Result, running_of
 from trackmj.sim.registry import REFERENCE_ARCHITECTURE
 
 CHANNEL_DISPLAY: dict[str, tuple[str, float]] = {
@@ -101,7 +106,7 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
     runs = list(zip(labels, results, strict=True))
     w = windows_of(results[0])
     t_end = float(results[0].columns()["t_s"][-1])
-    zooms = zoom_windows(w, t_end)[:4]
+    zooms = zoom_windows(w, t_end, running_of(results[0]))[:4]
     fig = plt.figure(figsize=(17, 20), layout="constrained")
     rows = fig.add_gridspec(2, 1, height_ratios=(15.0, 5.0), hspace=0.0)
     top, bottom = fig.add_subfigure(rows[0]), fig.add_subfigure(rows[1])
@@ -112,11 +117,12 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
     legend_above(ax_f, ncol=5)
     _head_pressures(top.add_subplot(grid[1], sharex=ax_f), runs, w, t_end)
     zoom_grid = grid[2].subgridspec(1, len(zooms))
-    for k, (name, t0, t1) in enumerate(zooms):
+    zoom_axes = []
+    for k, (_, t0, t1) in enumerate(zooms):
         ax = top.add_subplot(zoom_grid[k])
         tension_panel(ax, runs, w, (t0, t1), legend=False, raw_as_line=True)
-        ax.set_title(f"zoom: {name}", fontsize=9, loc="left")
         ax.set_xlabel("time [s]")
+        zoom_axes.append(ax)
     compared = [lab for lab in labels
                 if lab in (predictions or {}) and lab != REFERENCE_ARCHITECTURE]
     if predictions and compared:
@@ -127,6 +133,7 @@ def overlay_figure(results: Sequence[Result], path: str | Path, *,
     first = results[0]
     fig.suptitle(with_machine(title or f"{first.scenario} seed {first.seed}: "
                               + ", ".join(labels), results))
+    zoom_titles(fig, [(ax, name) for ax, (name, _, _) in zip(zoom_axes, zooms, strict=True)])
     return save_png(fig, Path(path))
 
 

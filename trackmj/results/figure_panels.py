@@ -2,16 +2,20 @@
 (:func:`tension_panel`: raw as a light min-max band, low-pass as the line, the reference),
 the admissible band [F_min, F_max] shaded green (:func:`force_band`), the disturbance
 windows (load pulses, supply drops) grey (:func:`shade_events`), and the windows the zoom
-panels show (:func:`zoom_windows`). The windows come from the run's own
-``metrics["evaluation"]`` table.
+panels show (:func:`zoom_windows`) with their titles (:func:`zoom_titles`). The windows
+come from the run's own ``metrics["evaluation"]`` table.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import re
+import textwrap
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 
 from trackmj.results.figure_style import (
     BAND_COLOUR,
@@ -25,7 +29,14 @@ from trackmj.results.figure_style import (
 )
 from trackmj.results.metric_windows import MetricWindows
 from trackmj.results.signals import lowpass
-from trackmj.results.store import Result
+from trackmj.results.store import Result, running_text
+
+ZOOM_TITLE_PT = 9.0
+"""Font size of a zoom panel's title [pt]."""
+CHAR_WIDTH_EM = 0.55
+"""Width of a title character as a share of its font size, with a margin (DejaVu Sans
+averages about 0.51 em on these lower-case titles)."""
+_NBSP = "\u00a0"
 
 
 def shade_events(ax: Axes, w: MetricWindows, t_end: float, label: bool = True) -> None:
@@ -60,11 +71,13 @@ def force_band(ax: Axes, w: MetricWindows, label: bool = True) -> None:
                      f"{span(w.force_min_N / 1e3, w.force_max_N / 1e3, 'kN')}" if label else None)
 
 
-def zoom_windows(w: MetricWindows, t_end: float) -> list[tuple[str, float, float]]:
-    """(title, t0, t1) of the zoom panels: the reference step, each disturbance edge (onset
-    and end) from the evaluation start (an earlier one is the run's initial condition), or,
-    with none, the next reference change after the step (NL1's first release), or, with
-    neither, one second of steady running."""
+def zoom_windows(w: MetricWindows, t_end: float, running: Mapping[str, Any] | None = None,
+                 ) -> list[tuple[str, float, float]]:
+    """(title, t0, t1) of the zoom panels [s]: the reference step, each disturbance edge
+    (onset and end) from the evaluation start (an earlier one is the run's initial
+    condition), or, with none, the next reference change after the step (NL1's first
+    release), or, with neither, one second from the steady window's start, titled by how the
+    track runs in it (the run's ``running`` record, :func:`quiet_window_title`)."""
     zooms = []
     if w.step is not None and w.step[0] < t_end:
         zooms.append((f"step at {w.step[0]:g} s", w.step[0] - 0.5, w.step[0] + 3.0))
@@ -79,8 +92,54 @@ def zoom_windows(w: MetricWindows, t_end: float) -> list[tuple[str, float, float
     if not zooms:
         t0 = w.steady[0] if w.steady is not None else w.evaluation_start_s
         t0 = t0 if t0 + 1.0 <= t_end else max(t_end - 1.0, 0.0)   # a short run: its last second
-        zooms.append((f"steady running, {t0:g}-{t0 + 1:g} s", t0, t0 + 1.0))
+        zooms.append((quiet_window_title(t0, t0 + 1.0, running), t0, t0 + 1.0))
     return [(title, max(t0, 0.0), min(t1, t_end)) for title, t0, t1 in zooms]
+
+
+def quiet_window_title(t0: float, t1: float, running: Mapping[str, Any] | None) -> str:
+    """Title of a zoom on [t0, t1] [s] without a step or disturbance, by how the track runs
+    (a run's ``running`` record): "steady running at 1.5 m/s, 5–6 s" at a constant forward
+    speed, "standing still, 5–6 s", else the window and the running in the words of
+    :func:`~trackmj.results.store.running_text` ("5–6 s, reversing at 1.5 m/s", "5–6 s,
+    forward and back (speed from a file)"); "5–6 s, no step or disturbance" for a run
+    without the record."""
+    window = f"{t0:g}–{t1:g} s"
+    if not running:
+        return f"{window}, no step or disturbance"
+    speed = running.get("speed_m_s")
+    if speed is not None and speed > 0.0:
+        return f"steady running at {speed:g} m/s, {window}"
+    if speed == 0.0:
+        return f"standing still, {window}"
+    how = running_text({**running, "grade": 0.0})     # the grade is the suptitle's
+    return f"{window}{how or ', track speed from a file'}"
+
+
+def zoom_titles(fig: Figure, zooms: Sequence[tuple[Axes, str]]) -> None:
+    """Title each zoom panel ``(axes, title)`` of ``fig`` "zoom: ``title``", left-aligned at
+    ZOOM_TITLE_PT and wrapped to the panel's width (:func:`wrap_title`), so that a long
+    title (a load pulse's hitch force, a moved pulse's times) runs neither into the next
+    panel nor off the figure, where it lost its end, the edge's time and unit. Wrapped at
+    the width before the layout, then again at the width the figure's layout gives."""
+    for laid_out in (False, True):
+        if laid_out and (engine := fig.get_layout_engine()) is not None:
+            engine.execute(fig)
+        for ax, title in zooms:
+            width_pt = ax.get_window_extent().width / fig.dpi * 72.0
+            chars = int(width_pt / (CHAR_WIDTH_EM * ZOOM_TITLE_PT))
+            ax.set_title(wrap_title(f"zoom: {title}", chars), fontsize=ZOOM_TITLE_PT,
+                         loc="left")
+
+
+def wrap_title(text: str, width_chars: int) -> str:
+    """``text`` in lines of at most ``width_chars`` characters, broken at spaces but not
+    between a number and the word after it (its unit) nor in a time "onset at 9.25 s" (it
+    stays on one line); a word longer than a line stays whole."""
+    glued = re.sub(r"(?<=\d) (?=\S)", _NBSP, text)
+    glued = re.sub(r"(?<=\w) at (?=[-+]?\d)", f"{_NBSP}at{_NBSP}", glued)
+    lines = textwrap.wrap(glued, max(width_chars, 1), break_long_words=False,
+                          break_on_hyphens=False)
+    return "\n".join(lines).replace(_NBSP, " ")
 
 
 def tension_panel(ax: Axes, runs: Sequence[tuple[str, Result]], w: MetricWindows,

@@ -18,7 +18,12 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure, SubFigure
 
 from trackmj.results.figure_energy import energy_bars
-from trackmj.results.figure_panels import shade_events, tension_panel, zoom_windows
+from trackmj.results.figure_panels import (
+    shade_events,
+    tension_panel,
+    zoom_titles,
+    zoom_windows,
+)
 from trackmj.results.figure_style import (
     MEASURED_COLOUR,
     RAW_COLOUR,
@@ -59,7 +64,7 @@ def run_figure(result: Result, path: str | Path,
     c = result.columns()
     t = c["t_s"]
     t_end = float(t[-1])
-    zooms = zoom_windows(w, t_end)
+    zooms = zoom_windows(w, t_end, running_of(result))
     measured = dict(measured or {})
     measured_N = measured.get("tension_N")
     stroke = "stroke_m" in measured
@@ -74,13 +79,13 @@ def run_figure(result: Result, path: str | Path,
     _valve_panels(ax_v, ax_u, c, w, t_end, measured)
     for ax in (ax_f, ax_p, ax_v):
         ax.tick_params(labelbottom=False)
-    for ax, (title, t0, t1) in zip(zoom_axes, zooms, strict=True):
+    for ax, (_, t0, t1) in zip(zoom_axes, zooms, strict=True):
         tension_panel(ax, [(result.architecture, result)], w, (t0, t1), legend=False,
                       raw_as_line=True, measured_N=measured_N)
-        ax.set_title(f"zoom: {title}", fontsize=9, loc="left")
         ax.set_xlabel("time [s]")
     energy_bars(energy, [result.architecture], [result])
     fig.suptitle(run_title(result, measured_channels=[n for n in measured if n != "t_s"]))
+    zoom_titles(fig, [(ax, title) for ax, (title, _, _) in zip(zoom_axes, zooms, strict=True)])
     return save_png(fig, Path(path))
 
 
