@@ -328,6 +328,26 @@ def _drawn(monkeypatch) -> dict:
     return drawn
 
 
+def test_a_grade_axis_says_it_is_tan_theta(tmp_path, monkeypatch) -> None:
+    """A swept [terrain] grade is the slope's tangent, dimensionless: the sweep figure's x
+    axis, its lines and its title say "terrain grade tan θ", the axis with [-] like every
+    other axis's unit."""
+    from trackmj.study.sweep import plot_sweep
+
+    grade = "scenario.terrain.grade"
+    rows = [_row(f"k{i}", i, **{SPEED: speed, grade: g, "rmse_lp_N": rmse})
+            for i, (speed, g, rmse) in enumerate([(0.5, 0.0, 500.0), (0.5, 0.2, 650.0),
+                                                   (1.5, 0.0, 540.0), (1.5, 0.2, 700.0)])]
+    write_table(rows, tmp_path / "results.parquet")
+    drawn = _drawn(monkeypatch)
+    plot_sweep(tmp_path)
+    by_grade, by_speed = drawn[f"{grade}.png"], drawn[f"{SPEED}.png"]
+    assert by_grade.axes[-1].get_xlabel() == "terrain grade tan θ [-]"
+    assert "against terrain grade tan θ" in by_grade.get_suptitle()
+    assert sorted(line.get_label() for line in by_speed.axes[0].get_lines()) == [
+        "terrain grade tan θ = 0", "terrain grade tan θ = 0.2"]
+
+
 def _error_bars(ax) -> list:
     from matplotlib.container import BarContainer, ErrorbarContainer
 

@@ -32,6 +32,9 @@ DISPLAY_UNITS: dict[str, tuple[float, str]] = {
 """SI unit -> (scale, display unit) on the figures; other units are shown as they are."""
 WORDS = {"lp": "low-pass", "rms": "RMS", "ise": "integral of squared error"}
 """Abbreviations of metric names in plain words (on the sweep figures' axes)."""
+KEY_SYMBOLS = {"scenario.terrain.grade": "tan θ"}
+"""Swept key -> the quantity its words are followed by where they alone do not say it (a
+grade is the slope's tangent, rise over run, not its angle)."""
 
 
 # ----------------------------------------------------------------------------- units
@@ -131,12 +134,14 @@ def column_words(name: str) -> str:
     if is_key_column(name):
         parts = [p for p in parts[1:] if not p.isdigit()][-2:]
     words = " ".join(_bare(p) for p in parts).replace("_", " ").split()
-    return " ".join(WORDS.get(w, w) for w in words)
+    return " ".join([*(WORDS.get(w, w) for w in words), *KEY_SYMBOLS.get(name, "").split()])
 
 
 def column_label(name: str) -> str:
     """Axis label of a results column: plain words and display unit ("tension RMSE,
-    low-pass [kN]")."""
+    low-pass [kN]"); a dimensionless swept key [-] ("terrain grade tan θ [-]")."""
     unit = METRIC_DISPLAY[name][2] if name in METRIC_DISPLAY else \
         display_unit(column_unit(name))[1]
+    if not unit and is_key_column(name) and column_unit(name) == "1":
+        unit = "-"
     return f"{column_words(name)} [{unit}]" if unit and unit != "1" else column_words(name)
