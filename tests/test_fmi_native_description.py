@@ -17,7 +17,9 @@ import pytest
 from fmpy.validation import validate_fmu
 
 from trackmj.fmi.native.description import model_description
+from trackmj.fmi.native.export import track_description
 from trackmj.fmi.native.variables import INPUTS, table
+from trackmj.scenarios.schema import TRACK_SPEED_MAX_M_S
 from trackmj.track.mechanics import load_model_params
 from trackmj.version import __version__
 
@@ -172,6 +174,28 @@ def test_inputs_and_parameters_start_inside_their_ranges(fmi) -> None:
     for v in inputs + parameters:
         start = float(v["start"])
         assert float(v.get("min", "-inf")) <= start <= float(v.get("max", "inf")), v["name"]
+
+
+def test_track_speed_input_allows_what_a_scenario_allows(fmi) -> None:
+    """The FMU takes the track speed a scenario may command, ±TRACK_SPEED_MAX_M_S, and says
+    so: an importer cannot drive the FMU where no trackmj run was ever checked."""
+    fmi_version, root = fmi
+    speed = next(v for v in _scalars(fmi_version, root) if v["name"] == "track_speed_m_s")
+    assert (float(speed["min"]), float(speed["max"])) == (-TRACK_SPEED_MAX_M_S,
+                                                          TRACK_SPEED_MAX_M_S)
+    assert f"|v| <= {TRACK_SPEED_MAX_M_S:g} m/s" in speed["description"]
+
+
+@pytest.mark.parametrize(("grade", "says"), [
+    (0.2, "grade tan θ = +0.2, uphill driving forward"),
+    (-0.2, "grade tan θ = -0.2, downhill driving forward"),
+    (0.0, "level, grade tan θ = 0")])
+def test_description_names_the_grade_the_track_stands_on(grade, says) -> None:
+    """The grade is compiled into the FMU's gravity: its description says it, as tan θ, with
+    the machine, terrain, seed and settling force."""
+    text = track_description("lf1352", "climb.toml", 3, 13e3, grade)
+    assert f"(lf1352, terrain climb.toml, seed 3, {says})" in text
+    assert "settled under 13000 N" in text
 
 
 def test_booleans_are_discrete_outputs(fmi) -> None:

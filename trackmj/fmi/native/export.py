@@ -150,13 +150,11 @@ def export_track(out: Path | str, *, fmi_version: int = 2, machine: str | None =
         if not built:
             raise RuntimeError("no platform could be built: " + "; ".join(
                 f"{p}: {why}" for p, why in missing.items()))
-        name = setup.machine.name
         (work / "fmu" / "modelDescription.xml").write_text(model_description(
             variables, fmi_version=fmi_version, token=token, model_name=f"{IDENTIFIER}",
-            description=(f"trackmj {__version__}: one track side ({name}, terrain "
-                         f"{terrain}, seed {seed}) in MuJoCo, settled under {force:.6g} N; "
-                         "the tensioner port F = force_N + force_dv_N_s_m * v as inputs"),
-            version=__version__))
+            description=track_description(setup.machine.name, terrain, seed, force,
+                                          setup.scenario.terrain.grade),
+            version=__version__), encoding="utf-8")
         out.parent.mkdir(parents=True, exist_ok=True)
         partial = out.with_name(out.name + ".partial")
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as fmu:
@@ -168,6 +166,19 @@ def export_track(out: Path | str, *, fmi_version: int = 2, machine: str | None =
                    f"platforms: {', '.join(built)}",
                    *(f"not built for {p}: {why}" for p, why in missing.items())])
     return NativeExport(out, fmi_version, tuple(built), dict(missing), notes)
+
+
+def track_description(machine: str, terrain: str, seed: int, force_N: float,
+                      grade: float) -> str:
+    """The modelDescription's description of a track FMU: the ``machine``, the ``terrain``
+    ("flat" or the scenario whose road and grade it stands on) with its road's ``seed``,
+    the ground's ``grade`` (tan θ, > 0 uphill driving forward; fixed in the model's gravity)
+    and the force ``force_N`` [N] it was settled under."""
+    slope = (f"grade tan θ = {grade:+g}, {'up' if grade > 0 else 'down'}hill driving forward"
+             if grade else "level, grade tan θ = 0")
+    return (f"trackmj {__version__}: one track side ({machine}, terrain {terrain}, seed "
+            f"{seed}, {slope}) in MuJoCo, settled under {force_N:.6g} N; the tensioner port "
+            "F = force_N + force_dv_N_s_m * v as inputs")
 
 
 def mujoco_licenses() -> dict[str, str]:

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from trackmj.scenarios.schema import TRACK_SPEED_MAX_M_S
 from trackmj.track.mechanics import GroundParams, ModelParams, TrackParams
 
 Causality = Literal["independent", "input", "output", "parameter"]
@@ -78,8 +79,8 @@ INPUTS = (
              "that damps)", 0.0, None, 0.0),
     Variable("track_speed_m_s", 3, "Float64", "input", "continuous", "m/s",
              "sprocket pitch-line speed command of the drive's velocity servo; > 0 drives "
-             "the vehicle forward; |v| <= 10 m/s (assumed: above any crawler's top speed)",
-             0.0, -10.0, 10.0),
+             f"the vehicle forward; |v| <= {TRACK_SPEED_MAX_M_S:g} m/s (a scenario's range)",
+             0.0, -TRACK_SPEED_MAX_M_S, TRACK_SPEED_MAX_M_S),
     Variable("hitch_pull_N", 4, "Float64", "input", "continuous", "N",
              "load on the rear hitch along the chassis x axis; > 0 pulls rearward (a towed "
              "implement), < 0 pushes", 0.0),
