@@ -262,6 +262,19 @@ def test_no_file_in_the_fmu_names_a_path_of_this_machine(native) -> None:
     assert "resources/track.mjb" in names and "resources/track.cfg" in names
 
 
+def test_the_sources_are_documentation_not_a_source_fmu(native) -> None:
+    """The C sources the binaries were built from travel in documentation/sources/ (to
+    read); nothing is in sources/, so an importer lists only the built platforms and never
+    tries to compile code that needs MuJoCo's library (fmpy took sources/ for c-code)."""
+    for which in ("fmi2", "fmi3"):
+        with zipfile.ZipFile(native[which]) as z:
+            names = z.namelist()
+        assert "documentation/sources/engine.c" in names, which
+        assert not [n for n in names if n.startswith("sources/")], which
+        assert "c-code" not in fmpy.supported_platforms(str(native[which])), which
+        assert "linux64" in fmpy.supported_platforms(str(native[which])), which
+
+
 def test_no_binary_needs_libpython(native) -> None:
     with zipfile.ZipFile(native["fmi2"]) as z:
         binaries = [n for n in z.namelist() if n.startswith("binaries/")]

@@ -10,7 +10,10 @@ The FMU holds everything a host needs and nothing of the exporting machine:
   weights, W5's contact scale), ``resources/track.xml`` its MJCF source (for reading and
   viewing), ``resources/track.cfg``: the indices, the foundation's arrays and the track
   settled under ``force_N`` (the state the Python plant starts a run from);
-* ``sources/``: the C sources and headers the binaries were built from;
+* ``documentation/sources/``: the C sources and headers the binaries were built from, to
+  read (every equation open). Not in ``sources/``: that folder makes an FMU a source FMU,
+  which an importing tool may try to build, and these need MuJoCo's headers and a
+  ``libmujoco`` for the host's platform, which only the binaries' platforms carry;
 * ``documentation/licenses/``: MuJoCo's licence (Apache 2.0) and its third parties'.
 
 The machine, terrain and seed are fixed at export (the model is compiled then); the
@@ -135,8 +138,8 @@ def export_track(out: Path | str, *, fmi_version: int = 2, machine: str | None =
         (resources / "track.xml").write_text(setup.track_mjcf())
         (resources / "track.cfg").write_text(configuration_text(plant))
         token = _token(resources, variables)
-        sources = work / "fmu" / "sources"
-        sources.mkdir()
+        sources = work / "fmu" / "documentation" / "sources"
+        sources.mkdir(parents=True)
         for source in (*SOURCES, FMI_LAYER[fmi_version]):
             shutil.copy(HERE / source, sources / source)
         for header in (HERE / "include").iterdir():
