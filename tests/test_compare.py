@@ -4,6 +4,7 @@ each run, and the prediction error of each architecture against tp."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 from synthetic import energy_table, synthetic_result
@@ -58,3 +59,36 @@ def test_several_controllers_get_their_own_figures(tmp_path) -> None:
     assert doc["figures"] == ["compare-nmpc.png", "psd-nmpc.png", "compare-pid.png",
                               "psd-pid.png", "controllers-tp.png", "controllers-dp-b.png"]
     assert doc["runs"]["dp-b-pid"]["metrics"]["energy_J"]["pump"] == pytest.approx(9501.0)
+
+
+QUICK = ["--set", "scenario.evaluation.start_s=0.02", "--set",
+         "scenario.evaluation.steady_start_s=0.03", "--set",
+         "scenario.reference.steps.0.time_s=0.03", "--set",
+         "scenario.reference.steps.1.time_s=0.04", "--workers", "1"]
+"""steps_short.toml's events moved into a 0.05 s comparison."""
+
+
+@pytest.mark.slow
+def test_a_comparison_of_other_inputs_is_refused_unless_overwrite(tmp_path, capsys) -> None:
+    """As ``trackmj run`` does: the same inputs resume, other inputs are refused with one
+    line naming the folder and --overwrite (the comparison there left as it was), and
+    --overwrite replaces it."""
+    out = tmp_path / "cmp"
+    scenario = Path(__file__).parent / "data" / "steps_short.toml"
+    args = ["compare", str(scenario), *QUICK, "--out", str(out)]
+    assert main([*args, "--duration", "0.05"]) == 0
+    capsys.readouterr()
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert main([*args, "--duration", "0.06"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"trackmj: error: --out {out}: holds a comparison of other inputs")
+    assert "give --overwrite to replace it" in err and len(err.splitlines()) == 1
+    assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*")
+            if p.is_file()} == before
+    assert main([*args, "--duration", "0.05"]) == 0          # the same inputs: resumed
+    assert json.loads((out / "compare.json").read_text())["duration_s"] == 0.05
+    assert main([*args, "--duration", "0.06", "--overwrite"]) == 0
+    doc = json.loads((out / "compare.json").read_text())
+    assert doc["duration_s"] == 0.06 and set(doc["runs"]) == {f"{a}-nmpc" for a in ARCHITECTURES}
+    assert all(read_result(out / name).columns()["t_s"][-1] == pytest.approx(0.06)
+               for name in doc["runs"])

@@ -235,10 +235,15 @@ def _add_compare(sub: Subcommands) -> None:
                              "reduced one's prediction error against "
                              f"{REFERENCE_ARCHITECTURE}")
     _run_args(compare, "output directory (default: runs/compare-SCENARIO, with -MACHINE when "
-                       "it is not the default one); runs already done in it are kept")
+                       "it is not the default one); a comparison of the same inputs in it "
+                       "is resumed (its runs already done are kept), a folder holding one "
+                       "of other inputs is refused unless --overwrite")
     compare.add_argument("--controllers", help="comma list, e.g. "
                          f"{','.join(by_name(CONTROLLERS))} (each on every architecture; "
                          "one more figure overlays the controllers)")
+    compare.add_argument("--overwrite", action="store_true", help="replace a comparison "
+                         "of other inputs in the output folder (its files are removed "
+                         "before this one runs)")
     _executor_args(compare)
     compare.set_defaults(func=cmd_compare)
 

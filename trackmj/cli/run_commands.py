@@ -137,7 +137,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     exit code 1 if a run failed."""
     # start-up: --help and argument errors must not import MuJoCo, CasADi or Matplotlib
     from trackmj.sim.setup import prepare
-    from trackmj.study.compare import compare, write_compare
+    from trackmj.study.compare import compare, comparison_key, write_compare
 
     controllers = args.controllers.split(",") if args.controllers else [None]
     setups = [prepare(args.scenario, controller=c, estimator=args.estimator, seed=args.seed,
@@ -149,8 +149,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
     scenario_machine = setups[0].machine.name
     out = Path(args.out or f"runs/compare-{scenario.name}{_machine_suffix(scenario_machine)}")
     base = _specs_base(args, str(args.scenario))
-    outcome = compare(base, controllers, out, seed=args.seed,
-                      workers=args.workers, scheduler=args.scheduler)
+    outcome = compare(base, controllers, out, seed=args.seed, workers=args.workers,
+                      scheduler=args.scheduler, key=comparison_key(setups),
+                      overwrite=args.overwrite)
     for spec, error in outcome.failed:
         print(f"trackmj: {spec.architecture} {spec.controller}: {error}", file=sys.stderr)
     doc = write_compare(outcome, out, scenario, setups[0].duration_s)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -92,12 +93,19 @@ class Store:
     ``--out`` guard, the lock, ``campaign.json``, the rows of ``results.parquet`` and the run
     directories. ``markers``: other names that show a directory is one of this kind (e.g. a
     report written before campaign.json existed); ``what``: its name in messages; ``runs``:
-    the subdirectory of the run directories ("." for the campaign directory itself)."""
+    the subdirectory of the run directories ("." for the campaign directory itself);
+    ``inputs_key``: for a campaign of one set of inputs (a comparison), their hash, kept in
+    ``campaign.json``: a directory holding one of other inputs (or of none, an older trackmj)
+    is refused unless ``overwrite``, which empties it first."""
 
     def __init__(self, out: str | Path, kind: str, markers: Sequence[str] = (),
-                 what: str | None = None, runs: str = RUNS) -> None:
+                 what: str | None = None, runs: str = RUNS, inputs_key: str | None = None,
+                 overwrite: bool = False) -> None:
         self.kind = kind
-        self.out = check_campaign_dir(out, (CAMPAIGN, RESULTS, *markers), what or kind)
+        self.what = what or kind
+        self.inputs_key = inputs_key
+        self.overwrite = overwrite
+        self.out = check_campaign_dir(out, (CAMPAIGN, RESULTS, *markers), self.what)
         self.results = self.out / RESULTS
         self.runs = self.out / runs
         self._lock = LockFile(self.out / LOCK)
@@ -110,14 +118,18 @@ class Store:
                                        "another --out")
         try:
             marker = self.out / CAMPAIGN
-            if marker.is_file():
-                kind = json.loads(marker.read_text()).get("kind")
-                if kind != self.kind:
-                    raise ResultDirectoryError(
-                        f"--out {self.out}: holds a trackmj {kind} ({CAMPAIGN}); refusing to "
-                        f"write a {self.kind} into it (choose another --out)")
-            else:
-                write_text_atomic(marker, json.dumps({"kind": self.kind}) + "\n")
+            held = json.loads(marker.read_text()) if marker.is_file() else None
+            if held is not None and held.get("kind") != self.kind:
+                raise ResultDirectoryError(
+                    f"--out {self.out}: holds a trackmj {held.get('kind')} ({CAMPAIGN}); "
+                    f"refusing to write a {self.kind} into it (choose another --out)")
+            if self._other_inputs(held):
+                self._empty()
+                held = None
+            if held is None:
+                doc = {"kind": self.kind} | ({} if self.inputs_key is None
+                                             else {"inputs_key": self.inputs_key})
+                write_text_atomic(marker, json.dumps(doc) + "\n")
             self.rows = {row["run_key"]: row for row in read_rows(self.results)}
         except BaseException:
             self.__exit__()
@@ -126,6 +138,34 @@ class Store:
 
     def __exit__(self, *exc: object) -> None:
         self._lock.release()
+
+    def _other_inputs(self, held: dict[str, Any] | None) -> bool:
+        """Whether the directory holds a campaign of inputs other than :attr:`inputs_key`
+        (``held``: its campaign.json, None without one); ResultDirectoryError if so, unless
+        :attr:`overwrite`. Only for a campaign of one set of inputs."""
+        if self.inputs_key is None or not self._entries():
+            return False
+        key = "" if held is None else str(held.get("inputs_key", ""))
+        if key == self.inputs_key:
+            return False
+        if not self.overwrite:
+            what = f"inputs {key[:8]}" if key else "no inputs key: an older trackmj"
+            raise ResultDirectoryError(
+                f"--out {self.out}: holds a {self.what} of other inputs ({what}; this one's "
+                f"are {self.inputs_key[:8]}); give --overwrite to replace it, or another --out")
+        return True
+
+    def _entries(self) -> list[Path]:
+        """What the directory holds besides the lock file."""
+        return [p for p in self.out.iterdir() if p != self._lock.path]
+
+    def _empty(self) -> None:
+        """Remove what the directory holds (a campaign of other inputs, ``--overwrite``)."""
+        for path in self._entries():
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
+                path.unlink()
 
     def run_dir(self, run: PlannedRun) -> Path:
         return self.runs / run.name

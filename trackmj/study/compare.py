@@ -5,6 +5,7 @@ and the figures."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -23,6 +24,7 @@ from trackmj.results.store import _json_ready as jsonable  # the one JSON form o
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 from trackmj.study.campaign import Store, check_campaign_dir, plan_run, run_campaign
 from trackmj.study.executor import RunSpec
+from trackmj.study.identity import inputs_key
 from trackmj.study.report_cases import tensioner_for
 from trackmj.study.report_markdown import PREDICTION_METRICS
 from trackmj.study.report_stats import mean_std
@@ -47,18 +49,30 @@ def check_compare_dir(out: str | Path) -> Path:
     return check_campaign_dir(out, ("campaign.json", COMPARE), "comparison")
 
 
+def comparison_key(setups: Sequence[Any]) -> str:
+    """Hash (20 hex digits) of a comparison's inputs: the inputs of each controller's run
+    (:func:`trackmj.study.identity.inputs_key` of its prepared setup), in order (every
+    architecture runs them)."""
+    keys = [inputs_key(s) for s in setups]
+    return hashlib.sha256(json.dumps(keys).encode()).hexdigest()[:20]
+
+
 def compare(base: Mapping[str, Any], controllers: Sequence[str], out_dir: str | Path, *,
-            seed: int, workers: int | None = None, scheduler: str | None = None) -> CompareRun:
+            seed: int, workers: int | None = None, scheduler: str | None = None,
+            key: str | None = None, overwrite: bool = False) -> CompareRun:
     """Every architecture with each controller on one case (``base``: the RunSpec fields but
     architecture, controller and seed), a campaign of kind ``compare``
     (:mod:`trackmj.study.campaign`): each run is written to ``OUT/<arch>-<controller>/`` (the run
-    contract plus its figure) as it finishes; a run already done there is read back."""
+    contract plus its figure) as it finishes; a run already done there is read back.
+    ``key``: the comparison's :func:`comparison_key`; a directory holding a comparison of
+    other inputs is refused (ResultDirectoryError) unless ``overwrite``, which replaces it."""
     fields = {k: v for k, v in base.items() if k != "tensioner"}
     specs = [RunSpec(**fields, architecture=a, controller=c, seed=seed,
                      tensioner=tensioner_for(a, base.get("tensioner")))
              for c in controllers for a in ARCHITECTURES]
     runs = [plan_run(s, name=f"{s.architecture}-{s.controller}") for s in specs]
-    with Store(out_dir, "compare", markers=(COMPARE,), what="comparison", runs=".") as store:
+    with Store(out_dir, "compare", markers=(COMPARE,), what="comparison", runs=".",
+               inputs_key=key, overwrite=overwrite) as store:
         made = run_campaign(store, runs, workers=workers, scheduler=scheduler,
                             progress=f"compare {base['scenario']}", need_results=True,
                             extras=lambda r: {"timeseries.png": lambda path: run_figure(r, path)})
