@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from trackmj.scenarios.load import load_scenario
+from trackmj.sim.setup import prepare
 from trackmj.validator import ParameterError
 
 DATA = Path(__file__).parent / "data"
@@ -102,9 +103,49 @@ def test_a_shuttle_speed_trace_travels_both_ways_and_a_speed_past_5_m_s_is_refus
         pytest.approx((0.9 * f_tooth, 1.1 * f_tooth), rel=2e-3))
     write_csv(tmp_path / "v.csv", {"t_s": t, "speed_m_s": 4.0 * edge})
     with pytest.raises(ParameterError) as info:
-        load_scenario(scenario_with(tmp_path, {track: '[track]\nfrom_file = "v.csv"\n'}))
-    assert "v.csv column 'speed_m_s' (track speed): -5.05 m/s at t = 1.181 s" in str(info.value)
-    assert "must stay in [-5, 5] m/s over the run" in str(info.value)
+        prepare(scenario_with(tmp_path, {track: '[track]\nfrom_file = "v.csv"\n'}))
+    assert ("v.csv column 'speed_m_s' (track speed): data row 1182 (t_s = 1.181) holds -5.05; "
+            "it must stay in [-5, 5] m/s over the run (0 .. 2.5 s)") == str(info.value)
+
+
+def test_a_bad_speed_sample_is_named_as_the_file_holds_it(tmp_path):
+    """A coarse trace in km/h: the message names the file's first sample outside ±5 m/s
+    (its data row, time and value as written, and the value in m/s), not a point of the
+    1 ms resampling between two of its rows; a sample after the run's end refuses no run."""
+    write_csv(tmp_path / "v.csv", {"t [ms]": np.array([0.0, 500.0, 1000.0, 1500.0, 3000.0]),
+                                   "speed [km/h]": np.array([0.0, 3.6, 18.0, 19.5, 30.0])})
+    path = scenario_with(tmp_path, {"[track]\nspeed_m_s = 1.5\nramp_s = 1.0\n":
+                                    '[track]\nfrom_file = "v.csv"\n'})
+    with pytest.raises(ParameterError) as info:
+        prepare(path)
+    assert str(info.value) == (
+        "v.csv column 'speed [km/h]' (track speed): data row 4 (t [ms] = 1500) holds 19.5 "
+        "(5.41667 m/s); it must stay in [-5, 5] m/s over the run (0 .. 2.5 s)")
+    with pytest.raises(ParameterError, match=r"data row 4 \(t \[ms\] = 1500\) holds 19\.5"):
+        prepare(path, duration=1.2)        # reads row 4: the run's speed interpolates to it
+    assert prepare(path, duration=1.0).scenario.track_speed_m_s(1.0) == pytest.approx(5.0)
+
+
+def test_a_trace_is_checked_against_the_runs_duration(tmp_path, capsys):
+    """A trace covering 1.2 s of a 2.5 s scenario: a run of --duration 1 takes it, the
+    scenario's own duration and a --duration past the trace are refused in one line."""
+    from trackmj.cli.main import main
+
+    t = 1e-3 * np.arange(0, 1201)
+    write_csv(tmp_path / "v.csv", {"t_s": t, "speed_m_s": np.minimum(t, 1.0)})
+    path = scenario_with(tmp_path, {"[track]\nspeed_m_s = 1.5\nramp_s = 1.0\n":
+                                    '[track]\nfrom_file = "v.csv"\n'})
+    assert load_scenario(path).duration_s == 2.5
+    assert prepare(path, duration=1.0).duration_s == 1.0
+    for given, shown in ((None, "2.5"), (1.5, "1.5")):
+        with pytest.raises(ParameterError) as info:
+            prepare(path, duration=given)
+        assert str(info.value) == ("v.csv column 'speed_m_s' (track speed): ends at 1.2 s, "
+                                   f"too short to cover the run (0 .. {shown} s)")
+    code = main(["run", str(path), "--duration", "1.5", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.endswith("too short to cover the run (0 .. 1.5 s)"), err
+    assert len(err.splitlines()) == 1 and not (tmp_path / "r").exists()
 
 
 @pytest.mark.parametrize(("columns", "words"), [
@@ -123,7 +164,7 @@ def test_bad_input_files_are_refused_naming_file_and_column(tmp_path, columns, w
     write_csv(tmp_path / "ref.csv", {k: np.asarray(v, float) for k, v in columns.items()})
     path = scenario_with(tmp_path, {REFERENCE_TABLE: '[reference]\nfrom_file = "ref.csv"\n'})
     with pytest.raises(ParameterError) as info:
-        load_scenario(path)
+        prepare(path)
     assert all(w in str(info.value) for w in words), str(info.value)
 
 
@@ -172,7 +213,6 @@ def test_parquet_inputs_and_the_identity_follows_the_file_content(tmp_path):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from trackmj.sim.setup import prepare
     from trackmj.study.identity import run_key
 
     t = 1e-3 * np.arange(0, 2501)

@@ -648,12 +648,14 @@ class InputSignal:
     """A time-series input of a run read from a file: ``values`` on the 1 ms grid ``t_s``
     (k·h from 0; linear interpolation of the file), held between grid points and beyond
     the ends (zero-order, as a 1 kHz set-point is applied); ``file`` and ``column`` name
-    where it came from (the header as written)."""
+    where it came from (the header as written); ``rows``: the file's own samples, for
+    messages that name one as written."""
 
     file: str
     column: str
     t_s: np.ndarray
     values: np.ndarray
+    rows: FileSamples
 
     def __repr__(self) -> str:
         """Names the file, the column and the SHA-256 of the signal (a run's identity,
@@ -672,6 +674,39 @@ class InputSignal:
             raise ParameterError(f"{self.file} column {self.column!r} ({what}): ends at "
                                  f"{self.t_s[-1]:g} s, too short to cover the run "
                                  f"(0 .. {duration_s:g} s)")
+
+    def check_range(self, duration_s: float, low: float, high: float, unit: str,
+                    what: str) -> None:
+        """ParameterError naming the file, column and the first of the file's samples a
+        run of ``duration_s`` [s] reads (those up to the first at or after its end) outside
+        [``low``, ``high``] (SI, ``unit``): its data row, time and value as written."""
+        rows = self.rows
+        read = rows.t_s <= rows.t_s[min(int(np.searchsorted(rows.t_s, duration_s
+                                                             - COVER_TOLERANCE_S)),
+                                        len(rows.t_s) - 1)]
+        si = rows.values * rows.factor
+        bad = ((si < low) | (si > high)) & read
+        if not bad.any():
+            return
+        k = int(np.argmax(bad))
+        converted = "" if rows.factor == 1.0 else f" ({si[k]:.6g} {unit})"
+        raise ParameterError(f"{self.file} column {self.column!r} ({what}): data row {k + 1} "
+                             f"({rows.time_column} = {rows.t_s[k] / rows.time_factor:.15g}) "
+                             f"holds {rows.values[k]:.15g}{converted}; it must stay in "
+                             f"[{low:g}, {high:g}] {unit} over the run (0 .. {duration_s:g} s)")
+
+
+@dataclass(frozen=True)
+class FileSamples:
+    """An input column's samples as the file holds them: ``t_s`` the times [s] (shape (n,),
+    row order), ``values`` as written (the column's own unit; NaN: missing), ``factor`` to
+    SI, and the time column's header as written and its factor to seconds."""
+
+    t_s: np.ndarray
+    values: np.ndarray
+    factor: float
+    time_column: str
+    time_factor: float
 
 
 def input_reading(header: str, si_unit: str) -> tuple[str, float]:
@@ -738,13 +773,14 @@ def input_signal(path: str | Path, column: str | None, suffix: str,
     header, factor = _input_column(path.name, others, column, suffix, what)
     raw = dict(zip(table.column_names, table.columns, strict=True))
     time_header, time_factor = named[TIME]
+    written = _numbers(path.name, header, raw[header])
     trace = _checked(Trace(path.name, _numbers(path.name, time_header, raw[time_header])
-                           * time_factor,
-                           {header: _numbers(path.name, header, raw[header]) * factor},
+                           * time_factor, {header: written * factor},
                            {TIME: time_header, header: header}, others, sha256))
     if trace.t_s[0] > COUPLING_STEP_S + COVER_TOLERANCE_S:
         raise ParameterError(f"{trace.where(TIME)} ({what}): starts at {trace.t_s[0]:g} s; "
                              f"an input must start by {COUPLING_STEP_S:g} s")
     t = COUPLING_STEP_S * np.arange(0, int(np.floor(trace.t_s[-1] / COUPLING_STEP_S
                                                       + 1e-9)) + 1)
-    return InputSignal(trace.file, header, t, trace.resample(header, t))
+    return InputSignal(trace.file, header, t, trace.resample(header, t),
+                       FileSamples(trace.t_s, written, factor, time_header, time_factor))

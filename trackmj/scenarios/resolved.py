@@ -111,7 +111,6 @@ class Scenario:
         object.__setattr__(self, "signals", read_inputs(self.source.parent, {
             "reference": self.reference, "supply": self.supply, "track": self.track,
             "hitch": self.hitch}))
-        self.check_inputs(self.duration_s)
 
     def pulse_hitch_N(self, index: int) -> float:
         """Hitch force [N] of load pulse ``index``: the file's hitch_N, else the one
@@ -142,24 +141,17 @@ class Scenario:
 
     def check_inputs(self, duration_s: float) -> None:
         """ParameterError naming the file and column if a from_file input does not cover a
-        run of ``duration_s`` [s], F_ref from a file leaves [0, 50 kN] or a track speed from
-        a file leaves ±5 m/s."""
+        run of ``duration_s`` [s] (the run's, :func:`trackmj.sim.setup.prepare`), or a
+        sample of F_ref from a file that the run reads leaves [0, 50 kN] or one of a track
+        speed leaves ±5 m/s (naming the file's sample as written)."""
         for what, signal in self.signals.items():
             signal.check_covers(duration_s, INPUT_NAMES[what])
         for what, low, high, unit in (("reference", 0.0, REFERENCE_MAX_N, "N"),
                                       ("track", -TRACK_SPEED_MAX_M_S, TRACK_SPEED_MAX_M_S,
                                        "m/s")):
             signal = self.signals.get(what)
-            if signal is None:
-                continue
-            keep = signal.t_s <= duration_s + COUPLING_STEP_S
-            bad = ((signal.values < low) | (signal.values > high)) & keep
-            if bad.any():
-                k = int(np.argmax(bad))
-                raise ParameterError(f"{signal.file} column {signal.column!r} "
-                                     f"({INPUT_NAMES[what]}): {signal.values[k]:.6g} {unit} at "
-                                     f"t = {signal.t_s[k]:.6g} s; it must stay in [{low:g}, "
-                                     f"{high:g}] {unit} over the run")
+            if signal is not None:
+                signal.check_range(duration_s, low, high, unit, INPUT_NAMES[what])
 
     def check_grade(self, ground_friction: float, where: str) -> None:
         """ParameterError unless the grade is below the ground's friction (``where`` names
