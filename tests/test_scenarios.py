@@ -490,3 +490,32 @@ def test_a_pulse_label_names_the_hitch_force_that_applies_it_and_a_missed_target
     sc = dataclasses.replace(sc, hitch_calibration=cal)
     assert sc.metric_windows().disturbance_labels == (
         "load pulse +2 kN (hitch -5.29 kN)", "load pulse -1.5 kN (hitch +4.13 kN, out of reach)")
+
+
+def test_a_scenario_gives_only_the_evaluation_keys_that_differ(tmp_path) -> None:
+    """[evaluation] with its two windows alone reads as W1's whole table (the same run
+    inputs); another key given overrides its default; an unknown key is refused with a
+    suggestion; the windows stay required."""
+    from trackmj.sim.setup import prepare
+    from trackmj.study.identity import inputs_key
+
+    text = scenario_path("W1").read_text()
+    cut = text.index("[evaluation]")
+    path = tmp_path / "mine.toml"
+    path.write_text(text[:cut] + "[evaluation]\nstart_s = 1.0\nsteady_start_s = 5.0\n")
+    assert load_scenario(path).evaluation == load_scenario("W1").evaluation
+    assert inputs_key(prepare(path)) == inputs_key(prepare("W1"))
+    path.write_text(text[:cut] + "[evaluation]\nstart_s = 1.0\nsteady_start_s = 5.0\n"
+                    "lowpass_cutoff_Hz = 3.0\n")
+    assert load_scenario(path).evaluation.lowpass_cutoff_Hz == 3.0
+    assert load_scenario(path).evaluation.psd_max_Hz == 50.0
+    path.write_text(text[:cut] + "[evaluation]\nstart_s = 1.0\nsteady_start_s = 5.0\n"
+                    "lowpass_cutof_Hz = 3.0\n")
+    with pytest.raises(ParameterError, match=r"^mine\.toml \[evaluation\]: unknown key "
+                                             r"'lowpass_cutof_Hz'; did you mean "
+                                             r"'lowpass_cutoff_Hz'\?"):
+        load_scenario(path)
+    path.write_text(text[:cut] + "[evaluation]\nstart_s = 1.0\n")
+    with pytest.raises(ParameterError, match=r"^mine\.toml \[evaluation\]: missing key "
+                                             r"'steady_start_s'"):
+        load_scenario(path)

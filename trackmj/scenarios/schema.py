@@ -430,40 +430,52 @@ class Evaluation(Parameters):
     """How the metrics are measured (:class:`~trackmj.results.metric_windows.MetricWindows`):
     tracking metrics from start_s, steady-state metrics and spectra from steady_start_s [s]; the
     settling band relative to the final value and the minimum hold [s]; the low-pass of the
-    ``_lp`` metrics; the named ripple bands; the resolution and extent of the spectra."""
+    ``_lp`` metrics; the named ripple bands; the resolution and extent of the spectra.
+
+    start_s and steady_start_s are the scenario's own (when its start-up is over and when its
+    steady part begins) and must be given; every other key defaults to the value the
+    built-in scenarios (W1) use, so a scenario file gives only what differs."""
 
     start_s: float = param(0.0, None, doc="tracking metrics from here")
     steady_start_s: float = param(0.0, None, doc="steady-state metrics from here")
-    settle_band_rel: float = param(0.0, 0.5, open_low=True,
-                                   doc="settling band relative to the final value")
-    min_hold_s: float = param(0.0, 10.0, doc="time in the band that counts as settled")
-    lowpass_cutoff_Hz: float = param(0.1, 50.0,
+    settle_band_rel: float = param(0.0, 0.5, open_low=True, default=0.02,
+                                   doc="settling band relative to the final value "
+                                   "(default W1's ±2 %)")
+    min_hold_s: float = param(0.0, 10.0, default=0.5,
+                              doc="time in the band that counts as settled (default W1's)")
+    lowpass_cutoff_Hz: float = param(0.1, 50.0, default=2.0,
                                      doc="cut-off of the zero-phase 2nd-order Butterworth "
-                                     "low-pass of the _lp metrics")
-    tooth_band_rel: float = param(0.0, 0.5, open_low=True,
-                                  doc="tooth-passing ripple band: v/pitch times 1 ± this")
-    body_mode_band_Hz: tuple[float, float] = param(0.1, 100.0,
+                                     "low-pass of the _lp metrics (default W1's)")
+    tooth_band_rel: float = param(0.0, 0.5, open_low=True, default=0.1,
+                                  doc="tooth-passing ripple band: v/pitch times 1 ± this "
+                                  "(default W1's)")
+    body_mode_band_Hz: tuple[float, float] = param(0.1, 100.0, default=(8.0, 12.0),
                                                    doc="track-idler-body mode band "
                                                    "[low, high] (ripple and chassis "
-                                                   "acceleration)")
-    psd_resolution_Hz: float = param(0.05, 10.0,
+                                                   "acceleration; default W1's, the "
+                                                   "study's 8-12 Hz)")
+    psd_resolution_Hz: float = param(0.05, 10.0, default=0.5,
                                      doc="frequency resolution of the spectra (Welch "
-                                     "segments of 1/resolution s)")
-    psd_max_Hz: float = param(1.0, 500.0, doc="spectra written up to here")
-    mean_window_s: float = param(0.01, 10.0, doc="trailing mean of the acceptance checks")
-    recovery_band_rel: float = param(0.0, 0.5, open_low=True,
+                                     "segments of 1/resolution s; default W1's)")
+    psd_max_Hz: float = param(1.0, 500.0, default=50.0,
+                              doc="spectra written up to here (default W1's)")
+    mean_window_s: float = param(0.01, 10.0, default=0.5,
+                                 doc="trailing mean of the acceptance checks (default W1's)")
+    recovery_band_rel: float = param(0.0, 0.5, open_low=True, default=0.05,
                                      doc="acceptance: band around the reference the mean "
-                                     "returns to after a disturbance edge")
-    steady_window_s: float = param(0.1, 100.0, doc="acceptance: length of a steady window "
-                                   "whose mean error is the steady offset")
+                                     "returns to after a disturbance edge (default W1's)")
+    steady_window_s: float = param(0.1, 100.0, default=5.0,
+                                   doc="acceptance: length of a steady window whose mean "
+                                   "error is the steady offset (default W1's)")
     recovery_within_s: float = param(0.0, 30.0, open_low=True, default=RECOVERY_WITHIN_S,
                                      doc="acceptance: the mean is back within the recovery "
                                      "band this long after each disturbance edge (and a "
-                                     "steady window starts no earlier)")
+                                     "steady window starts no earlier; default W1's)")
     steady_offset_max_rel: float = param(0.0, 0.5, open_low=True,
                                          default=STEADY_OFFSET_MAX_REL,
                                          doc="acceptance: a steady window's mean error "
-                                         "stays below this share of the reference")
+                                         "stays below this share of the reference "
+                                         "(default W1's)")
 
     def cross_check(self, at: Location) -> None:
         low, high = self.body_mode_band_Hz
