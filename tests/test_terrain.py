@@ -79,3 +79,41 @@ def test_heightfield_round_trips_heights() -> None:
     assert rx == pytest.approx(0.05 * (len(prof.z_m) - 1) / 2) and ry == 0.5 and base > 0
     np.testing.assert_allclose(hf.pos[2] + hf.data[1] * ez, prof.z_m, atol=1e-12)
     assert hf.pos[0] - rx == pytest.approx(-4.0)
+
+
+QUICK_W1 = ["--set", "scenario.evaluation.start_s=0.3", "--set",
+            "scenario.reference.steps.0.time_s=0.31", "--set",
+            "scenario.reference.ramps.0.start_s=0.33", "--duration", "0.35"]
+"""W1 with its events moved into a 0.35 s run."""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("machine", "grade", "said"), [("m113", "0.2", True),
+                                                        ("lf1352", "0.0", False)])
+def test_a_carrier_settled_on_its_end_stop_is_said_in_one_line(tmp_path, capsys, machine,
+                                                               grade, said) -> None:
+    """M113 (front sprocket) on a 0.2 grade: the traction holding it on the slope loads
+    the idler strands and the settle leaves the carrier on its retracted stop (stroke 0);
+    the run says so on stderr, naming the machine, grade, stroke and stop, and still
+    writes its result. A level LF1352 settles between its stops and says nothing."""
+    import json
+
+    from trackmj.cli.main import main
+
+    out = tmp_path / "run"
+    args = ["run", "W1", "--machine", machine, "--set", f"scenario.terrain.grade={grade}",
+            *QUICK_W1, "--out", str(out)]
+    assert main(args) in (0, 1)
+    lines = [x for x in capsys.readouterr().err.replace("\r", "\n").splitlines()
+             if "end stop" in x]
+    metrics = json.loads((out / "metrics.json").read_text())["metrics"]
+    if not said:
+        assert lines == [] and "settled_on_end_stop" not in metrics
+        return
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("trackmj: warning: m113 on a grade of +0.2 (tan θ) settles "
+                               "with its idler carrier on its retracted end stop (stroke -")
+    assert "mm, the stop at 0.0 mm)" in lines[0]
+    on = metrics["settled_on_end_stop"]
+    assert on["stop"] == "retracted" and on["stop_stroke_m"] == 0.0
+    assert on["stroke_m"] <= 0.0

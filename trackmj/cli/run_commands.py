@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 from trackmj.cli.run_folder import refuse_other_inputs, run_folder
 from trackmj.cli.summary import (
     derailment_lines,
+    end_stop_line,
     flagged,
     measured_table,
     summary_table,
@@ -28,7 +29,10 @@ from trackmj.sim.controllers import CONTROLLERS
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from trackmj.results.measured import MeasuredLog
+    from trackmj.results.store import Result
 
 
 def _files(args: argparse.Namespace) -> dict:
@@ -98,6 +102,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"{setup.scenario.name} ({setup.scenario.title}) on {setup.machine.name}, "
           f"{result.architecture}, {result.controller}/{result.estimator}, seed "
           f"{result.seed}{running_text(running_of(result))} -> {out}")
+    _print_end_stop([result], setup.machine.name, setup.scenario.terrain.grade)
     if result.metrics.get("tensioner", {}).get("element") == "fmu":
         print(tensioner_line(result.metrics["tensioner"]))
     if result.metrics.get("valve_mode_applied") is False and setup.tensioner is not None:
@@ -110,6 +115,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(measured_table(result.metrics["prediction_vs_measured"], measured.file))
         print(_log_line(measured))
     return 1 if flagged(result.metrics) else 0
+
+
+def _print_end_stop(results: Sequence[Result], machine: str, grade: float) -> None:
+    """On stderr, one line if the track of any of ``results`` settled with its idler
+    carrier on an end stop (:func:`trackmj.cli.summary.end_stop_line`; the runs of one
+    case settle alike)."""
+    lines = [end_stop_line(r.metrics, machine, grade) for r in results]
+    line = next((x for x in lines if x is not None), None)
+    if line is not None:
+        print(line, file=sys.stderr)
 
 
 def _machine_suffix(name: str) -> str:
@@ -154,6 +169,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                       overwrite=args.overwrite)
     for spec, error in outcome.failed:
         print(f"trackmj: {spec.architecture} {spec.controller}: {error}", file=sys.stderr)
+    _print_end_stop(outcome.results, scenario_machine, scenario.terrain.grade)
     doc = write_compare(outcome, out, scenario, setups[0].duration_s)
     print(summary_table(outcome.results, "{r.architecture} {r.controller}"))
     print(f"-> {doc}")

@@ -242,3 +242,17 @@ def _where_text(check: str, where: dict) -> str:
         return (f"pin {where['pin']:.0f}, {where['strand']}, {where['excursion_m'] * 1e3:.0f} mm "
                 f"outside (chassis frame x {where['x_m']:.2f} m, z {where['z_m']:.2f} m)")
     return f"{where['seated_pins']:.0f} pins seated"
+
+
+def end_stop_line(metrics: Mapping[str, Any], machine: str, grade: float) -> str | None:
+    """One line if the run's track settled with its idler carrier on an end stop
+    (``metrics["settled_on_end_stop"]``, :func:`trackmj.sim.run.run`): the machine, the
+    grade, the stroke and the stop; None otherwise."""
+    on = metrics.get("settled_on_end_stop")
+    if on is None:
+        return None
+    where = "level ground" if grade == 0.0 else f"a grade of {grade:+g} (tan θ)"
+    return (f"trackmj: warning: {machine} on {where} settles with its idler carrier on its "
+            f"{on['stop']} end stop (stroke {on['stroke_m'] * 1e3:.1f} mm, the stop at "
+            f"{on['stop_stroke_m'] * 1e3:.1f} mm): the stop, not the tensioner, holds the "
+            "idler at the start of the run")

@@ -138,6 +138,10 @@ class PassiveTensioner:
                    params.idler.stroke_at_layout_m)
 
 
+END_STOP_TOLERANCE_M = 0.5e-3
+"""The idler carrier rests on an end stop within this of it, or past it (into the stop's
+soft limit) [m]."""
+
 STRANDS = ("upper", "lower run", "other")
 """Where a pin is (:meth:`TrackPlant.pin_strand`): the upper strand, the sprocket's lower
 run (between the sprocket and its nearest road wheel), or elsewhere (the wraps round the
@@ -332,6 +336,26 @@ class TrackPlant:
     def stroke_m(self) -> float:
         """Cylinder stroke [m] (outward positive)."""
         return self._stroke_offset_m + float(self._qpos[self._slide_q])
+
+    @property
+    def stroke_stops_m(self) -> tuple[float, float]:
+        """Strokes of the carrier's end stops, the range of ``idler_slide`` [m]: (retracted,
+        extended); (-inf, inf) for a slide without limits."""
+        joint = self.model.joint("idler_slide")
+        if not joint.limited[0]:
+            return -math.inf, math.inf
+        low, high = joint.range
+        return self._stroke_offset_m + float(low), self._stroke_offset_m + float(high)
+
+    def end_stop(self) -> str | None:
+        """The end stop the carrier rests on, "retracted" or "extended" (within
+        :data:`END_STOP_TOLERANCE_M` of it or past it), or None between them."""
+        retracted, extended = self.stroke_stops_m
+        if self.stroke_m <= retracted + END_STOP_TOLERANCE_M:
+            return "retracted"
+        if self.stroke_m >= extended - END_STOP_TOLERANCE_M:
+            return "extended"
+        return None
 
     @property
     def stroke_velocity_m_s(self) -> float:
