@@ -61,7 +61,8 @@ class Verdict:
     def band_forced_by_drive(self) -> bool:
         """Whether the mean left the band's top where the drive alone held the idler above
         it (its floor at the highest mean at or above F_max): no tensioner could keep it in."""
-        return self.mean_range_N[1] > self.band_N[1] <= self.drive_floor_at_max_N
+        top = self.band_N[1]
+        return self.mean_range_N[1] > top and self.drive_floor_at_max_N >= top
 
     @property
     def holds(self) -> bool:
