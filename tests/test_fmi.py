@@ -630,6 +630,8 @@ def test_the_plant_fmu_refuses_bad_values_with_fmi2_error_and_a_message(plant) -
     for args, expected in (
             (("setReal", [fmu.vr["track_speed_m_s"]], [float("nan")]),
              "track_speed_m_s = nan m/s: allowed a finite value"),
+            (("setReal", [fmu.vr["track_speed_m_s"]], [7.5]),
+             "track_speed_m_s = 7.5 m/s: allowed a finite value in [-5, 5]"),
             (("setReal", [fmu.vr["hitch_pull_N"]], [float("inf")]),
              "hitch_pull_N = inf N: allowed a finite value"),
             (("setInteger", [fmu.vr["valve_mode"]], [2]), "valve_mode = 2: allowed -1"),

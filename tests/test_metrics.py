@@ -372,3 +372,17 @@ def test_a_band_breach_is_named_the_drives_only_where_its_floor_is_above_the_ban
     assert "no tensioner" not in rear.text()
     unknown = acceptance(t, y, ref, windows(evaluation_start_s=0.5), torque)
     assert math.isnan(unknown["drive_floor_at_max_N"])
+
+
+@pytest.mark.parametrize(("column", "label"), [
+    ("scenario.load_pulses.1.delta_rel", "load pulses delta relative [-]"),
+    ("control.mpc.max_iter", "mpc max iterations [-]"),
+    ("hydraulics.fluid.bulk_modulus_Pa", "fluid bulk modulus [MPa]"),
+])
+def test_a_swept_keys_label_keeps_what_its_dimensionless_suffix_says(column: str,
+                                                                      label: str) -> None:
+    """A unit suffix goes to the brackets, but a dimensionless one (_rel, _iter, ...) says
+    what the number is: "delta" alone would not tell a relative change from an absolute."""
+    from trackmj.results.columns import column_label
+
+    assert column_label(column) == label

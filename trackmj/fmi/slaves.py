@@ -43,6 +43,7 @@ from trackmj.errors import PhysicsError
 from trackmj.machines.assembly import MACHINE_SUFFIX, names
 from trackmj.ports import COUPLING_STEP_S, Command, Readout, StepInputs
 from trackmj.scenarios.load import builtin_names
+from trackmj.scenarios.schema import TRACK_SPEED_MAX_M_S
 from trackmj.sim.architectures import Assembly, assemble
 from trackmj.sim.observers import PhysicsGuard, PhysicsLimits, capture_mujoco_warnings
 from trackmj.sim.run import physics_limits
@@ -76,8 +77,11 @@ class Signal:
 
     def allowed(self) -> str:
         """A Real input's allowed values in words, for error messages."""
-        return "allowed a finite value" + ("" if self.minimum is None else
-                                           f" >= {self.minimum:g}")
+        low, high = self.minimum, self.maximum
+        if low is not None and high is not None:
+            return f"allowed a finite value in [{low:g}, {high:g}]"
+        return "allowed a finite value" + ("" if low is None else f" >= {low:g}") + (
+            "" if high is None else f" <= {high:g}")
 
 
 _PARAMETER, _INPUT, _OUTPUT = Fmi2Causality.parameter, Fmi2Causality.input, Fmi2Causality.output
@@ -103,7 +107,8 @@ INPUTS = (
            "supply pressure set value (gauge); 0 (default): the hydraulic file's nominal", 0.0),
     Signal("track_speed_m_s", Real, _INPUT, "m/s",
            "sprocket pitch-line speed command of the drive's velocity servo; > 0 drives the "
-           "vehicle forward"),
+           f"vehicle forward; |v| <= {TRACK_SPEED_MAX_M_S:g} m/s (a scenario's range)",
+           -TRACK_SPEED_MAX_M_S, TRACK_SPEED_MAX_M_S),
     Signal("hitch_pull_N", Real, _INPUT, "N",
            "load on the rear hitch along the chassis x axis; > 0 pulls rearward (a towed "
            "implement), < 0 pushes"),
@@ -272,8 +277,9 @@ class PlantSlave(Fmi2Slave):
             self._valve_mode = int(value)
         else:
             number = float(value)
-            if not math.isfinite(number) or (signal.minimum is not None
-                                             and number < signal.minimum):
+            if not math.isfinite(number) or (
+                    signal.minimum is not None and number < signal.minimum) or (
+                    signal.maximum is not None and number > signal.maximum):
                 self._error(f"{signal.name} = {number!r} {signal.unit}: {signal.allowed()}")
                 return
             self._inputs[signal.name] = number

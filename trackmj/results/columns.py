@@ -113,12 +113,20 @@ def display_unit(unit: str) -> tuple[float, str]:
     return DISPLAY_UNITS.get(unit, (1.0, unit))
 
 
+DIMENSIONLESS_WORDS = {"_rel": "relative", "_scale": "scale", "_count": "count",
+                       "_steps": "steps", "_iter": "iterations"}
+"""Suffixes of dimensionless names that say what the number is, so they stay as words
+(``delta_rel`` -> "delta relative", where the unit alone would leave "delta")."""
+
+
 def _bare(part: str) -> str:
     """``part`` of a column name without its unit suffix (``bulk_modulus_Pa`` ->
-    ``bulk_modulus``)."""
+    ``bulk_modulus``), a dimensionless one's suffix in words (``delta_rel`` ->
+    ``delta_relative``)."""
     for suffix, _ in UNIT_SUFFIXES:
         if part.endswith(suffix) and len(part) > len(suffix):
-            return part[: -len(suffix)]
+            word = DIMENSIONLESS_WORDS.get(suffix)
+            return part[: -len(suffix)] + ("" if word is None else f"_{word}")
     return part
 
 
