@@ -217,7 +217,7 @@ RECOVERY_NOT_MET = {
              "0.5 s mean up to 27.1 kN, F_max = 26.7 kN): with the sprocket at the "
              "front, braking leaves the idler on the slack side, so the -10 % drive pulse "
              "needs a 15.0 kN push, 28 % of the side's weight, that pitches the chassis "
-             "by 38 mrad; its release rings the chassis' pitch mode (1.0 Hz, about 10 % "
+             "by 38 mrad; its release rings the chassis' pitch and surge (1.0 Hz, about 10 % "
              "of critical on Chrono's torsion-arm damping) and with it the drive torque "
              "(+-3.8 kN·m): with the stroke held the 0.5 s mean swings 17.8 -> 27.3 kN and "
              "rings for 3 s; with 4x the metering and pump flow the loop still rings "
