@@ -76,10 +76,10 @@ def _scenario_file(tmp_path, name: str, edit) -> str:
 
 def test_w3_push_beyond_what_the_tensioner_holds_stops_with_the_reason(tmp_path, monkeypatch,
                                                                       capsys) -> None:
-    """A -30 kN push pulse at 2-4 s (the file's allowed limit) drives the idler in faster than
-    the rod chambers can be fed; they fill with air, and the push tears the track loop open
-    (closure gap 23 mm at 3.03 s): the run stops with exit 3 naming the time and the reason,
-    writes no result and leaves no MuJoCo log in the working directory."""
+    """A -30 kN push pulse at 2-4 s (beyond LF1352's drawbar capacity) drives the idler in faster
+    than the rod chambers can be fed; they fill with air, and the push tears the track loop
+    open (closure gap 23 mm at 3.03 s): the run stops with exit 3 naming the time and the
+    reason, writes no result and leaves no MuJoCo log in the working directory."""
     monkeypatch.chdir(tmp_path)
     path = _scenario_file(tmp_path, "W3", lambda s: s.replace(
         "start_s = 6.0\nend_s = 8.0", "start_s = 2.0\nend_s = 4.0\nhitch_N = -30000.0"))

@@ -615,11 +615,11 @@ def test_a_sweep_writes_its_summary_and_a_figure_per_key(grid, executor) -> None
 
 
 def test_a_failing_run_becomes_an_error_row(executor, tmp_path) -> None:
-    """A -30 kN push on the rear hitch (the file's limit) from 0.5 to 1.0 s, the oil's free
-    air swept: without it the push pulls the rods below vacuum within 0.2 s, and that run is
-    a row with its error; with the shipped air (0.005) the rod chambers fill with air and the
-    run beside it goes through (loop closure within 0.2 mm; held to 1.4 s the push tears the
-    loop about 1 s after its onset)."""
+    """A -30 kN push on the rear hitch (far beyond LF1352's drawbar capacity) from 0.5 to 1.0 s,
+    the oil's free air swept: without it the push pulls the rods below vacuum within 0.2 s,
+    and that run is a row with its error; with the shipped air (0.005) the rod chambers fill
+    with air and the run beside it goes through (loop closure within 0.2 mm; held to 1.4 s
+    the push tears the loop about 1 s after its onset)."""
     spec = {"sweep": {"scenario": "W3", "duration_s": DURATION_S, "set": [
         "scenario.load_pulses.0.start_s=0.5", "scenario.load_pulses.0.end_s=1.0",
         "scenario.load_pulses.0.hitch_N=-30000.0", "scenario.load_pulses.1.hitch_N=0.0"],

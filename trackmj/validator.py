@@ -489,6 +489,18 @@ def _check_range(value: float, spec: Spec, fail: Any) -> None:
                    + (f" {spec.unit}" if spec.unit and spec.unit != "1" else ""))
 
 
+def range_error(cls: type, name: str, value: float) -> str | None:
+    """``'is outside the allowed range [low, high] unit'`` if ``value`` is outside the range
+    of field ``name`` of parameter class ``cls``, else None (for a value a check derives
+    from the file's, e.g. a relative value made absolute, whose message names the key the
+    file gives)."""
+    try:
+        _check_range(value, _schema(cls)[name].spec, ParameterError)
+    except ParameterError as exc:
+        return str(exc)
+    return None
+
+
 def _check_string(value: str, spec: Spec, fail: Any) -> None:
     if spec.choices is not None and value not in spec.choices:
         raise fail(f"is not one of {list(spec.choices)}")

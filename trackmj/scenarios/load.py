@@ -103,11 +103,7 @@ def load_scenario(name_or_path: str | Path,
         packaged = packaged_nominal()
         nominal_tension_N = packaged[0] if nominal_tension_N is None else nominal_tension_N
         supply_setpoint_Pa = packaged[1] if supply_setpoint_Pa is None else supply_setpoint_Pa
-    try:
-        f = resolve(f, nominal_tension_N, supply_setpoint_Pa)
-    except ParameterError as exc:   # a resolved value's check names the file
-        raise ParameterError(f"{path.name} (relative values at a nominal tension of "
-                             f"{nominal_tension_N:g} N): {exc}") from None
+    f = resolve(f, nominal_tension_N, supply_setpoint_Pa)   # its refusals name the file
     return _scenario(f, path, nominal_tension_N)
 
 

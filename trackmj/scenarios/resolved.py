@@ -142,7 +142,7 @@ class Scenario:
     def check_inputs(self, duration_s: float) -> None:
         """ParameterError naming the file and column if a from_file input does not cover a
         run of ``duration_s`` [s] (the run's, :func:`trackmj.sim.setup.prepare`), or a
-        sample of F_ref from a file that the run reads leaves [0, 50 kN] or one of a track
+        sample of F_ref from a file that the run reads leaves [0, 5 MN] or one of a track
         speed leaves ±5 m/s (naming the file's sample as written)."""
         for what, signal in self.signals.items():
             signal.check_covers(duration_s, INPUT_NAMES[what])

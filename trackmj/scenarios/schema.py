@@ -39,8 +39,9 @@ absolute or relative to the hydraulic file's set-point; exactly one of each pair
 
 Time windows must lie in the run: steps, ramp, drop and pulse starts and the evaluation
 starts before ``duration_s``; each drop's and pulse's edges fit inside its window; drops do
-not overlap; F_ref stays in [0, 50 kN]. The scenario ``name`` names the run directories, so
-it is a short identifier (letters, digits, ``_ . -``, not starting with a dot, at most 64
+not overlap; F_ref stays in [0, 5 MN] (:data:`FORCE_MAX_N`, a sanity cap above any crawler;
+the machine's own limits bind). The scenario ``name`` names the run directories, so it is a
+short identifier (letters, digits, ``_ . -``, not starting with a dot, at most 64
 characters). Tables may carry a ``source`` string; unlike parameter files they need not.
 """
 
@@ -59,16 +60,34 @@ from trackmj.results.verdict import RECOVERY_WITHIN_S, STEADY_OFFSET_MAX_REL
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.entries import by_name, choices
 from trackmj.track.terrain import ISO8608_GD_N0_M3
-from trackmj.validator import Location, ParameterError, Parameters, missing_key, param
+from trackmj.validator import (
+    Location,
+    ParameterError,
+    Parameters,
+    missing_key,
+    origin_field,
+    param,
+)
 
 NAME_PATTERN = r"[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 """Scenario and variant names: they become parts of run directory names."""
-REFERENCE_MAX_N = 50e3
-"""F_ref must stay within [0, REFERENCE_MAX_N] over the run [N]."""
+FORCE_MAX_N = 5e6
+"""Sanity cap on every force a scenario gives or resolves to [N] (F_ref and its steps, a
+hitch force, a pulse's target, the [limits]; a ramp's slope at most this per second): the
+weight of one side of the heaviest crawlers built, 1000 t class mining shovels (~500 t a
+side, 4.9 MN), so above the track tension and the drawbar pull (mu W) of any crawler
+trackmj models (its mechanics file admits up to 1.2e5 kg a side and a nominal tension up
+to 1 MN). It only catches a slip of units; the limits that bind are the machine's: its
+drawbar capacity and 75 % of its tipping force for a hitch force
+(:mod:`trackmj.sim.w3_hitch`), its cylinders' force for the band
+(:func:`trackmj.machines.assembly.cylinder_force_shortfall`)."""
+REFERENCE_MAX_N = FORCE_MAX_N
+"""F_ref must stay within [0, REFERENCE_MAX_N] over the run [N] (the sanity cap)."""
 TRACK_SPEED_MAX_M_S = 5.0
 """The commanded track speed stays within ±TRACK_SPEED_MAX_M_S [m/s] (negative: reverse)."""
-HITCH_LIMIT_N = 30e3
-"""A load pulse's hitch force stays within ±HITCH_LIMIT_N [N]."""
+HITCH_LIMIT_N = FORCE_MAX_N
+"""A load pulse's hitch force stays within ±HITCH_LIMIT_N [N] (the sanity cap; the
+calibration keeps within the machine's drawbar capacity and tipping limit)."""
 
 _T = TypeVar("_T")
 
@@ -153,7 +172,8 @@ class Step(Parameters):
     """Reference step of delta_N [N] at time_s [s]."""
 
     time_s: float = param(0.0, None, doc="time of the step")
-    delta_N: float | None = param(-50e3, 50e3, default=None, doc="change of F_ref (absolute)")
+    delta_N: float | None = param(-FORCE_MAX_N, FORCE_MAX_N, default=None,
+                                  doc="change of F_ref (absolute)")
     delta_rel: float | None = param(-3.0, 3.0, default=None, unit="1",
                                     doc="change of F_ref over the nominal tension")
 
@@ -166,7 +186,8 @@ class Ramp(Parameters):
     """Reference ramp of rate_N_s [N/s] from start_s to end_s [s]."""
 
     start_s: float = param(0.0, None, doc="start of the ramp")
-    rate_N_s: float | None = param(-5e3, 5e3, default=None, doc="slope of F_ref (absolute)")
+    rate_N_s: float | None = param(-FORCE_MAX_N, FORCE_MAX_N, default=None,
+                                    doc="slope of F_ref (absolute)")
     rate_rel_s: float | None = param(-1.0, 1.0, default=None, unit="1/s",
                                      doc="slope of F_ref over the nominal tension")
     end_s: float | None = param(0.0, None, default=None,
@@ -353,7 +374,7 @@ class LoadPulse(Parameters):
     hitch_N: float | None = param(-HITCH_LIMIT_N, HITCH_LIMIT_N, default=None,
                                   doc="hitch force (> 0 tow, < 0 push); optional: "
                                   "calibrated for the machine to the target delta")
-    delta_N: float | None = param(-20e3, 20e3, default=None,
+    delta_N: float | None = param(-FORCE_MAX_N, FORCE_MAX_N, default=None,
                                   doc="target change of the hold-mode idler load (absolute)")
     delta_rel: float | None = param(-1.0, 1.0, default=None, unit="1",
                                     doc="target change over the nominal tension")
@@ -415,8 +436,10 @@ class Limits(Parameters):
     """Admissible tension band [F_min, F_max] [N]; each optional: the machine's band
     (``trackmj.control.params.BAND_REL`` x its nominal tension)."""
 
-    force_min_N: float | None = param(0.0, 100e3, default=None, doc="lower tension limit")
-    force_max_N: float | None = param(0.0, 100e3, default=None, doc="upper tension limit")
+    force_min_N: float | None = param(0.0, FORCE_MAX_N, default=None,
+                                      doc="lower tension limit")
+    force_max_N: float | None = param(0.0, FORCE_MAX_N, default=None,
+                                      doc="upper tension limit")
 
     def cross_check(self, at: Location) -> None:
         if (self.force_min_N is not None and self.force_max_N is not None
@@ -509,6 +532,9 @@ class ScenarioFile(Parameters):
     variants: tuple[Variant, ...] = param(default=(), doc="optional parameter variants")
     hitch: Hitch | None = param(  # noqa: RUF009 (param() returns a dataclasses.Field)
         default=None, doc="optional hitch load from a file")
+    origin: Location = origin_field()  # noqa: RUF009 (returns a dataclasses.Field)
+    """Where the values come from (the file, the --set options): the resolution to
+    absolute values names them (:func:`trackmj.scenarios.resolve.resolve`)."""
 
     file_kind: ClassVar[str] = "scenario"
 
@@ -555,7 +581,7 @@ def _check_reference_range(ref: Reference, duration_s: float, at: Location) -> N
             k = int(np.argmax(bad))
             raise ParameterError(f"{at.table()}: F_ref reaches {f[k]:.6g} N at t = "
                                  f"{t[k]:.6g} s; it must stay in [0, {REFERENCE_MAX_N:g}] N "
-                                 "over the run")
+                                 "over the run (a sanity cap above any crawler's tension)")
 
 
 def _is_absolute(ref: Reference) -> bool:

@@ -90,7 +90,14 @@ from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.ports import COUPLING_STEP_S, Element, StepInputs
 from trackmj.scenarios.load import BUILTIN_FOLDER
 from trackmj.scenarios.resolved import HitchCalibration, Scenario
-from trackmj.scenarios.schema import HITCH_LIMIT_N, NOMINAL, LoadPulse, Supply, present
+from trackmj.scenarios.schema import (
+    FORCE_MAX_N,
+    HITCH_LIMIT_N,
+    NOMINAL,
+    LoadPulse,
+    Supply,
+    present,
+)
 from trackmj.sim.architectures import assemble
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 from trackmj.sim.setup import RunSetup
@@ -314,10 +321,21 @@ def starting_guess(target_rel: float, weight_N: float,
     return -target_rel * weight_N, "the target's share of the nominal x the side weight"
 
 
+def binding_limit(drawbar_N: float, tipping_N: float) -> tuple[float, str]:
+    """The limit [N] along the chain that binds in one direction, and its name: the drawbar
+    capacity ``drawbar_N``, the share of the tipping force ``tipping_N``, or (on no crawler
+    trackmj models) the scenario schema's sanity cap on hitch_N."""
+    return min((drawbar_N, "the drawbar capacity"),
+               (tipping_N, f"{TIPPING_SHARE * 100:g} % of the tipping force"),
+               (HITCH_LIMIT_N, f"the sanity cap on hitch_N, {HITCH_LIMIT_N / 1e3:g} kN"))
+
+
 def search(change: Callable[[float], float], target_N: float, start_N: float,
-           limits_N: tuple[float, float], *, what: str) -> PulseCalibration:
+           limits_N: tuple[float, float], *, what: str,
+           limit_names: tuple[str, str] = ("", "")) -> PulseCalibration:
     """Hitch force [N] whose ``change`` [N] equals ``target_N`` within REL_TOL, every trial
-    within ``limits_N`` = (push, tow), the largest push and tow along the chain [N] (> 0).
+    within ``limits_N`` = (push, tow), the largest push and tow along the chain [N] (> 0),
+    ``limit_names`` what each is (named in an out-of-reach reason).
 
     ``start_N`` first; if it misses, its mirror (−start_N) too, and the direction whose
     change goes further towards the target is kept (on a front-sprocket machine a tow may
@@ -376,7 +394,9 @@ def search(change: Callable[[float], float], target_N: float, start_N: float,
         if abs(f) >= limit(f):
             side = "the wrong way from" if towards(d) <= 0.0 else "short of"
             kind = "push" if f < 0.0 else "tow"
-            raise OutOfReach(what, f"at the limit, a {kind} of {f:+.0f} N along the chain, "
+            name = limit_names[0] if f < 0.0 else limit_names[1]
+            raise OutOfReach(what, f"at the limit{f' ({name})' if name else ''}, a {kind} of "
+                             f"{f:+.0f} N along the chain, "
                              f"the idler load changes by {d / 1e3:+.3f} kN, {side} "
                              f"{target_N / 1e3:+.3f} kN; {trials()}", tried)
         if len(tried) >= MAX_RUNS:
@@ -466,13 +486,14 @@ def calibrate(scenario: Scenario, rig: Rig, indices: tuple[int, ...],
                 f"{capacity / 1e3:.2f} kN horizontal, Wong, Theory of Ground Vehicles; "
                 f"{TIPPING_SHARE * 100:g} % of the static tipping force along the chain, "
                 f"ISO 10567: push {TIPPING_SHARE * tip_push / 1e3:.2f} kN, tow "
-                f"{TIPPING_SHARE * tip_tow / 1e3:.2f} kN; the file's limit "
-                f"{HITCH_LIMIT_N / 1e3:g} kN)")
-        drawbar = min(capacity / math.cos(math.radians(p.pull_angle_deg)), HITCH_LIMIT_N)
-        limits = (min(drawbar, TIPPING_SHARE * tip_push), min(drawbar, TIPPING_SHARE * tip_tow))
+                f"{TIPPING_SHARE * tip_tow / 1e3:.2f} kN)")
+        drawbar = capacity / math.cos(math.radians(p.pull_angle_deg))
+        push, push_name = binding_limit(drawbar, TIPPING_SHARE * tip_push)
+        tow, tow_name = binding_limit(drawbar, TIPPING_SHARE * tip_tow)
         start, rule = starting_guess(target / nominal, weight, reference)
         try:
-            out[i] = search(change, target, start, limits, what=what)
+            out[i] = search(change, target, start, (push, tow), what=what,
+                            limit_names=(push_name, tow_name))
         except OutOfReach as exc:
             out[i] = furthest_towards(exc, target, rule)
         except ParameterError as exc:
@@ -509,14 +530,15 @@ class CalibrationEntry(Parameters):
                                           "edges, speed, initial force, terrain, method)")
     delta_rel: tuple[float, ...] = param(-1.0, 1.0, unit="1", allow_empty=True,
                                          doc="target idler-load change over the nominal")
-    target_N: tuple[float, ...] = param(-20e3, 20e3, allow_empty=True,
+    target_N: tuple[float, ...] = param(-FORCE_MAX_N, FORCE_MAX_N, allow_empty=True,
                                         doc="target idler-load change")
     hitch_N: tuple[float, ...] = param(-HITCH_LIMIT_N, HITCH_LIMIT_N, allow_empty=True,
                                        doc="calibrated hitch force (> 0 tow, < 0 push)")
-    achieved_N: tuple[float, ...] = param(-20e3, 20e3, allow_empty=True,
+    achieved_N: tuple[float, ...] = param(-FORCE_MAX_N, FORCE_MAX_N, allow_empty=True,
                                           doc="hold-mode idler-load change measured with it")
-    side_weight_N: float = param(0.0, 1e6, open_low=True, doc="weight of the track side")
-    drawbar_capacity_N: float = param(0.0, 1e6, doc="mu x side weight")
+    side_weight_N: float = param(0.0, FORCE_MAX_N, open_low=True,
+                                 doc="weight of the track side")
+    drawbar_capacity_N: float = param(0.0, FORCE_MAX_N, doc="mu x side weight")
     mechanics_sha256: str = param(pattern=SHA256, doc="hash of the validated mechanics")
     hydraulics_sha256: str = param(pattern=SHA256, doc="hash of the validated hydraulics")
     host: str = param(max_len=300, doc="where it was measured (trackmj.host.machine())")
