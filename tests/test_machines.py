@@ -167,14 +167,42 @@ def test_a_machine_file_taking_a_shipped_name_for_other_files_is_refused(tmp_pat
 
 def test_a_layout_stroke_beyond_the_cylinder_is_refused_naming_both_files() -> None:
     """The mechanics' stroke at the layout must fit the hydraulic file's cylinder: refused
-    at load by model info, drive (load_plant) and a run (prepare), before any generation."""
-    message = (r"^compact3\.toml \[idler\]\.stroke_at_layout_m = 0\.5 m is beyond the "
+    at load by model info, drive (load_plant) and a run (prepare), before any generation,
+    naming the --set option that gave it."""
+    message = (r"^--set model\.idler\.stroke_at_layout_m = 0\.5 m is beyond the "
                r"cylinder's stroke, compact3_hydraulics\.toml \[cylinder\]\.stroke_max_m = "
                r"0\.08 m: allowed \[0, 0\.08\] m")
     with pytest.raises(ParameterError, match=message):
         load_plant(machine="compact3", overrides={"idler.stroke_at_layout_m": 0.5})
     with pytest.raises(ParameterError, match=message):
         prepare("W1", machine="compact3", overrides={"model.idler.stroke_at_layout_m": 0.5})
+
+
+@pytest.mark.parametrize("machine", sorted(shipped()))
+def test_each_shipped_carrier_travels_within_its_cylinder(machine: str, capsys) -> None:
+    """The shipped carriers travel exactly the cylinder's stroke about the layout
+    (slide_range_m = ±stroke_max_m / 2 about mid-stroke): model info accepts them."""
+    assert main(["model", "info", "--machine", machine]) == 0
+    assert "error" not in capsys.readouterr().err
+
+
+def test_a_carrier_travel_beyond_the_cylinder_is_refused_naming_both_files(tmp_path,
+                                                                          capsys) -> None:
+    """A slide range that carries the idler past the cylinder's end stop (compact3: 0.04 m
+    at the layout + 0.06 m = 0.10 m of a 0.08 m stroke) is refused by model info and a run,
+    in one line naming the option, both files' keys and the range that fits."""
+    message = (r"^trackmj: error: --set model\.idler\.slide_range_m = \[-0\.04, 0\.06\] m "
+               r"moves the carrier over the cylinder stroke 0 \.\. 0\.1 m \(about "
+               r"compact3\.toml \[idler\]\.stroke_at_layout_m = 0\.04 m\), beyond the "
+               r"cylinder's stroke, compact3_hydraulics\.toml \[cylinder\]\.stroke_max_m = "
+               r"0\.08 m: allowed slide_range_m within \[-0\.04, 0\.04\] m")
+    bad = ["--machine", "compact3", "--set", "model.idler.slide_range_m=[-0.04, 0.06]"]
+    for argv in (["model", "info", *bad],
+                 ["run", "W1", *bad, "--duration", "2", "--out", str(tmp_path / "r")]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and re.search(message, err), err
+    assert not (tmp_path / "r").exists()
 
 
 def test_a_missing_include_names_the_file_that_includes_it(tmp_path) -> None:

@@ -220,16 +220,37 @@ def idler_file(params: ModelParams, machine: Machine) -> Path | None:
     return machine.idler
 
 
+STROKE_TOLERANCE_M = 1e-9
+"""Rounding allowed where the carrier's travel meets the cylinder's end stops [m]
+(0.05 + 0.05 is 0.1 in floating point, but not every sum is)."""
+
+
 def check_cylinder_stroke(params: ModelParams, model_file: str, hydraulics: HydraulicParams,
                           hydraulics_file: str) -> None:
     """ParameterError naming both files' keys unless the mechanics' cylinder stroke at the
-    layout ([idler].stroke_at_layout_m [m]) lies within the hydraulic file's cylinder
-    stroke ([cylinder].stroke_max_m [m]): the two files describe one cylinder."""
+    layout ([idler].stroke_at_layout_m [m]) and the carrier's whole travel about it
+    (stroke_at_layout_m + [idler].slide_range_m [m]) lie within the hydraulic file's
+    cylinder stroke [0, [cylinder].stroke_max_m] [m]: the two files describe one cylinder,
+    whose end stops the carrier cannot pass. A key given with --set is named as the
+    option."""
+    def idler(key: str) -> str:             # the mechanics key, or the --set option
+        at = params.origin
+        return at.key("idler", key) if at.file is not None else f"{model_file} [idler].{key}"
+
     stroke, top = params.idler.stroke_at_layout_m, hydraulics.cylinder.stroke_max_m
+    cylinder = f"{hydraulics_file} [cylinder].stroke_max_m = {top:g} m"
     if stroke > top:
-        raise ParameterError(f"{model_file} [idler].stroke_at_layout_m = {stroke:g} m is beyond "
-                             f"the cylinder's stroke, {hydraulics_file} [cylinder].stroke_max_m "
-                             f"= {top:g} m: allowed [0, {top:g}] m (or a longer cylinder)")
+        raise ParameterError(f"{idler('stroke_at_layout_m')} = {stroke:g} m is beyond the "
+                             f"cylinder's stroke, {cylinder}: allowed [0, {top:g}] m (or a "
+                             "longer cylinder)")
+    lo, hi = params.idler.slide_range_m
+    if stroke + lo < -STROKE_TOLERANCE_M or stroke + hi > top + STROKE_TOLERANCE_M:
+        raise ParameterError(
+            f"{idler('slide_range_m')} = [{lo:g}, {hi:g}] m moves the carrier over the "
+            f"cylinder stroke {stroke + lo:g} .. {stroke + hi:g} m (about "
+            f"{idler('stroke_at_layout_m')} = {stroke:g} m), beyond the cylinder's stroke, "
+            f"{cylinder}: allowed slide_range_m within [{-stroke:g}, {top - stroke:g}] m (or "
+            "a longer cylinder)")
 
 
 def cylinder_force_shortfall(params: ModelParams, model_file: str,
