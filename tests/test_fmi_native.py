@@ -564,3 +564,65 @@ def test_two_instances_on_two_threads_agree_with_one(native) -> None:
     for thread in threads:
         thread.join()
     assert results[0] == alone and results[1] == alone
+
+
+@pytest.mark.parametrize("kind", ["track", "plant"])
+def test_an_fmu_name_not_ending_in_fmu_is_refused_before_any_work(tmp_path, capsys,
+                                                                   kind: str) -> None:
+    """-o x.zip would write an FMU an importer does not take for one: refused in one line,
+    nothing written."""
+    from trackmj.cli.main import main
+
+    out = tmp_path / "x.zip"
+    assert main(["fmu", "export", kind, "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"trackmj: error: -o {out}: an FMU's file name must end in .fmu (FMI "
+                   "2.0/3.0 standard), e.g. -o track.fmu")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_force_that_tears_the_settled_track_writes_no_fmu(tmp_path, capsys) -> None:
+    """--force 5e5 N (33 x LF1352's nominal) makes the settle unstable: an FMU starting
+    from that state would be meaningless, so none is written and one line says why and
+    what fits."""
+    from trackmj.cli.main import main
+
+    out = tmp_path / "x.fmu"
+    assert main(["fmu", "export", "track", "--force", "5e5", "--platform", "linux",
+                 "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("trackmj: error: --force 500000 N: the track of lf1352 settled "
+                              "under it left physics (MuJoCo warning: "), err
+    assert err[-1].endswith("so the FMU would start from no physical state and was not "
+                            "written; give a force nearer the machine's nominal tension "
+                            "15000 N"), err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_track_settled_on_its_end_stop_is_exported_with_the_runs_warning(tmp_path,
+                                                                          capsys) -> None:
+    """compact3 with its carrier's travel cut to 5 mm outward of the layout, settled under
+    60 kN (4.6 x its nominal), rests on its extended stop: the FMU is written (an importer
+    applying less force lifts the carrier off the stop) with the warning a run gives."""
+    from trackmj.cli.main import main
+    from trackmj.machines.assembly import resolve
+
+    shipped = resolve("compact3")
+    mechanics = tmp_path / "short.toml"
+    mechanics.write_text(shipped.mechanics.read_text().replace(
+        "slide_range_m = [-0.04, 0.04]", "slide_range_m = [-0.04, 0.005]"))
+    machine = tmp_path / "short_machine.toml"
+    machine.write_text(f'[machine]\nname = "compact3-short"\ndescription = "compact3, short '
+                       f'carrier travel"\nmechanics = "short.toml"\nhydraulics = '
+                       f'"{shipped.hydraulics}"\ncontrol = "{shipped.control}"\n')
+    out = tmp_path / "short.fmu"
+    assert main(["fmu", "export", "track", "--machine", str(machine), "--force", "6e4",
+                 "--platform", "linux", "-o", str(out)]) == 0
+    assert out.is_file()
+    err = [line for line in capsys.readouterr().err.splitlines() if "trackmj" in line]
+    assert len(err) == 1 and err[0].startswith(
+        "trackmj: warning: compact3-short on level ground settles with its idler carrier on "
+        "its extended end stop (stroke "), err
+    assert err[0].endswith("the stop at 45.0 mm): the stop, not the tensioner, holds the "
+                           "idler in the FMU's start state (settled under --force 60000 N)")

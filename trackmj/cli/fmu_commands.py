@@ -7,11 +7,19 @@ from __future__ import annotations
 import argparse
 import sys
 
+from trackmj.cli.summary import end_stop_line
 from trackmj.fmi.export import export
 
 
 def cmd_fmu_export(args: argparse.Namespace) -> int:
-    """``trackmj fmu export KIND -o FILE.fmu``: the FMU written, with its notes."""
+    """``trackmj fmu export KIND -o FILE.fmu``: the FMU written, with its notes; a name not
+    ending in .fmu is refused before any work (an importer finds an FMU by it). A track
+    settled with its idler carrier on an end stop is written with a warning on stderr, as
+    a run's is: the stop is part of the machine, and an importer that applies less force
+    lifts the carrier off it."""
+    if not str(args.out).lower().endswith(".fmu"):
+        raise ValueError(f"-o {args.out}: an FMU's file name must end in .fmu (FMI 2.0/3.0 "
+                         "standard), e.g. -o track.fmu")
     if args.kind == "track":
         # start-up: --help and argument errors must not import MuJoCo (the exporter settles
         # the track)
@@ -27,6 +35,12 @@ def cmd_fmu_export(args: argparse.Namespace) -> int:
         print(f"wrote {native.path}")
         for note in native.notes:
             print(f"  {note}")
+        settled = ("W1's initial tension" if args.force is None else "--force")
+        warning = end_stop_line({"settled_on_end_stop": native.end_stop}, native.machine,
+                                native.grade, when=f"in the FMU's start state (settled under "
+                                f"{settled} {native.force_N:g} N)")
+        if warning is not None:
+            print(warning, file=sys.stderr)
         return 0
     track_only = [f"--{name}" for name, default in (("fmi", 2), ("machine", None),
                                                     ("terrain", "flat"), ("seed", 0),

@@ -244,10 +244,12 @@ def _where_text(check: str, where: dict) -> str:
     return f"{where['seated_pins']:.0f} pins seated"
 
 
-def end_stop_line(metrics: Mapping[str, Any], machine: str, grade: float) -> str | None:
+def end_stop_line(metrics: Mapping[str, Any], machine: str, grade: float,
+                  when: str = "at the start of the run") -> str | None:
     """One line if the run's track settled with its idler carrier on an end stop
     (``metrics["settled_on_end_stop"]``, :func:`trackmj.sim.run.run`): the machine, the
-    grade, the stroke and the stop; None otherwise."""
+    grade, the stroke and the stop, and ``when`` the stop holds the idler; None
+    otherwise."""
     on = metrics.get("settled_on_end_stop")
     if on is None:
         return None
@@ -255,4 +257,4 @@ def end_stop_line(metrics: Mapping[str, Any], machine: str, grade: float) -> str
     return (f"trackmj: warning: {machine} on {where} settles with its idler carrier on its "
             f"{on['stop']} end stop (stroke {on['stroke_m'] * 1e3:.1f} mm, the stop at "
             f"{on['stop_stroke_m'] * 1e3:.1f} mm): the stop, not the tensioner, holds the "
-            "idler at the start of the run")
+            f"idler {when}")

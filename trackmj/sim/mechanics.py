@@ -7,7 +7,7 @@ from __future__ import annotations
 import copy
 import hashlib
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import mujoco
 import numpy as np
@@ -94,6 +94,18 @@ def settled_track(setup: MechanicsSetup, force_N: float) -> TrackPlant:
         plant.foundation.memory[:] = memory
     plant.time_s = 0.0
     return plant
+
+
+def settled_end_stop(track: TrackPlant) -> dict[str, Any] | None:
+    """The end stop the settled track's idler carrier rests on at t = 0 (``stop``:
+    "retracted" or "extended", the carrier's ``stroke_m`` and the stop's ``stop_stroke_m``
+    [m]), None when it rests between them (the tensioner holds the idler)."""
+    stop = track.end_stop()
+    if stop is None:
+        return None
+    retracted, extended = track.stroke_stops_m
+    return {"stop": stop, "stroke_m": track.stroke_m,
+            "stop_stroke_m": retracted if stop == "retracted" else extended}
 
 
 def build_track(setup: MechanicsSetup) -> BuiltMechanics:

@@ -17,7 +17,7 @@ import dataclasses
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -44,6 +44,7 @@ from trackmj.sim.architectures import Assembly, assemble
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.drive import DerailmentChecks
 from trackmj.sim.loop import Schedule, run_loop
+from trackmj.sim.mechanics import settled_end_stop
 from trackmj.sim.observers import (
     CHANNEL_SETS,
     ChannelRecorder,
@@ -62,7 +63,6 @@ from trackmj.validator import ParameterError
 if TYPE_CHECKING:
     from trackmj.results.measured import MeasuredLog
     from trackmj.results.playback import PlaybackRecorder
-    from trackmj.track.plant import TrackPlant
 
 FRAME_EVERY_STEPS = 20
 """Rerun scene frames every 20 ms of simulated time."""
@@ -204,7 +204,7 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
         tp_result = run(dataclasses.replace(setup, architecture=REFERENCE_ARCHITECTURE))
     with capture_mujoco_warnings() as warnings:
         asm = assemble(setup, tp_result)
-        on_stop = None if asm.track is None else _settled_end_stop(asm.track)
+        on_stop = None if asm.track is None else settled_end_stop(asm.track)
         controller, estimator, sensors = _blocks(setup, asm)
         sched = schedule(setup, controller.horizon_steps, controller.period_s)
         watch = _watch(setup, asm, sched, warnings, channels=channels, progress=progress,
@@ -227,18 +227,6 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
         watch.playback.log_timeseries(result)
         watch.playback.close()
     return result
-
-
-def _settled_end_stop(track: TrackPlant) -> dict[str, Any] | None:
-    """The end stop the settled track's idler carrier rests on at t = 0 (``stop``:
-    "retracted" or "extended", the carrier's ``stroke_m`` and the stop's ``stop_stroke_m``
-    [m]), None when it rests between them (the tensioner holds the idler)."""
-    stop = track.end_stop()
-    if stop is None:
-        return None
-    retracted, extended = track.stroke_stops_m
-    return {"stop": stop, "stroke_m": track.stroke_m,
-            "stop_stroke_m": retracted if stop == "retracted" else extended}
 
 
 def _blocks(setup: RunSetup, asm: Assembly) -> tuple[Controller, Estimator, Sensors]:

@@ -33,6 +33,7 @@ import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -40,8 +41,8 @@ import numpy as np
 from trackmj.fmi.native import toolchain
 from trackmj.fmi.native.description import model_description
 from trackmj.fmi.native.variables import Variable, c_header, table
-from trackmj.sim.mechanics import settled_track
-from trackmj.sim.observers import PhysicsLimits
+from trackmj.sim.mechanics import settled_end_stop, settled_track
+from trackmj.sim.observers import PhysicsLimits, capture_mujoco_warnings
 from trackmj.sim.setup import prepare
 from trackmj.track.foundation import L_B, L_K, L_MU, L_ONSET, L_SHEAR
 from trackmj.track.plant import TrackPlant
@@ -64,13 +65,20 @@ that a W5 contact scale is included)."""
 @dataclass(frozen=True)
 class NativeExport:
     """What an export made: the FMU ``path``, the FMI version, the platforms built and, for
-    each left out, why; ``notes`` the lines to tell the user."""
+    each left out, why; ``notes`` the lines to tell the user; the ``machine`` and ground
+    ``grade`` (tan θ) it stands on, the force ``force_N`` [N] it was settled under and, if
+    its idler carrier settled on an end stop, which
+    (:func:`~trackmj.sim.mechanics.settled_end_stop`, None between the stops)."""
 
     path: Path
     fmi_version: int
     platforms: tuple[str, ...]
     missing: Mapping[str, str]
     notes: tuple[str, ...]
+    machine: str = ""
+    grade: float = 0.0
+    force_N: float = 0.0
+    end_stop: Mapping[str, Any] | None = None
 
 
 def initial_outputs(plant: TrackPlant) -> np.ndarray:
@@ -127,7 +135,15 @@ def export_track(out: Path | str, *, fmi_version: int = 2, machine: str | None =
     scenario = "W1" if terrain in ("", "flat") else terrain
     setup = prepare(scenario, seed=seed, machine=machine, model=model)
     force = setup.force0_N if force_N is None else float(force_N)
-    plant = settled_track(setup, force)
+    with capture_mujoco_warnings() as warnings:
+        plant = settled_track(setup, force)
+    left = _left_physics(plant, warnings)
+    if left is not None:
+        given = "--force" if force_N is not None else "W1's initial tension"
+        raise ValueError(f"{given} {force:g} N: the track of {setup.machine.name} settled "
+                         f"under it left physics ({left}), so the FMU would start from no "
+                         "physical state and was not written; give a force nearer the "
+                         f"machine's nominal tension {setup.model.nominal_tension_N:g} N")
     variables = _with_ground_starts(table(setup.model, force), plant)
     out = Path(out)
     with tempfile.TemporaryDirectory(prefix="trackmj-fmu-") as tmp:
@@ -168,7 +184,23 @@ def export_track(out: Path | str, *, fmi_version: int = 2, machine: str | None =
     notes = tuple([f"FMI {fmi_version}.0 co-simulation, native: needs no Python on the host",
                    f"platforms: {', '.join(built)}",
                    *(f"not built for {p}: {why}" for p, why in missing.items())])
-    return NativeExport(out, fmi_version, tuple(built), dict(missing), notes)
+    return NativeExport(out, fmi_version, tuple(built), dict(missing), notes,
+                        machine=setup.machine.name, grade=setup.scenario.terrain.grade,
+                        force_N=force, end_stop=settled_end_stop(plant))
+
+
+def _left_physics(plant: TrackPlant, warnings: list[str]) -> str | None:
+    """Why the settled ``plant`` is no physical state, as a run's physics guard judges one
+    (a MuJoCo warning during the settle, a non-finite state, the loop torn beyond
+    :data:`CLOSURE_MAX_M`), or None."""
+    if warnings:
+        return f"MuJoCo warning: {warnings[0].strip().rstrip('.')}"
+    if not (np.isfinite(plant.data.qpos).all() and np.isfinite(plant.data.qvel).all()):
+        return "a non-finite state"
+    if not plant.closure_error_m <= CLOSURE_MAX_M:
+        return (f"track loop closure gap {plant.closure_error_m * 1e3:.1f} mm, beyond "
+                f"{CLOSURE_MAX_M * 1e3:g} mm")
+    return None
 
 
 def track_description(machine: str, terrain: str, seed: int, force_N: float,
