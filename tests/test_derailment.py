@@ -295,3 +295,43 @@ def test_the_closed_loop_observer_sees_a_track_go_slack(plant) -> None:
     assert metrics["derailment_checks"] == 10
     slack = metrics["derailment"]["slack_strand"]
     assert slack["failing_checks"] >= 5 and slack["worst"]["tension_N"] < 1000.0
+
+
+def test_model_info_and_drive_give_the_settled_idler_force_beside_the_preload(
+        tmp_path, capsys) -> None:
+    """The preload holds at the layout stroke; compact3's track settles 3.1 mm further out,
+    where its 1 MN/m spring has lost ~3 kN. model info and drive print that settled force
+    and stroke beside the preload, and they are what the plant does standing; the static
+    strand tension is the settled force's, and the settled strand carries it."""
+    from trackmj.machines.track_plant import load_plant
+    from trackmj.ports import StepInputs
+    from trackmj.track.plant import PassiveTensioner
+
+    assert main(["model", "info", "--machine", "compact3"]) == 0
+    printed = capsys.readouterr().out
+    (line,) = [ln for ln in printed.splitlines() if ln.startswith("tensioner ")]
+    preload, ref, settled, stroke = (float(v) for v in re.search(
+        r"preload ([\d.]+) kN at the layout stroke ([\d.]+) mm; settled ([\d.]+) kN at "
+        r"([\d.]+) mm", line).groups())
+    assert (preload, ref) == (13.0, 40.0)
+    plant = load_plant(machine="compact3")
+    passive = PassiveTensioner.from_params(plant.params)
+    for _ in range(200):                       # standing 0.2 s at home
+        plant.apply(StepInputs(0.0, 0.0, 0.0, math.nan))
+        plant.step(passive)
+    assert plant.idler_force_N / 1e3 == pytest.approx(settled, rel=0.01)
+    assert plant.stroke_m * 1e3 == pytest.approx(stroke, abs=0.1)
+    assert settled < 0.85 * preload            # the gap is real, not rounding
+    (strand,) = [ln for ln in printed.splitlines() if ln.startswith("static strand tension")]
+    static = float(re.search(r"([\d.]+) kN at the settled idler force ([\d.]+) kN",
+                             strand).group(1))
+    upper = plant.pin_tensions_N()[plant.upper_strand_pins()].mean() / 1e3
+    assert static == pytest.approx(upper, rel=0.1)
+
+    code, out, m, c, _ = _drive(tmp_path, capsys, "--machine", "compact3", "--speed", "0",
+                                "--duration", "0.2")
+    assert code == 0
+    assert line.split(maxsplit=1)[1].startswith(
+        out.split("tensioner", 1)[1].splitlines()[0].strip())
+    assert m["home_idler_force_N"] == pytest.approx(c["idler_force_N"][0], abs=20.0)
+    assert m["home_settled"] is True

@@ -88,8 +88,15 @@ def cmd_model_info(args: argparse.Namespace) -> int:
 def _geometry_rows(plant: TrackPlant) -> list[tuple[str, str]]:
     """The derived geometry of the plant's layout and what its home keyframe measures."""
     # start-up: --help and argument errors must not import SciPy
-    from trackmj.track.mjcf.geometry import catenary_sag_m, derive_geometry, measured_sag_m
+    from trackmj.results.store import preload_text
+    from trackmj.track.mjcf.geometry import (
+        catenary_sag_m,
+        derive_geometry,
+        measured_sag_m,
+        static_strand_tension_N,
+    )
     from trackmj.track.mjcf.layout import compute_layout
+    from trackmj.track.plant import PassiveTensioner
 
     p = plant.params
     layout = compute_layout(p)
@@ -129,14 +136,20 @@ def _geometry_rows(plant: TrackPlant) -> list[tuple[str, str]]:
                       f"the track's own weight only, w·L²·cos θ/(8·T) with w {per_m / 1e3:.2f} "
                       f"kN/m, T {upper_N / 1e3:.2f} kN (mean upper-strand pin tension at "
                       "home); a span resting on wheels between its ends sags less")]
+    settled_N = PassiveTensioner.from_params(p).standing_force_N(plant.stroke_m)
+    strand_N = static_strand_tension_N(p, g.idler_factor, settled_N)
     rows += [
         ("weight this side", f"{weight / 1e3:.2f} kN (Σ ground normal force at home "
                              f"{ground / 1e3:.2f} kN)"),
-        ("static strand tension", f"{g.strand_tension_N / 1e3:.2f} kN at the preload "
-                                  f"{p.tensioner.preload_N / 1e3:.1f} kN (idler geometry "
-                                  f"factor {g.idler_factor:.4f}; frictionless idler)"),
+        ("tensioner", preload_text(p.tensioner.preload_N, p.idler.stroke_at_layout_m,
+                                   settled_N, plant.stroke_m)
+         + f" (spring {p.tensioner.stiffness_N_m / 1e6:g} MN/m)"),
+        ("static strand tension", f"{strand_N / 1e3:.2f} kN at the settled idler force "
+                                  f"{settled_N / 1e3:.2f} kN (idler geometry factor "
+                                  f"{g.idler_factor:.4f}; frictionless idler)"),
     ]
     return rows
+
 
 
 def _upper_strand_supports(plant: TrackPlant) -> list[tuple[str, float, float]]:
@@ -225,6 +238,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
     than :data:`~trackmj.sim.drive.INTEGRATOR_CREATION_MAX_REL` of the drive work (2 for
     bad input and 3 for a run that leaves physics, from :func:`trackmj.cli.main.main`)."""
     # start-up: --help and argument errors must not import MuJoCo
+    from trackmj.results.store import passive_text
     from trackmj.sim.drive import INTEGRATOR_CREATION_MAX_REL, drive
 
     overrides = model_overrides(args.set)
@@ -238,6 +252,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
           f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
     if m["tensioner"]["element"] == "fmu":
         print(tensioner_line(m["tensioner"]))
+    if "preload_N" in m:
+        print(f"tensioner          {passive_text(m)}")
     print(f"idler force        mean {s['idler_force_mean_N'] / 1e3:7.2f} kN   "
           f"min {s['idler_force_min_N'] / 1e3:7.2f}  max {s['idler_force_max_N'] / 1e3:7.2f}")
     print(f"strand tension     upper {s['upper_strand_tension_mean_N'] / 1e3:5.2f} kN, "

@@ -18,7 +18,7 @@ from matplotlib.axes import Axes
 from matplotlib.ticker import MaxNLocator
 
 from trackmj.results.figure_style import legend_above, save_png
-from trackmj.results.store import running_text
+from trackmj.results.store import passive_text, running_text
 
 FAIL_COLOURS = {"slack_strand": "#E69F00", "links_off_envelope": "#CC79A7",
                 "sprocket_disengaged": "#0072B2", "derailed": "#D55E00"}
@@ -141,13 +141,14 @@ def _indicator(ax: Axes, t: np.ndarray, held: np.ndarray, rows: np.ndarray, labe
 
 
 def _title(metrics: Mapping[str, Any]) -> str:
-    """Machine, speed (and grade), tensioner and the derailment count, with how the checks
-    are made."""
-    tensioner = (f"preload {metrics['preload_N'] / 1e3:g} kN" if "preload_N" in metrics
+    """Machine, speed (and grade), duration and tensioner (a passive one's preload beside
+    its settled force, :func:`~trackmj.results.store.passive_text`); below, the derailment
+    count with how the checks are made."""
+    tensioner = (passive_text(metrics) if "preload_N" in metrics
                  else f"tensioner {metrics['tensioner'].get('file', '')}")
     failed = metrics["derailment_checks_failed"]
     slope = running_text({"grade": metrics.get("grade")})
-    return (f"drive: {metrics['machine']}, {metrics['speed_m_s']:g} m/s{slope}, {tensioner}, "
-            f"{metrics['duration_s']:g} s; derailment checks failed {failed} of "
+    return (f"drive: {metrics['machine']}, {metrics['speed_m_s']:g} m/s{slope}, "
+            f"{metrics['duration_s']:g} s; {tensioner}\nderailment checks failed {failed} of "
             f"{metrics['derailment_checks']} (every "
             f"{metrics['derailment_check_interval_s']:g} s, values held between checks)")

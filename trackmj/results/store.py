@@ -157,6 +157,28 @@ def running_text(running: Mapping[str, Any] | None) -> str:
     return "".join(f", {p}" for p in parts)
 
 
+def preload_text(preload_N: float, stroke_ref_m: float, settled_N: float,
+                 stroke_m: float, settled: str = "settled") -> str:
+    """"preload 40.0 kN at the layout stroke 80.0 mm; settled 13.9 kN at 88.7 mm": the
+    passive tensioner's preload [N] where it holds (``stroke_ref_m`` [m]) beside the idler
+    force [N] at the home stroke [m], which the spring moves off the preload."""
+    return (f"preload {preload_N / 1e3:.1f} kN at the layout stroke {stroke_ref_m * 1e3:.1f} "
+            f"mm; {settled} {settled_N / 1e3:.2f} kN at {stroke_m * 1e3:.1f} mm")
+
+
+
+def passive_text(metrics: Mapping[str, Any]) -> str:
+    """A drive's passive tensioner in words (its metrics.json, which holds ``preload_N``):
+    :func:`preload_text` with the home keyframe's force called "settled" when the keyframe
+    was settled under this law, else "at home"; the preload alone for a drive made before
+    metrics.json held the home stroke."""
+    if "home_idler_force_N" not in metrics:
+        return f"preload {metrics['preload_N'] / 1e3:g} kN"
+    return preload_text(metrics["preload_N"], metrics["preload_stroke_m"],
+                        metrics["home_idler_force_N"], metrics["home_stroke_m"],
+                        "settled" if metrics["home_settled"] else "at home")
+
+
 def running_of(result: Result) -> dict[str, Any] | None:
     """The ``running`` record of a run's metadata (None for runs made before it)."""
     try:

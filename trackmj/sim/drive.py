@@ -90,10 +90,10 @@ class DriveResult:
 
 
 def _file_tensioner(path: str | Path, stroke_m: float
-                    ) -> tuple[TensionerElement, dict[str, Any], float | None]:
+                    ) -> tuple[TensionerElement, dict[str, Any], PassiveTensioner | None]:
     """The tensioner of a tensioner file on the track at ``stroke_m`` [m], what metrics.json
-    says about it (an FMU: strongest coupling it offers) and its preload [N] if it is the
-    passive spring-damper (None for an FMU)."""
+    says about it (an FMU: strongest coupling it offers) and the passive spring-damper if it
+    is one (None for an FMU)."""
     tensioner = load_tensioner(path)
     if tensioner.fmu is not None:
         element = FmuElement(tensioner, stroke_m, "strong")
@@ -101,8 +101,8 @@ def _file_tensioner(path: str | Path, stroke_m: float
     t = tensioner.passive
     if t is None:
         raise ValueError(f"{path}: a tensioner file holds a [passive] or an [fmu] table")
-    return (PassiveTensioner(t.preload_N, t.stiffness_N_m, t.damping_N_s_m, t.stroke_ref_m),
-            {"element": "passive", "file": str(path)}, t.preload_N)
+    passive = PassiveTensioner(t.preload_N, t.stiffness_N_m, t.damping_N_s_m, t.stroke_ref_m)
+    return passive, {"element": "passive", "file": str(path)}, passive
 
 
 def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = None,
@@ -135,7 +135,8 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
                      "[track].ground_friction")
     if grade != 0.0:
         plant.model.opt.gravity[:] = gravity_on_grade(plant.model.opt.gravity, grade)
-    element, described, passive_preload_N = _drive_tensioner(plant, tensioner, preload_N)
+    element, described, passive = _drive_tensioner(plant, tensioner, preload_N)
+    home = passive_metrics(plant, passive)
     ramp_s = min(1.0, duration_s / 4.0)
     steps = round(duration_s / COUPLING_STEP_S)
     ledger = TrackEnergyLedger(plant)
@@ -155,7 +156,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
         "mjcf_file": None if mjcf is None else str(mjcf),
         "overrides": dict(overrides or {}),
         "tensioner": described,
-        **({"preload_N": passive_preload_N} if passive_preload_N is not None else {}),
+        **home,
         "real_time_factor": duration_s / wall, "plant_real_time_factor": duration_s / plant_wall,
         "wall_time_s": wall, "host": host_machine(),
         "track_energy": energy.to_dict(),
@@ -204,10 +205,10 @@ def _check_drive(speed_m_s: float, duration_s: float, tensioner: str | Path | No
 
 
 def _drive_tensioner(plant: TrackPlant, tensioner: str | Path | None, preload_N: float | None
-                     ) -> tuple[TensionerElement, dict[str, Any], float | None]:
+                     ) -> tuple[TensionerElement, dict[str, Any], PassiveTensioner | None]:
     """The tensioner file's element (:func:`_file_tensioner`) or the model's passive
-    tensioner (at ``preload_N`` [N] if given), what metrics.json says about it and its
-    preload [N] (None for an FMU)."""
+    tensioner (at ``preload_N`` [N] if given), what metrics.json says about it and the
+    passive spring-damper if it is one (None for an FMU)."""
     if tensioner is not None:
         return _file_tensioner(tensioner, plant.stroke_m)
     passive = PassiveTensioner.from_params(plant.params)
@@ -216,7 +217,23 @@ def _drive_tensioner(plant: TrackPlant, tensioner: str | Path | None, preload_N:
         if not (math.isfinite(preload_N) and preload_N >= 0.0):
             raise ValueError(f"preload {preload_N!r} N: must be finite and >= 0")
         passive.preload_N = preload_N
-    return passive, described, passive.preload_N
+    return passive, described, passive
+
+
+def passive_metrics(plant: TrackPlant, passive: PassiveTensioner | None) -> dict[str, Any]:
+    """What metrics.json says of a passive tensioner (nothing for an FMU): its
+    ``preload_N`` [N] and the stroke it holds at, ``preload_stroke_m`` [m]; the home
+    keyframe's stroke ``home_stroke_m`` [m] and the force the spring-damper gives there
+    standing, ``home_idler_force_N`` [N] (the spring moves it off the preload); and
+    ``home_settled``: whether the keyframe was settled under this same law (the model's own
+    tensioner at its preload), so the drive starts from rest at that force."""
+    if passive is None:
+        return {}
+    own = PassiveTensioner.from_params(plant.params)
+    return {"preload_N": passive.preload_N, "preload_stroke_m": passive.stroke_ref_m,
+            "home_stroke_m": plant.stroke_m,
+            "home_idler_force_N": passive.standing_force_N(plant.stroke_m),
+            "home_settled": passive == own}
 
 
 def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnergyLedger,

@@ -131,6 +131,12 @@ class PassiveTensioner:
     def complete_step(self, t_s: float, stroke_m: float, velocity_m_s: float) -> None:
         """Nothing to finish: the element has no state."""
 
+    def standing_force_N(self, stroke_m: float) -> float:
+        """Force [N] on the idler standing still at ``stroke_m`` [m]: the preload less the
+        spring's loss from ``stroke_ref_m`` (at the home keyframe's stroke, the settled
+        idler force; the preload holds only at ``stroke_ref_m``)."""
+        return self.preload_N - self.stiffness_N_m * (stroke_m - self.stroke_ref_m)
+
     @classmethod
     def from_params(cls, params: ModelParams) -> PassiveTensioner:
         t = params.tensioner

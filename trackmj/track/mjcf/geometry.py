@@ -122,10 +122,18 @@ def derive_geometry(p: ModelParams, layout: Layout) -> Geometry:
     d_out = np.array(spans[i].direction)
     u = np.array(slide_axis(p))
     factor = float((d_in - d_out) @ u)
-    carrier_weight = (p.idler.mass_kg + p.idler.carrier_mass_kg) * p.simulation.gravity_m_s2
-    tension = (p.tensioner.preload_N - carrier_weight * u[1]) / factor
+    tension = static_strand_tension_N(p, factor, p.tensioner.preload_N)
     return Geometry(wraps, tuple(spans), path, p.track.link_count * p.track.pitch_m,
                     closure, tension, factor)
+
+
+def static_strand_tension_N(p: ModelParams, idler_factor: float, idler_force_N: float
+                            ) -> float:
+    """The static tension [N] in both strands at a frictionless idler that the tensioner's
+    ``idler_force_N`` [N] holds: (F − the carrier's weight along the slide) / ``idler_factor``
+    (:attr:`Geometry.idler_factor`)."""
+    carrier_weight = (p.idler.mass_kg + p.idler.carrier_mass_kg) * p.simulation.gravity_m_s2
+    return (idler_force_N - carrier_weight * slide_axis(p)[1]) / idler_factor
 
 
 def catenary_sag_m(p: ModelParams, span: Span, tension_N: float,
