@@ -249,6 +249,9 @@ def test_infeasible_link_count_names_the_counts_that_close(tmp_path) -> None:
                           r"\[road_wheels\]\.x_m\[5\]"),
     ({"sprocket.z_m": 0.15}, r"sprocket\]?\.z_m = 0\.15 puts the sprocket's lowest pin "
                              r"below the ground line"),
+    ({"idler.z_m": 0.05}, r"^--set model\.idler\.z_m = 0\.05 puts the idler \(radius 0\.2 m\) "
+                          r"into the ground line .*: raise it by at least 180 mm "
+                          r"\(z_m >= 0\.23 m\)$"),
     ({"road_wheels.count": 1, "road_wheels.x_m": [0.0]}, r"count = 1 .*\[2, 10\]"),
     ({"sprocket.tooth_radius_m": 0.03}, r"tooth_radius_m = 0\.03 overlaps a pin running onto "
                                         r"or off the sprocket: .*allowed tooth_radius_m <= "
@@ -257,6 +260,14 @@ def test_infeasible_link_count_names_the_counts_that_close(tmp_path) -> None:
 def test_implausible_layouts_are_refused_naming_the_key(overrides, message) -> None:
     with pytest.raises(ParameterError, match=message):
         load_model_params(overrides=overrides)
+
+
+def test_a_layout_refusal_on_a_file_key_names_the_set_option_that_caused_it() -> None:
+    """Only --set moved the sprocket, yet the check that fails names the road wheel the
+    file holds: the message says which --set changed the layout."""
+    with pytest.raises(ParameterError, match=r"^lf1352\.toml \[road_wheels\]\.x_m = .* "
+                       r"touches the sprocket teeth: .* \(with --set model\.sprocket\.x_m\)$"):
+        load_model_params(overrides={"sprocket.x_m": -0.8})
 
 
 def test_a_tooth_that_fits_the_seated_pins_but_not_a_pin_running_on_is_refused(

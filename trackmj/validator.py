@@ -254,9 +254,16 @@ class Location:
         return f"{self.label} {table}.{name}" if table else f"{self.label}.{name}"
 
     def error(self, key: str | tuple[str | int, ...], value: Any, text: str) -> ParameterError:
-        """``ParameterError('<where key> = <value> <text>')`` for a cross-field check."""
+        """``ParameterError('<where key> = <value> <text>')`` for a cross-field check; when
+        ``--set`` changed other keys of the file than the one named, the message ends
+        naming them (a cross-field check may fail on a key the file holds because of a
+        value given on the command line)."""
         parts = (key,) if isinstance(key, str) else key
-        return ParameterError(f"{self.key(*parts)} = {_show(value)} {text}")
+        named = self.key(*parts)
+        others = [option for option in dict.fromkeys(self.overridden.values())
+                  if named != option and not named.startswith((option + ".", option + "["))]
+        changed = f" (with {', '.join(others)})" if others else ""
+        return ParameterError(f"{named} = {_show(value)} {text}{changed}")
 
 
 def origin_field() -> Any:

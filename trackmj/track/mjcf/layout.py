@@ -249,6 +249,12 @@ def idler_window(p: ModelParams, at: Location) -> tuple[float, float]:
         blocked_by[hit & clear] = key
         clear &= ~hit
     i0 = len(xs) // 2
+    if cz[i0] < floor:       # the centre at x_m is (x_m, z_m): its height is what fixes it
+        raise at.error(("idler", "z_m"), p.idler.z_m, f"puts the idler (radius "
+                       f"{p.idler.radius_m:g} m) into the ground line (its lowest pin below "
+                       f"the road wheels'): raise it by at least "
+                       f"{math.ceil((floor - cz[i0]) * 1e3)} mm (z_m >= "
+                       f"{math.ceil(floor * 1e3) / 1e3:g} m)")
     if not clear[i0]:
         raise at.error(("idler", "x_m"), x0, f"puts the idler (radius {p.idler.radius_m:g} m) "
                        f"into {blocked_by[i0]}: move it clear by at least "
