@@ -335,3 +335,30 @@ def test_model_info_and_drive_give_the_settled_idler_force_beside_the_preload(
         out.split("tensioner", 1)[1].splitlines()[0].strip())
     assert m["home_idler_force_N"] == pytest.approx(c["idler_force_N"][0], abs=20.0)
     assert m["home_settled"] is True
+
+
+def test_model_info_warns_of_return_rollers_the_settled_strand_hangs_clear_of(capsys) -> None:
+    """LF1352's rollers lowered to 0.325 m (above the road wheels, which the loader checks):
+    the settled upper strand sags 52 mm and still hangs clear of both. model info says so
+    in one stderr line naming each roller, its x_m entry and the z_m that placed it (here
+    the --set option); the shipped layout, both rollers carrying, says nothing."""
+    assert main(["model", "info", "--set", "model.return_rollers.z_m=0.325"]) == 0
+    captured = capsys.readouterr()
+    assert "return_roller" not in captured.out.split("wraps", 1)[1].splitlines()[0]
+    assert captured.err.count("\n") == 1
+    assert captured.err.startswith(
+        "trackmj: return_roller_1 (lf1352.toml [return_rollers].x_m[0] = -0.4 m), "
+        "return_roller_2 (lf1352.toml [return_rollers].x_m[1] = 0.45 m) carry no track at "
+        "home: the settled upper strand hangs clear above them at --set "
+        "model.return_rollers.z_m = 0.325 m")
+    assert main(["model", "info"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_keys_say_the_tooth_count_is_the_pins_seated_per_turn(capsys) -> None:
+    """A 21-tooth excavator sprocket engages every other pin: entered as 21 it builds a
+    637 mm pitch radius at 190 mm pitch; the key's doc says to enter the pins it seats."""
+    assert main(["keys", "model"]) == 0
+    (line,) = [ln for ln in capsys.readouterr().out.splitlines()
+               if ln.startswith("model.sprocket.tooth_count:")]
+    assert "pins seated per turn" in line and "every other pin" in line and "(11 for 21)" in line

@@ -11,6 +11,7 @@ import argparse
 import hashlib
 import json
 import math
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -82,7 +83,34 @@ def cmd_model_info(args: argparse.Namespace) -> int:
     width = max(len(label) for label, _ in rows) + 2
     for label, text in rows:
         print(f"{label:<{width}}{text}")
+    _say_idle_rollers(plant)
     return 0
+
+
+def idle_rollers_line(plant: TrackPlant) -> str | None:
+    """One line naming the declared return rollers that carry no track at home (the
+    settled upper strand hangs clear of them: too low, or under a sprocket or idler so
+    large that the strand passes high above) and the key that places them; None if every
+    roller carries the strand."""
+    idle = plant.idle_return_rollers()
+    if not idle:
+        return None
+    rr, at = plant.params.return_rollers, plant.params.origin
+    names = ", ".join(f"return_roller_{k + 1} ({at.key('return_rollers', 'x_m')}[{k}] = "
+                      f"{rr.x_m[k]:g} m)" for k in idle)
+    verb = "carries" if len(idle) == 1 else "carry"
+    return (f"{names} {verb} no track at home: the settled upper strand hangs clear above "
+            f"{'it' if len(idle) == 1 else 'them'} at {at.key('return_rollers', 'z_m')} = "
+            f"{rr.z_m:g} m; the model runs as if {'it' if len(idle) == 1 else 'they'} were "
+            "not there (raise z_m toward the line from the sprocket's top to the idler's, or "
+            "remove the entry)")
+
+
+def _say_idle_rollers(plant: TrackPlant) -> None:
+    """:func:`idle_rollers_line` on stderr, if any."""
+    line = idle_rollers_line(plant)
+    if line is not None:
+        print(f"trackmj: {line}", file=sys.stderr)
 
 
 def _geometry_rows(plant: TrackPlant) -> list[tuple[str, str]]:

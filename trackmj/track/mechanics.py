@@ -103,7 +103,12 @@ class ChassisParams(Parameters):
 
 @dataclass(frozen=True)
 class SprocketParams(Parameters):
-    tooth_count: int = param(6, 40)
+    tooth_count: int = param(6, 40, doc="pins seated per turn: N pitch chords round "
+                             "the pitch circle, pitch radius p/(2·sin(π/N)); a "
+                             "sprocket whose teeth engage every other pin (an odd "
+                             "21-23 tooth excavator sprocket) seats about half its "
+                             "teeth: enter that (11 for 21) and check the pitch "
+                             "radius model info prints")
     x_m: float = param(-10.0, 10.0)
     z_m: float = param(0.0, 5.0)
     tooth_radius_m: float = param(0.002, 0.1)

@@ -553,6 +553,18 @@ class TrackPlant:
             totals[group] += float(wrench[0])
         return totals
 
+    def idle_return_rollers(self) -> list[int]:
+        """Indices k (0-based, as ``[return_rollers].x_m``) of the return rollers no link
+        touches in the current state (at home: rollers the settled upper strand hangs clear
+        of, which carry nothing)."""
+        m, d = self.model, self.data
+        rollers = {m.body(f"return_roller_{k + 1}").id: k
+                   for k in range(len(self.params.return_rollers.x_m))}
+        touched = {rollers.get(int(m.geom_bodyid[c.geom1]),
+                               rollers.get(int(m.geom_bodyid[c.geom2])))
+                   for c in (d.contact[i] for i in range(d.ncon))}
+        return [k for k in rollers.values() if k not in touched]
+
     def seated_sprocket_pins(self) -> int:
         """Pins within ``SEAT_TOLERANCE_M`` of the sprocket pitch circle; a pin riding on a
         tooth tip sits about 40 mm further out."""
