@@ -362,3 +362,20 @@ def test_keys_say_the_tooth_count_is_the_pins_seated_per_turn(capsys) -> None:
     (line,) = [ln for ln in capsys.readouterr().out.splitlines()
                if ln.startswith("model.sprocket.tooth_count:")]
     assert "pins seated per turn" in line and "every other pin" in line and "(11 for 21)" in line
+
+
+def test_a_nominal_tension_typed_in_kN_is_refused_naming_the_key_and_a_plausible_value(
+        capsys) -> None:
+    """nominal_tension_N = 15 (meant as 15 kN) on LF1352: the idler, identified at 12-15 N,
+    would hold its strands at 6 N, slack on their own weight. The run refuses before the
+    identification, in one line naming the --set option, the strand tension, and the values
+    that would hold the strand (the least, and 15000 as the kN reading). A machine without
+    nominal_tension_N (identified at its preload) gets the same line naming preload_N."""
+    assert main(["run", "W1", "--set", "model.tensioner.nominal_tension_N=15"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert re.search(r"--set model\.tensioner\.nominal_tension_N = 15 N: the idler, "
+                     r"identified at 0\.8-1\.0 x it, holds the strands at 6\.0\d* N, below the "
+                     r"1000 N under which the upper strand hangs slack on its own weight "
+                     r".*; use nominal_tension_N >= \d+ N \(15000 if 15 was meant in kN\)$",
+                     err.strip()), err

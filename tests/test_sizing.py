@@ -161,7 +161,8 @@ def test_the_idler_identified_for_a_run_is_the_run_model(monkeypatch) -> None:
     monkeypatch.setattr(setup, "identify_idler", refuse)
     run = prepare("W1", machine="compact3", overrides={"model.tensioner.preload_N": 12345.0})
     with pytest.raises(IdentificationError, match=r"^compact3_machine\.toml: the idler "
-                       r"identified on compact3\.toml as the run changes it: the idler's "):
+                       r"identified on compact3\.toml with this run's changes to it "
+                       r"\(--set model\.\*, --model\): the idler's "):
         assert run.idler
 
 

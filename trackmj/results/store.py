@@ -159,10 +159,10 @@ def running_text(running: Mapping[str, Any] | None) -> str:
 
 def preload_text(preload_N: float, stroke_ref_m: float, settled_N: float,
                  stroke_m: float, settled: str = "settled") -> str:
-    """"preload 40.0 kN at the layout stroke 80.0 mm; settled 13.9 kN at 88.7 mm": the
+    """"preload 40 kN at the layout stroke 80.0 mm; settled 13.81 kN at 88.7 mm": the
     passive tensioner's preload [N] where it holds (``stroke_ref_m`` [m]) beside the idler
     force [N] at the home stroke [m], which the spring moves off the preload."""
-    return (f"preload {preload_N / 1e3:.1f} kN at the layout stroke {stroke_ref_m * 1e3:.1f} "
+    return (f"preload {preload_N / 1e3:.3g} kN at the layout stroke {stroke_ref_m * 1e3:.1f} "
             f"mm; {settled} {settled_N / 1e3:.2f} kN at {stroke_m * 1e3:.1f} mm")
 
 

@@ -81,13 +81,17 @@ def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
                                                             for m in data["modes"]))
     except (FileNotFoundError, ValueError, KeyError, TypeError):
         pass
+    slack = slack_nominal_text(params)      # before the identification's seconds of work
+    if slack is not None:
+        raise IdentificationError(f"{machine.file.name}: {slack}")
     try:
         idler = identify_idler(lambda: TrackPlant(
             mujoco.MjModel.from_xml_string(model_mjcf(params, machine)), params),
             **identification_for(params.nominal_tension_N),
             min_mass_kg=params.idler.mass_kg + params.idler.carrier_mass_kg)
     except IdentificationError as error:
-        changed = "" if params == mechanics(machine) else " as the run changes it"
+        changed = ("" if params == mechanics(machine)
+                   else " with this run's changes to it (--set model.*, --model)")
         raise IdentificationError(f"{machine.file.name}: the idler identified on "
                                   f"{machine.mechanics.name}{changed}: {error}") from None
     record = {"idler": {name: float(getattr(idler, name)) for name in SCALARS},
@@ -97,6 +101,37 @@ def _idler(params: ModelParams, machine: Machine) -> EquivalentIdler:
     except OSError:
         pass
     return idler
+
+
+def slack_nominal_text(params: ModelParams) -> str | None:
+    """Why an idler identification failed, when the cause is the nominal tension: the
+    identification holds the idler at 0.8-1.0 x ``params.nominal_tension_N`` F [N]; at a
+    frictionless idler both strands then carry T = F / f (f the idler geometry factor,
+    :func:`~trackmj.track.mjcf.geometry.static_strand_tension_N`, the carrier's weight on an
+    inclined slide included). Below :attr:`TrackPlant.SLACK_TENSION_N` the upper strand
+    hangs on its own weight (the drive's slack-strand check), so there is no tensioned
+    idler to identify. One line naming the key (``preload_N`` or ``nominal_tension_N``),
+    T, and the least value that keeps the strand above slack, with 1000 x a value below
+    1 kN when that would (a force typed in kN); None when T is above slack."""
+    from trackmj.track.mjcf.geometry import derive_geometry, static_strand_tension_N
+    from trackmj.track.mjcf.layout import compute_layout
+
+    t, at = params.tensioner, params.origin
+    key = "preload_N" if t.nominal_tension_N is None else "nominal_tension_N"
+    value = params.nominal_tension_N
+    factor = derive_geometry(params, compute_layout(params)).idler_factor
+    low = static_strand_tension_N(params, factor, 0.8 * value)
+    slack = TrackPlant.SLACK_TENSION_N
+    if low >= slack:
+        return None
+    least_N = (slack - static_strand_tension_N(params, factor, 0.0)) * factor / 0.8
+    hint = f"{key} >= {least_N:.4g} N"
+    if value < 1e3 and static_strand_tension_N(params, factor, 0.8e3 * value) >= slack:
+        hint += f" ({value * 1e3:.6g} if {value:g} was meant in kN)"
+    return (f"{at.key('tensioner', key)} = {value:g} N: the idler, identified at 0.8-1.0 x "
+            f"it, holds the strands at {low:.4g} N, below the {slack:g} N under which the "
+            f"upper strand hangs slack on its own weight (idler geometry factor "
+            f"{factor:.4g}): no tensioned idler to identify; use {hint}")
 
 
 @functools.cache
