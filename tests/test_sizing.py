@@ -293,3 +293,36 @@ def test_shipped_machines_hold_their_band_top_and_run_their_supply_drops(name: s
                                   hyd.supply.setpoint_Pa, hyd.tank_pressure_Pa) >= top
     for scenario in ("W1", "W4", "NL1"):
         prepare(scenario, machine=name)
+
+
+@pytest.mark.parametrize("name", machines.names())
+def test_shipped_metering_follows_the_rule_and_draws_no_warning(name: str, capsys) -> None:
+    """The rule's restrictor on each machine's own files is the shipped one to 2 %, and a
+    run of it says nothing about the metering."""
+    machine = machines.resolve(name)
+    params = machines.mechanics(machine)
+    hyd = load_hydraulic_params(machine.hydraulics)
+    stiffness = load_idler(machine.idler).stiffness_N_m
+    rule = machines.metering_rule_m2(params, hyd, stiffness, HOLD_S)
+    assert hyd.metering.head_branch_area_m2 == pytest.approx(rule, rel=0.02)
+    prepare("W1", machine=name)
+    assert "metering" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("factor", "effect"), [(1.6, "valve chatter"), (0.6, "slower")])
+def test_metering_far_from_the_rule_is_warned_in_one_line(factor: float, effect: str,
+                                                          capsys) -> None:
+    """A head restrictor 1.6 x the rule's (a 20 t newcomer's, whose valves then switched at
+    14-19 Hz) or 0.6 x it: the run goes on and says so in one stderr line naming the --set
+    option, the value and the rule's value (LF1352: 4.03e-8 m²); 1.4 x stays quiet."""
+    area = factor * 4.03e-8
+    prepare("W1", overrides={"hydraulics.metering.head_branch_area_m2": area})
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith(f"trackmj: --set hydraulics.metering.head_branch_area_m2 = "
+                          f"{area:.3g} m² is {factor:.2g} x the metering rule's 4.03e-08 m² "
+                          "(docs/sizing.md, Metering: one 30 ms pulse moves 0.75 % of the "
+                          "nominal 15 kN;"), err
+    assert effect in err
+    prepare("W1", overrides={"hydraulics.metering.head_branch_area_m2": 1.4 * 4.03e-8})
+    assert capsys.readouterr().err == ""

@@ -31,7 +31,14 @@ from trackmj.control.params import BAND_REL
 from trackmj.hydraulics.params import HydraulicParams
 from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.machines.idler import load_identification
-from trackmj.machines.sizing import CYLINDER_COUNT, VALVE_DROP_PA, holding_force_N
+from trackmj.machines.sizing import (
+    CYLINDER_COUNT,
+    PULSE_REL,
+    VALVE_DROP_PA,
+    head_path_area_m2,
+    holding_force_N,
+    restrictor_for,
+)
 from trackmj.track.mechanics import ModelParams, load_model_params, mechanics_sha256, models_dir
 from trackmj.track.mjcf.builders import mjcf_parts, read_mjcf, recorded_mechanics_sha256
 from trackmj.track.mjcf.cache import cached_mjcf
@@ -292,6 +299,70 @@ def cylinder_force_shortfall(params: ModelParams, model_file: str,
         f"the metering (rods at tank, {tank / 1e6:g} MPa), below the band's top "
         f"{band_top_N / 1e3:.2f} kN ({band}); the run goes on, the band's top out of the "
         f"cylinders' reach: to hold it, {allowed} (trackmj.machines.sizing.size_cylinders)")
+
+
+METERING_FACTOR = 1.5
+"""How far a hydraulic file's head restrictor may lie from the metering rule's
+(:func:`metering_rule_m2`) before a run warns, either way [-]. The tension one
+minimum-hold pulse moves grows with the area (the head flow is Cq·A·v): 1.5 x the rule
+moves 1.1 % of the nominal tension per pulse, past the PID's 1 % dead band and 1.5 x
+the 0.75 % window the MPC's offset trim leaves alone (the control file), so one pulse
+overshoots the window the controllers were tuned to stop in and the valves chatter (a
+20 t machine at 1.6 x switched at 14-19 Hz against ~3/s on compact3). Below the rule the
+same ratio down (0.5 % per pulse) leaves the tension rate two thirds of the tuned one. The
+shipped files follow the rule to 2 %."""
+
+
+def metering_rule_m2(params: ModelParams, hydraulics: HydraulicParams,
+                     idler_stiffness_N_m: float, min_hold_s: float) -> float:
+    """The head-branch restrictor [m²] docs/sizing.md's metering rule gives for the
+    hydraulic file's cylinders on ``params``' machine: at the nominal tension, the layout
+    stroke and the supply set-point, one minimum-hold pulse (``min_hold_s`` [s]) at full
+    pressurizing opening moves :data:`~trackmj.machines.sizing.PULSE_REL` of the nominal
+    tension against the identified idler (``idler_stiffness_N_m`` [N/m]); the restrictor
+    in series with the 2/2 valve that gives half that head path area."""
+    nominal, cyl = params.nominal_tension_N, hydraulics.cylinder
+    area = head_path_area_m2(
+        PULSE_REL * nominal / min_hold_s, force_N=nominal,
+        area_head_m2=CYLINDER_COUNT * cyl.area_head_m2,
+        area_rod_m2=CYLINDER_COUNT * cyl.area_rod_m2,
+        volume_head_m3=CYLINDER_COUNT * (cyl.dead_volume_head_m3 + cyl.area_head_m2
+                                         * params.idler.stroke_at_layout_m),
+        idler_stiffness_N_m=idler_stiffness_N_m, supply_Pa=hydraulics.supply.setpoint_Pa,
+        tank_Pa=hydraulics.tank_pressure_Pa, bulk_modulus_Pa=hydraulics.fluid.bulk_modulus_Pa,
+        density_kg_m3=hydraulics.fluid.density_kg_m3,
+        discharge_coefficient=hydraulics.orifice.discharge_coefficient,
+        critical_pressure_Pa=hydraulics.orifice.critical_pressure_Pa)
+    return restrictor_for(area / CYLINDER_COUNT, hydraulics.switching_valves.open_area_m2)
+
+
+def metering_mismatch(params: ModelParams, hydraulics: HydraulicParams, hydraulics_file: str,
+                      idler_stiffness_N_m: float, min_hold_s: float) -> str | None:
+    """One line naming the hydraulic file's ``[metering].head_branch_area_m2`` (or the
+    ``--set`` that gave it), its value and the rule's (:func:`metering_rule_m2`) when they
+    differ by more than :data:`METERING_FACTOR` either way; None within it, or when the rule
+    has no answer (a set-point below the nominal tension's head pressure, no minimum hold).
+    Not refused: a metering study runs other restrictors on purpose."""
+    if min_hold_s <= 0.0:
+        return None
+    try:
+        rule = metering_rule_m2(params, hydraulics, idler_stiffness_N_m, min_hold_s)
+    except ValueError:
+        return None
+    given = hydraulics.metering.head_branch_area_m2
+    ratio = given / rule
+    if 1.0 / METERING_FACTOR <= ratio <= METERING_FACTOR:
+        return None
+    key = hydraulics.sources.get("metering.head_branch_area_m2", "").split("=")[0] or \
+        f"{hydraulics_file} [metering].head_branch_area_m2"
+    effect = ("a minimum-hold pulse overshoots the tension window the controllers stop in "
+              "(valve chatter)" if ratio > 1.0 else "the tension moves slower than the "
+              "controllers were tuned for")
+    return (f"{key} = {given:.3g} m² is {ratio:.2g} x the metering rule's {rule:.3g} m² "
+            f"(docs/sizing.md, Metering: one {min_hold_s * 1e3:g} ms pulse moves "
+            f"{PULSE_REL * 100:g} % of the nominal {params.nominal_tension_N / 1e3:g} kN; "
+            f"{ratio * PULSE_REL * 100:.2g} % with this restrictor): {effect}; the run goes on "
+            f"(trackmj.machines.assembly.metering_rule_m2)")
 
 
 def model_mjcf(params: ModelParams, machine: Machine | None = None) -> str:
