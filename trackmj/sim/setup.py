@@ -59,6 +59,8 @@ from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE, REPLACEA
 from trackmj.track.mechanics import ModelParams, load_model_params
 from trackmj.track.mjcf.builders import on_grade, with_heightfield
 from trackmj.track.mjcf.cache import model_key
+from trackmj.track.mjcf.geometry import derive_geometry, static_strand_tension_N
+from trackmj.track.mjcf.layout import compute_layout
 from trackmj.track.plant import TrackPlant
 from trackmj.track.terrain import RoadProfile
 from trackmj.validator import FILE_KINDS, ParameterError, parse_overrides, split_override_key
@@ -114,9 +116,6 @@ def slack_nominal_text(params: ModelParams) -> str | None:
     idler to identify. One line naming the key (``preload_N`` or ``nominal_tension_N``),
     T, and the least value that keeps the strand above slack, with 1000 x a value below
     1 kN when that would (a force typed in kN); None when T is above slack."""
-    from trackmj.track.mjcf.geometry import derive_geometry, static_strand_tension_N
-    from trackmj.track.mjcf.layout import compute_layout
-
     t, at = params.tensioner, params.origin
     key = "preload_N" if t.nominal_tension_N is None else "nominal_tension_N"
     value = params.nominal_tension_N
