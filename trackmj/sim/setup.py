@@ -424,9 +424,9 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
             "MPC weights are scaled by the tension-rate gain of the machine's own files, "
             f"so write the changes into {mach.mechanics.name}, or into a copy that a machine "
             "file of its own names") from None
-    if tensioner_file is None:
+    if tensioner_file is None:   # the machine's own mechanics and idler, as the MPC weights
         _say_once(metering_mismatch(
-            model_params, hydraulics_params, Path(hydraulics or mach.hydraulics).name,
+            mechanics(mach), hydraulics_params, Path(hydraulics or mach.hydraulics).name,
             _idler(mechanics(mach), mach).stiffness_N_m, control_params.valves.min_hold_s))
     return RunSetup(
         scenario=sc, variant=var, architecture=architecture, controller=controller,
