@@ -238,7 +238,15 @@ def test_infeasible_link_count_names_the_counts_that_close(tmp_path) -> None:
     ({"road_wheels.x_m": [-0.75, -0.45, -0.15, 0.15, 0.45, 1.6]},
      r"road_wheels\]?\.x_m = .* entry 5 \(1\.6 m\) lies outside the span"),
     ({"road_wheels.x_m": [-0.75, -0.45, -0.15, 0.15, 0.2, 0.75]},
-     r"road_wheels\]?\.x_m = .* entries 3 and 4 are 0\.05 m apart"),
+     r"road_wheels\]?\.x_m = .* entries 3 \(0\.15 m\) and 4 \(0\.2 m\) are only 0\.05 m apart: "
+     r"neighbours must be at least 2·radius_m \+ 10 mm = 0\.23 m apart$"),
+    ({"road_wheels.x_m": [-0.75, -0.45, 0.15, -0.15, 0.45, 0.75]},
+     r"road_wheels\]?\.x_m = .* entries 2 \(0\.15 m\) and 3 \(-0\.15 m\) are not in increasing x "
+     r"\(rear to front\): sort them rear to front, "
+     r"x_m = \[-0\.75, -0\.45, -0\.15, 0\.15, 0\.45, 0\.75\]$"),
+    ({"road_wheels.x_m": [-0.75, -0.45, 0.15, 0.05, 0.45, 0.75]},
+     r"entries 2 \(0\.15 m\) and 3 \(0\.05 m\) are not in increasing x \(rear to front\): "
+     r"list them rear to front, neighbours at least 2·radius_m \+ 10 mm = 0\.23 m apart$"),
     ({"road_wheels.count": 3, "road_wheels.x_m": [-0.75, -0.5, -0.25]},
      r"must straddle the chassis centre of mass"),
     ({"road_wheels.x_m": [-0.95, -0.45, -0.15, 0.15, 0.45, 0.75]},

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
+from itertools import pairwise
 from pathlib import Path
 from typing import Any, ClassVar, Literal
 
@@ -305,6 +306,28 @@ def _check_consistency(p: ModelParams, at: Location) -> None:
     _check_layout(p, at)
 
 
+def _check_spacing(at: Location, table: str, xs: Sequence[float], gap: float) -> None:
+    """Refuse wheel abscissae that do not increase from rear to front by ``gap`` [m]. The
+    message names the first offending pair with its values; a list that is merely unsorted
+    is told to sort itself, with the sorted list to paste."""
+    spacing = f"2·radius_m + {CLEARANCE_M * 1e3:g} mm = {gap:g} m"
+    ordered = sorted(xs)
+    pairs = [(k, xs[k - 1], xs[k]) for k in range(1, len(xs))]
+    backwards = [(k, a, b) for k, a, b in pairs if b <= a]
+    if backwards:
+        k, a, b = backwards[0]
+        spaced = all(y - x >= gap for x, y in pairwise(ordered))
+        fix = (f"sort them rear to front, x_m = [{', '.join(f'{x:g}' for x in ordered)}]"
+               if spaced else f"list them rear to front, neighbours at least {spacing} apart")
+        raise at.error((table, "x_m"), xs, f"entries {k - 1} ({a:g} m) and {k} ({b:g} m) are "
+                       f"not in increasing x (rear to front): {fix}")
+    for k, a, b in pairs:
+        if b - a < gap:
+            raise at.error((table, "x_m"), xs, f"entries {k - 1} ({a:g} m) and {k} ({b:g} m) "
+                           f"are only {b - a:g} m apart: neighbours must be at least "
+                           f"{spacing} apart")
+
+
 def _check_layout(p: ModelParams, at: Location) -> None:
     """Geometry a track can be laid round: wheels in the span, clear of each other, above
     the ground line; then the loop closure (:func:`trackmj.track.mjcf.layout.check_closure`)."""
@@ -327,12 +350,7 @@ def _check_layout(p: ModelParams, at: Location) -> None:
             if not rear < x < front:
                 raise at.error((table, "x_m"), xs, f"entry {k} ({x:g} m) lies outside the span "
                                f"between sprocket and idler ({rear:g} .. {front:g} m)")
-        for k in range(1, len(xs)):
-            if xs[k] - xs[k - 1] < 2.0 * radius + CLEARANCE_M:
-                raise at.error((table, "x_m"), xs, f"entries {k - 1} and {k} are "
-                               f"{xs[k] - xs[k - 1]:g} m apart: must increase by at least "
-                               f"2·radius_m + {CLEARANCE_M * 1e3:g} mm = "
-                               f"{2.0 * radius + CLEARANCE_M:g} m")
+        _check_spacing(at, table, xs, 2.0 * radius + CLEARANCE_M)
     if max(rw.x_m) - min(rw.x_m) < 2.0 * p.track.pitch_m:
         raise at.error(("road_wheels", "x_m"), rw.x_m, f"span {max(rw.x_m) - min(rw.x_m):g} m "
                        f"from first to last: at least two links (2·pitch_m = "
