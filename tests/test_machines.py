@@ -253,8 +253,12 @@ def test_infeasible_link_count_names_the_counts_that_close(tmp_path) -> None:
      r"entry 0 \(-0\.95 m\) touches the sprocket teeth"),
     ({"return_rollers.z_m": 0.30}, r"return_rollers\]?\.z_m = 0\.3 puts the rollers onto"),
     ({"return_rollers.x_m": [-0.6, -0.3, 0.0, 0.3, 0.6]}, r"at most 4"),
-    ({"idler.x_m": 0.95}, r"idler\]?\.x_m = 0\.95 puts the idler .* into "
-                          r"\[road_wheels\]\.x_m\[5\]"),
+    ({"idler.x_m": 0.95}, r"^--set model\.idler\.x_m = 0\.95 puts the idler \(radius 0\.2 m\) into "
+                          r"\[road_wheels\]\.x_m\[5\] \(it must keep 10 mm clear of it\): "
+                          r"increase x_m by at least 102 mm \(x_m >= 1\.052 m\)$"),
+    ({"idler.x_m": -0.95, "sprocket.x_m": 1.35, "return_rollers.x_m": [-0.3, 0.6]},
+     r"idler\.x_m = -0\.95 puts the idler .* into \[road_wheels\]\.x_m\[0\] .*: "
+     r"decrease x_m by at least 102 mm \(x_m <= -1\.052 m\)"),
     ({"sprocket.z_m": 0.15}, r"sprocket\]?\.z_m = 0\.15 puts the sprocket's lowest pin "
                              r"below the ground line"),
     ({"idler.z_m": 0.05}, r"^--set model\.idler\.z_m = 0\.05 puts the idler \(radius 0\.2 m\) "
@@ -268,6 +272,11 @@ def test_infeasible_link_count_names_the_counts_that_close(tmp_path) -> None:
 def test_implausible_layouts_are_refused_naming_the_key(overrides, message) -> None:
     with pytest.raises(ParameterError, match=message):
         load_model_params(overrides=overrides)
+
+
+def test_the_idler_x_m_a_refusal_proposes_clears_the_road_wheel() -> None:
+    """The advice "increase x_m by at least 102 mm (x_m >= 1.052 m)" above is enough."""
+    assert load_model_params(overrides={"idler.x_m": 1.052}).idler.x_m == 1.052
 
 
 def test_a_layout_refusal_on_a_file_key_names_the_set_option_that_caused_it() -> None:

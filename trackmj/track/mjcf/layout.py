@@ -233,13 +233,10 @@ def _idler_obstacles(p: ModelParams) -> list[tuple[str, float, float, float]]:
     return out
 
 
-def idler_window(p: ModelParams, at: Location) -> tuple[float, float]:
-    """The idler abscissae [m] within ±CLOSURE_WINDOW_M of ``x_m`` where the idler clears
-    the other wheels (CLEARANCE_M) and stays above the ground line: the contiguous range
-    round ``x_m``. ParameterError if the idler at ``x_m`` itself collides."""
-    x0 = p.idler.x_m
-    xs = np.linspace(x0 - CLOSURE_WINDOW_M, x0 + CLOSURE_WINDOW_M, 1001)
-    cz = np.array([idler_center(p, x)[1] for x in xs])
+def _idler_blocks(p: ModelParams, xs: np.ndarray, cz: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(clear, blocked_by) of idler centres (xs, cz): clear where the idler stays above the
+    ground line and CLEARANCE_M from the other wheels; blocked_by names what it hits."""
     floor = p.track.pin_radius_m + vertex_radius(p, p.idler.radius_m)
     clear = cz >= floor
     blocked_by = np.full(len(xs), "", dtype=object)
@@ -248,6 +245,36 @@ def idler_window(p: ModelParams, at: Location) -> tuple[float, float]:
         hit = np.hypot(xs - ox, cz - oz) < distance
         blocked_by[hit & clear] = key
         clear &= ~hit
+    return clear, blocked_by
+
+
+def _idler_x_move(p: ModelParams, obstacle_x: float) -> str:
+    """Which way and how far [mm] to move ``[idler].x_m`` (z_m as it is) to clear every
+    wheel, away from the one at ``obstacle_x`` first: the advice of a refusal."""
+    x0 = p.idler.x_m
+    away = math.copysign(1.0, x0 - obstacle_x) if x0 != obstacle_x else outward_sign(p)
+    steps = np.arange(1, int(CLOSURE_WINDOW_M * 1e3) + 1) * 1e-3
+    for d in (away, -away):
+        xs = x0 + d * steps
+        clear, _ = _idler_blocks(p, xs, np.full(len(xs), p.idler.z_m))
+        if clear.any():
+            j = int(np.argmax(clear))
+            return (f"{'increase' if d > 0 else 'decrease'} x_m by at least "
+                    f"{round(steps[j] * 1e3)} mm (x_m {'>=' if d > 0 else '<='} "
+                    f"{xs[j]:.3f} m)")
+    return (f"no x_m within ±{CLOSURE_WINDOW_M:g} m clears it at z_m = {p.idler.z_m:g} m: "
+            "move the idler or that wheel")
+
+
+def idler_window(p: ModelParams, at: Location) -> tuple[float, float]:
+    """The idler abscissae [m] within ±CLOSURE_WINDOW_M of ``x_m`` where the idler clears
+    the other wheels (CLEARANCE_M) and stays above the ground line: the contiguous range
+    round ``x_m``. ParameterError if the idler at ``x_m`` itself collides."""
+    x0 = p.idler.x_m
+    xs = np.linspace(x0 - CLOSURE_WINDOW_M, x0 + CLOSURE_WINDOW_M, 1001)
+    cz = np.array([idler_center(p, x)[1] for x in xs])
+    floor = p.track.pin_radius_m + vertex_radius(p, p.idler.radius_m)
+    clear, blocked_by = _idler_blocks(p, xs, cz)
     i0 = len(xs) // 2
     if cz[i0] < floor:       # the centre at x_m is (x_m, z_m): its height is what fixes it
         raise at.error(("idler", "z_m"), p.idler.z_m, f"puts the idler (radius "
@@ -256,9 +283,11 @@ def idler_window(p: ModelParams, at: Location) -> tuple[float, float]:
                        f"{math.ceil((floor - cz[i0]) * 1e3)} mm (z_m >= "
                        f"{math.ceil(floor * 1e3) / 1e3:g} m)")
     if not clear[i0]:
+        obstacle_x = next(ox for key, ox, _, _ in _idler_obstacles(p)
+                          if key == blocked_by[i0])
         raise at.error(("idler", "x_m"), x0, f"puts the idler (radius {p.idler.radius_m:g} m) "
-                       f"into {blocked_by[i0]}: move it clear by at least "
-                       f"{CLEARANCE_M * 1e3:g} mm")
+                       f"into {blocked_by[i0]} (it must keep {CLEARANCE_M * 1e3:g} mm clear "
+                       f"of it): {_idler_x_move(p, obstacle_x)}")
     lo = i0
     while lo > 0 and clear[lo - 1]:
         lo -= 1
