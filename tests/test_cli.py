@@ -175,3 +175,13 @@ def test_the_summary_names_the_edges_the_tension_never_came_back_after() -> None
     result.metrics["acceptance"]["edge_recovery_s"] = {}
     rows = summary_table([result], "{r.architecture}").splitlines()
     assert "| back within 5 % after an edge [s] | – |" in rows
+
+
+def test_the_summary_says_which_band_each_recovery_row_judges() -> None:
+    """NL1's summary showed "recovery time ... not within ±2 %" beside "acceptance: holds"
+    (the acceptance asks ±5 % of the 0.5 s mean): each row's label names its band."""
+    result = synthetic_result("NL1", duration_s=20.0)
+    result.metrics["recovery_time_lp_s"] = math.nan
+    rows = summary_table([result], "{r.architecture}").splitlines()
+    assert "| recovery time (±2 % band), low-pass [s] | not within ±2 % |" in rows
+    assert any(row.startswith("| back within 5 % after an edge [s] |") for row in rows)
