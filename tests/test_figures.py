@@ -396,3 +396,28 @@ def test_band_labels_carry_three_significant_digits(captured) -> None:
                                              (0.000123456, "0.000123"), (-0.33, "-0.33")])
 def test_numbers_in_labels(value: float, text: str) -> None:
     assert figure_style.number(value) == text
+
+
+def _spans(ax) -> list[tuple[float, float]]:
+    """The (start, end) [s] of each grey span on ``ax``."""
+    return [(round(p.get_x(), 6), round(p.get_x() + p.get_width(), 6)) for p in ax.patches]
+
+
+@pytest.mark.parametrize(("drop", "spans", "note"), [
+    ((0.0, 30.0), [], "supply at 9 MPa from the start"),          # NL1: the whole run
+    ((0.0, 5.0), [(1.0, 5.0)], None),       # ends during the run: from the evaluation start
+    ((11.0, 13.0), [(11.0, 13.0)], None),   # W4's drop: an event
+])
+def test_a_supply_held_from_the_start_is_the_runs_condition_not_a_shaded_event(
+        drop, spans, note) -> None:
+    """NL1's supply is at 9 MPa from t = 0: shading its whole run as "supply drop window"
+    hid the admissible band; the legend says what the supply is instead."""
+    w = dataclasses.replace(load_scenario("NL1").metric_windows(link_pitch_m=0.075),
+                            disturbances=(drop,))
+    fig, ax = plt.subplots()
+    figure_panels.shade_events(ax, w, 30.0)
+    labels = ax.get_legend_handles_labels()[1]
+    assert _spans(ax) == spans
+    assert ("supply drop window" in labels) == bool(spans)
+    assert (note in labels) if note else not any("from the start" in s for s in labels)
+    plt.close(fig)

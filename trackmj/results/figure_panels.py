@@ -41,19 +41,40 @@ _NBSP = "\u00a0"
 
 def shade_events(ax: Axes, w: MetricWindows, t_end: float, label: bool = True) -> None:
     """Grey spans over the disturbance windows up to the run's end ``t_end`` [s] (a window
-    after the end of a shortened run is not drawn); a dotted line at the reference step."""
+    after the end of a shortened run is not drawn); a dotted line at the reference step.
+    A window that starts before the evaluation start is the run's initial condition, not an
+    event (NL1's supply at 9 MPa from t = 0): it is shaded only from the evaluation start
+    to its end, and not at all if it lasts the run, which the legend then says
+    (:func:`initial_condition_text`)."""
     named = set()
     for k, (on, off) in enumerate(w.disturbances):
         if on >= t_end:
             continue
-        off = min(off, t_end)
         kind = _disturbance_kind(w, k)
+        if on < w.evaluation_start_s:
+            if off >= t_end:           # no edge in the run: a legend line, no span
+                if label:
+                    ax.plot([], [], ls="none", label=initial_condition_text(w, k))
+                continue
+            on = w.evaluation_start_s
+        off = min(off, t_end)
+        if off <= on:
+            continue
         ax.axvspan(on, off, color=EVENT_COLOUR, alpha=0.15, lw=0,
                    label=f"{kind} window" if label and kind not in named else None)
         named.add(kind)
     if w.step is not None and w.step[0] < t_end:
         ax.axvline(w.step[0], color=EVENT_COLOUR, ls="-.", lw=1.0,
                    label=f"reference step at {w.step[0]:g} s" if label else None)
+
+
+def initial_condition_text(w: MetricWindows, k: int) -> str:
+    """Disturbance ``k`` as the run's initial condition: "supply at 9 MPa from the start"
+    (from its onset when that is after t = 0)."""
+    what = (w.disturbance_labels[k] if k < len(w.disturbance_labels) else "disturbance")
+    what = re.sub(r"^supply drop to ", "supply at ", what)
+    on = w.disturbances[k][0]
+    return f"{what} from the start" if on <= 0.0 else f"{what} from {on:g} s"
 
 
 def _disturbance_kind(w: MetricWindows, k: int) -> str:
