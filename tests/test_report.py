@@ -155,10 +155,10 @@ def test_summary_table_names_views_and_says_when_nothing_settled() -> None:
     table = summary_table([settled, ringing], "{r.architecture}")
     rows = {line.split(" | ")[0].strip("| "): line for line in table.splitlines()}
     assert "tension RMSE, low-pass [kN]" in rows and "tension RMSE, raw [kN]" in rows
-    settle = rows["settling time (±2 % band), low-pass [s]"].split(" | ")
+    settle = rows["settling time (settling band), low-pass [s]"].split(" | ")
     assert float(settle[1]) == pytest.approx(settled.metrics["settling_time_lp_s"], abs=1e-3)
     assert settle[2].startswith("not within ±2 %")
-    assert "recovery time (±2 % band), low-pass [s]" not in rows      # W1 has no disturbance
+    assert "recovery time (settling band), low-pass [s]" not in rows      # W1 has no disturbance
     assert "zero-phase 2nd-order Butterworth at 2 Hz" in table
 
 
