@@ -166,7 +166,6 @@ def preload_text(preload_N: float, stroke_ref_m: float, settled_N: float,
             f"mm; {settled} {settled_N / 1e3:.2f} kN at {stroke_m * 1e3:.1f} mm")
 
 
-
 def passive_text(metrics: Mapping[str, Any]) -> str:
     """A drive's passive tensioner in words (its metrics.json, which holds ``preload_N``):
     :func:`preload_text` with the home keyframe's force called "settled" when the keyframe
