@@ -146,10 +146,13 @@ def test_a_duration_that_cuts_an_event_is_refused_naming_it(tmp_path, capsys):
         check_duration(load_scenario("W3"), 2.0)
 
 
-@pytest.mark.parametrize(("name", "duration_s"), [("W1", 4.0), ("W3", 10.0), ("W4", 15.0)])
+@pytest.mark.parametrize(("name", "duration_s"), [("W1", 4.0), ("W3", 10.0), ("W4", 15.0),
+                                              ("NL1", 10.0)])
 def test_the_moves_a_refusal_offers_fit_the_events_into_the_run(name, duration_s):
     """A newcomer who copies the --set items of the refusal gets a run that holds every
-    event: the schedule compressed as report and sweep compress it."""
+    event: the schedule compressed as report and sweep compress it. NL1's supply drop runs
+    to the scenario's end (0-30 s, 0.1 s edge back): it stays a drop to the end, where
+    moving its end to the run's end asked for 0.1 s more than the run."""
     with pytest.raises(ParameterError) as info:
         check_duration(load_scenario(name), duration_s)
     offered = re.findall(r"--set scenario\.(\S+)=([0-9.]+)", str(info.value))

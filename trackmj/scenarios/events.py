@@ -91,16 +91,18 @@ def moved_events(sc: Scenario, duration_s: float) -> dict[str, float]:
 
     The schedule after the evaluation start ``s`` is compressed linearly: a time t >= s
     becomes s + (t − s)·(duration_s − s)/(D − s), D the scenario's duration, so the events
-    keep their order and their share of the run; earlier times stay. Edges (a pulse's rise,
-    a drop's transition) keep their length where the window holds it, else shrink by the
-    same factor. Moved times are rounded to the 1 ms coupling step."""
+    keep their order and their share of the run; earlier times stay, and so do times at or
+    after D (a drop or pulse that lasts to the scenario's end lasts to the run's end).
+    Edges (a pulse's rise, a drop's transition) keep their length where the window holds
+    it, else shrink by the same factor. Moved times are rounded to the 1 ms coupling
+    step."""
     if not cut_events(sc, duration_s):
         return {}
-    s = sc.evaluation.start_s
-    factor = (duration_s - s) / (sc.duration_s - s)
+    s, end = sc.evaluation.start_s, sc.duration_s
+    factor = (duration_s - s) / (end - s)
 
     def move(t: float) -> float:
-        return t if t < s else s + (t - s) * factor
+        return t if t < s or t >= end else s + (t - s) * factor
 
     out: dict[str, float] = {}
     for e in events(sc):
