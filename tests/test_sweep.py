@@ -693,3 +693,20 @@ def test_a_run_that_kills_its_worker_is_an_outcome_with_the_error(executor, monk
     outcomes = executor.map([fine, dying])
     assert outcomes[0].ok and outcomes[0].result.seed == 0
     assert outcomes[1].error.startswith("KilledWorker")
+
+
+def test_plot_says_when_runs_settled_on_an_end_stop(tmp_path, capsys) -> None:
+    """Rows holding a run's end-stop record (flattened, as a sweep writes it) get one line
+    on stderr with how many runs and the first one's case; rows without it get none."""
+    on = {"settled_on_end_stop.stroke_m": -0.0028, "settled_on_end_stop.stop_stroke_m": 0.0,
+          "settled_on_end_stop.grade": 0.2}
+    write_table([_row("k0", 0, machine="m113", **on), _row("k1", 1, machine="m113")],
+                tmp_path / "results.parquet")
+    assert main(["sweep", "--plot", str(tmp_path)]) == 0
+    assert capsys.readouterr().err == (
+        "trackmj: warning: 1 of 2 runs settled with the idler carrier on an end stop, the "
+        "first W1 on m113 on a grade of +0.2 (tan θ) (stroke -2.8 mm, the stop at 0.0 mm): "
+        "the stop, not the tensioner, holds the idler at the start of those runs\n")
+    write_table([_row("k1", 1, machine="m113")], tmp_path / "results.parquet")
+    assert main(["sweep", "--plot", str(tmp_path)]) == 0
+    assert capsys.readouterr().err == ""

@@ -6,6 +6,10 @@ import numpy as np
 import pytest
 from scipy.signal import welch
 
+from trackmj.cli.run_commands import _print_end_stop
+from trackmj.cli.summary import end_stop_rows_line
+from trackmj.results.store import read_result
+from trackmj.study.campaign import flatten_metrics
 from trackmj.track.terrain import (
     ISO8608_GD_N0_M3,
     band_rms_m,
@@ -116,4 +120,14 @@ def test_a_carrier_settled_on_its_end_stop_is_said_in_one_line(tmp_path, capsys,
     assert "mm, the stop at 0.0 mm)" in lines[0]
     on = metrics["settled_on_end_stop"]
     assert on["stop"] == "retracted" and on["stop_stroke_m"] == 0.0
-    assert on["stroke_m"] <= 0.0
+    assert on["stroke_m"] <= 0.0 and on["grade"] == 0.2
+    # a report says it once per scenario, a sweep from its rows' flattened record
+    result = read_result(out)
+    _print_end_stop([result, result], "m113")
+    assert capsys.readouterr().err == lines[0] + "\n"
+    row = {"scenario": "W1", "machine": "m113"} | flatten_metrics(metrics)
+    assert end_stop_rows_line([row, {"scenario": "W1", "machine": "m113"}]) == (
+        "trackmj: warning: 1 of 2 runs settled with the idler carrier on an end stop, the "
+        f"first W1 on m113 on a grade of +0.2 (tan θ) (stroke {on['stroke_m'] * 1e3:.1f} "
+        "mm, the stop at 0.0 mm): the stop, not the tensioner, holds the idler at the start "
+        "of those runs")

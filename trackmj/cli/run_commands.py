@@ -17,6 +17,7 @@ from trackmj.cli.run_folder import refuse_other_inputs, run_folder
 from trackmj.cli.summary import (
     derailment_lines,
     end_stop_line,
+    end_stop_rows_line,
     flagged,
     measured_table,
     summary_table,
@@ -102,7 +103,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"{setup.scenario.name} ({setup.scenario.title}) on {setup.machine.name}, "
           f"{result.architecture}, {result.controller}/{result.estimator}, seed "
           f"{result.seed}{running_text(running_of(result))} -> {out}")
-    _print_end_stop([result], setup.machine.name, setup.scenario.terrain.grade)
+    _print_end_stop([result], setup.machine.name)
     if result.metrics.get("tensioner", {}).get("element") == "fmu":
         print(tensioner_line(result.metrics["tensioner"]))
     if result.metrics.get("valve_mode_applied") is False and setup.tensioner is not None:
@@ -117,13 +118,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 1 if flagged(result.metrics) else 0
 
 
-def _print_end_stop(results: Sequence[Result], machine: str, grade: float) -> None:
-    """On stderr, one line if the track of any of ``results`` settled with its idler
-    carrier on an end stop (:func:`trackmj.cli.summary.end_stop_line`; the runs of one
-    case settle alike)."""
-    lines = [end_stop_line(r.metrics, machine, grade) for r in results]
-    line = next((x for x in lines if x is not None), None)
-    if line is not None:
+def _print_end_stop(results: Sequence[Result], machine: str) -> None:
+    """On stderr, one line per scenario whose track settled with its idler carrier on an
+    end stop in any of ``results`` (:func:`trackmj.cli.summary.end_stop_line`; the runs of
+    one scenario settle alike)."""
+    said: dict[str, str] = {}
+    for r in results:
+        line = end_stop_line(r.metrics, machine)
+        if line is not None:
+            said.setdefault(r.scenario, line)
+    for line in said.values():
         print(line, file=sys.stderr)
 
 
@@ -169,7 +173,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                       overwrite=args.overwrite)
     for spec, error in outcome.failed:
         print(f"trackmj: {spec.architecture} {spec.controller}: {error}", file=sys.stderr)
-    _print_end_stop(outcome.results, scenario_machine, scenario.terrain.grade)
+    _print_end_stop(outcome.results, scenario_machine)
     doc = write_compare(outcome, out, scenario, setups[0].duration_s)
     print(summary_table(outcome.results, "{r.architecture} {r.controller}"))
     print(f"-> {doc}")
@@ -217,6 +221,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     out = check_report_dir(Path(args.out or f"runs/report{_machine_suffix(machine)}"))
     matrix = run_matrix(specs, out, workers=args.workers, scheduler=args.scheduler)
     path = write_report(matrix.results, out, matrix)
+    _print_end_stop(matrix.results, machine)
     print(f"{len(matrix.results)} runs ({matrix.resumed} resumed, {len(matrix.failed)} failed) "
           f"in {matrix.wall_time_s:.0f} s -> {path}")
     return 1 if matrix.failed else 0
@@ -231,6 +236,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     """``trackmj sweep``: every point of a sweep spec, resumed, or ``--plot`` to redraw its
     figures; exit code 1 if a run failed."""
     # start-up: --help and argument errors must not import MuJoCo
+    from trackmj.study.campaign import RESULTS
     from trackmj.study.sweep import plot_sweep, summarize_sweep, summary_markdown, sweep
 
     if args.plot is not None:
@@ -246,6 +252,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(summary_markdown(summarize_sweep(args.plot, machine=args.machine)))
         figures = plot_sweep(args.plot, machine=args.machine, diagnostics=args.diagnostics)
         print(f"summary.md, summary.csv, {_count(len(figures), 'figure')} -> {Path(args.plot)}")
+        _print_rows_end_stop(Path(args.plot) / RESULTS)
         return 0
     if args.spec is None:
         raise ValueError("sweep needs a spec file (or --plot DIR); see 'trackmj sweep -h'")
@@ -256,8 +263,19 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                     diagnostics=args.diagnostics)
     print(summary_markdown(summary.table))
     print(summary)
+    _print_rows_end_stop(summary.results)
     print(f"summary.md, summary.csv, {_count(len(summary.figures), 'figure')} -> {out}")
     return 1 if summary.failed else 0
+
+
+def _print_rows_end_stop(results: Path) -> None:
+    """On stderr, one line if runs of the campaign ``results`` (a results.parquet) settled
+    with the idler carrier on an end stop (:func:`trackmj.cli.summary.end_stop_rows_line`)."""
+    from trackmj.study.campaign import read_rows
+
+    line = end_stop_rows_line(read_rows(results))
+    if line is not None:
+        print(line, file=sys.stderr)
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:

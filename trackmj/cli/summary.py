@@ -10,7 +10,7 @@ they read are SI.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -244,17 +244,41 @@ def _where_text(check: str, where: dict) -> str:
     return f"{where['seated_pins']:.0f} pins seated"
 
 
-def end_stop_line(metrics: Mapping[str, Any], machine: str, grade: float,
+def end_stop_line(metrics: Mapping[str, Any], machine: str, grade: float | None = None,
                   when: str = "at the start of the run") -> str | None:
     """One line if the run's track settled with its idler carrier on an end stop
     (``metrics["settled_on_end_stop"]``, :func:`trackmj.sim.run.run`): the machine, the
-    grade, the stroke and the stop, and ``when`` the stop holds the idler; None
-    otherwise."""
+    grade (tan θ; the record's own unless given), the stroke and the stop, and ``when`` the
+    stop holds the idler; None otherwise."""
     on = metrics.get("settled_on_end_stop")
     if on is None:
         return None
-    where = "level ground" if grade == 0.0 else f"a grade of {grade:+g} (tan θ)"
-    return (f"trackmj: warning: {machine} on {where} settles with its idler carrier on its "
-            f"{on['stop']} end stop (stroke {on['stroke_m'] * 1e3:.1f} mm, the stop at "
-            f"{on['stop_stroke_m'] * 1e3:.1f} mm): the stop, not the tensioner, holds the "
+    if grade is None:
+        grade = float(on.get("grade", 0.0))
+    return (f"trackmj: warning: {machine} on {_ground(grade)} settles with its idler carrier "
+            f"on its {on['stop']} end stop (stroke {on['stroke_m'] * 1e3:.1f} mm, the stop "
+            f"at {on['stop_stroke_m'] * 1e3:.1f} mm): the stop, not the tensioner, holds the "
             f"idler {when}")
+
+
+def _ground(grade: float) -> str:
+    """"level ground" or "a grade of +0.2 (tan θ)"."""
+    return "level ground" if grade == 0.0 else f"a grade of {grade:+g} (tan θ)"
+
+
+def end_stop_rows_line(rows: Sequence[Mapping[str, Any]]) -> str | None:
+    """One line if any of a campaign's ``rows`` (flattened metrics, :func:`trackmj.study.
+    campaign.flatten_metrics`: ``settled_on_end_stop.stroke_m`` and ``.stop_stroke_m`` [m],
+    ``.grade`` [-]) settled with its idler carrier on an end stop: how many of the rows, and
+    the first one's scenario, machine, grade, stroke and stop; None otherwise."""
+    on = [r for r in rows if "settled_on_end_stop.stroke_m" in r]
+    if not on:
+        return None
+    first = on[0]
+    return (f"trackmj: warning: {len(on)} of {len(rows)} runs settled with the idler carrier "
+            f"on an end stop, the first {first.get('scenario', '?')} on "
+            f"{first.get('machine', '?')} on "
+            f"{_ground(float(first.get('settled_on_end_stop.grade', 0.0)))} (stroke "
+            f"{first['settled_on_end_stop.stroke_m'] * 1e3:.1f} mm, the stop at "
+            f"{first['settled_on_end_stop.stop_stroke_m'] * 1e3:.1f} mm): the stop, not the "
+            "tensioner, holds the idler at the start of those runs")

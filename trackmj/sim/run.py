@@ -222,7 +222,8 @@ def run(setup: RunSetup, *, rrd: str | Path | None = None, progress: bool = Fals
     if watch.derailment is not None:
         result.metrics |= watch.derailment.metrics()
     if on_stop is not None:
-        result.metrics["settled_on_end_stop"] = on_stop
+        result.metrics["settled_on_end_stop"] = on_stop | {
+            "grade": setup.scenario.terrain.grade}
     if watch.playback is not None:
         watch.playback.log_timeseries(result)
         watch.playback.close()
