@@ -71,8 +71,8 @@ def shade_events(ax: Axes, w: MetricWindows, t_end: float, label: bool = True) -
 def initial_condition_text(w: MetricWindows, k: int) -> str:
     """Disturbance ``k`` as the run's initial condition: "supply at 9 MPa from the start"
     (from its onset when that is after t = 0)."""
-    what = (w.disturbance_labels[k] if k < len(w.disturbance_labels) else "disturbance")
-    what = re.sub(r"^supply drop to ", "supply at ", what)
+    states = w.disturbance_states or w.disturbance_labels
+    what = states[k] if k < len(states) else "disturbance"
     on = w.disturbances[k][0]
     return f"{what} from the start" if on <= 0.0 else f"{what} from {on:g} s"
 

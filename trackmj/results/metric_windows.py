@@ -24,8 +24,9 @@ class MetricWindows:
     switching; skips the start-up transient). steady: window of the fluctuation band, the mean
     tension and the spectra. step: (t_step, initial, final, t_end) of a reference step, its
     overshoot and settling evaluated in [t_step, t_end]. disturbances: (onset, end) windows of
-    load pulses or supply drops, disturbance_labels what each one is (for figures; empty:
-    unnamed); an onset or end before evaluation_start_s is the run's initial condition (e.g.
+    load pulses or supply drops, disturbance_labels what each one is and disturbance_states
+    each as the state a run can start in ("supply at 9 MPa"; for figures; empty: unnamed,
+    the label); an onset or end before evaluation_start_s is the run's initial condition (e.g.
     NL1's supply held at 9 MPa from t = 0), not an edge the disturbance and acceptance metrics
     judge. settle_band_rel: settling and recovery band relative to the final value (recovery: to
     the reference at the onset), unless recovery_band_N is given. min_hold_s: how long a
@@ -66,6 +67,7 @@ class MetricWindows:
     step: tuple[float, float, float, float] | None = None
     disturbances: tuple[tuple[float, float], ...] = ()
     disturbance_labels: tuple[str, ...] = ()
+    disturbance_states: tuple[str, ...] = ()
     steady: tuple[float, float] | None = None
     recovery_band_N: float | None = None
     mean_window_s: float = 0.5

@@ -324,13 +324,13 @@ class Scenario:
         machine's ``drive_load`` (g [1/m], σ; :mod:`trackmj.machines.drive_load`) the
         acceptance also takes the drive's floor under the idler load."""
         duration = self.duration_s if duration_s is None else duration_s
-        dist, labels = self._disturbances()
+        dist, labels, states = self._disturbances()
         ev, speed = self.evaluation, self.steady_pace_m_s(duration)
         return MetricWindows(
             force_min_N=present(self.limits.force_min_N, "limits.force_min_N"),
             force_max_N=present(self.limits.force_max_N, "limits.force_max_N"),
             evaluation_start_s=ev.start_s, step=self._first_step(duration), disturbances=dist,
-            disturbance_labels=labels,
+            disturbance_labels=labels, disturbance_states=states,
             steady=(ev.steady_start_s, duration), settle_band_rel=ev.settle_band_rel,
             min_hold_s=ev.min_hold_s, lowpass_cutoff_Hz=ev.lowpass_cutoff_Hz,
             body_mode_band_Hz=ev.body_mode_band_Hz,
@@ -369,15 +369,18 @@ class Scenario:
         return (s0.time_s, before, before + present(s0.delta_N, "reference.steps.delta_N"),
                 t_stop)
 
-    def _disturbances(self) -> tuple[tuple[tuple[float, float], ...], tuple[str, ...]]:
-        """The load pulses' then the supply drops' windows (start, end) [s] and their
-        labels."""
+    def _disturbances(self) -> tuple[tuple[tuple[float, float], ...], tuple[str, ...],
+                                     tuple[str, ...]]:
+        """The load pulses' then the supply drops' windows (start, end) [s], their labels
+        and each as a state a run can start in ("supply at 9 MPa")."""
         dist = tuple((p.start_s, p.end_s) for p in self.load_pulses)
         dist += tuple((d.start_s, d.end_s) for d in self.supply.drops)
-        drops_Pa = [present(d.pressure_Pa, "supply.drops.pressure_Pa") for d in self.supply.drops]
-        labels = tuple(self._pulse_label(i) for i in range(len(self.load_pulses)))
-        labels += tuple(f"supply drop to {x / 1e6:g} MPa" for x in drops_Pa)
-        return dist, labels
+        drops_MPa = [present(d.pressure_Pa, "supply.drops.pressure_Pa") / 1e6
+                     for d in self.supply.drops]
+        pulses = tuple(self._pulse_label(i) for i in range(len(self.load_pulses)))
+        labels = pulses + tuple(f"supply drop to {x:g} MPa" for x in drops_MPa)
+        states = pulses + tuple(f"supply at {x:g} MPa" for x in drops_MPa)
+        return dist, labels, states
 
     def _pulse_label(self, index: int) -> str:
         """"load pulse +2 kN" (its hold-mode idler-load target), with the hitch force that
