@@ -44,6 +44,7 @@ from trackmj.ports import COUPLING_STEP_S, Command, Readout, StepInputs, Tension
 from trackmj.results.figure_drive import drive_figure
 from trackmj.results.store import ResultWriter, finite_or_null, metrics_as_read, parquet_bytes
 from trackmj.scenarios.schema import TRACK_SPEED_MAX_M_S
+from trackmj.sim.mechanics import SETTLE_S
 from trackmj.track.energy import TrackEnergyLedger
 from trackmj.track.plant import DerailmentStatus, PassiveTensioner, TrackPlant
 from trackmj.track.terrain import check_grade_held, gravity_on_grade
@@ -134,7 +135,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     check_grade_held(grade, plant.params.track.ground_friction, "grade ",
                      "[track].ground_friction")
     if grade != 0.0:
-        plant.model.opt.gravity[:] = gravity_on_grade(plant.model.opt.gravity, grade)
+        _settle_on_grade(plant, grade)
     element, described, passive = _drive_tensioner(plant, tensioner, preload_N)
     home = passive_metrics(plant, passive)
     ramp_s = min(1.0, duration_s / 4.0)
@@ -169,6 +170,17 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     }
     out = write_drive(out_dir, metrics, series) if out_dir is not None else None
     return DriveResult(metrics, series, out)
+
+
+def _settle_on_grade(plant: TrackPlant, grade: float) -> None:
+    """Tilt ``plant``'s gravity to the ``grade`` (tan θ) and let the machine settle there
+    standing for :data:`~trackmj.sim.mechanics.SETTLE_S` under the model's own passive
+    tensioner (the law its level home keyframe was settled under), its clock back at 0:
+    the drive then starts from rest on the slope, as a scenario's run does, not from the
+    level keyframe sliding back into the tilted gravity while the sprocket ramps up."""
+    plant.model.opt.gravity[:] = gravity_on_grade(plant.model.opt.gravity, grade)
+    plant.run(PassiveTensioner.from_params(plant.params), SETTLE_S)
+    plant.time_s = 0.0
 
 
 INTEGRATOR_CREATION_MAX_REL = 0.03
