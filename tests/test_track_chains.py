@@ -14,7 +14,9 @@ T/K.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import mujoco
@@ -38,6 +40,7 @@ from trackmj.track.mjcf.structure import (
     chain_starts,
     hinged_pins,
     pin_series_count,
+    pin_slide_ids,
     stretch_armature_kg,
 )
 from trackmj.track.plant import PassiveTensioner, TrackPlant
@@ -261,13 +264,73 @@ def test_implicit_spring_is_backward_euler_on_a_stiff_slide() -> None:
         energy = now
 
 
-def test_chains_refuse_the_torsional_bushings(model_params: ModelParams) -> None:
-    """The bushings' torsion tendons join pitch hinges the chained links do not have."""
+def _clamped_strand(params: ModelParams) -> tuple[mujoco.MjModel, int]:
+    """The first three chains of ``params``' loop as a strand in zero gravity without
+    contacts: link_00 welded to the world at its layout pose, pin 0 and the links from the
+    fourth chain on removed (a connect or tendon reaching them too), every link joint but
+    the pin slides damped (5 N·m·s/rad or N·s/m, only to settle: statics do not depend on
+    it). Returns the model and the strand's link count."""
+    root = ET.fromstring(generate_mjcf(params).split("-->", 1)[1])
+    count = chain_starts(params)[3]
+    world = root.find("worldbody")
+    for body in world.findall("body"):
+        if body.get("name", "").startswith("link_") and int(body.get("name")[5:]) >= count:
+            world.remove(body)
+    for group in (root.find("equality"), root.find("tendon")):
+        for item in list(group):
+            pin = int(item.get("name")[4:6])
+            if pin == 0 or pin >= count:
+                group.remove(item)
+            for term in item.findall("joint[@joint='link_00_pitch']"):
+                item.remove(term)   # the clamped root turns no more
+    clamped = world.find("body[@name='link_00']")
+    for joint in clamped.findall("joint"):
+        clamped.remove(joint)
+    for joint in root.iter("joint"):
+        if joint.get("name", "").startswith("link_") and joint.get("class") != "pin_stretch":
+            joint.set("damping", "5")
+    root.remove(root.find("keyframe"))
+    model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+    model.opt.gravity[:] = 0.0
+    model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    return model, count
+
+
+@pytest.mark.parametrize("structure", ["slides", "chains"])
+def test_a_strand_bent_by_a_moment_turns_every_pin_by_moment_over_stiffness(
+        model_params: ModelParams, structure: str) -> None:
+    """The bushings' torsional spring on chained links: a strand of three chains clamped at
+    link_00 and loaded by a couple M about +y on its free end carries M through every pin
+    and no force, so each pin, hinged or connect, turns by −M/k_t (LF1352's scaled Chrono
+    RSDA, 240 N·m/rad; M = 5 N·m: 20.8 mrad; a turn about +y takes a link's x axis
+    towards −z, so its angle in the x-z plane falls), the pin slides unstretched. Stepped
+    as the plant steps (the pin slides' springs and every damper implicit)."""
     p = dataclasses.replace(model_params,
+                            track=dataclasses.replace(model_params.track, structure=structure),
                             bushings=dataclasses.replace(model_params.bushings, enabled=True))
-    with pytest.raises(ParameterError, match=r"^ModelParams \[track\]\.structure = 'slides' "
-                       r"does not take the \[bushings\] torsional"):
-        generate_mjcf(p)
+    model, count = _clamped_strand(p)
+    data = mujoco.MjData(model)
+    slides = [j for j in pin_slide_ids(model, range(count)).values() if j >= 0]
+    damped = [j for j in range(model.njnt) if model.joint(j).name.startswith("link_")
+              and j not in slides]
+    springs = ImplicitSprings(model, data, slides, damped)
+    links = [model.body(link_name(k)).id for k in range(count)]
+    moment = 5.0
+    data.xfrc_applied[links[-1], 4] = moment
+    for _ in range(10000):
+        mujoco.mj_step1(model, data)
+        springs.apply()
+        mujoco.mj_factorM(model, data)
+        mujoco.mj_step2(model, data)
+    angle = [math.atan2(data.xmat[b][6], data.xmat[b][0]) for b in links]   # x axis' z, x
+    twist = np.array([math.remainder(b - a, 2.0 * math.pi)
+                      for a, b in itertools.pairwise(angle)])
+    k_t = p.bushings.torsional_stiffness_N_m_rad
+    assert set(chain_starts(p)[1:3]) < set(range(1, count))   # two connects among the pins
+    np.testing.assert_allclose(twist, -moment / k_t, rtol=1e-3)
+    if slides:
+        stretch = data.qpos[model.jnt_qposadr[slides]]
+        assert np.abs(stretch).max() < 1e-9   # no force through the pins
 
 
 def test_chains_longer_than_measured_are_refused_naming_the_key() -> None:

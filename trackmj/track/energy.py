@@ -24,7 +24,8 @@ where the numerical term N_k is the integrator's own energy error, in three part
 * implicit springs: the pin slides' springs act at the step's end
   (:class:`trackmj.track.foundation.ImplicitSprings`), their implicit part −h·K·v_{k+1} on
   Δq adds −K·Δq² per slide, so with the explicit part's +½·K·Δq² backward Euler's −½·K·Δq²
-  (dissipates).
+  (dissipates). The pin hinges' torsional dampers the same step takes, −B·v_{k+1} on Δq,
+  are booked as pin torsion.
 
 The residual r_k = (M_k·Δv − h·f)ᵀ·v_{k+1} is what the booked forces miss of what MuJoCo
 integrated (solver tolerance, an unbooked force); it is not a fitted quantity.
@@ -264,13 +265,14 @@ class TrackEnergyLedger:
         self._tensioner_dof = int(m.jnt_dofadr[m.joint("idler_slide").id])
         # where each dof's damper work goes: the pin slides' (structure "slides") to the
         # pins, whose connects' work is booked there too; other damped dofs are the
-        # suspension slides; the rest (tendon dampers of the pin torsion) to A_TORSION
+        # suspension slides; the rest to A_TORSION: the link hinges (a hinged pin's
+        # torsional damper on its hinge, the connects' torsion tendons on the pitch and
+        # pin hinges they join)
         self._damper_slot = np.where(m.dof_damping > 0.0, A_SUSPENSION, A_TORSION)
         self._damper_slot[m.jnt_dofadr[plant.pin_slide_joints]] = A_WORK + _PINS
         hinges = [j for j in range(m.njnt) if m.joint(j).name.startswith("link_")
                   and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]   # pitch and pin hinges
-        if np.any(m.dof_damping[m.jnt_dofadr[hinges]] > 0.0):
-            raise ValueError("energy ledger: link hinges must not carry joint damping")
+        self._damper_slot[m.jnt_dofadr[hinges]] = A_TORSION
         # the implicit part of the step, qDeriv·Δv, in MuJoCo's sparse layout
         self._deriv_row = np.repeat(np.arange(m.nv), m.D_rownnz)
         self._deriv_col = m.D_colind.copy()
@@ -330,8 +332,8 @@ class TrackEnergyLedger:
         t.drive_work_J += drive * dq[self._drive_dof]
         t.tensioner_work_J += self.plant.idler_force_N * dq[self._tensioner_dof]
         # dampers as integrated (MuJoCo 4.0.0 keeps only the same-tree entries of a
-        # tendon's damping in qDeriv, so the pin-torsion dampers, tendons between two
-        # links, are implicit on their diagonal only)
+        # tendon's damping in qDeriv, so a pin-torsion tendon between two trees is
+        # implicit on those entries only)
         _book_dampers(d.qDeriv, self._deriv_row, self._deriv_col, dv, dq, d.qfrc_damper,
                       self._actuator_dofs, m.actuator_biasprm[:, 2], self._actuator_free,
                       self._damper_slot, self._implicit, self._acc)
@@ -353,6 +355,8 @@ class TrackEnergyLedger:
         springs = self.plant.springs   # their implicit part −h·K·v₁ on Δq: −K·Δq² per dof
         s = springs.dofs
         self._acc[A_IMPLICIT_SPRINGS] -= float(springs.h_stiffness @ (v1[s] * dq[s]))
+        # the dampers the step takes with them (the pin hinges' torsion): −B·v₁ on Δq
+        self._acc[A_TORSION] -= float(springs.damping @ (v1[s] * dq[s]))
         self._acc[A_KINETIC_MID] += 0.5 * float(v1 @ self._mv)
         self._v_prev = v1.copy()
         self._steps += 1

@@ -622,11 +622,11 @@ class Foundation:
 def implicit_springs_apply(mass: np.ndarray, qfrc_applied: np.ndarray, qvel: np.ndarray,
                            dofs: np.ndarray, mass_index: np.ndarray, h_stiffness: np.ndarray,
                            h: float) -> None:
-    """Backward Euler for joint springs on single dofs: h²·K into ``mass`` (MuJoCo's sparse
-    M, at each dof's diagonal address ``mass_index``) and −h·K·v₀ into ``qfrc_applied``, so
-    that with MuJoCo's own −K·(q₀ − q_ref) the spring acts with −K·(q₀ + h·v₁ − q_ref) =
-    −K·(q₁ − q_ref) over the step. dofs, mass_index: (s,) int; h_stiffness: h·K (s,)
-    [N·s/m]; h [s]."""
+    """Backward Euler for joint springs (and dampers) on single dofs: h·G into ``mass``
+    (MuJoCo's sparse M, at each dof's diagonal address ``mass_index``) and −G·v₀ into
+    ``qfrc_applied``, G = h·K + B, so that with MuJoCo's own −K·(q₀ − q_ref) the joint acts
+    with −K·(q₀ + h·v₁ − q_ref) − B·v₁ = −K·(q₁ − q_ref) − B·v₁ over the step. dofs,
+    mass_index: (s,) int; h_stiffness: G (s,) [N·s/m or N·m·s/rad]; h [s]."""
     for i in range(dofs.shape[0]):
         mass[mass_index[i]] += h * h_stiffness[i]
         qfrc_applied[dofs[i]] = -h_stiffness[i] * qvel[dofs[i]]
@@ -644,12 +644,21 @@ class ImplicitSprings:
 
     joints: ids of slide or hinge joints with ``jnt_stiffness`` K [N/m or N·m/rad]; none
     for a model without such springs (structure "chains" or "free", the foundation's toys).
+    dampers: ids of further joints whose joint damping B [N·s/m or N·m·s/rad] the step takes
+    the same way (the pin hinges' torsional dampers): h·B into M, −B·v₀ applied, and the
+    model's damping of those dofs set to 0; their springs stay MuJoCo's explicit ones.
+    MuJoCo's own implicit damping (``qDeriv``) is not seen by the constraint solver (the
+    module docstring): measured on M113's bushings at 1 ms, hinge dampers of 10 N·m·s/rad
+    diverge that way. Construct once per compiled model (it moves the damping out of it).
     """
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData,
-                 joints: Sequence[int] | np.ndarray) -> None:
-        joints = np.asarray(joints, dtype=np.int64)
-        self.dofs = model.jnt_dofadr[joints].astype(np.int64)
+                 joints: Sequence[int] | np.ndarray,
+                 dampers: Sequence[int] | np.ndarray = ()) -> None:
+        springs = np.asarray(joints, dtype=np.int64)
+        damped = np.asarray(dampers, dtype=np.int64)
+        every = np.concatenate([springs, damped])
+        self.dofs = model.jnt_dofadr[every].astype(np.int64)
         # M is CSR over the lower triangle: a row's diagonal is its last entry
         self.mass_index = (model.M_rowadr[self.dofs] + model.M_rownnz[self.dofs] - 1
                            ).astype(np.int64)
@@ -657,19 +666,27 @@ class ImplicitSprings:
             raise ValueError("implicit springs: a dof's diagonal is not its row's last entry")
         model.dof_armature[self.dofs] = 0.0
         h = float(model.opt.timestep)
-        self.h_stiffness = h * model.jnt_stiffness[joints]
-        """h·K of each spring [N·s/m], shape (s,)."""
+        self.h_stiffness = np.concatenate([h * model.jnt_stiffness[springs],
+                                           np.zeros(len(damped))])
+        """h·K of each spring (0 for a damper) [N·s/m or N·m·s/rad], shape (s,)."""
+        damper_dofs = self.dofs[len(springs):]
+        self.damping = np.concatenate([np.zeros(len(springs)), model.dof_damping[damper_dofs]])
+        """B of each damper (0 for a spring) [N·s/m or N·m·s/rad], shape (s,)."""
+        model.dof_damping[damper_dofs] = 0.0
+        self.gain = self.h_stiffness + self.damping
+        """h·K + B, the velocity gain the step takes implicitly, shape (s,)."""
         self._args = (data.M, data.qfrc_applied, data.qvel, self.dofs, self.mass_index,
-                      self.h_stiffness, h)
+                      self.gain, h)
 
     def apply(self) -> None:
-        """h²·K into M and −h·K·v₀ into qfrc_applied (after :meth:`Foundation.apply`)."""
+        """h·(h·K + B) into M and −(h·K + B)·v₀ into qfrc_applied (after
+        :meth:`Foundation.apply`)."""
         implicit_springs_apply(*self._args)
 
     def configuration(self) -> dict[str, np.ndarray]:
-        """What the native FMU's engine needs: dofs, M addresses (s,) and h·K (s,)."""
+        """What the native FMU's engine needs: dofs, M addresses (s,) and h·K + B (s,)."""
         return {"spring_dofs": self.dofs, "spring_mass_index": self.mass_index,
-                "spring_h_stiffness": self.h_stiffness}
+                "spring_h_stiffness": self.gain}
 
 
 def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,

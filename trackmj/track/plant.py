@@ -37,7 +37,7 @@ from trackmj.track.foundation import REDO_STATE, Foundation, FoundationLaw, Impl
 from trackmj.track.foundation import step as foundation_step
 from trackmj.track.mechanics import ModelParams
 from trackmj.track.mjcf.names import link_name, pin_name
-from trackmj.track.mjcf.structure import equalise_link_weights, pin_slide_ids
+from trackmj.track.mjcf.structure import equalise_link_weights, pin_slide_ids, torsion_hinge_ids
 
 
 @numba.njit(cache=True)
@@ -279,8 +279,10 @@ class TrackPlant:
         equalise_link_weights(m)   # chains: every link link_00's row weight
         self.foundation = Foundation(m, self.data, self._pin_geom,
                                      FoundationLaw.from_params(params))
-        # the pin slides' springs by backward Euler (no armature); none without slides
-        self.springs = ImplicitSprings(m, self.data, self.pin_slide_joints)
+        # the pin slides' springs and the pin hinges' torsional dampers by backward Euler
+        # (no armature); none without slides or torsional damping
+        self.springs = ImplicitSprings(m, self.data, self.pin_slide_joints,
+                                       torsion_hinge_ids(m, hinged))
         self._saved_state = np.zeros(mujoco.mj_stateSize(m, REDO_STATE))
         # the step's start velocity (the foundation keeps it) and the chassis' z dof, for
         # the per-step acceleration readout

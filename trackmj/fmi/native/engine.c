@@ -102,7 +102,7 @@ typedef struct {
     int springs;           /* joint springs integrated implicitly (the pin slides) */
     int *spring_dofs;      /* (springs,) */
     int *spring_mass_index;  /* (springs,): the dof's diagonal address in d->M */
-    double *spring_h_stiffness;  /* (springs,): h*K [N s/m] */
+    double *spring_h_stiffness;  /* (springs,): h*K + B [N s/m] (B: the torsion hinges) */
 } Foundation;
 
 static int segment_of(const double *line, int n, double x) {

@@ -23,10 +23,11 @@ The model is planar (x forward, z up, all hinges about +y):
   and damping (``[pins]``, or ``[bushings]`` when enabled), optionally with a torsional
   spring-damper (fixed tendon ``pin_kk_torsion``); with ``[track] structure = "chains"``
   (the default) :func:`trackmj.track.mjcf.structure.chain_links` then hinges the links of each
-  chain to one another (hinge ``link_kk_pin``) and keeps one connect per chain, carrying
-  the chain's pins in series. No link is the root of the whole loop: in a single kinematic
-  tree the contact rows' missing J̇·q̇ term depends on each link's path to the root, which
-  travels round the loop and put a once-per-revolution component into the idler force.
+  chain to one another (hinge ``link_kk_pin``, carrying a hinged pin's torsion) and keeps
+  one connect per chain, carrying the chain's pins in series. No link is the root of the
+  whole loop: in a single kinematic tree the contact rows' missing J̇·q̇ term depends on
+  each link's path to the root, which travels round the loop and put a
+  once-per-revolution component into the idler force.
 
 Collision filtering (contype/conaffinity bits): link rails (8) touch wheels, hub, idler and
 rollers; pin spheres (16) touch the ground and sprocket teeth; links never touch links.
@@ -328,19 +329,26 @@ def _links(root: ET.Element, world: ET.Element, p: ModelParams, layout: Layout) 
 
 
 def _check_torsion(p: ModelParams) -> None:
-    """Limits of the pins' torsional spring-damper (fixed tendons) at this timestep.
+    """Limits of the pins' torsional spring-damper at this timestep (I: a link's pitch
+    inertia about its centre of mass, h: the timestep).
 
-    The tendon spring is explicit: the zig-zag mode of the links, ω² = 4·k_t/I, must keep
-    soft_margin·(hω)²/4 <= 1. The tendon damping is implicit only in part: MuJoCo 4.0.0's
-    ``implicitfast`` keeps the same-tree entries of a tendon's damping derivative, and a
-    pin tendon joins two links, two trees, so its coupling term stays explicit. Measured on
-    this model at 1 ms it diverges from 0.2 N·m·s/rad (0.15 holds); the limit is
-    I/(20·h), about half of that.
+    The springs are explicit (tendons, and on chains the hinge joints' stiffness): the
+    zig-zag mode of the links, ω² = 4·k_t/I, must keep soft_margin·(hω)²/4 <= 1. The
+    dampers: on free links every pin is a fixed tendon joining two links, two trees, and
+    MuJoCo 4.0.0's ``implicitfast`` keeps only the same-tree entries of a tendon's damping
+    derivative, none of which the constraint solver sees; measured on LF1352 at 1 ms it
+    diverges from 0.2 N·m·s/rad (0.15 holds), so the limit is I/(20·h). On chains and
+    slides a hinged pin's damper is taken into the step's mass matrix
+    (:class:`trackmj.track.foundation.ImplicitSprings`, no limit), and the connects' tendons
+    join a chain's root pitch and pin hinges to the next root: driven at 2.0 m/s on slides
+    LF1352 holds 0.5 N·m·s/rad (0.27·I/h) and diverges at 1.0 (0.53·I/h), M113's connects
+    hold 40 (0.98·I/h; 80 creates 8 % of the drive work), so the limit is I/(4·h).
     """
     joint, table = p.pin_joint, p.pin_joint_table
     inertia, h = _link_inertia(p)[1], p.simulation.timestep_s
     stiffness_limit = inertia / (p.solver.soft_margin * h * h)
-    damping_limit = inertia / (20.0 * h)
+    share = 20.0 if p.track.structure == "free" else 4.0
+    damping_limit = inertia / (share * h)
     if joint.torsional_stiffness_N_m_rad > stiffness_limit:
         raise p.origin.error((table, "torsional_stiffness_N_m_rad"),
                              joint.torsional_stiffness_N_m_rad,
@@ -350,7 +358,9 @@ def _check_torsion(p: ModelParams) -> None:
         raise p.origin.error((table, "torsional_damping_N_m_s_rad"),
                              joint.torsional_damping_N_m_s_rad,
                              f"exceeds {damping_limit:.3f} N·m·s/rad (link pitch inertia / "
-                             "(20·timestep)); larger values diverge at this timestep")
+                             f"({share:.0f}·timestep) for structure "
+                             f"\"{p.track.structure}\"); larger values diverge at this "
+                             "timestep")
 
 
 CONTACT_PARTNERS = {"ground": "ground", "sprocket_hub": "rail", "idler_wheel": "rail"}

@@ -23,7 +23,7 @@ from trackmj.track.mechanics import MODEL_NAME, ModelParams, default_xml_path, l
 from trackmj.track.mjcf.builders import build_mjcf, split_mjcf
 from trackmj.track.mjcf.layout import compute_layout
 from trackmj.track.mjcf.names import link_name
-from trackmj.track.mjcf.structure import equalise_link_weights, pin_slide_ids
+from trackmj.track.mjcf.structure import equalise_link_weights, pin_slide_ids, torsion_hinge_ids
 from trackmj.validator import ParameterError
 
 SETTLE_DURATION_S = 3.0
@@ -47,16 +47,17 @@ def geom_keys(name: str) -> tuple[str, ...]:
 
 def settle(model: mujoco.MjModel, params: ModelParams, duration_s: float) -> mujoco.MjData:
     """State after ``duration_s`` [s] from the layout, standing (sprocket servo at 0 rad/s),
-    under the passive tensioner of ``params``, the pin slides' springs implicit as in the
-    plant's step; ParameterError naming the mechanics file on an initial penetration or on
-    MuJoCo warnings while settling."""
+    under the passive tensioner of ``params``, the pin slides' springs and the pin hinges'
+    torsional dampers implicit as in the plant's step; ParameterError naming the mechanics
+    file on an initial penetration or on MuJoCo warnings while settling."""
     equalise_link_weights(model)
     data = mujoco.MjData(model)
     pins = [model.geom(link_name(k) + "_pin").id for k in range(params.track.link_count)]
     foundation = Foundation(model, data, pins, FoundationLaw.from_params(params))
     slides = [j for j in pin_slide_ids(model, range(params.track.link_count)).values()
               if j >= 0]
-    springs = ImplicitSprings(model, data, slides)
+    springs = ImplicitSprings(model, data, slides,
+                              torsion_hinge_ids(model, range(params.track.link_count)))
     tensioner = model.actuator("tensioner").id
     t = params.tensioner
     model.actuator_biasprm[tensioner, :3] = (0.0, -t.stiffness_N_m, -t.damping_N_s_m)

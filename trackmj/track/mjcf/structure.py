@@ -19,8 +19,14 @@ link's ``body_invweight0`` at qpos0 and it differs with the link's place in its 
 generator's settle call it), so one solref per partner geom keeps every contact at its
 stated stiffness (:mod:`trackmj.track.mjcf.soft`). The revolution component of the idler force
 stays ≤ 4 % of the link-passing one at 1.0/1.5/2.0 m/s and the connect gaps ≤ 0.32 mm.
-The pins' torsional spring-damper (bushings) needs free links: their tendons join the links'
-pitch hinges, which chained links do not have.
+The pins' torsional spring-damper (bushings) follows the planar joint coordinates
+(:func:`_chain_torsion`): a chain's root turns by −(its pitch hinge) and each hinged link by
+−(its pin hinge) more, so the twist at a hinged pin is that hinge's angle from in-line (the
+spring and damper sit on the hinge joint, ``springref`` the layout's in-line angle; the
+step takes the damper into its mass matrix, :func:`torsion_hinge_ids`), and at a connect
+starting chain c+1 it is root pitch(c+1) − root pitch(c) − Σ pin hinges(c), a fixed tendon
+``pin_kk_torsion`` with coefficients ±1 (tested: a clamped strand bent by a couple M turns
+every pin by M/k_t).
 
 Track structure "slides": the chains above with every pin compliant on its own. Before each
 pin hinge a slide ``link_kk_stretch`` along the parent link's pitch carries that pin's
@@ -114,6 +120,15 @@ def pin_slide_ids(model: mujoco.MjModel, links: Iterable[int]) -> dict[int, int]
             for k in links}
 
 
+def torsion_hinge_ids(model: mujoco.MjModel, links: Iterable[int]) -> list[int]:
+    """Joint ids of the pin hinges ``link_kk_pin`` among ``links`` that carry a torsional
+    damper (bushings on chains or slides), for the step's implicit dampers
+    (:class:`trackmj.track.foundation.ImplicitSprings`); none without torsional damping."""
+    ids = (mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, link_name(k) + "_pin")
+           for k in links)
+    return [j for j in ids if j >= 0 and model.dof_damping[model.jnt_dofadr[j]] > 0.0]
+
+
 def hinged_pins(p: ModelParams) -> list[int]:
     """Pins that are hinges (every pin inside a chain; none for free links)."""
     starts = set(chain_starts(p))
@@ -126,15 +141,8 @@ def _floats(text: str) -> np.ndarray:
 
 def chain_links(root: ET.Element, p: ModelParams) -> None:
     """Hinge every link inside a chain to the link before it, for "slides" on a compliant
-    slide along the parent's pitch (see the module docstring); refuses the torsional
-    spring-damper of bushings (its tendons join pitch hinges that the chained links no
-    longer have)."""
-    joint = p.pin_joint
-    if joint.torsional_stiffness_N_m_rad > 0.0 or joint.torsional_damping_N_m_s_rad > 0.0:
-        raise p.origin.error(("track", "structure"), p.track.structure,
-                             f"does not take the [{p.pin_joint_table}] torsional "
-                             "spring-damper; use structure = \"free\" with it")
-
+    slide along the parent's pitch, and move the pins' torsional spring-damper onto the
+    chained coordinates (:func:`_chain_torsion`; see the module docstring)."""
     world = find(root, "worldbody")
     bodies = {b.get("name"): b for b in world.findall("body")}
     # world pose of every link at the layout, before any is re-parented
@@ -166,6 +174,42 @@ def chain_links(root: ET.Element, p: ModelParams) -> None:
     equality = find(root, "equality")
     for k in hinged_pins(p):
         equality.remove(find(equality, f"connect[@name='{pin_name(k)}']"))
+    _chain_torsion(root, p)
+
+
+def _chain_torsion(root: ET.Element, p: ModelParams) -> None:
+    """Rewrite the free links' torsion tendons ``pin_kk_torsion`` (pitch_k − pitch_{k−1},
+    ``springlength`` the in-line value) for the chains. A hinged pin's twist is its hinge
+    angle alone: the tendon becomes the hinge's own stiffness and damping about
+    ``springref`` = that in-line value (a joint damper inside a tree is implicit under
+    ``implicitfast``, a tendon's only on its same-tree entries). A connect's tendon keeps
+    +1 on its own chain's root pitch and replaces −1 on the previous chain's last link by
+    −1 on that chain's root pitch and on every pin hinge of the chain (each hinge turns its
+    child and all after it by −q about +y). No tendons (no torsion): nothing to do."""
+    tendons = root.find("tendon")
+    if tendons is None:
+        return
+    links = find(root, "worldbody")
+    hinges = {attribute(j, "name"): j for j in links.iter("joint")}
+    starts = chain_starts(p)
+    n = p.track.link_count
+    for k in hinged_pins(p):
+        fixed = find(tendons, f"fixed[@name='{pin_name(k)}_torsion']")
+        hinge = hinges[link_name(k) + "_pin"]
+        hinge.set("stiffness", attribute(fixed, "stiffness"))
+        hinge.set("damping", attribute(fixed, "damping"))
+        hinge.set("springref", attribute(fixed, "springlength"))
+        tendons.remove(fixed)
+    for c, start in enumerate(starts):
+        first = starts[c - 1]   # the previous chain's root (the last chain for c = 0)
+        last = (start - 1) % n
+        fixed = find(tendons, f"fixed[@name='{pin_name(start)}_torsion']")
+        fixed.remove(find(fixed, f"joint[@joint='{link_name(last)}_pitch']"))
+        ET.SubElement(fixed, "joint", joint=link_name(first) + "_pitch", coef="-1")
+        for k in range(first + 1, last + 1):
+            ET.SubElement(fixed, "joint", joint=link_name(k) + "_pin", coef="-1")
+    if not len(tendons):
+        root.remove(tendons)
 
 
 def equalise_link_weights(model: mujoco.MjModel) -> None:
