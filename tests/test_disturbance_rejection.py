@@ -116,14 +116,16 @@ def test_the_sagging_supply_still_holds_the_nominal_tension(machine: str) -> Non
     it: two 40 mm heads hold M113's 20 kN at 8.08 MPa, two 32 mm ones compact3's 13 kN at
     8.20 MPa (F + A_r·p_t over A_h; 22.3 and 14.3 kN at 9 MPa with no flow). The governor
     leaves 0.5 MPa across the metering (21.1 and 13.5 kN), so over the drop's last 3 s the
-    tension's mean is within 2 % of the reference (1 MPa left: 19.8 and 12.7 kN, 2-3.7 % low)."""
+    tension's mean is within 2 % of the reference (1 MPa left: 19.8 and 12.7 kN, 2-3.7 % low).
+    The supply sits at the drop's 9 MPa on average: the head flow's ripple moves it (M113 on
+    its bushings, 1.63e-7 m² head branches: 9.06 MPa mean, 8.34-9.69 MPa, 0.26 MPa rms)."""
     result = simulate("W4", machine=machine, duration=10.0,
                       set={"scenario.supply.drops.0.start_s": 2.0,
                            "scenario.supply.drops.0.end_s": 9.0})
     cols = result.columns()
     t, f, ref = cols["t_s"], cols["tension_N"], cols["tension_ref_N"]
     sag = (t >= 6.0) & (t < 9.0)
-    assert np.all(cols["p_supply_Pa"][sag] < 9.5e6)          # the supply did sag
+    assert np.mean(cols["p_supply_Pa"][sag]) < 9.2e6        # the supply did sag
     nominal = float(np.mean(ref[sag]))
     assert abs(np.mean(f[sag]) - nominal) < 0.02 * nominal
     assert result.metrics["mujoco_warnings"] == 0

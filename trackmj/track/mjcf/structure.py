@@ -181,8 +181,8 @@ def _chain_torsion(root: ET.Element, p: ModelParams) -> None:
     """Rewrite the free links' torsion tendons ``pin_kk_torsion`` (pitch_k − pitch_{k−1},
     ``springlength`` the in-line value) for the chains. A hinged pin's twist is its hinge
     angle alone: the tendon becomes the hinge's own stiffness and damping about
-    ``springref`` = that in-line value (a joint damper inside a tree is implicit under
-    ``implicitfast``, a tendon's only on its same-tree entries). A connect's tendon keeps
+    ``springref`` = that in-line value (the plant's step takes a joint's damper into its
+    mass matrix, :func:`torsion_hinge_ids`; a tendon's it cannot). A connect's tendon keeps
     +1 on its own chain's root pitch and replaces −1 on the previous chain's last link by
     −1 on that chain's root pitch and on every pin hinge of the chain (each hinge turns its
     child and all after it by −q about +y). No tendons (no torsion): nothing to do."""
