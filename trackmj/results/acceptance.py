@@ -57,8 +57,10 @@ def drive_floor_N(drive_torque_N_m: np.ndarray, w: MetricWindows) -> np.ndarray 
     balance T₁ − T₂ = T/r with the slack side at T₂ ≥ 0 leaves the tight side at least
     T/r, and a frictionless idler passes it to both its strands, so no tensioner can hold
     the idler below G·T/r = g·max(σ·T, 0) (statics: the strands' weight and inertia, which
-    add to it, neglected; :mod:`trackmj.machines.drive_load`). None if the windows carry no
-    drive load (g, σ)."""
+    add to it, neglected; :mod:`trackmj.machines.drive_load`). It takes strands that carry
+    tension only: a track with bending stiffness passes part of T through its bending
+    moments (M113 on its rubber bushings: the 0.5 s mean fell to 0.92 of it on W2's start
+    ramp, tests/test_drive_load.py). None if the windows carry no drive load (g, σ)."""
     if w.drive_load_gain_1_m is None or w.drive_tight_sign is None:
         return None
     torque = np.asarray(drive_torque_N_m, dtype=float)

@@ -88,7 +88,8 @@ class Verdict:
             pull_kN = self.drive_floor_at_max_N / 1e3
             forced = (f"; the drive's pull through the idler was {pull_kN:.1f} kN there "
                       f"({self.mean_max_s:.2f} s; G/r × the drive torque, the slack side "
-                      "unloaded), above the band: no tensioner could keep the mean in"
+                      "unloaded, strands carrying tension only), above the band: no "
+                      "tensioner could keep the mean in"
                       if self.band_forced_by_drive else "")
             why.append(f"band: {span}, outside {band}{forced}")
         if "recovery" in self.broken:
