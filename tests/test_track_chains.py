@@ -374,3 +374,32 @@ def test_a_hitch_load_reaches_the_idler_as_on_free_links_when_every_pin_is_compl
     assert free[6126.4] < -1700.0                   # the near-slack regime
     assert (abs(slides[6126.4] - free[6126.4])
             < 0.5 * abs(change["chains"][6126.4] - free[6126.4]))
+
+
+def test_a_bushed_track_steps_in_mujocos_own_integrator_as_its_viewer_does() -> None:
+    """M113's MJCF (rubber bushings on slides, the hinges' torsional dampers 10 N·m·s/rad)
+    stepped by ``mj_step`` alone, as MuJoCo's viewer steps it, its sprocket ramped to 2 m/s
+    over 1 s: 1.5 s without a bad-acceleration warning (without the hinges' armature h·B it
+    diverged at 1.2 s: MuJoCo's implicit damper is not seen by its constraint solver). The
+    plant's own step takes that term into its mass matrix itself and zeroes the armature."""
+    from trackmj.machines.assembly import resolve
+    from trackmj.machines.track_plant import load_plant, mechanics, model_mjcf
+
+    machine = resolve("m113")
+    params = mechanics(machine)
+    model = mujoco.MjModel.from_xml_string(model_mjcf(params, machine))
+    hinge = model.jnt_dofadr[model.joint("link_01_pin").id]
+    h, damping = model.opt.timestep, params.pin_joint.torsional_damping_N_m_s_rad
+    assert model.dof_damping[hinge] == damping > 0.0
+    assert model.dof_armature[hinge] == pytest.approx(h * damping)
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, 0)
+    drive = model.actuator("sprocket_drive").id
+    radius = params.sprocket_pitch_radius_m
+    for k in range(1500):
+        data.ctrl[drive] = min(1.0, k * h) * 2.0 / radius
+        mujoco.mj_step(model, data)
+    assert data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number == 0
+    assert np.isfinite(data.qvel).all()
+    plant = load_plant(machine="m113")
+    assert plant.model.dof_armature[hinge] == 0.0
