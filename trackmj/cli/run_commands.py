@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from trackmj.cli.run_folder import refuse_other_inputs, run_folder
 from trackmj.cli.summary import (
@@ -30,7 +30,7 @@ from trackmj.sim.controllers import CONTROLLERS
 from trackmj.sim.registry import ARCHITECTURES, REFERENCE_ARCHITECTURE
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Mapping, Sequence
 
     from trackmj.results.measured import MeasuredLog
     from trackmj.results.store import Result
@@ -236,7 +236,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     """``trackmj sweep``: every point of a sweep spec, resumed, or ``--plot`` to redraw its
     figures; exit code 1 if a run failed."""
     # start-up: --help and argument errors must not import MuJoCo
-    from trackmj.study.campaign import RESULTS
+    from trackmj.study.campaign import RESULTS, read_rows
     from trackmj.study.sweep import plot_sweep, summarize_sweep, summary_markdown, sweep
 
     if args.plot is not None:
@@ -252,7 +252,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(summary_markdown(summarize_sweep(args.plot, machine=args.machine)))
         figures = plot_sweep(args.plot, machine=args.machine, diagnostics=args.diagnostics)
         print(f"summary.md, summary.csv, {_count(len(figures), 'figure')} -> {Path(args.plot)}")
-        _print_rows_end_stop(Path(args.plot) / RESULTS)
+        _print_rows_end_stop(read_rows(Path(args.plot) / RESULTS))
         return 0
     if args.spec is None:
         raise ValueError("sweep needs a spec file (or --plot DIR); see 'trackmj sweep -h'")
@@ -263,17 +263,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                     diagnostics=args.diagnostics)
     print(summary_markdown(summary.table))
     print(summary)
-    _print_rows_end_stop(summary.results)
+    _print_rows_end_stop(read_rows(summary.results))
     print(f"summary.md, summary.csv, {_count(len(summary.figures), 'figure')} -> {out}")
     return 1 if summary.failed else 0
 
 
-def _print_rows_end_stop(results: Path) -> None:
-    """On stderr, one line if runs of the campaign ``results`` (a results.parquet) settled
+def _print_rows_end_stop(rows: Sequence[Mapping[str, Any]]) -> None:
+    """On stderr, one line if runs of a campaign's ``rows`` (results.parquet's) settled
     with the idler carrier on an end stop (:func:`trackmj.cli.summary.end_stop_rows_line`)."""
-    from trackmj.study.campaign import read_rows
-
-    line = end_stop_rows_line(read_rows(results))
+    line = end_stop_rows_line(rows)
     if line is not None:
         print(line, file=sys.stderr)
 
