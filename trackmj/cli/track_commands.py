@@ -179,7 +179,6 @@ def _geometry_rows(plant: TrackPlant) -> list[tuple[str, str]]:
     return rows
 
 
-
 def _upper_strand_supports(plant: TrackPlant) -> list[tuple[str, float, float]]:
     """What carries the upper strand at its current state besides its end wheels: (body,
     x [m] of the pin it carries in the layout frame, contact normal force [N]) of every

@@ -185,10 +185,10 @@ def _chain_torsion(root: ET.Element, p: ModelParams) -> None:
     mass matrix, :func:`torsion_hinge_ids`; a tendon's it cannot; for MuJoCo's own stepping,
     its viewer, the hinge carries that term h·B as an armature, which the plant's step
     zeroes: without it MuJoCo's implicit damper diverges, M113 driven at 2 m/s at 1.2 s).
-    A connect's tendon keeps
-    +1 on its own chain's root pitch and replaces −1 on the previous chain's last link by
-    −1 on that chain's root pitch and on every pin hinge of the chain (each hinge turns its
-    child and all after it by −q about +y). No tendons (no torsion): nothing to do."""
+    A connect's tendon keeps +1 on its own chain's root pitch and replaces −1 on the
+    previous chain's last link by −1 on that chain's root pitch and on every pin hinge of
+    the chain (each hinge turns its child and all after it by −q about +y). No tendons (no
+    torsion): nothing to do."""
     tendons = root.find("tendon")
     if tendons is None:
         return
