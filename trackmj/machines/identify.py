@@ -192,9 +192,9 @@ def fit_modal(freq_Hz: np.ndarray, compliance: np.ndarray) -> tuple[ModalTerm, .
 def _settled_stroke(plant, force_N: float, settle_s: float) -> float:
     """Mean stroke [m] over 0.3 s after ``settle_s`` [s] at a constant damped force."""
     element = ConstantForce(force_N, damping_N_s_m=2e4)
-    plant.run(element, settle_s)
+    plant.run(element, settle_s, park=False)
     samples: list[float] = []
-    plant.run(element, 0.3, 0.0, lambda pl: samples.append(pl.stroke_m))
+    plant.run(element, 0.3, 0.0, lambda pl: samples.append(pl.stroke_m), park=False)
     return float(np.mean(samples))
 
 
@@ -203,7 +203,9 @@ def identify_idler(make_plant: Callable[[], TrackPlant], force_low_N: float = 12
                    excitation_s: float = 8.0, band_Hz: tuple[float, float] = (1.0, 50.0),
                    amplitude_N: float = 1_500.0, seed: int = 0,
                    min_mass_kg: float = 1e-3) -> EquivalentIdler:
-    """Identify the equivalent idler on a standing track (sprocket held at 0 rad/s);
+    """Identify the equivalent idler on a standing track, its sprocket held at 0 rad/s by
+    the drive's velocity servo with the parking brake released (the sprocket's boundary
+    condition when driving, where the controllers use the model);
     IdentificationError if the stroke does not grow between the force levels or the
     single-mode fit is none (:func:`check_single_dof`).
 
@@ -226,7 +228,8 @@ def identify_idler(make_plant: Callable[[], TrackPlant], force_low_N: float = 12
     _settled_stroke(plant, mean, settle_s)
     force = mean + multisine(excitation_s, band_Hz, amplitude_N, seed)
     strokes: list[float] = []
-    plant.run(ForceHistory(force), excitation_s, 0.0, lambda pl: strokes.append(pl.stroke_m))
+    plant.run(ForceHistory(force), excitation_s, 0.0, lambda pl: strokes.append(pl.stroke_m),
+              park=False)
     freq, compliance, coherence = frequency_response(force, np.array(strokes), band_Hz)
     mass, damping = fit_single_dof(freq, compliance, stiffness, min_mass_kg)
     omega = 2.0 * math.pi * freq

@@ -121,6 +121,21 @@ class SprocketParams(Parameters):
 
 
 @dataclass(frozen=True)
+class ParkingBrakeParams(Parameters):
+    """The drive's spring-applied parking brake, applied while the sprocket speed command
+    is zero (the travel control in neutral releases its pressure): at the sprocket, a
+    torsional spring (the drive line between the brake and the sprocket) to an anchor
+    angle that slips once the spring carries the holding torque."""
+
+    holding_torque_N_m: float = param(0.0, 1e7, open_low=True, unit="N·m",
+                                      doc="torque the brake holds at the sprocket before "
+                                          "it slips")
+    drive_line_stiffness_N_m_rad: float = param(1e3, 1e9, unit="N·m/rad",
+                                                doc="torsional stiffness between the "
+                                                    "brake and the sprocket")
+
+
+@dataclass(frozen=True)
 class IdlerParams(Parameters):
     radius_m: float = param(0.02, 1.0)
     x_m: float = param(-10.0, 10.0)
@@ -244,6 +259,10 @@ class ModelParams(Parameters):
     bushings: BushingParams
     tensioner: PassiveTensionerParams
     solver: SolverParams
+    parking_brake: ParkingBrakeParams | None = param(  # noqa: RUF009 (param() returns a dataclasses.Field)
+        default=None, doc="the drive's parking brake; optional: none, a zero speed "
+                          "command then holds the sprocket through the drive's velocity "
+                          "servo only, which yields under a holding torque (creeps)")
     sources: Mapping[str, str] = sources_field()
     origin: Location = origin_field()  # noqa: RUF009 (returns a dataclasses.Field)
 
@@ -304,6 +323,11 @@ def _check_consistency(p: ModelParams, at: Location) -> None:
                        f"a third of a link ({p.track.link_mass_kg:g} kg) at timestep "
                        f"{p.simulation.timestep_s:g} s")
     _check_layout(p, at)
+    brake, limit = p.parking_brake, p.sprocket.drive_torque_limit_N_m
+    if brake is not None and brake.holding_torque_N_m > limit:
+        raise at.error(("parking_brake", "holding_torque_N_m"), brake.holding_torque_N_m,
+                       f"must be <= [sprocket] drive_torque_limit_N_m = {limit:g} N·m (the "
+                       "brake acts through the drive, whose torque limit bounds it)")
 
 
 def _check_spacing(at: Location, table: str, xs: Sequence[float], gap: float) -> None:

@@ -204,6 +204,9 @@ class TrackPlant:
     properties (``stroke_m``, ``stroke_velocity_m_s``, ``idler_force_N``,
     ``chassis_acc_z_m_s2``, ``closure_error_m``, ``warning_count``).
 
+    ``parked``: the machine's parking brake ([parking_brake] of its mechanics file) is
+    applied; a zero speed command applies it, any other releases it.
+
     Parameters
     ----------
     model : mujoco.MjModel
@@ -247,6 +250,15 @@ class TrackPlant:
         self._drive_gain = float(m.actuator_gainprm[self._drive, 0])   # kv [N·m·s/rad], gear 1
         self._drive_limit = (float(m.actuator_forcerange[self._drive, 1])
                              if m.actuator_forcelimited[self._drive] else math.inf)
+        # the parking brake at a zero speed command: the servo's command becomes
+        # (k_b/kv)·(anchor − θ), so it applies k_b·(anchor − θ) − kv·ω; the anchor slips
+        # to keep k_b·|anchor − θ| within the holding torque (none: ratio 0)
+        self._sprocket_q = int(m.jnt_qposadr[m.joint("sprocket_hinge").id])
+        brake = params.parking_brake
+        self._brake_ratio = (0.0 if brake is None
+                             else brake.drive_line_stiffness_N_m_rad / self._drive_gain)
+        self._brake_slip_rad = (0.0 if brake is None else
+                                brake.holding_torque_N_m / brake.drive_line_stiffness_N_m_rad)
         n = params.track.link_count
         self.link_count = n
         self._link_body = np.array([m.body(link_name(k)).id for k in range(n)])
@@ -319,6 +331,8 @@ class TrackPlant:
         self.last_law = None
         self._speed_command = 0.0
         self._hitch_loaded = False
+        self.parked = self._brake_ratio > 0.0
+        self._brake_anchor = float(self.data.qpos[self._sprocket_q])
         mujoco.mj_forward(self.model, self.data)
         # the ground acting at this state as in a step (the foundation's wrenches), then
         # everything derived again with it
@@ -384,6 +398,11 @@ class TrackPlant:
         return float(self.data.qvel[self._sprocket_v])
 
     @property
+    def sprocket_angle_rad(self) -> float:
+        """Sprocket angle [rad], the sense that drives the vehicle forward positive."""
+        return float(self._qpos[self._sprocket_q])
+
+    @property
     def drive_torque_N_m(self) -> float:
         """Torque of the sprocket drive on the sprocket over the last step [N·m], > 0 driving
         the vehicle forward: the velocity servo's kv·(ω_cmd − ω) at the end-of-step speed
@@ -398,11 +417,32 @@ class TrackPlant:
         """Sprocket pitch-line speed [m/s] (positive drives the vehicle forward)."""
         return self.sprocket_speed_rad_s * self.params.sprocket_pitch_radius_m
 
-    def set_track_speed(self, speed_m_s: float) -> None:
-        """Command the sprocket velocity servo to a pitch-line speed [m/s]."""
+    def set_track_speed(self, speed_m_s: float, *, park: bool = True) -> None:
+        """Command the sprocket velocity servo to a pitch-line speed [m/s]. Zero applies the
+        machine's parking brake where it has one (:attr:`parked`), anchored at the
+        sprocket's angle now, unless ``park`` is False (the servo then holds zero speed as
+        it holds any speed when driving); any other speed releases it."""
         if not math.isfinite(speed_m_s):
             raise ValueError(f"track speed must be finite, got {speed_m_s!r}")
+        if speed_m_s == 0.0 and park and self._brake_ratio > 0.0:
+            if not self.parked:
+                self.parked = True
+                self._brake_anchor = float(self._qpos[self._sprocket_q])
+            return
+        self.parked = False
         self._ctrl[self._drive] = speed_m_s / self.params.sprocket_pitch_radius_m
+
+    @property
+    def parking_brake_anchor_rad(self) -> float:
+        """Sprocket angle [rad] the applied parking brake holds to (where it was applied,
+        moved by its slips); meaningless while :attr:`parked` is False."""
+        return self._brake_anchor
+
+    @property
+    def parking_brake_windup_rad(self) -> float:
+        """Twist of the drive line against the applied parking brake [rad] (anchor − θ,
+        > 0 while it holds the sprocket against turning backward); 0 when released."""
+        return self._brake_anchor - float(self._qpos[self._sprocket_q]) if self.parked else 0.0
 
     def set_hitch_force(self, pull_N: float, down_N: float) -> None:
         """Load on the rear hitch (site ``rear_hitch``) in the chassis frame: ``pull_N`` [N]
@@ -663,6 +703,8 @@ class TrackPlant:
             "sprocket_body": np.array([self._sprocket_body]),
             "drive_gain": np.array([self._drive_gain]),
             "drive_limit": np.array([self._drive_limit]),
+            "sprocket_q": np.array([self._sprocket_q]),
+            "parking_brake": np.array([self._brake_ratio, self._brake_slip_rad]),
             "stroke_offset_m": np.array([self._stroke_offset_m]),
             "pitch_radius_m": np.array([self.params.sprocket_pitch_radius_m]),
             "ride_height_m": np.array([self.params.chassis.ride_height_m]),
@@ -706,10 +748,19 @@ class TrackPlant:
         self._ctrl[self._tensioner] = force
         self._biasprm[self._tensioner, 2] = damping
         self.last_law = law   # what idler_force_N reads, in on_substep too
+        parked = self.parked
+        if parked:
+            self._ctrl[self._drive] = self._brake_ratio * (
+                self._brake_anchor - self._qpos[self._sprocket_q])
         for _ in range(self.substeps):
             foundation_step(m, d, self.foundation, self.springs, self._saved_state)
             if on_substep is not None:
                 on_substep()
+        if parked:   # the brake slips: its anchor follows, the spring at the holding torque
+            angle = float(self._qpos[self._sprocket_q])
+            if abs(self._brake_anchor - angle) > self._brake_slip_rad:
+                self._brake_anchor = angle + math.copysign(self._brake_slip_rad,
+                                                           self._brake_anchor - angle)
         stroke = self.stroke_m
         if self.substeps == 1:
             velocity = self.stroke_velocity_m_s
@@ -721,12 +772,14 @@ class TrackPlant:
 
     def run(self, element: TensionerElement, duration_s: float,
             track_speed: Callable[[float], float] | float = 0.0,
-            on_step: Callable[[TrackPlant], None] | None = None) -> None:
-        """Step for ``duration_s`` with a track-speed command [m/s] (constant or f(t))."""
+            on_step: Callable[[TrackPlant], None] | None = None, *,
+            park: bool = True) -> None:
+        """Step for ``duration_s`` with a track-speed command [m/s] (constant or f(t));
+        ``park`` as :meth:`set_track_speed`'s."""
         steps = round(duration_s / COUPLING_STEP_S)
         speed = track_speed if callable(track_speed) else (lambda _t: track_speed)
         for _ in range(steps):
-            self.set_track_speed(speed(self.time_s))
+            self.set_track_speed(speed(self.time_s), park=park)
             self.step(element)
             if on_step is not None:
                 on_step(self)

@@ -470,12 +470,14 @@ typedef struct {
     int32_t out_bool[N_OUT_BOOL];
     double law_force, law_damping;  /* the last step's force law */
     double speed_command;           /* the sprocket speed command in effect [m/s] */
+    double brake_anchor;            /* sprocket angle the parking brake holds to [rad] */
+    int32_t parked;                 /* the parking brake is applied */
     int32_t hitch_loaded;
     int32_t initialized;
     double kinematics[N_KINEMATICS];
 } Scalars;
 
-#define STATE_MAGIC 0x74726b6d6a310001ULL   /* "trkmj1" + layout 1 */
+#define STATE_MAGIC 0x74726b6d6a310002ULL   /* "trkmj1" + layout 2 */
 
 struct Engine {
     mjModel *m;
@@ -486,9 +488,10 @@ struct Engine {
     double *redo;           /* mj_stateSize(REDO_STATE) */
     int substeps;
     /* indices (TrackPlant's) */
-    int slide_q, slide_v, sprocket_v, chassis_q[3], chassis_v[3], tensioner, drive;
+    int slide_q, slide_v, sprocket_q, sprocket_v, chassis_q[3], chassis_v[3], tensioner, drive;
     int hitch_site, chassis_body, sprocket_body;
     double drive_gain, drive_limit, stroke_offset_m, pitch_radius_m, ride_height_m;
+    double brake_ratio, brake_slip_rad;   /* parking brake: k_b/kv [1/s], slip angle [rad] */
     int n;                  /* pins (= links) */
     int *link_body, *pin_geom, *connect_of_pin;
     int *stretch_qpos;      /* structure "slides": qpos of every pin slide */
@@ -610,10 +613,12 @@ void engine_free(Engine *e) {
 static int load_configuration(Engine *e, const Cfg *cfg) {
     const mjModel *m = e->m;
     Foundation *f = &e->f;
+    double brake[2];
     if (cfg_into_int(e, cfg, "substeps", &e->substeps, 1)
         || cfg_into_int(e, cfg, "pins", &e->n, 1)
         || cfg_into_int(e, cfg, "slide_q", &e->slide_q, 1)
         || cfg_into_int(e, cfg, "slide_v", &e->slide_v, 1)
+        || cfg_into_int(e, cfg, "sprocket_q", &e->sprocket_q, 1)
         || cfg_into_int(e, cfg, "sprocket_v", &e->sprocket_v, 1)
         || cfg_into_int(e, cfg, "chassis_q", e->chassis_q, 3)
         || cfg_into_int(e, cfg, "chassis_v", e->chassis_v, 3)
@@ -624,6 +629,7 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
         || cfg_into_int(e, cfg, "sprocket_body", &e->sprocket_body, 1)
         || cfg_into(e, cfg, "drive_gain", &e->drive_gain, 1)
         || cfg_into(e, cfg, "drive_limit", &e->drive_limit, 1)
+        || cfg_into(e, cfg, "parking_brake", brake, 2)
         || cfg_into(e, cfg, "stroke_offset_m", &e->stroke_offset_m, 1)
         || cfg_into(e, cfg, "pitch_radius_m", &e->pitch_radius_m, 1)
         || cfg_into(e, cfg, "ride_height_m", &e->ride_height_m, 1)
@@ -636,6 +642,8 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
         || cfg_into_int(e, cfg, "foundation_width", &f->width, 1)
         || cfg_into(e, cfg, "foundation_law", f->law, N_LAW))
         return -1;
+    e->brake_ratio = brake[0];
+    e->brake_slip_rad = brake[1];
     int n = e->n, D = f->width;
     f->n = n;
     e->connects = cfg_count(cfg, "pins_per_connect");
@@ -661,6 +669,7 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
     e->initial_mj = cfg_doubles(e, cfg, "initial_state", state_size);
     e->initial_memory = cfg_doubles(e, cfg, "initial_memory", N_MEMORY * n);
     double initial_law[2], initial_out[N_OUT_REAL + N_OUT_BOOL], kinematics[N_KINEMATICS];
+    double initial_brake[2];
     if (!e->link_body || !e->pin_geom || !e->connect_of_pin || !e->pins_per_connect
         || !e->stretch_qpos || !f->spring_dofs || !f->spring_mass_index
         || !f->spring_h_stiffness
@@ -668,7 +677,8 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
         || !e->initial_mj || !e->initial_memory || e->hull_n < 3 || f->line_n < 2
         || cfg_into(e, cfg, "initial_law", initial_law, 2)
         || cfg_into(e, cfg, "initial_outputs", initial_out, N_OUT_REAL + N_OUT_BOOL)
-        || cfg_into(e, cfg, "initial_kinematics", kinematics, N_KINEMATICS))
+        || cfg_into(e, cfg, "initial_kinematics", kinematics, N_KINEMATICS)
+        || cfg_into(e, cfg, "initial_brake", initial_brake, 2))
         return -1;
     e->has_hinged = 0;
     for (int k = 0; k < n; k++)
@@ -698,6 +708,8 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
     for (int i = 0; i < N_OUT_REAL; i++) s0->out_real[i] = initial_out[i];
     for (int i = 0; i < N_OUT_BOOL; i++) s0->out_bool[i] = initial_out[N_OUT_REAL + i] != 0.0;
     memcpy(s0->kinematics, kinematics, sizeof kinematics);
+    s0->parked = initial_brake[0] != 0.0;
+    s0->brake_anchor = initial_brake[1];
     return 0;
 }
 
@@ -1107,8 +1119,16 @@ EngineStatus engine_step(Engine *e, long steps) {
     char why[256];
     for (; done < steps; done++) {
         /* the scenario inputs (TrackPlant.apply) */
-        if (speed != e->s.speed_command) {
-            d->ctrl[e->drive] = speed / e->pitch_radius_m;
+        if (speed != e->s.speed_command) {   /* TrackPlant.set_track_speed */
+            if (speed == 0.0 && e->brake_ratio > 0.0) {
+                if (!e->s.parked) {
+                    e->s.parked = 1;
+                    e->s.brake_anchor = d->qpos[e->sprocket_q];
+                }
+            } else {
+                e->s.parked = 0;
+                d->ctrl[e->drive] = speed / e->pitch_radius_m;
+            }
             e->s.speed_command = speed;
         }
         if (pull != 0.0 || down != 0.0 || e->s.hitch_loaded) {
@@ -1119,7 +1139,16 @@ EngineStatus engine_step(Engine *e, long steps) {
         double stroke0 = e->stroke_offset_m + d->qpos[e->slide_q];
         d->ctrl[e->tensioner] = force;
         m->actuator_biasprm[mjNBIAS * e->tensioner + 2] = slope;
+        const int parked = e->s.parked;
+        if (parked)
+            d->ctrl[e->drive] = e->brake_ratio * (e->s.brake_anchor - d->qpos[e->sprocket_q]);
         for (int sub = 0; sub < e->substeps; sub++) foundation_step(m, d, &e->f, e->redo);
+        if (parked) {   /* the brake slips: its anchor follows, the spring at the limit */
+            double angle = d->qpos[e->sprocket_q];
+            if (fabs(e->s.brake_anchor - angle) > e->brake_slip_rad)
+                e->s.brake_anchor = angle + copysign(e->brake_slip_rad,
+                                                     e->s.brake_anchor - angle);
+        }
         e->s.law_force = force;
         e->s.law_damping = slope;
         e->s.steps++;
