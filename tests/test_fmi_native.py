@@ -53,6 +53,7 @@ DAMPING_N_S_M = 2.0e4
 """The W1-like law F = F0(t) − c·v the comparisons drive: F0 swinging ±1 kN at 1 Hz about
 13 kN, c = 20 kN·s/m (the order of the hydraulic port's Z in W1)."""
 VR = {"force_N": 1, "force_dv_N_s_m": 2, "track_speed_m_s": 3, "hitch_pull_N": 4,
+      "drive_torque_N_m": 14,
       "stroke_m": 10, "velocity_m_s": 11, "tension_N": 12, "upper_strand_tension_N": 15,
       "closure_error_m": 18, "ground_friction": 34, "derailed": 23}
 
@@ -138,19 +139,23 @@ def python_plant(terrain: str = "flat") -> Any:
     return settled_track(setup, FORCE_N)
 
 
-def drive(step: Callable[[float, float], tuple[float, float, float]], seconds: float,
-          speed_m_s: float = 1.5) -> np.ndarray:
-    """(stroke, velocity, tension) after every 1 ms step of ``step(F0, speed)``."""
-    rows = [step(force_at(k * 1e-3), speed_m_s) for k in range(round(seconds / 1e-3))]
+def drive(step: Callable[[float, float], tuple[float, ...]], seconds: float,
+          speed_m_s: float = 1.5, parked_s: float = 0.0) -> np.ndarray:
+    """(stroke, velocity, tension, ...) after every 1 ms step of ``step(F0, speed)``: speed 0
+    (the parking brake applied) for ``parked_s`` [s], then ``speed_m_s`` [m/s]."""
+    rows = [step(force_at(k * 1e-3), 0.0 if k * 1e-3 < parked_s else speed_m_s)
+            for k in range(round(seconds / 1e-3))]
     return np.array(rows)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("which", ["fmi2", "road", "grade"])
 def test_the_fmu_steps_as_the_python_plant(native, which) -> None:
-    """5 s at 1.5 m/s under the W1-like law, flat ground, W2's ISO road and a 1 in 5 grade:
-    stroke, velocity and tension equal the Python plant's to 1e-9 relative."""
+    """5 s at 1.5 m/s under the W1-like law, flat ground, W2's ISO road and a 1 in 5 grade
+    (there parked for its first second, the parking brake holding): stroke, velocity and
+    tension equal the Python plant's to 1e-9 relative."""
     plant = python_plant({"fmi2": "flat", "road": "W2", "grade": str(CLIMB)}[which])
+    parked_s = 1.0 if which == "grade" else 0.0
 
     def python_step(force: float, speed: float) -> tuple[float, float, float]:
         plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))
@@ -167,12 +172,52 @@ def test_the_fmu_steps_as_the_python_plant(native, which) -> None:
             fmu.step()
             return fmu.get("stroke_m"), fmu.get("velocity_m_s"), fmu.get("tension_N")
 
-        ours = drive(fmu_step, 5.0)
+        ours = drive(fmu_step, 5.0, parked_s=parked_s)
         fmu.close()
-    theirs = drive(python_step, 5.0)
+    theirs = drive(python_step, 5.0, parked_s=parked_s)
     scale = np.abs(theirs).max(axis=0)
     assert np.abs(ours - theirs).max(axis=0) / scale == pytest.approx(0.0, abs=1e-9)
     assert theirs[:, 1].std() > 1e-3   # the comparison saw a moving idler
+
+
+@pytest.mark.slow
+def test_a_slipping_parking_brake_steps_as_the_python_plant(tmp_path) -> None:
+    """LF1352 with a 300 N·m parking brake parked on the 1 in 5 grade, which asks ~0.6
+    kN·m of it: 1 s parked (the brake slipping, the track rolling back), then 1 s at
+    1.5 m/s; stroke, velocity, tension and the drive torque equal the Python plant's to 1e-9
+    relative, and the parked second rolled back."""
+    text = (Path(__file__).resolve().parents[1] / "models" / "lf1352.toml").read_text()
+    line = next(x for x in text.splitlines() if x.startswith("holding_torque_N_m = "))
+    model = tmp_path / "lf1352_weak_brake.toml"
+    model.write_text(text.replace(line, "holding_torque_N_m = 300.0"))
+    fmu_path = export_track(tmp_path / "weak.fmu", force_N=FORCE_N, model=str(model),
+                            terrain=str(CLIMB), platforms=("linux",)).path
+    plant = settled_track(prepare(str(CLIMB), model=model), FORCE_N)
+
+    def python_step(force: float, speed: float) -> tuple[float, ...]:
+        plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))
+        plant.step(ConstantForce(force, DAMPING_N_S_M))
+        return (plant.stroke_m, plant.stroke_velocity_m_s, plant.idler_force_N,
+                plant.drive_torque_N_m, plant.sprocket_speed_rad_s)
+
+    with slave(fmu_path) as fmu:
+        fmu.start()
+        fmu.set("force_dv_N_s_m", -DAMPING_N_S_M)
+
+        def fmu_step(force: float, speed: float) -> tuple[float, ...]:
+            fmu.set("force_N", force)
+            fmu.set("track_speed_m_s", speed)
+            fmu.step()
+            return (fmu.get("stroke_m"), fmu.get("velocity_m_s"), fmu.get("tension_N"),
+                    fmu.get("drive_torque_N_m"), math.nan)
+
+        ours = drive(fmu_step, 2.0, parked_s=1.0)
+        fmu.close()
+    theirs = drive(python_step, 2.0, parked_s=1.0)
+    scale = np.abs(theirs[:, :4]).max(axis=0)
+    assert np.abs(ours[:, :4] - theirs[:, :4]).max(axis=0) / scale == pytest.approx(0.0,
+                                                                                  abs=1e-9)
+    assert theirs[500:1000, 4].mean() < -1e-3   # parked, the sprocket turned back: slipping
 
 
 @pytest.mark.slow

@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypedDict
 
-import mujoco
 import numpy as np
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Status
@@ -48,6 +47,7 @@ from trackmj.sim.architectures import Assembly, assemble
 from trackmj.sim.observers import PhysicsGuard, PhysicsLimits, capture_mujoco_warnings
 from trackmj.sim.run import physics_limits
 from trackmj.sim.setup import prepare
+from trackmj.track.plant import PlantSnapshot
 from trackmj.version import __version__
 
 if TYPE_CHECKING:
@@ -178,11 +178,6 @@ def _scenario_refused(value: str, flat: bool) -> str | None:
             f"({', '.join(builtin)}) or an existing scenario file *.toml")
 
 
-TrackState = tuple[Any, ...]
-"""A saved track: MjData copy, actuator bias parameters, the ground's memory (shear
-displacements, contact history), clock, last force law, speed command, hitch flag."""
-
-
 @dataclass(frozen=True)
 class PlantState:
     """A saved plant FMU (opaque to the importer): the parameters it was built from, the
@@ -191,7 +186,7 @@ class PlantState:
     it stopped (None: running)."""
 
     parameters: dict[str, str | int]
-    track: TrackState
+    track: PlantSnapshot
     tensioner: HydraulicTensioner
     sensors: Sensors
     mode: int | None
@@ -424,10 +419,8 @@ class PlantSlave(Fmi2Slave):
             self._error("fmi2GetFMUstate before initialization ended: no state to save")
             return None
         plant, element = built.track, built.element
-        track = (copy.copy(plant.data), plant.model.actuator_biasprm.copy(),
-                 plant.foundation.memory.copy(), plant.time_s, plant.last_law,
-                 plant._speed_command, plant._hitch_loaded)
-        return PlantState(dict(self._parameters), track, copy.deepcopy(element.tensioner),
+        return PlantState(dict(self._parameters), plant.snapshot(),
+                          copy.deepcopy(element.tensioner),
                           copy.deepcopy(built.sensors), element._mode, dict(self._inputs),
                           self._valve_mode, dict(self._outputs), self._start_s, self._steps,
                           self._stopped)
@@ -445,12 +438,7 @@ class PlantSlave(Fmi2Slave):
             self._error(f"fmi2SetFMUstate: the state was saved by a plant built from "
                         f"{state.parameters}, this one is built from {self._parameters}")
             return
-        plant = built.track
-        data, biasprm, memory, plant.time_s, plant.last_law, speed, loaded = state.track
-        mujoco.mj_copyData(plant.data, plant.model, data)
-        plant.model.actuator_biasprm[:] = biasprm
-        plant.foundation.memory[:] = memory
-        plant._speed_command, plant._hitch_loaded = speed, loaded
+        built.track.restore(state.track)
         element = HydraulicElement(copy.deepcopy(state.tensioner))
         element._mode = state.mode
         built.element = built.asm.element = built.asm.plant.element = element

@@ -4,19 +4,17 @@ idler loaded by a tp run's track load. Stroke y [m] outward positive, forces [N]
 
 from __future__ import annotations
 
-import copy
 import hashlib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 import mujoco
-import numpy as np
 
 from trackmj.elements.prescribed import ConstantForce
-from trackmj.ports import ForceLaw, Mechanics
+from trackmj.ports import Mechanics
 from trackmj.results.store import Result
 from trackmj.sim.loop_plants import EquivalentIdlerMechanics
-from trackmj.track.plant import TrackPlant
+from trackmj.track.plant import PlantSnapshot, TrackPlant
 
 if TYPE_CHECKING:
     from trackmj.machines.idler import EquivalentIdler
@@ -62,7 +60,7 @@ class BuiltMechanics:
 
 SETTLED_KEPT = 4
 """Settled track states kept per process (see :func:`settled_track`)."""
-_settled: dict[tuple, tuple[mujoco.MjData, np.ndarray, np.ndarray, ForceLaw | None]] = {}
+_settled: dict[tuple, PlantSnapshot] = {}
 
 
 def settled_track(setup: MechanicsSetup, force_N: float) -> TrackPlant:
@@ -71,9 +69,10 @@ def settled_track(setup: MechanicsSetup, force_N: float) -> TrackPlant:
 
     The settled state is kept per process for the same MJCF, contact scale, force and model
     parameters (runs that differ only in hydraulics, control, controller, or the seed on
-    flat ground): a later run restores it (every MjData buffer, the tensioner's bias
-    parameters, the ground's shear displacements and contact history, the last force law)
-    instead of settling again, bit for bit the same."""
+    flat ground): a later run restores it (:meth:`TrackPlant.snapshot`: every MjData
+    buffer, the tensioner's bias parameters, the ground's shear displacements and contact
+    history, the last force law, the parking brake) instead of settling again, bit for bit
+    the same."""
     text = setup.track_mjcf()
     plant = TrackPlant(mujoco.MjModel.from_xml_string(text), setup.model)
     scale = setup.contact_stiffness_scale
@@ -85,13 +84,9 @@ def settled_track(setup: MechanicsSetup, force_N: float) -> TrackPlant:
         plant.run(ConstantForce(force_N, SETTLE_DAMPING_N_S_M), SETTLE_S)
         if len(_settled) >= SETTLED_KEPT:
             del _settled[next(iter(_settled))]
-        _settled[key] = (copy.copy(plant.data), plant.model.actuator_biasprm.copy(),
-                         plant.foundation.memory.copy(), plant.last_law)
+        _settled[key] = plant.snapshot()
     else:
-        data, biasprm, memory, plant.last_law = kept
-        mujoco.mj_copyData(plant.data, plant.model, data)
-        plant.model.actuator_biasprm[:] = biasprm
-        plant.foundation.memory[:] = memory
+        plant.restore(kept)
     plant.time_s = 0.0
     return plant
 

@@ -21,6 +21,7 @@ Sign conventions (see also :mod:`trackmj.ports`):
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 from collections.abc import Callable
@@ -175,6 +176,25 @@ class DerailmentStatus:
     @property
     def any(self) -> bool:
         return self.sprocket_disengaged or self.links_off_envelope or self.slack_strand
+
+
+@dataclass(frozen=True)
+class PlantSnapshot:
+    """Everything :meth:`TrackPlant.step` carries from one step to the next besides the
+    model (:meth:`TrackPlant.snapshot`): a copy of the MjData, the actuators' bias
+    parameters (the tensioner's force-law slope), the ground's memory (shear displacements,
+    contact history), the clock [s], the last force law, the speed command in effect
+    [m/s], whether a hitch load is applied, and the parking brake (applied; anchor [rad])."""
+
+    data: mujoco.MjData
+    actuator_biasprm: np.ndarray
+    ground_memory: np.ndarray
+    time_s: float
+    last_law: ForceLaw | None
+    speed_command_m_s: float
+    hitch_loaded: bool
+    parked: bool
+    brake_anchor_rad: float
 
 
 @dataclass(frozen=True)
@@ -340,6 +360,24 @@ class TrackPlant:
         self.foundation.apply()
         self.foundation.finish(final=True, advance=False)
         mujoco.mj_forward(self.model, self.data)
+
+    def snapshot(self) -> PlantSnapshot:
+        """The plant's state now, for :meth:`restore` (a copy: later steps leave it)."""
+        return PlantSnapshot(copy.copy(self.data), self.model.actuator_biasprm.copy(),
+                             self.foundation.memory.copy(), self.time_s, self.last_law,
+                             self._speed_command, self._hitch_loaded, self.parked,
+                             self._brake_anchor)
+
+    def restore(self, snapshot: PlantSnapshot) -> None:
+        """Put the plant back into ``snapshot``'s state (taken of this plant or of one built
+        from the same model), bit for bit."""
+        mujoco.mj_copyData(self.data, self.model, snapshot.data)
+        self.model.actuator_biasprm[:] = snapshot.actuator_biasprm
+        self.foundation.memory[:] = snapshot.ground_memory
+        self.time_s, self.last_law = snapshot.time_s, snapshot.last_law
+        self._speed_command, self._hitch_loaded = (snapshot.speed_command_m_s,
+                                                   snapshot.hitch_loaded)
+        self.parked, self._brake_anchor = snapshot.parked, snapshot.brake_anchor_rad
 
     def _contact_groups(self) -> dict[int, str]:
         groups = {self._sprocket_body: "sprocket", 0: "ground"}
