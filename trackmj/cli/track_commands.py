@@ -13,7 +13,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from trackmj.cli.summary import derailment_lines, tensioner_line
 from trackmj.machines.default import DEFAULT_MACHINE
@@ -289,7 +289,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
           f"(sprocket pitch speed {s['track_speed_mean_m_s']:.3f} m/s)")
     print(f"drive torque       mean {s['drive_torque_mean_N_m'] / 1e3:.3f} kN·m"
           + (f" (hitch load {args.hitch_pull / 1e3:g} kN)" if args.hitch_pull else "")
-          + (f" (grade {args.grade:g})" if args.grade else ""))
+          + (f" (grade {args.grade:g})" if args.grade else "")
+          + _parked_text(m))
     contacts = sum(e["contact_work_J"].values())
     print(f"energy [kJ]        drive {e['drive_work_J'] / 1e3:.3f}, tensioner "
           f"{e['tensioner_work_J'] / 1e3:.3f}, suspension {e['suspension_loss_J'] / 1e3:.3f}, "
@@ -309,6 +310,17 @@ def cmd_drive(args: argparse.Namespace) -> int:
     print(f"wrote {result.out_dir} (metrics.json, timeseries.parquet, drive.png)")
     healthy = m["mujoco_warnings"] == 0 and m["derailment_checks_failed"] == 0
     return 0 if healthy and not created else 1
+
+
+def _parked_text(metrics: dict[str, Any]) -> str:
+    """What held a standing drive: its parking brake with its holding torque, or the velocity
+    servo alone ('' for a drive that moved)."""
+    holding = metrics["parking_brake_holding_N_m"]
+    if metrics["parked"]:
+        return f"; parked: the parking brake holds up to {holding / 1e3:g} kN·m"
+    if metrics["speed_m_s"] == 0.0 and holding is None:
+        return "; no parking brake: the velocity servo holds, creeping under the torque"
+    return ""
 
 
 def _drive_folder(args: argparse.Namespace) -> str:

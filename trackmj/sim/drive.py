@@ -164,6 +164,9 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
         "steady": _steady_means(series, ramp_s + 1.0 if duration_s > ramp_s + 1.0 else 0.0),
         "max_pin_gap_m": float(series["max_pin_gap_m"].max()),
         "mujoco_warnings": plant.warning_count,
+        "parked": plant.parked,
+        "parking_brake_holding_N_m": (None if plant.params.parking_brake is None
+                                      else plant.params.parking_brake.holding_torque_N_m),
         "integrator_created_rel": integrator_created_rel(energy.numerical_J,
                                                          energy.drive_work_J),
         **derailment_metrics(table, len(checks)),
