@@ -183,9 +183,10 @@ def test_the_fmu_steps_as_the_python_plant(native, which) -> None:
 @pytest.mark.slow
 def test_a_slipping_parking_brake_steps_as_the_python_plant(tmp_path) -> None:
     """LF1352 with a 300 N·m parking brake parked on the 1 in 5 grade, which asks ~0.6
-    kN·m of it: 1 s parked (the brake slipping, the track rolling back), then 1 s at
-    1.5 m/s; stroke, velocity, tension and the drive torque equal the Python plant's to 1e-9
-    relative, and the parked second rolled back."""
+    kN·m of it: 1 s parked (the brake slipping, the track rolling back), 1 s at 1.5 m/s,
+    then 0.6 s commanded to stop (the brake applying once the sprocket is slow); stroke,
+    velocity, tension and the drive torque equal the Python plant's to 1e-9 relative, the
+    parked second rolled back and the brake is applied again at the end."""
     text = (Path(__file__).resolve().parents[1] / "models" / "lf1352.toml").read_text()
     line = next(x for x in text.splitlines() if x.startswith("holding_torque_N_m = "))
     model = tmp_path / "lf1352_weak_brake.toml"
@@ -193,6 +194,10 @@ def test_a_slipping_parking_brake_steps_as_the_python_plant(tmp_path) -> None:
     fmu_path = export_track(tmp_path / "weak.fmu", force_N=FORCE_N, model=str(model),
                             terrain=str(CLIMB), platforms=("linux",)).path
     plant = settled_track(prepare(str(CLIMB), model=model), FORCE_N)
+
+    def speed_at(k: int) -> float:
+        """Parked 1 s, 1.5 m/s for 1 s, then commanded to stop [m/s] at step ``k``."""
+        return 1.5 if 1000 <= k < 2000 else 0.0
 
     def python_step(force: float, speed: float) -> tuple[float, ...]:
         plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))
@@ -211,13 +216,14 @@ def test_a_slipping_parking_brake_steps_as_the_python_plant(tmp_path) -> None:
             return (fmu.get("stroke_m"), fmu.get("velocity_m_s"), fmu.get("tension_N"),
                     fmu.get("drive_torque_N_m"), math.nan)
 
-        ours = drive(fmu_step, 2.0, parked_s=1.0)
+        ours = np.array([fmu_step(force_at(k * 1e-3), speed_at(k)) for k in range(2600)])
         fmu.close()
-    theirs = drive(python_step, 2.0, parked_s=1.0)
+    theirs = np.array([python_step(force_at(k * 1e-3), speed_at(k)) for k in range(2600)])
     scale = np.abs(theirs[:, :4]).max(axis=0)
     assert np.abs(ours[:, :4] - theirs[:, :4]).max(axis=0) / scale == pytest.approx(0.0,
                                                                                   abs=1e-9)
     assert theirs[500:1000, 4].mean() < -1e-3   # parked, the sprocket turned back: slipping
+    assert not plant.park_pending and plant.parked   # stopped again: the brake re-applied
 
 
 @pytest.mark.slow

@@ -184,7 +184,8 @@ class PlantSnapshot:
     model (:meth:`TrackPlant.snapshot`): a copy of the MjData, the actuators' bias
     parameters (the tensioner's force-law slope), the ground's memory (shear displacements,
     contact history), the clock [s], the last force law, the speed command in effect
-    [m/s], whether a hitch load is applied, and the parking brake (applied; anchor [rad])."""
+    [m/s], whether a hitch load is applied, and the parking brake (applied; asked for at a
+    zero command but not yet applied; anchor [rad])."""
 
     data: mujoco.MjData
     actuator_biasprm: np.ndarray
@@ -194,6 +195,7 @@ class PlantSnapshot:
     speed_command_m_s: float
     hitch_loaded: bool
     parked: bool
+    park_pending: bool
     brake_anchor_rad: float
 
 
@@ -225,7 +227,8 @@ class TrackPlant:
     ``chassis_acc_z_m_s2``, ``closure_error_m``, ``warning_count``).
 
     ``parked``: the machine's parking brake ([parking_brake] of its mechanics file) is
-    applied; a zero speed command applies it, any other releases it.
+    applied: a zero speed command applies it once the sprocket's pitch speed is below
+    ``BRAKE_APPLY_SPEED_M_S``; any other command releases it.
 
     Parameters
     ----------
@@ -238,6 +241,11 @@ class TrackPlant:
     ENVELOPE_THRESHOLD_M = 0.10
     SEAT_TOLERANCE_M = 0.012
     MIN_SEATED_PINS = 2
+    BRAKE_APPLY_SPEED_M_S = 0.05
+    """Pitch speed [m/s] below which a zero speed command applies the parking brake: the
+    machine has stopped (a brake applied at speed would lock a moving machine). Above the
+    velocity servo's creep under a parked machine's holding torque (LF1352 on tan θ = 0.5:
+    6.7 mm/s), so a machine the servo holds still gets its brake."""
     SLACK_TENSION_N = 1000.0
     """Below this the upper strand hangs on its own weight (rigid links never reach zero:
     one metre of track weighs ~460 N and a hanging span keeps a few hundred newtons)."""
@@ -279,6 +287,7 @@ class TrackPlant:
                              else brake.drive_line_stiffness_N_m_rad / self._drive_gain)
         self._brake_slip_rad = (0.0 if brake is None else
                                 brake.holding_torque_N_m / brake.drive_line_stiffness_N_m_rad)
+        self._brake_apply_rad_s = self.BRAKE_APPLY_SPEED_M_S / params.sprocket_pitch_radius_m
         n = params.track.link_count
         self.link_count = n
         self._link_body = np.array([m.body(link_name(k)).id for k in range(n)])
@@ -351,7 +360,8 @@ class TrackPlant:
         self.last_law = None
         self._speed_command = 0.0
         self._hitch_loaded = False
-        self.parked = self._brake_ratio > 0.0
+        self.parked = self._brake_ratio > 0.0   # standing at the keyframe, braked
+        self._park_pending = False
         self._brake_anchor = float(self.data.qpos[self._sprocket_q])
         mujoco.mj_forward(self.model, self.data)
         # the ground acting at this state as in a step (the foundation's wrenches), then
@@ -366,7 +376,7 @@ class TrackPlant:
         return PlantSnapshot(copy.copy(self.data), self.model.actuator_biasprm.copy(),
                              self.foundation.memory.copy(), self.time_s, self.last_law,
                              self._speed_command, self._hitch_loaded, self.parked,
-                             self._brake_anchor)
+                             self._park_pending, self._brake_anchor)
 
     def restore(self, snapshot: PlantSnapshot) -> None:
         """Put the plant back into ``snapshot``'s state (taken of this plant or of one built
@@ -377,7 +387,8 @@ class TrackPlant:
         self.time_s, self.last_law = snapshot.time_s, snapshot.last_law
         self._speed_command, self._hitch_loaded = (snapshot.speed_command_m_s,
                                                    snapshot.hitch_loaded)
-        self.parked, self._brake_anchor = snapshot.parked, snapshot.brake_anchor_rad
+        self.parked, self._park_pending = snapshot.parked, snapshot.park_pending
+        self._brake_anchor = snapshot.brake_anchor_rad
 
     def _contact_groups(self) -> dict[int, str]:
         groups = {self._sprocket_body: "sprocket", 0: "ground"}
@@ -456,19 +467,27 @@ class TrackPlant:
         return self.sprocket_speed_rad_s * self.params.sprocket_pitch_radius_m
 
     def set_track_speed(self, speed_m_s: float, *, park: bool = True) -> None:
-        """Command the sprocket velocity servo to a pitch-line speed [m/s]. Zero applies the
-        machine's parking brake where it has one (:attr:`parked`), anchored at the
-        sprocket's angle now, unless ``park`` is False (the servo then holds zero speed as
-        it holds any speed when driving); any other speed releases it."""
+        """Command the sprocket velocity servo to a pitch-line speed [m/s]. Zero asks for the
+        machine's parking brake where it has one: the servo brings the sprocket to rest and
+        the brake applies (:attr:`parked`), anchored at the sprocket's angle then, at the
+        first step that starts below ``BRAKE_APPLY_SPEED_M_S``; with ``park`` False the
+        servo holds zero speed as it holds any speed when driving. Any other speed releases
+        the brake."""
         if not math.isfinite(speed_m_s):
             raise ValueError(f"track speed must be finite, got {speed_m_s!r}")
         if speed_m_s == 0.0 and park and self._brake_ratio > 0.0:
             if not self.parked:
-                self.parked = True
-                self._brake_anchor = float(self._qpos[self._sprocket_q])
+                self._park_pending = True
+                self._ctrl[self._drive] = 0.0
             return
-        self.parked = False
+        self.parked = self._park_pending = False
         self._ctrl[self._drive] = speed_m_s / self.params.sprocket_pitch_radius_m
+
+    @property
+    def park_pending(self) -> bool:
+        """A zero speed command asked for the parking brake, which applies once the sprocket
+        is below ``BRAKE_APPLY_SPEED_M_S``."""
+        return self._park_pending
 
     @property
     def parking_brake_anchor_rad(self) -> float:
@@ -742,7 +761,8 @@ class TrackPlant:
             "drive_gain": np.array([self._drive_gain]),
             "drive_limit": np.array([self._drive_limit]),
             "sprocket_q": np.array([self._sprocket_q]),
-            "parking_brake": np.array([self._brake_ratio, self._brake_slip_rad]),
+            "parking_brake": np.array([self._brake_ratio, self._brake_slip_rad,
+                                       self._brake_apply_rad_s]),
             "stroke_offset_m": np.array([self._stroke_offset_m]),
             "pitch_radius_m": np.array([self.params.sprocket_pitch_radius_m]),
             "ride_height_m": np.array([self.params.chassis.ride_height_m]),
@@ -786,6 +806,10 @@ class TrackPlant:
         self._ctrl[self._tensioner] = force
         self._biasprm[self._tensioner, 2] = damping
         self.last_law = law   # what idler_force_N reads, in on_substep too
+        if self._park_pending and (abs(self._qvel[self._sprocket_v])
+                                   < self._brake_apply_rad_s):
+            self.parked, self._park_pending = True, False
+            self._brake_anchor = float(self._qpos[self._sprocket_q])
         parked = self.parked
         if parked:
             self._ctrl[self._drive] = self._brake_ratio * (

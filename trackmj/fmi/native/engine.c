@@ -472,6 +472,7 @@ typedef struct {
     double speed_command;           /* the sprocket speed command in effect [m/s] */
     double brake_anchor;            /* sprocket angle the parking brake holds to [rad] */
     int32_t parked;                 /* the parking brake is applied */
+    int32_t park_pending;           /* asked for at a zero command, not yet applied */
     int32_t hitch_loaded;
     int32_t initialized;
     double kinematics[N_KINEMATICS];
@@ -491,7 +492,8 @@ struct Engine {
     int slide_q, slide_v, sprocket_q, sprocket_v, chassis_q[3], chassis_v[3], tensioner, drive;
     int hitch_site, chassis_body, sprocket_body;
     double drive_gain, drive_limit, stroke_offset_m, pitch_radius_m, ride_height_m;
-    double brake_ratio, brake_slip_rad;   /* parking brake: k_b/kv [1/s], slip angle [rad] */
+    /* parking brake: k_b/kv [1/s], slip angle [rad], sprocket speed it applies below [rad/s] */
+    double brake_ratio, brake_slip_rad, brake_apply_rad_s;
     int n;                  /* pins (= links) */
     int *link_body, *pin_geom, *connect_of_pin;
     int *stretch_qpos;      /* structure "slides": qpos of every pin slide */
@@ -613,7 +615,7 @@ void engine_free(Engine *e) {
 static int load_configuration(Engine *e, const Cfg *cfg) {
     const mjModel *m = e->m;
     Foundation *f = &e->f;
-    double brake[2];
+    double brake[3];
     if (cfg_into_int(e, cfg, "substeps", &e->substeps, 1)
         || cfg_into_int(e, cfg, "pins", &e->n, 1)
         || cfg_into_int(e, cfg, "slide_q", &e->slide_q, 1)
@@ -629,7 +631,7 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
         || cfg_into_int(e, cfg, "sprocket_body", &e->sprocket_body, 1)
         || cfg_into(e, cfg, "drive_gain", &e->drive_gain, 1)
         || cfg_into(e, cfg, "drive_limit", &e->drive_limit, 1)
-        || cfg_into(e, cfg, "parking_brake", brake, 2)
+        || cfg_into(e, cfg, "parking_brake", brake, 3)
         || cfg_into(e, cfg, "stroke_offset_m", &e->stroke_offset_m, 1)
         || cfg_into(e, cfg, "pitch_radius_m", &e->pitch_radius_m, 1)
         || cfg_into(e, cfg, "ride_height_m", &e->ride_height_m, 1)
@@ -644,6 +646,7 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
         return -1;
     e->brake_ratio = brake[0];
     e->brake_slip_rad = brake[1];
+    e->brake_apply_rad_s = brake[2];
     int n = e->n, D = f->width;
     f->n = n;
     e->connects = cfg_count(cfg, "pins_per_connect");
@@ -669,7 +672,7 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
     e->initial_mj = cfg_doubles(e, cfg, "initial_state", state_size);
     e->initial_memory = cfg_doubles(e, cfg, "initial_memory", N_MEMORY * n);
     double initial_law[2], initial_out[N_OUT_REAL + N_OUT_BOOL], kinematics[N_KINEMATICS];
-    double initial_brake[2];
+    double initial_brake[3];
     if (!e->link_body || !e->pin_geom || !e->connect_of_pin || !e->pins_per_connect
         || !e->stretch_qpos || !f->spring_dofs || !f->spring_mass_index
         || !f->spring_h_stiffness
@@ -678,7 +681,7 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
         || cfg_into(e, cfg, "initial_law", initial_law, 2)
         || cfg_into(e, cfg, "initial_outputs", initial_out, N_OUT_REAL + N_OUT_BOOL)
         || cfg_into(e, cfg, "initial_kinematics", kinematics, N_KINEMATICS)
-        || cfg_into(e, cfg, "initial_brake", initial_brake, 2))
+        || cfg_into(e, cfg, "initial_brake", initial_brake, 3))
         return -1;
     e->has_hinged = 0;
     for (int k = 0; k < n; k++)
@@ -709,7 +712,8 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
     for (int i = 0; i < N_OUT_BOOL; i++) s0->out_bool[i] = initial_out[N_OUT_REAL + i] != 0.0;
     memcpy(s0->kinematics, kinematics, sizeof kinematics);
     s0->parked = initial_brake[0] != 0.0;
-    s0->brake_anchor = initial_brake[1];
+    s0->park_pending = initial_brake[1] != 0.0;
+    s0->brake_anchor = initial_brake[2];
     return 0;
 }
 
@@ -1122,11 +1126,11 @@ EngineStatus engine_step(Engine *e, long steps) {
         if (speed != e->s.speed_command) {   /* TrackPlant.set_track_speed */
             if (speed == 0.0 && e->brake_ratio > 0.0) {
                 if (!e->s.parked) {
-                    e->s.parked = 1;
-                    e->s.brake_anchor = d->qpos[e->sprocket_q];
+                    e->s.park_pending = 1;
+                    d->ctrl[e->drive] = 0.0;
                 }
             } else {
-                e->s.parked = 0;
+                e->s.parked = e->s.park_pending = 0;
                 d->ctrl[e->drive] = speed / e->pitch_radius_m;
             }
             e->s.speed_command = speed;
@@ -1139,6 +1143,11 @@ EngineStatus engine_step(Engine *e, long steps) {
         double stroke0 = e->stroke_offset_m + d->qpos[e->slide_q];
         d->ctrl[e->tensioner] = force;
         m->actuator_biasprm[mjNBIAS * e->tensioner + 2] = slope;
+        if (e->s.park_pending && fabs(d->qvel[e->sprocket_v]) < e->brake_apply_rad_s) {
+            e->s.parked = 1;
+            e->s.park_pending = 0;
+            e->s.brake_anchor = d->qpos[e->sprocket_q];
+        }
         const int parked = e->s.parked;
         if (parked)
             d->ctrl[e->drive] = e->brake_ratio * (e->s.brake_anchor - d->qpos[e->sprocket_q]);

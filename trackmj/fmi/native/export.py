@@ -108,7 +108,8 @@ def configuration_text(plant: TrackPlant) -> str:
               "initial_law": np.array([law.force_N, law.damping_N_s_m]),
               "initial_outputs": initial_outputs(plant),
               "initial_kinematics": plant.hitch_kinematics(),
-              "initial_brake": np.array([float(plant.parked), plant.parking_brake_anchor_rad]),
+              "initial_brake": np.array([float(plant.parked), float(plant.park_pending),
+                                         plant.parking_brake_anchor_rad]),
               "closure_max_m": np.array([CLOSURE_MAX_M])}
     lines = []
     for key, value in arrays.items():
