@@ -123,6 +123,10 @@ def test_model_info_columns_are_aligned_and_the_mass_is_explained(capsys) -> Non
     (mass,) = [ln for ln in lines if ln.startswith("mass ")]
     plant = load_plant()
     assert f"{plant.model.body_mass.sum():.0f} kg: one track side" in mass
+    (drive,) = [ln for ln in lines if ln.startswith("drive ")]
+    brake = plant.params.parking_brake
+    assert brake is not None
+    assert f"parking brake holds {brake.holding_torque_N_m / 1e3:g} kN·m" in drive
 
 
 def test_a_registered_controller_is_offered_with_no_other_edit(monkeypatch, capsys) -> None:

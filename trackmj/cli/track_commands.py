@@ -20,6 +20,7 @@ from trackmj.machines.default import DEFAULT_MACHINE
 from trackmj.validator import ParameterError, parse_overrides
 
 if TYPE_CHECKING:
+    from trackmj.track.mechanics import ModelParams
     from trackmj.track.mjcf.geometry import Span
     from trackmj.track.plant import TrackPlant
 
@@ -175,8 +176,21 @@ def _geometry_rows(plant: TrackPlant) -> list[tuple[str, str]]:
         ("static strand tension", f"{strand_N / 1e3:.2f} kN at the settled idler force "
                                   f"{settled_N / 1e3:.2f} kN (idler geometry factor "
                                   f"{g.idler_factor:.4f}; frictionless idler)"),
+        ("drive", _drive_text(p)),
     ]
     return rows
+
+
+def _drive_text(p: ModelParams) -> str:
+    """The sprocket drive of ``p``: its velocity servo, torque limit and parking brake."""
+    spr, brake = p.sprocket, p.parking_brake
+    text = (f"velocity servo {spr.drive_gain_N_m_s / 1e3:g} kN·m·s/rad, torque limit "
+            f"{spr.drive_torque_limit_N_m / 1e3:g} kN·m; ")
+    if brake is None:
+        return text + "no parking brake (standing, the servo yields at T/kv)"
+    return text + (f"parking brake holds {brake.holding_torque_N_m / 1e3:g} kN·m at a zero "
+                   f"command (drive line {brake.drive_line_stiffness_N_m_rad / 1e6:g} "
+                   "MN·m/rad)")
 
 
 def _upper_strand_supports(plant: TrackPlant) -> list[tuple[str, float, float]]:
