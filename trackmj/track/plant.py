@@ -111,6 +111,24 @@ def _strands(geom_xpos: np.ndarray, pin_geom: np.ndarray, qpos: np.ndarray,
     return (sum_u / n_u if n_u else math.nan), (sum_l / n_l if n_l else math.nan)
 
 
+@numba.njit(cache=True)
+def _least_upper_tension(efc_force: np.ndarray, cfrc_int: np.ndarray, xmat: np.ndarray,
+                         link_body: np.ndarray, connect_of_pin: np.ndarray,
+                         geom_xpos: np.ndarray, pin_geom: np.ndarray, qpos: np.ndarray,
+                         chassis_q: np.ndarray, bounds: np.ndarray, tension: np.ndarray,
+                         upper: np.ndarray, lower: np.ndarray) -> float:
+    """The least pin tension of the upper strand [N] (0 with no pin there), the pin
+    tensions and strand masks left in ``tension``, ``upper``, ``lower``
+    (:func:`_pin_tensions`, :func:`_strands`): one call per coupling step."""
+    _pin_tensions(efc_force, cfrc_int, xmat, link_body, connect_of_pin, tension)
+    _strands(geom_xpos, pin_geom, qpos, chassis_q, bounds, tension, upper, lower)
+    least = math.inf
+    for k in range(len(tension)):
+        if upper[k] and tension[k] < least:
+            least = tension[k]
+    return 0.0 if least == math.inf else least
+
+
 @dataclass
 class PassiveTensioner:
     """Preload spring-damper acting on the idler carrier (like Chrono's M113 idler).
@@ -163,9 +181,12 @@ class DerailmentStatus:
 
     sprocket_disengaged: bool   # fewer than 2 pins seated on the sprocket pitch circle
     links_off_envelope: bool    # a pin is further than the threshold outside its home envelope
-    slack_strand: bool          # upper-strand tension fell to what its own weight causes
+    slack_strand: bool          # held_upper_strand_tension_N below the slack tension
     max_envelope_excursion_m: float
-    min_upper_strand_tension_N: float   # 0 when no pin is in the upper strand
+    min_upper_strand_tension_N: float   # now; 0 when no pin is in the upper strand
+    # the highest the upper strand's least pin tension rose over the last slack window
+    # (TrackPlant.SLACK_PERSISTENCE_S, every coupling step); inf before that much history
+    held_upper_strand_tension_N: float
     seated_pins: int            # pins seated on the sprocket pitch circle
     worst_envelope_pin: int     # the pin furthest outside the home envelope
     worst_envelope_strand: str  # its strand (:data:`STRANDS`)
@@ -218,6 +239,16 @@ class TrackPlant:
     SLACK_TENSION_N = 1000.0
     """Below this the upper strand hangs on its own weight (rigid links never reach zero:
     one metre of track weighs ~460 N and a hanging span keeps a few hundred newtons)."""
+    SLACK_PERSISTENCE_S = 0.1
+    """The slack window [s]: the strand is slack when its least pin tension has stayed
+    below ``SLACK_TENSION_N`` at every coupling step for this long. A strand hanging on its
+    weight lasts; a tooth's chordal action or engagement compresses one pin for a few
+    milliseconds (measured on M113 at its preload, 154 mm pitch, driven at 1.5-3 m/s, ±0.2
+    grade, in reverse: at most 27 ms below 1 kN, the strand's mean above 1.9 kN; models/README.md,
+    "The slack-strand window"). 0.1 s is 3.7 x that, one tooth-passing period of M113 (the
+    coarsest pitch shipped) at 1.54 m/s, the time a released pin needs to fall 49 mm
+    (g t^2 / 2, the order of a strand's home sag), and the drive's check interval, so the
+    checks' windows tile the run."""
 
     def __init__(self, model: mujoco.MjModel, params: ModelParams) -> None:
         self.model = model
@@ -298,6 +329,12 @@ class TrackPlant:
         self._strand_bounds = np.array([ride, max(spr.z_m, params.idler.z_m) - ride + 0.05,
                                         lo, hi, spr.z_m - ride - 0.05])
         self._upper, self._lower = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+        # the least upper-strand pin tension of the last SLACK_PERSISTENCE_S of coupling
+        # steps (a ring, oldest at _slack_at) and how many steps in a row it was slack
+        self._slack_window = np.full(round(self.SLACK_PERSISTENCE_S / COUPLING_STEP_S),
+                                     math.inf)
+        self._slack_at = 0
+        self._slack_steps = 0
         self._hitch_site = m.site("rear_hitch").id
         self._sprocket_body = m.body("sprocket").id
         self._carrier_body = m.body("idler_carrier").id
@@ -317,6 +354,7 @@ class TrackPlant:
         self.data.ctrl[self._drive] = 0.0
         self.time_s = 0.0
         self.last_law = None
+        self.clear_slack_window()
         self._speed_command = 0.0
         self._hitch_loaded = False
         mujoco.mj_forward(self.model, self.data)
@@ -326,6 +364,14 @@ class TrackPlant:
         self.foundation.apply()
         self.foundation.finish(final=True, advance=False)
         mujoco.mj_forward(self.model, self.data)
+
+    def clear_slack_window(self) -> None:
+        """Forget the upper strand's tension history: the slack window starts again (no
+        ``slack_strand`` before ``SLACK_PERSISTENCE_S`` of steps); a run whose clock
+        starts at 0 starts it with it."""
+        self._slack_window[:] = math.inf
+        self._slack_at = 0
+        self._slack_steps = 0
 
     def _contact_groups(self) -> dict[int, str]:
         groups = {self._sprocket_body: "sprocket", 0: "ground"}
@@ -622,10 +668,39 @@ class TrackPlant:
         self._strands(self._tension)
         return STRANDS[0] if self._upper[k] else STRANDS[1] if self._lower[k] else STRANDS[2]
 
+    @property
+    def slack_duration_s(self) -> float:
+        """How long the upper strand's least pin tension has stayed below
+        ``SLACK_TENSION_N``, read after every coupling step up to the last [s] (0 when the
+        last step's was at or above it; an empty upper strand counts as 0 N)."""
+        return self._slack_steps * COUPLING_STEP_S
+
+    @property
+    def slack_window_steps(self) -> int:
+        """Coupling steps in ``SLACK_PERSISTENCE_S``, the slack window."""
+        return len(self._slack_window)
+
+    def _book_slack(self) -> None:
+        """The coupling step's least upper-strand pin tension (0 N with no pin there) into
+        the slack window and the run of slack steps."""
+        d = self.data
+        if self._has_hinged_pins:
+            mujoco.mj_rnePostConstraint(self.model, d)
+        least = _least_upper_tension(d.efc_force, d.cfrc_int, d.xmat, self._link_body,
+                                     self._connect_of_pin, d.geom_xpos, self._pin_geom,
+                                     self._qpos, self._chassis_q, self._strand_bounds,
+                                     self._tension, self._upper, self._lower)
+        self._slack_window[self._slack_at] = least
+        self._slack_at = (self._slack_at + 1) % len(self._slack_window)
+        self._slack_steps = self._slack_steps + 1 if least < self.SLACK_TENSION_N else 0
+
     def derailment(self) -> DerailmentStatus:
         """The derailment indicators now (thresholds ``MIN_SEATED_PINS``,
-        ``ENVELOPE_THRESHOLD_M``, ``SLACK_TENSION_N``) and where each is worst: the pin
-        furthest outside the home envelope and the upper-strand pin of least tension."""
+        ``ENVELOPE_THRESHOLD_M``; ``SLACK_TENSION_N`` held for ``SLACK_PERSISTENCE_S``)
+        and where each is worst: the pin furthest outside the home envelope and the
+        upper-strand pin of least tension now. The strand is slack when its least pin
+        tension stayed below ``SLACK_TENSION_N`` at each of the last
+        ``SLACK_PERSISTENCE_S`` of coupling steps (:attr:`slack_duration_s`)."""
         excursion = self.envelope_excursion_m()
         worst = int(excursion.argmax())
         upper = self.upper_strand_pins()
@@ -637,9 +712,10 @@ class TrackPlant:
         return DerailmentStatus(
             sprocket_disengaged=seated < self.MIN_SEATED_PINS,
             links_off_envelope=float(excursion[worst]) > self.ENVELOPE_THRESHOLD_M,
-            slack_strand=min_upper < self.SLACK_TENSION_N,
+            slack_strand=self._slack_steps >= len(self._slack_window),
             max_envelope_excursion_m=float(excursion[worst]),
             min_upper_strand_tension_N=min_upper,
+            held_upper_strand_tension_N=float(self._slack_window.max()),
             seated_pins=seated,
             worst_envelope_pin=worst,
             worst_envelope_strand=self.pin_strand(worst),
@@ -670,6 +746,7 @@ class TrackPlant:
             "envelope_threshold_m": np.array([self.ENVELOPE_THRESHOLD_M]),
             "seat_tolerance_m": np.array([self.SEAT_TOLERANCE_M]),
             "slack_tension_N": np.array([self.SLACK_TENSION_N]),
+            "slack_window_steps": np.array([self.slack_window_steps]),
             "min_seated_pins": np.array([self.MIN_SEATED_PINS]),
             "link_body": self._link_body, "pin_geom": self._pin_geom,
             "connect_of_pin": self._connect_of_pin, "pins_per_connect": self._pins_per_connect,
@@ -695,7 +772,8 @@ class TrackPlant:
 
         With several MuJoCo substeps the law is held and the element is completed with
         the mean velocity over the step (displacement / step), which keeps the work
-        exchanged consistent with the stroke change.
+        exchanged consistent with the stroke change. The step's least upper-strand pin
+        tension goes into the slack window (:meth:`derailment`).
         """
         m, d = self.model, self.data
         stroke0 = self.stroke_m
@@ -716,6 +794,7 @@ class TrackPlant:
         else:
             velocity = (stroke - stroke0) / COUPLING_STEP_S
         self.time_s += COUPLING_STEP_S
+        self._book_slack()
         element.complete_step(self.time_s, stroke, velocity)
         return law
 
