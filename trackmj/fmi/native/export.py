@@ -41,6 +41,7 @@ import numpy as np
 from trackmj.fmi.native import toolchain
 from trackmj.fmi.native.description import model_description
 from trackmj.fmi.native.variables import Variable, c_header, table
+from trackmj.ports import COUPLING_STEP_S
 from trackmj.sim.mechanics import settled_end_stop, settled_track
 from trackmj.sim.observers import PhysicsLimits, capture_mujoco_warnings
 from trackmj.sim.setup import prepare
@@ -108,6 +109,8 @@ def configuration_text(plant: TrackPlant) -> str:
               "initial_law": np.array([law.force_N, law.damping_N_s_m]),
               "initial_outputs": initial_outputs(plant),
               "initial_kinematics": plant.hitch_kinematics(),
+              "initial_slack_steps": np.array([round(plant.slack_duration_s
+                                                     / COUPLING_STEP_S)]),
               "closure_max_m": np.array([CLOSURE_MAX_M])}
     lines = []
     for key, value in arrays.items():
