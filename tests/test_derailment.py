@@ -17,6 +17,7 @@ import pytest
 
 from trackmj.cli.main import main
 from trackmj.elements.prescribed import ConstantForce
+from trackmj.fmi.native.variables import OUTPUTS
 from trackmj.machines.track_plant import load_plant
 from trackmj.ports import Command, Readout, StepInputs, TensionerElement
 from trackmj.sim.drive import DerailmentChecks, derailment_columns, derailment_table
@@ -247,6 +248,18 @@ def test_a_strand_left_at_half_a_kilonewton_hangs_and_is_slack(plant) -> None:
     assert checks[5:].all()
     np.testing.assert_array_equal(r["slack"], r["held"] < SLACK_N)
     np.testing.assert_array_equal(r["slack"], r["spell"] >= WINDOW_S - 1e-9)
+
+
+def test_the_help_and_the_fmus_description_state_the_plants_slack_rule(capsys) -> None:
+    """``trackmj drive --help`` and the native FMU's slack_strand say the threshold and
+    window the plant uses."""
+    with pytest.raises(SystemExit):
+        main(["drive", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert (f"below {SLACK_N / 1e3:g} kN at every 1 ms step of the {WINDOW_S:g} s before "
+            "the check") in help_text
+    (slack,) = [v for v in OUTPUTS if v.name == "slack_strand"]
+    assert f"below {SLACK_N:g} N at every 1 ms step of the last {WINDOW_S:g} s" in slack.description
 
 
 def test_a_pin_pushed_200_mm_below_the_ground_run_is_200_mm_off_its_envelope(plant) -> None:
