@@ -202,9 +202,10 @@ def _steps(plant: TrackPlant, element: TensionerElement, speed_m_s: float, ramp_
            seconds: float) -> dict[str, np.ndarray]:
     """Drive ``plant`` with ``element`` at ``speed_m_s`` [m/s] (ramped over ``ramp_s`` [s])
     for ``seconds`` [s]; after every step: the upper strand's least and mean pin tension
-    [N] (``least``, ``mean``), how long the least has stayed below the slack tension
-    (``spell`` [s]), the slack verdict (``slack``) and the reading it takes, the least
-    tension's peak over the window (``held`` [N])."""
+    [N] (``least``, ``mean``), how long the least has stayed below the slack tension at
+    the window's samples (``spell`` [s]), the slack verdict (``slack``) and the reading it
+    takes, the least tension's peak over the window's samples (``held`` [N]), and the
+    plant's step count (``count``)."""
     rows = []
     for _ in range(round(seconds / 1e-3)):
         plant.apply(StepInputs(speed_m_s * min(1.0, plant.time_s / ramp_s), 0.0, 0.0,
@@ -213,22 +214,33 @@ def _steps(plant: TrackPlant, element: TensionerElement, speed_m_s: float, ramp_
         tension = plant.pin_tensions_N()[plant.upper_strand_pins()]
         s = plant.derailment()
         rows.append((tension.min(), tension.mean(), plant.slack_duration_s, s.slack_strand,
-                     s.held_upper_strand_tension_N))
-    return dict(zip(("least", "mean", "spell", "slack", "held"), np.array(rows).T,
+                     s.held_upper_strand_tension_N, plant.step_count))
+    return dict(zip(("least", "mean", "spell", "slack", "held", "count"), np.array(rows).T,
                     strict=True))
+
+
+def _longest_run_s(below: np.ndarray) -> float:
+    """The longest run of True in ``below``, one entry per 1 ms step [s]."""
+    longest = run = 0
+    for b in below:
+        run = run + 1 if b else 0
+        longest = max(longest, run)
+    return longest * 1e-3
 
 
 def test_a_tooths_compression_of_one_pin_on_m113_is_not_a_slack_strand() -> None:
     """M113 (10 teeth, 154 mm pitch, bushed pins) driven to 3 m/s in 1 s, 1.4 s: as teeth
     engage, an upper-strand pin is pushed into compression (measured: least pin tension
-    -2.0 kN at 1.24 s, 42 steps below 1 kN in spells of at most 17 ms) while the strand
-    holds 4.9 kN or more on mean. One instant's least tension would call it slack; the
-    strand is not, and no step's verdict says it is."""
+    -2.0 kN at 1.24 s, 42 steps below 1 kN in spells of at most 17 ms; 4 of the 140
+    samples, one every 10 ms, fall in one, at most 2 in a row) while the strand holds
+    4.9 kN or more on mean. One instant's least tension would call it slack; the strand is
+    not, and no step's verdict says it is."""
     plant = load_plant(machine="m113")
     r = _steps(plant, PassiveTensioner.from_params(plant.params), 3.0, 1.0, 1.4)
     assert r["least"].min() < 0.0                  # a pin in compression ...
     assert r["mean"].min() > 3.0 * SLACK_N         # ... in a tensioned strand
-    assert 0.0 < r["spell"].max() < WINDOW_S / 2   # below 1 kN briefly, in spells
+    assert 0.0 < _longest_run_s(r["least"] < SLACK_N) < WINDOW_S / 2   # briefly, in spells
+    assert 0.0 < r["spell"].max() < WINDOW_S / 2   # some samples see one, none the window
     assert not r["slack"].any()
     held = r["held"][round(WINDOW_S / 1e-3):]      # from the first full window on
     assert held.min() > 3.0 * SLACK_N
@@ -238,16 +250,47 @@ def test_a_strand_left_at_half_a_kilonewton_hangs_and_is_slack(plant) -> None:
     """LF1352's idler pushed at a constant 1 kN (its strands' share F/2.0 = 0.5 kN, below
     the 1 kN slack tension), driven to 1.5 m/s in 0.5 s, 1 s: the strand hangs on its
     weight as a whole (measured: mean pin tension 0.62 kN over the last 0.1 s, its least
-    pin below 1 kN for the last 0.54 s); every check from 0.6 s on calls it slack, and the
-    verdict is the window's reading at every step."""
+    pin below 1 kN at every step of the last 0.54 s, at every sample of the last 0.6 s);
+    every check from 0.6 s on calls it slack, and the verdict is the window's reading at
+    every step."""
     r = _steps(plant, ConstantForce(1e3, 2e4), 1.5, 0.5, 1.0)
     window = round(WINDOW_S / 1e-3)
     assert r["mean"][-window:].mean() < SLACK_N and r["least"][-window:].max() < SLACK_N
-    assert r["spell"][-1] > 3 * WINDOW_S
+    assert r["spell"][-1] > 3 * WINDOW_S and _longest_run_s(r["least"] < SLACK_N) > 0.5
     checks = r["slack"][window - 1::window]        # at 0.1, 0.2, .. 1.0 s
     assert checks[5:].all()
     np.testing.assert_array_equal(r["slack"], r["held"] < SLACK_N)
     np.testing.assert_array_equal(r["slack"], r["spell"] >= WINDOW_S - 1e-9)
+
+
+def test_the_window_samples_every_10th_step_of_the_plants_count(plant) -> None:
+    """The slack window reads the strand after every 10th step of the plant's step count
+    (``SLACK_SAMPLE_S`` = 10 ms, 10 samples in the 0.1 s window): its spell, peak and
+    verdict change at those steps only. Clearing the window restarts the count, so a
+    run that clears it samples at the same steps whatever came before (LF1352 at 1 kN, as
+    above, then again from the state 0.23 s in, where the first run was first slack)."""
+    sample = round(TrackPlant.SLACK_SAMPLE_S / 1e-3)
+    assert (sample, plant.slack_sample_steps, plant.slack_window_samples) == (10, 10, 10)
+    assert plant.step_count == 0
+    r = _steps(plant, ConstantForce(1e3, 2e4), 1.5, 0.5, 0.5)
+    np.testing.assert_array_equal(r["count"], np.arange(1, 501))
+    for key in ("spell", "held", "slack"):
+        changed = np.nonzero(r[key][1:] != r[key][:-1])[0] + 2   # steps where it changed
+        assert len(changed) and not (changed % sample).any(), key
+    assert r["slack"].any() and r["spell"].max() >= WINDOW_S
+    # cleared mid-run (not on a sample step): the count restarts at 0 with an empty window
+    plant.run(ConstantForce(1e3, 2e4), 0.005, 1.5)
+    assert plant.step_count == 505
+    plant.clear_slack_window()
+    assert plant.step_count == 0 and plant.slack_duration_s == 0.0
+    s = plant.derailment()
+    assert not s.slack_strand and s.held_upper_strand_tension_N == math.inf
+    plant.run(ConstantForce(1e3, 2e4), 0.009, 1.5)
+    assert plant.slack_duration_s == 0.0                   # no sample in 9 steps
+    plant.run(ConstantForce(1e3, 2e4), 0.001, 1.5)
+    assert plant.slack_duration_s == TrackPlant.SLACK_SAMPLE_S   # the 10th: one, slack
+    plant.run(ConstantForce(1e3, 2e4), 0.09, 1.5)
+    assert plant.slack_duration_s == pytest.approx(WINDOW_S) and plant.derailment().slack_strand
 
 
 def test_the_help_and_the_fmus_description_state_the_plants_slack_rule(capsys) -> None:
@@ -256,10 +299,12 @@ def test_the_help_and_the_fmus_description_state_the_plants_slack_rule(capsys) -
     with pytest.raises(SystemExit):
         main(["drive", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
-    assert (f"below {SLACK_N / 1e3:g} kN at every 1 ms step of the {WINDOW_S:g} s before "
-            "the check") in help_text
+    sample_ms = f"{TrackPlant.SLACK_SAMPLE_S * 1e3:g} ms"
+    assert (f"below {SLACK_N / 1e3:g} kN at every {sample_ms} sample of the {WINDOW_S:g} s "
+            "up to the check") in help_text
     (slack,) = [v for v in OUTPUTS if v.name == "slack_strand"]
-    assert f"below {SLACK_N:g} N at every 1 ms step of the last {WINDOW_S:g} s" in slack.description
+    assert (f"below {SLACK_N:g} N at every {sample_ms} sample of the last {WINDOW_S:g} s"
+            in slack.description)
 
 
 def test_a_pin_pushed_200_mm_below_the_ground_run_is_200_mm_off_its_envelope(plant) -> None:

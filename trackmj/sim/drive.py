@@ -16,9 +16,10 @@ place):
   (:func:`trackmj.results.figure_drive.drive_figure`).
 
 Derailment is checked every :data:`DERAILMENT_CHECK_S` (:meth:`TrackPlant.derailment`: three
-checks, and ``derailed`` when any fails; the slack strand's reads every coupling step since
-the previous check, its window :attr:`TrackPlant.SLACK_PERSISTENCE_S` being the check
-interval). Its timeseries columns (:data:`DERAILMENT_UNITS`)
+checks, and ``derailed`` when any fails; the slack strand's reads the samples taken every
+:attr:`TrackPlant.SLACK_SAMPLE_S` since the previous check, its window
+:attr:`TrackPlant.SLACK_PERSISTENCE_S` being the check interval). Its timeseries columns
+(:data:`DERAILMENT_UNITS`)
 hold each check's value from that check's row until the next check's (sample and hold), NaN
 before the first check; the flags are 1.0 when the check fails, else 0.0.
 """
@@ -366,7 +367,8 @@ def _thresholds() -> dict[str, tuple[str, float | None]]:
     p = TrackPlant
     return {
         "slack_strand": (f"upper-strand min pin tension < {p.SLACK_TENSION_N:g} N at every "
-                         f"step for {p.SLACK_PERSISTENCE_S:g} s", p.SLACK_TENSION_N),
+                         f"{p.SLACK_SAMPLE_S * 1e3:g} ms sample for "
+                         f"{p.SLACK_PERSISTENCE_S:g} s", p.SLACK_TENSION_N),
         "links_off_envelope": (f"a pin > {p.ENVELOPE_THRESHOLD_M:g} m outside its home "
                                "envelope (chassis frame)", p.ENVELOPE_THRESHOLD_M),
         "sprocket_disengaged": (f"seated sprocket pins < {p.MIN_SEATED_PINS}",

@@ -119,7 +119,7 @@ def _least_upper_tension(efc_force: np.ndarray, cfrc_int: np.ndarray, xmat: np.n
                          upper: np.ndarray, lower: np.ndarray) -> float:
     """The least pin tension of the upper strand [N] (0 with no pin there), the pin
     tensions and strand masks left in ``tension``, ``upper``, ``lower``
-    (:func:`_pin_tensions`, :func:`_strands`): one call per coupling step."""
+    (:func:`_pin_tensions`, :func:`_strands`): one call per slack-window sample."""
     _pin_tensions(efc_force, cfrc_int, xmat, link_body, connect_of_pin, tension)
     _strands(geom_xpos, pin_geom, qpos, chassis_q, bounds, tension, upper, lower)
     least = math.inf
@@ -184,8 +184,9 @@ class DerailmentStatus:
     slack_strand: bool          # held_upper_strand_tension_N below the slack tension
     max_envelope_excursion_m: float
     min_upper_strand_tension_N: float   # now; 0 when no pin is in the upper strand
-    # the highest the upper strand's least pin tension rose over the last slack window
-    # (TrackPlant.SLACK_PERSISTENCE_S, every coupling step); inf before that much history
+    # the highest the upper strand's least pin tension rose over the last slack window's
+    # samples (TrackPlant.SLACK_PERSISTENCE_S, one every SLACK_SAMPLE_S); inf before a full
+    # window of them
     held_upper_strand_tension_N: float
     seated_pins: int            # pins seated on the sprocket pitch circle
     worst_envelope_pin: int     # the pin furthest outside the home envelope
@@ -240,15 +241,29 @@ class TrackPlant:
     """Below this the upper strand hangs on its own weight (rigid links never reach zero:
     one metre of track weighs ~460 N and a hanging span keeps a few hundred newtons)."""
     SLACK_PERSISTENCE_S = 0.1
-    """The slack window [s]: the strand is slack when its least pin tension has stayed
-    below ``SLACK_TENSION_N`` at every coupling step for this long. A strand hanging on its
-    weight lasts; a tooth's chordal action or engagement compresses one pin for a few
-    milliseconds (measured on M113 at its preload, 154 mm pitch, driven at 1.5-3 m/s, ±0.2
-    grade, in reverse: at most 27 ms below 1 kN, the strand's mean above 1.9 kN; models/README.md,
-    "The slack-strand window"). 0.1 s is 3.7 x that, one tooth-passing period of M113 (the
-    coarsest pitch shipped) at 1.54 m/s, the time a released pin needs to fall 49 mm
-    (g t^2 / 2, the order of a strand's home sag), and the drive's check interval, so the
-    checks' windows tile the run."""
+    """The slack window [s]: the strand is slack when its least pin tension was below
+    ``SLACK_TENSION_N`` at every sample (``SLACK_SAMPLE_S``) over this long. A strand
+    hanging on its weight lasts; a tooth's chordal action or engagement compresses one pin
+    for a few milliseconds (measured on M113 at its preload, 154 mm pitch, driven at 1.5-3
+    m/s, ±0.2 grade, in reverse: at most 27 ms below 1 kN, the strand's mean above 1.9 kN;
+    models/README.md, "The slack-strand window"). 0.1 s is 3.7 x that, one tooth-passing
+    period of M113 (the coarsest pitch shipped) at 1.54 m/s, the time a released pin needs
+    to fall 49 mm (g t^2 / 2, the order of a strand's home sag), and the drive's check
+    interval, so the checks' windows tile the run."""
+    SLACK_SAMPLE_S = 0.01
+    """How often the slack window samples the upper strand's least pin tension [s]: after
+    every 10th coupling step of the plant's step count (:attr:`step_count`), so the window
+    holds 10 samples. Read after every step it cost ~4.5 % of the plant step
+    (``mj_rnePostConstraint`` and a pass over the pins) for a check made every 0.1 s. A
+    strand that hangs is below ``SLACK_TENSION_N`` at every sample, so no 0.1 s spell
+    escapes; the samples must not call a tensioned strand slack by seeing only its spikes.
+    The measured compression spikes last <= 27 ms and recur at tooth passing, v / pitch:
+    < 20 Hz on M113 up to 3 m/s (>= 51 ms apart, >= 24 ms above 1 kN between them); on
+    LF1352 and compact3 at 3 m/s 40 and 33 Hz, their spikes <= 4 ms (>= 21 ms between).
+    Each gap is longer than a sample interval and holds a sample, so 10 ms samples neither
+    alias the tooth passing into a slack strand nor let a 0.1 s spell escape (LF1352 at a
+    1 kN preload, 3 m/s, leaves ~8 ms gaps: its window's lowest peak fell from 2.24 to
+    1.75 kN, not slack; models/README.md, "The slack-strand window")."""
 
     def __init__(self, model: mujoco.MjModel, params: ModelParams) -> None:
         self.model = model
@@ -329,12 +344,17 @@ class TrackPlant:
         self._strand_bounds = np.array([ride, max(spr.z_m, params.idler.z_m) - ride + 0.05,
                                         lo, hi, spr.z_m - ride - 0.05])
         self._upper, self._lower = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
-        # the least upper-strand pin tension of the last SLACK_PERSISTENCE_S of coupling
-        # steps (a ring, oldest at _slack_at) and how many steps in a row it was slack
-        self._slack_window = np.full(round(self.SLACK_PERSISTENCE_S / COUPLING_STEP_S),
+        # the least upper-strand pin tension sampled every _slack_sample_steps coupling
+        # steps over the last SLACK_PERSISTENCE_S (a ring, oldest at _slack_at) and how
+        # many samples in a row it was slack
+        self._slack_sample_steps = round(self.SLACK_SAMPLE_S / COUPLING_STEP_S)
+        self._slack_window = np.full(round(self.SLACK_PERSISTENCE_S / self.SLACK_SAMPLE_S),
                                      math.inf)
         self._slack_at = 0
-        self._slack_steps = 0
+        self._slack_samples = 0
+        # coupling steps since the clock started (reset, clear_slack_window): the slack
+        # window samples at its multiples of _slack_sample_steps
+        self.step_count = 0
         self._hitch_site = m.site("rear_hitch").id
         self._sprocket_body = m.body("sprocket").id
         self._carrier_body = m.body("idler_carrier").id
@@ -366,12 +386,14 @@ class TrackPlant:
         mujoco.mj_forward(self.model, self.data)
 
     def clear_slack_window(self) -> None:
-        """Forget the upper strand's tension history: the slack window starts again (no
-        ``slack_strand`` before ``SLACK_PERSISTENCE_S`` of steps); a run whose clock
-        starts at 0 starts it with it."""
+        """Forget the upper strand's tension history and start the step count again at 0:
+        the slack window starts again (no ``slack_strand`` before ``SLACK_PERSISTENCE_S``
+        of samples) and samples at the same steps whether the track was settled afresh or
+        restored; a run whose clock starts at 0 starts it with it."""
         self._slack_window[:] = math.inf
         self._slack_at = 0
-        self._slack_steps = 0
+        self._slack_samples = 0
+        self.step_count = 0
 
     def _contact_groups(self) -> dict[int, str]:
         groups = {self._sprocket_body: "sprocket", 0: "ground"}
@@ -671,18 +693,24 @@ class TrackPlant:
     @property
     def slack_duration_s(self) -> float:
         """How long the upper strand's least pin tension has stayed below
-        ``SLACK_TENSION_N``, read after every coupling step up to the last [s] (0 when the
-        last step's was at or above it; an empty upper strand counts as 0 N)."""
-        return self._slack_steps * COUPLING_STEP_S
+        ``SLACK_TENSION_N`` [s], in whole samples (``SLACK_SAMPLE_S``) up to the last one:
+        0 when the last sample's was at or above it (an empty upper strand counts as 0 N)."""
+        return self._slack_samples * self.SLACK_SAMPLE_S
 
     @property
-    def slack_window_steps(self) -> int:
-        """Coupling steps in ``SLACK_PERSISTENCE_S``, the slack window."""
+    def slack_sample_steps(self) -> int:
+        """Coupling steps per sample of the slack window (``SLACK_SAMPLE_S``)."""
+        return self._slack_sample_steps
+
+    @property
+    def slack_window_samples(self) -> int:
+        """Samples in ``SLACK_PERSISTENCE_S``, the slack window."""
         return len(self._slack_window)
 
     def _book_slack(self) -> None:
-        """The coupling step's least upper-strand pin tension (0 N with no pin there) into
-        the slack window and the run of slack steps."""
+        """The least upper-strand pin tension now (0 N with no pin there) into the slack
+        window and the run of slack samples: a sample, taken after every
+        ``slack_sample_steps``-th step (:meth:`step`)."""
         d = self.data
         if self._has_hinged_pins:
             mujoco.mj_rnePostConstraint(self.model, d)
@@ -692,15 +720,15 @@ class TrackPlant:
                                      self._tension, self._upper, self._lower)
         self._slack_window[self._slack_at] = least
         self._slack_at = (self._slack_at + 1) % len(self._slack_window)
-        self._slack_steps = self._slack_steps + 1 if least < self.SLACK_TENSION_N else 0
+        self._slack_samples = self._slack_samples + 1 if least < self.SLACK_TENSION_N else 0
 
     def derailment(self) -> DerailmentStatus:
         """The derailment indicators now (thresholds ``MIN_SEATED_PINS``,
         ``ENVELOPE_THRESHOLD_M``; ``SLACK_TENSION_N`` held for ``SLACK_PERSISTENCE_S``)
         and where each is worst: the pin furthest outside the home envelope and the
         upper-strand pin of least tension now. The strand is slack when its least pin
-        tension stayed below ``SLACK_TENSION_N`` at each of the last
-        ``SLACK_PERSISTENCE_S`` of coupling steps (:attr:`slack_duration_s`)."""
+        tension was below ``SLACK_TENSION_N`` at each sample (every ``SLACK_SAMPLE_S``) of
+        the last ``SLACK_PERSISTENCE_S`` (:attr:`slack_duration_s`)."""
         excursion = self.envelope_excursion_m()
         worst = int(excursion.argmax())
         upper = self.upper_strand_pins()
@@ -712,7 +740,7 @@ class TrackPlant:
         return DerailmentStatus(
             sprocket_disengaged=seated < self.MIN_SEATED_PINS,
             links_off_envelope=float(excursion[worst]) > self.ENVELOPE_THRESHOLD_M,
-            slack_strand=self._slack_steps >= len(self._slack_window),
+            slack_strand=self._slack_samples >= len(self._slack_window),
             max_envelope_excursion_m=float(excursion[worst]),
             min_upper_strand_tension_N=min_upper,
             held_upper_strand_tension_N=float(self._slack_window.max()),
@@ -746,7 +774,8 @@ class TrackPlant:
             "envelope_threshold_m": np.array([self.ENVELOPE_THRESHOLD_M]),
             "seat_tolerance_m": np.array([self.SEAT_TOLERANCE_M]),
             "slack_tension_N": np.array([self.SLACK_TENSION_N]),
-            "slack_window_steps": np.array([self.slack_window_steps]),
+            "slack_sample_steps": np.array([self.slack_sample_steps]),
+            "slack_window_samples": np.array([self.slack_window_samples]),
             "min_seated_pins": np.array([self.MIN_SEATED_PINS]),
             "link_body": self._link_body, "pin_geom": self._pin_geom,
             "connect_of_pin": self._connect_of_pin, "pins_per_connect": self._pins_per_connect,
@@ -772,8 +801,9 @@ class TrackPlant:
 
         With several MuJoCo substeps the law is held and the element is completed with
         the mean velocity over the step (displacement / step), which keeps the work
-        exchanged consistent with the stroke change. The step's least upper-strand pin
-        tension goes into the slack window (:meth:`derailment`).
+        exchanged consistent with the stroke change. Every ``slack_sample_steps``-th
+        step (of :attr:`step_count`) samples the upper strand's least pin tension into the
+        slack window (:meth:`derailment`).
         """
         m, d = self.model, self.data
         stroke0 = self.stroke_m
@@ -794,7 +824,9 @@ class TrackPlant:
         else:
             velocity = (stroke - stroke0) / COUPLING_STEP_S
         self.time_s += COUPLING_STEP_S
-        self._book_slack()
+        self.step_count += 1
+        if not self.step_count % self._slack_sample_steps:
+            self._book_slack()
         element.complete_step(self.time_s, stroke, velocity)
         return law
 

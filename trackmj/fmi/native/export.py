@@ -41,7 +41,6 @@ import numpy as np
 from trackmj.fmi.native import toolchain
 from trackmj.fmi.native.description import model_description
 from trackmj.fmi.native.variables import Variable, c_header, table
-from trackmj.ports import COUPLING_STEP_S
 from trackmj.sim.mechanics import settled_end_stop, settled_track
 from trackmj.sim.observers import PhysicsLimits, capture_mujoco_warnings
 from trackmj.sim.setup import prepare
@@ -102,6 +101,10 @@ def configuration_text(plant: TrackPlant) -> str:
     law = plant.last_law
     if law is None:
         raise ValueError("the track has not been settled (no step taken)")
+    if plant.step_count or plant.time_s:
+        raise ValueError(f"the track's clock is at step {plant.step_count}, t = "
+                         f"{plant.time_s:g} s: the engine starts its clock and slack window "
+                         "at 0 (settled_track clears them)")
     state = np.zeros(mujoco.mj_stateSize(plant.model, mujoco.mjtState.mjSTATE_INTEGRATION))
     mujoco.mj_getState(plant.model, plant.data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
     arrays = {**plant.configuration(), "initial_state": state,
@@ -109,8 +112,6 @@ def configuration_text(plant: TrackPlant) -> str:
               "initial_law": np.array([law.force_N, law.damping_N_s_m]),
               "initial_outputs": initial_outputs(plant),
               "initial_kinematics": plant.hitch_kinematics(),
-              "initial_slack_steps": np.array([round(plant.slack_duration_s
-                                                     / COUPLING_STEP_S)]),
               "closure_max_m": np.array([CLOSURE_MAX_M])}
     lines = []
     for key, value in arrays.items():
