@@ -11,6 +11,7 @@ that is right, a wrong line shows at 1e-3 within a second).
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import shutil
@@ -42,6 +43,7 @@ from trackmj.fmi.native.export import export_track
 from trackmj.ports import StepInputs
 from trackmj.sim.mechanics import settled_track
 from trackmj.sim.setup import prepare
+from trackmj.track.plant import TrackPlant
 
 HERE = Path(__file__).resolve().parent
 CLIMB = HERE / "data" / "climb.toml"
@@ -55,7 +57,7 @@ DAMPING_N_S_M = 2.0e4
 VR = {"force_N": 1, "force_dv_N_s_m": 2, "track_speed_m_s": 3, "hitch_pull_N": 4,
       "drive_torque_N_m": 14,
       "stroke_m": 10, "velocity_m_s": 11, "tension_N": 12, "upper_strand_tension_N": 15,
-      "closure_error_m": 18, "ground_friction": 34, "derailed": 23}
+      "closure_error_m": 18, "ground_friction": 34, "slack_strand": 22, "derailed": 23}
 
 
 def force_at(t_s: float) -> float:
@@ -111,6 +113,9 @@ class Slave:
 
     def get(self, name: str) -> float:
         return (self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)([VR[name]])[0]
+
+    def flag(self, name: str) -> bool:
+        return bool(self.fmu.getBoolean([VR[name]])[0])
 
     def step(self, h_s: float = 1e-3) -> None:
         self.fmu.doStep(self.t, h_s)
@@ -264,6 +269,44 @@ def test_a_track_with_pin_slides_steps_as_the_python_plant(tmp_path) -> None:
     assert np.abs(ours - theirs).max(axis=0) / scale == pytest.approx(0.0, abs=1e-9)
     # the largest gap is one pin's stretch: a few T/K (~30 µm) on the start's traction peak
     assert 10e-6 < np.median(theirs[:, 3]) < 0.1e-3 and theirs[:, 3].max() < 0.5e-3
+
+
+@pytest.mark.parametrize("which", ["fmi2", "fmi3"])
+def test_the_slack_strand_output_is_the_python_plants_verdict_at_every_step(native,
+                                                                           which) -> None:
+    """LF1352 driven to 1.5 m/s in 0.5 s under 13 kN, its idler dropped to 300 N from 0.6 to
+    1.2 s, 1.6 s: the upper strand's least pin tension falls below 1 kN in spells shorter
+    than the 0.1 s window (measured: 1-50 ms, 1-5 of the window's samples every 10 ms)
+    and in one of 0.38 s (38 samples), slack from 0.1 s into it. After every 1 ms step the
+    FMU's slack_strand is the Python plant's verdict (both sample at the same steps of
+    their counts, from 0 at the settled state), and the run saw both kinds of spell."""
+    window = round(TrackPlant.SLACK_PERSISTENCE_S / TrackPlant.SLACK_SAMPLE_S)   # samples
+
+    def force(t_s: float) -> float:
+        return 300.0 if 0.6 <= t_s < 1.2 else FORCE_N
+
+    plant = python_plant()
+    spells, theirs = [], []
+    for k in range(1600):
+        t, speed = k * 1e-3, 1.5 * min(1.0, k * 1e-3 / 0.5)
+        plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))
+        plant.step(ConstantForce(force(t), DAMPING_N_S_M))
+        spells.append(round(plant.slack_duration_s / TrackPlant.SLACK_SAMPLE_S))
+        theirs.append(plant.derailment().slack_strand)
+    ours = []
+    with slave(native[which]) as fmu:
+        fmu.start()
+        fmu.set("force_dv_N_s_m", -DAMPING_N_S_M)
+        for k in range(1600):
+            fmu.set("force_N", force(k * 1e-3))
+            fmu.set("track_speed_m_s", 1.5 * min(1.0, k * 1e-3 / 0.5))
+            fmu.step()
+            ours.append(fmu.flag("slack_strand"))
+        fmu.close()
+    np.testing.assert_array_equal(ours, theirs)
+    ended = [n for n, after in itertools.pairwise(spells) if n > 0 and after == 0]
+    assert sum(0 < n < window for n in ended) >= 3      # brief spells: not slack
+    assert max(spells) > 3 * window and sum(theirs) > 0.2 / 1e-3   # a lasting one: slack
 
 
 @pytest.mark.parametrize("which", ["fmi2", "fmi3"])

@@ -178,7 +178,9 @@ def _add_drive(sub: Subcommands) -> None:
         "drive", help="drive the track with the passive tensioner",
         description="Drive the bare track (no hydraulics) with its passive tensioner or a "
                     "--tensioner file; derailment is checked every 0.1 s (slack upper "
-                    "strand, links off their home envelope, sprocket disengaged) and the "
+                    "strand: its least pin tension below 1 kN at every 10 ms sample of "
+                    "the 0.1 s up to the check, not one pin's momentary compression at a "
+                    "tooth; links off their home envelope; sprocket disengaged) and the "
                     "summary names each failing check, when it first failed and where.",
         epilog="exit codes: 0 healthy; 1 a derailment check failed or MuJoCo warned; 2 bad "
                "input (an option, file, key or value, or an --out it may not write; one "

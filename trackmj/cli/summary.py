@@ -202,7 +202,7 @@ def derailment_lines(metrics: dict) -> list[str]:
     lines = [head]
     width = max(len(w) for w in CHECK_WORDS.values()) + 2
     for check in order:
-        row, limit = table[check], _limit_text(check, table[check]["threshold"])
+        row, limit = table[check], _limit_text(check, table[check])
         worst = row["worst"]
         if _missing(worst):
             text = "not checked (a run shorter than the check interval)"
@@ -222,10 +222,11 @@ def _checks(n: float) -> str:
     return f"{n:.0f} check" if n == 1 else f"{n:.0f} checks"
 
 
-def _limit_text(check: str, threshold: float) -> str:
-    """When ``check`` fails, in display units."""
+def _limit_text(check: str, row: dict) -> str:
+    """When ``check`` fails (its ``row`` of the table), in display units."""
+    threshold = row["threshold"]
     if check == "slack_strand":
-        return f"fails below {threshold / 1e3:.2f} kN"
+        return f"fails below {threshold / 1e3:.2f} kN throughout {row['window_s']:g} s"
     if check == "links_off_envelope":
         return f"fails above {threshold * 1e3:.0f} mm"
     return f"fails below {threshold:.0f} pins"
@@ -234,10 +235,12 @@ def _limit_text(check: str, threshold: float) -> str:
 def _where_text(check: str, where: dict) -> str:
     """What ``check`` measured and where (an ``at_first`` or ``worst`` entry)."""
     if check == "slack_strand":
-        if _missing(where["pin"]):
-            return "no pin in the upper strand"
-        return (f"upper-strand min tension {where['tension_N'] / 1e3:.2f} kN at pin "
-                f"{where['pin']:.0f}")
+        now = ("no pin in the upper strand" if _missing(where["pin"]) else
+               f"{where['tension_N'] / 1e3:.2f} kN at pin {where['pin']:.0f}")
+        if _missing(where["held_tension_N"]):
+            return f"upper-strand min tension {now} (no full window yet)"
+        return (f"upper-strand min tension peaked at {where['held_tension_N'] / 1e3:.2f} kN "
+                f"over the window, {now} at the check")
     if check == "links_off_envelope":
         return (f"pin {where['pin']:.0f}, {where['strand']}, {where['excursion_m'] * 1e3:.0f} mm "
                 f"outside (chassis frame x {where['x_m']:.2f} m, z {where['z_m']:.2f} m)")

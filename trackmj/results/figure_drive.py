@@ -25,6 +25,9 @@ FAIL_COLOURS = {"slack_strand": "#E69F00", "links_off_envelope": "#CC79A7",
 """Shade of the intervals where each derailment check failed."""
 THRESHOLD_COLOUR = "#D55E00"
 CHECK_COLOUR = "#009E73"
+LEAST_COLOUR = "#56B4E9"
+"""The upper strand's least pin tension at the checks (a readout; the slack check reads its
+peak over the window, in :data:`CHECK_COLOUR`)."""
 RAW_ROWS = 2000
 BINS = 200
 """Up to :data:`RAW_ROWS` rows a signal is drawn as it is, beyond as min-max bands and
@@ -57,8 +60,9 @@ def _checked(t: np.ndarray, interval_s: float) -> np.ndarray:
 def drive_figure(metrics: Mapping[str, Any], series: Mapping[str, np.ndarray],
                  path: str | Path) -> Path:
     """One drive run (``metrics`` and ``series`` as :mod:`trackmj.sim.drive` writes them,
-    SI): idler force [kN]; upper-strand and lower-run mean tensions and the upper strand's
-    least pin tension at each check against the slack threshold [kN]; the largest envelope
+    SI): idler force [kN]; upper-strand and lower-run mean tensions, the upper strand's
+    least pin tension at each check and the highest it rose over the slack window ending
+    there (the slack check's reading) against the slack threshold [kN]; the largest envelope
     excursion against its threshold [mm]; the seated sprocket pins against their minimum.
     The derailment values are those of each check, held to the next; shaded: where a
     check failed (the whole run's ``derailed`` in the top panel). Written to ``path``."""
@@ -81,7 +85,10 @@ def drive_figure(metrics: Mapping[str, Any], series: Mapping[str, np.ndarray],
     _band(ax_t, t, series["lower_strand_tension_N"] / 1e3, "#0072B2",
           "sprocket lower run, mean pin tension", ls="--")
     _indicator(ax_t, t, series["upper_strand_tension_min_N"] / 1e3, rows,
-               "upper strand, least pin tension at each check")
+               "upper strand, least pin tension at each check", LEAST_COLOUR)
+    _indicator(ax_t, t, series["upper_strand_tension_held_N"] / 1e3, rows,
+               f"its peak over the {table['slack_strand']['window_s']:g} s before each check "
+               "(slack below the threshold)")
     ax_t.axhline(slack / 1e3, color=THRESHOLD_COLOUR, ls=":", lw=1.4,
                  label=f"slack below {slack / 1e3:g} kN")
     _shade(ax_t, t, series["slack_strand"], "slack_strand", "slack strand (to the next check)")
@@ -133,11 +140,11 @@ def _band(ax: Axes, t: np.ndarray, x: np.ndarray, colour: str, label: str, ls: s
             label=f"{label} ({bin_ms:.0f} ms mean, band min-max)")
 
 
-def _indicator(ax: Axes, t: np.ndarray, held: np.ndarray, rows: np.ndarray, label: str
-               ) -> None:
+def _indicator(ax: Axes, t: np.ndarray, held: np.ndarray, rows: np.ndarray, label: str,
+               colour: str = CHECK_COLOUR) -> None:
     """A derailment value held between checks (line) with a marker at each check."""
-    ax.plot(t, held, color=CHECK_COLOUR, lw=1.6, label=label, zorder=5)
-    ax.plot(t[rows], held[rows], ls="none", marker="o", ms=3.5, color=CHECK_COLOUR, zorder=5)
+    ax.plot(t, held, color=colour, lw=1.6, label=label, zorder=5)
+    ax.plot(t[rows], held[rows], ls="none", marker="o", ms=3.5, color=colour, zorder=5)
 
 
 def _title(metrics: Mapping[str, Any]) -> str:

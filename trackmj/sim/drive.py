@@ -16,7 +16,10 @@ place):
   (:func:`trackmj.results.figure_drive.drive_figure`).
 
 Derailment is checked every :data:`DERAILMENT_CHECK_S` (:meth:`TrackPlant.derailment`: three
-checks, and ``derailed`` when any fails). Its timeseries columns (:data:`DERAILMENT_UNITS`)
+checks, and ``derailed`` when any fails; the slack strand's reads the samples taken every
+:attr:`TrackPlant.SLACK_SAMPLE_S` since the previous check, its window
+:attr:`TrackPlant.SLACK_PERSISTENCE_S` being the check interval). Its timeseries columns
+(:data:`DERAILMENT_UNITS`)
 hold each check's value from that check's row until the next check's (sample and hold), NaN
 before the first check; the flags are 1.0 when the check fails, else 0.0.
 """
@@ -59,13 +62,15 @@ STEP_UNITS: dict[str, str] = {
 DERAILMENT_UNITS: dict[str, str] = {
     "sprocket_seated_pins": "1", "envelope_excursion_max_m": "m", "envelope_worst_pin": "1",
     "upper_strand_tension_min_N": "N", "upper_strand_slackest_pin": "1",
-    "sprocket_disengaged": "1", "links_off_envelope": "1", "slack_strand": "1", "derailed": "1",
+    "upper_strand_tension_held_N": "N", "sprocket_disengaged": "1", "links_off_envelope": "1",
+    "slack_strand": "1", "derailed": "1",
 }
 """Columns of ``timeseries.parquet`` sampled at each derailment check and held until the
 next (NaN before the first), and their units: the seated sprocket pins, the largest
-envelope excursion and its pin, the least upper-strand pin tension and its pin (0 N and pin
-NaN when no pin is in the upper strand: the strand check fails), and each check's flag
-(1 failing, 0 passing)."""
+envelope excursion and its pin, the least upper-strand pin tension and its pin at the check
+(0 N and pin NaN when no pin is in the upper strand), the highest that least tension rose
+over the slack window ending there (the slack check's reading, below the slack tension: it
+fails), and each check's flag (1 failing, 0 passing)."""
 TIMESERIES_UNITS: dict[str, str] = STEP_UNITS | DERAILMENT_UNITS
 """Every column of ``timeseries.parquet`` and its unit."""
 DERAILMENT_CHECKS = ("slack_strand", "links_off_envelope", "sprocket_disengaged", "derailed")
@@ -180,10 +185,12 @@ def _settle_on_grade(plant: TrackPlant, grade: float) -> None:
     standing for :data:`~trackmj.sim.mechanics.SETTLE_S` under the model's own passive
     tensioner (the law its level home keyframe was settled under), its clock back at 0:
     the drive then starts from rest on the slope, as a scenario's run does, not from the
-    level keyframe sliding back into the tilted gravity while the sprocket ramps up."""
+    level keyframe sliding back into the tilted gravity while the sprocket ramps up. Its
+    slack window starts with the drive, as on level ground."""
     plant.model.opt.gravity[:] = gravity_on_grade(plant.model.opt.gravity, grade)
     plant.run(PassiveTensioner.from_params(plant.params), SETTLE_S)
     plant.time_s = 0.0
+    plant.clear_slack_window()
 
 
 INTEGRATOR_CREATION_MAX_REL = 0.03
@@ -308,8 +315,8 @@ def derailment_columns(rows: Sequence[int], statuses: Sequence[DerailmentStatus]
     for i, s in enumerate(statuses):
         slackest = s.min_upper_strand_pin if s.min_upper_strand_pin >= 0 else math.nan
         row = (s.seated_pins, s.max_envelope_excursion_m, s.worst_envelope_pin,
-               s.min_upper_strand_tension_N, slackest, s.sprocket_disengaged,
-               s.links_off_envelope, s.slack_strand, s.any)
+               s.min_upper_strand_tension_N, slackest, s.held_upper_strand_tension_N,
+               s.sprocket_disengaged, s.links_off_envelope, s.slack_strand, s.any)
         for column, value in zip(values.values(), row, strict=True):
             column[i] = float(value)
     latest = np.searchsorted(np.asarray(rows, dtype=np.int64), np.arange(steps),
@@ -334,12 +341,15 @@ def _severity(check: str, s: DerailmentStatus) -> float:
     if check == "links_off_envelope":
         return -s.max_envelope_excursion_m
     if check == "slack_strand":
-        return s.min_upper_strand_tension_N
+        return s.held_upper_strand_tension_N
     return -sum(_fails(c, s) for c in DERAILMENT_CHECKS[:-1])
 
 
 def _where(check: str, s: DerailmentStatus, t_s: float) -> dict[str, Any]:
-    """What ``check`` measured in ``s`` at ``t_s`` [s] and where (pins, strand, SI)."""
+    """What ``check`` measured in ``s`` at ``t_s`` [s] and where (pins, strand, SI); the
+    slack strand's: the highest its least pin tension rose over the window ending at
+    ``t_s`` (``held_tension_N``, None before a full window) and, at ``t_s``, that least
+    tension and its pin."""
     if check == "sprocket_disengaged":
         return {"t_s": t_s, "seated_pins": s.seated_pins}
     if check == "links_off_envelope":
@@ -348,7 +358,8 @@ def _where(check: str, s: DerailmentStatus, t_s: float) -> dict[str, Any]:
                 "pin": s.worst_envelope_pin, "strand": s.worst_envelope_strand,
                 "x_m": x, "z_m": z}
     if check == "slack_strand":
-        return {"t_s": t_s, "tension_N": s.min_upper_strand_tension_N,
+        return {"t_s": t_s, "held_tension_N": finite_or_null(s.held_upper_strand_tension_N),
+                "tension_N": s.min_upper_strand_tension_N,
                 "pin": s.min_upper_strand_pin if s.min_upper_strand_pin >= 0 else None,
                 "strand": "upper"}
     return {"t_s": t_s, "failing": [c for c in DERAILMENT_CHECKS[:-1] if _fails(c, s)]}
@@ -358,8 +369,9 @@ def _thresholds() -> dict[str, tuple[str, float | None]]:
     """Each check's failing condition (words) and threshold (SI; None for ``derailed``)."""
     p = TrackPlant
     return {
-        "slack_strand": (f"upper-strand min pin tension < {p.SLACK_TENSION_N:g} N",
-                         p.SLACK_TENSION_N),
+        "slack_strand": (f"upper-strand min pin tension < {p.SLACK_TENSION_N:g} N at every "
+                         f"{p.SLACK_SAMPLE_S * 1e3:g} ms sample for "
+                         f"{p.SLACK_PERSISTENCE_S:g} s", p.SLACK_TENSION_N),
         "links_off_envelope": (f"a pin > {p.ENVELOPE_THRESHOLD_M:g} m outside its home "
                                "envelope (chassis frame)", p.ENVELOPE_THRESHOLD_M),
         "sprocket_disengaged": (f"seated sprocket pins < {p.MIN_SEATED_PINS}",
@@ -402,7 +414,8 @@ def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStat
                      ) -> dict[str, dict[str, Any]]:
     """The ``derailment`` table of metrics.json, one entry per check
     (:data:`DERAILMENT_CHECKS`) of the ``statuses`` taken at ``times_s`` [s]: its failing
-    condition (``fails_when``, ``threshold`` SI), ``failing_checks`` (how many checks
+    condition (``fails_when``, ``threshold`` SI; the slack strand's window ``window_s``
+    [s]), ``failing_checks`` (how many checks
     failed), ``first_s`` and ``last_s`` (None when it never failed), what it measured and
     where at its first failure (``at_first``, None when it never failed) and at its worst
     over every check, passing or failing (``worst``: the margin of a healthy run; None
@@ -414,8 +427,10 @@ def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStat
         failing = [i for i, s in enumerate(statuses) if _fails(check, s)]
         worst = (min(range(len(statuses)), key=lambda i: _severity(check, statuses[i]))
                  if statuses else None)
+        window = {"window_s": TrackPlant.SLACK_PERSISTENCE_S} if check == "slack_strand" else {}
         table[check] = {
-            "fails_when": words, "threshold": threshold, "failing_checks": len(failing),
+            "fails_when": words, "threshold": threshold, **window,
+            "failing_checks": len(failing),
             "first_s": times_s[failing[0]] if failing else None,
             "last_s": times_s[failing[-1]] if failing else None,
             "at_first": (_where(check, statuses[failing[0]], times_s[failing[0]])

@@ -65,7 +65,7 @@ _settled: dict[tuple, PlantSnapshot] = {}
 
 def settled_track(setup: MechanicsSetup, force_N: float) -> TrackPlant:
     """The track of the run (terrain of the seed, W5 contact scale), settled standing under
-    ``force_N`` [N] on the idler for SETTLE_S, with its clock reset to 0.
+    ``force_N`` [N] on the idler for SETTLE_S, with its clock and slack window reset.
 
     The settled state is kept per process for the same MJCF, contact scale, force and model
     parameters (runs that differ only in hydraulics, control, controller, or the seed on
@@ -88,6 +88,7 @@ def settled_track(setup: MechanicsSetup, force_N: float) -> TrackPlant:
     else:
         plant.restore(kept)
     plant.time_s = 0.0
+    plant.clear_slack_window()   # as its clock: settled afresh or restored, the same run
     return plant
 
 

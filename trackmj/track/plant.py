@@ -112,6 +112,24 @@ def _strands(geom_xpos: np.ndarray, pin_geom: np.ndarray, qpos: np.ndarray,
     return (sum_u / n_u if n_u else math.nan), (sum_l / n_l if n_l else math.nan)
 
 
+@numba.njit(cache=True)
+def _least_upper_tension(efc_force: np.ndarray, cfrc_int: np.ndarray, xmat: np.ndarray,
+                         link_body: np.ndarray, connect_of_pin: np.ndarray,
+                         geom_xpos: np.ndarray, pin_geom: np.ndarray, qpos: np.ndarray,
+                         chassis_q: np.ndarray, bounds: np.ndarray, tension: np.ndarray,
+                         upper: np.ndarray, lower: np.ndarray) -> float:
+    """The least pin tension of the upper strand [N] (0 with no pin there), the pin
+    tensions and strand masks left in ``tension``, ``upper``, ``lower``
+    (:func:`_pin_tensions`, :func:`_strands`): one call per slack-window sample."""
+    _pin_tensions(efc_force, cfrc_int, xmat, link_body, connect_of_pin, tension)
+    _strands(geom_xpos, pin_geom, qpos, chassis_q, bounds, tension, upper, lower)
+    least = math.inf
+    for k in range(len(tension)):
+        if upper[k] and tension[k] < least:
+            least = tension[k]
+    return 0.0 if least == math.inf else least
+
+
 @dataclass
 class PassiveTensioner:
     """Preload spring-damper acting on the idler carrier (like Chrono's M113 idler).
@@ -164,9 +182,13 @@ class DerailmentStatus:
 
     sprocket_disengaged: bool   # fewer than 2 pins seated on the sprocket pitch circle
     links_off_envelope: bool    # a pin is further than the threshold outside its home envelope
-    slack_strand: bool          # upper-strand tension fell to what its own weight causes
+    slack_strand: bool          # held_upper_strand_tension_N below the slack tension
     max_envelope_excursion_m: float
-    min_upper_strand_tension_N: float   # 0 when no pin is in the upper strand
+    min_upper_strand_tension_N: float   # now; 0 when no pin is in the upper strand
+    # the highest the upper strand's least pin tension rose over the last slack window's
+    # samples (TrackPlant.SLACK_PERSISTENCE_S, one every SLACK_SAMPLE_S); inf before a full
+    # window of them
+    held_upper_strand_tension_N: float
     seated_pins: int            # pins seated on the sprocket pitch circle
     worst_envelope_pin: int     # the pin furthest outside the home envelope
     worst_envelope_strand: str  # its strand (:data:`STRANDS`)
@@ -184,8 +206,9 @@ class PlantSnapshot:
     model (:meth:`TrackPlant.snapshot`): a copy of the MjData, the actuators' bias
     parameters (the tensioner's force-law slope), the ground's memory (shear displacements,
     contact history), the clock [s], the last force law, the speed command in effect
-    [m/s], whether a hitch load is applied, and the parking brake (applied; asked for at a
-    zero command but not yet applied; anchor [rad])."""
+    [m/s], whether a hitch load is applied, the parking brake (applied; asked for at a
+    zero command but not yet applied; anchor [rad]), and the slack-strand window (the step
+    count, its samples [N], where the next goes, the slack samples in a row)."""
 
     data: mujoco.MjData
     actuator_biasprm: np.ndarray
@@ -197,6 +220,10 @@ class PlantSnapshot:
     parked: bool
     park_pending: bool
     brake_anchor_rad: float
+    step_count: int
+    slack_window_N: np.ndarray
+    slack_at: int
+    slack_samples: int
 
 
 @dataclass(frozen=True)
@@ -249,6 +276,30 @@ class TrackPlant:
     SLACK_TENSION_N = 1000.0
     """Below this the upper strand hangs on its own weight (rigid links never reach zero:
     one metre of track weighs ~460 N and a hanging span keeps a few hundred newtons)."""
+    SLACK_PERSISTENCE_S = 0.1
+    """The slack window [s]: the strand is slack when its least pin tension was below
+    ``SLACK_TENSION_N`` at every sample (``SLACK_SAMPLE_S``) over this long. A strand
+    hanging on its weight lasts; a tooth's chordal action or engagement compresses one pin
+    for a few milliseconds (measured on M113 at its preload, 154 mm pitch, driven at 1.5-3
+    m/s, ±0.2 grade, in reverse: at most 27 ms below 1 kN, the strand's mean above 1.9 kN;
+    models/README.md, "The slack-strand window"). 0.1 s is 3.7 x that, one tooth-passing
+    period of M113 (the coarsest pitch shipped) at 1.54 m/s, the time a released pin needs
+    to fall 49 mm (g t^2 / 2, the order of a strand's home sag), and the drive's check
+    interval, so the checks' windows tile the run."""
+    SLACK_SAMPLE_S = 0.01
+    """How often the slack window samples the upper strand's least pin tension [s]: after
+    every 10th coupling step of the plant's step count (:attr:`step_count`), so the window
+    holds 10 samples. Read after every step it cost ~4.5 % of the plant step
+    (``mj_rnePostConstraint`` and a pass over the pins) for a check made every 0.1 s. A
+    strand that hangs is below ``SLACK_TENSION_N`` at every sample, so no 0.1 s spell
+    escapes; the samples must not call a tensioned strand slack by seeing only its spikes.
+    The measured compression spikes last <= 27 ms and recur at tooth passing, v / pitch:
+    < 20 Hz on M113 up to 3 m/s (>= 51 ms apart, >= 24 ms above 1 kN between them); on
+    LF1352 and compact3 at 3 m/s 40 and 33 Hz, their spikes <= 4 ms (>= 21 ms between).
+    Each gap is longer than a sample interval and holds a sample, so 10 ms samples neither
+    alias the tooth passing into a slack strand nor let a 0.1 s spell escape (LF1352 at a
+    1 kN preload, 3 m/s, leaves ~8 ms gaps: its window's lowest peak fell from 2.24 to
+    1.75 kN, not slack; models/README.md, "The slack-strand window")."""
 
     def __init__(self, model: mujoco.MjModel, params: ModelParams) -> None:
         self.model = model
@@ -339,6 +390,17 @@ class TrackPlant:
         self._strand_bounds = np.array([ride, max(spr.z_m, params.idler.z_m) - ride + 0.05,
                                         lo, hi, spr.z_m - ride - 0.05])
         self._upper, self._lower = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+        # the least upper-strand pin tension sampled every _slack_sample_steps coupling
+        # steps over the last SLACK_PERSISTENCE_S (a ring, oldest at _slack_at) and how
+        # many samples in a row it was slack
+        self._slack_sample_steps = round(self.SLACK_SAMPLE_S / COUPLING_STEP_S)
+        self._slack_window = np.full(round(self.SLACK_PERSISTENCE_S / self.SLACK_SAMPLE_S),
+                                     math.inf)
+        self._slack_at = 0
+        self._slack_samples = 0
+        # coupling steps since the clock started (reset, clear_slack_window): the slack
+        # window samples at its multiples of _slack_sample_steps
+        self.step_count = 0
         self._hitch_site = m.site("rear_hitch").id
         self._sprocket_body = m.body("sprocket").id
         self._carrier_body = m.body("idler_carrier").id
@@ -358,6 +420,7 @@ class TrackPlant:
         self.data.ctrl[self._drive] = 0.0
         self.time_s = 0.0
         self.last_law = None
+        self.clear_slack_window()
         self._speed_command = 0.0
         self._hitch_loaded = False
         self.parked = self._brake_ratio > 0.0   # standing at the keyframe, braked
@@ -376,7 +439,8 @@ class TrackPlant:
         return PlantSnapshot(copy.copy(self.data), self.model.actuator_biasprm.copy(),
                              self.foundation.memory.copy(), self.time_s, self.last_law,
                              self._speed_command, self._hitch_loaded, self.parked,
-                             self._park_pending, self._brake_anchor)
+                             self._park_pending, self._brake_anchor, self.step_count,
+                             self._slack_window.copy(), self._slack_at, self._slack_samples)
 
     def restore(self, snapshot: PlantSnapshot) -> None:
         """Put the plant back into ``snapshot``'s state (taken of this plant or of one built
@@ -389,6 +453,19 @@ class TrackPlant:
                                                    snapshot.hitch_loaded)
         self.parked, self._park_pending = snapshot.parked, snapshot.park_pending
         self._brake_anchor = snapshot.brake_anchor_rad
+        self.step_count = snapshot.step_count
+        self._slack_window[:] = snapshot.slack_window_N
+        self._slack_at, self._slack_samples = snapshot.slack_at, snapshot.slack_samples
+
+    def clear_slack_window(self) -> None:
+        """Forget the upper strand's tension history and start the step count again at 0:
+        the slack window starts again (no ``slack_strand`` before ``SLACK_PERSISTENCE_S``
+        of samples) and samples at the same steps whether the track was settled afresh or
+        restored; a run whose clock starts at 0 starts it with it."""
+        self._slack_window[:] = math.inf
+        self._slack_at = 0
+        self._slack_samples = 0
+        self.step_count = 0
 
     def _contact_groups(self) -> dict[int, str]:
         groups = {self._sprocket_body: "sprocket", 0: "ground"}
@@ -719,10 +796,45 @@ class TrackPlant:
         self._strands(self._tension)
         return STRANDS[0] if self._upper[k] else STRANDS[1] if self._lower[k] else STRANDS[2]
 
+    @property
+    def slack_duration_s(self) -> float:
+        """How long the upper strand's least pin tension has stayed below
+        ``SLACK_TENSION_N`` [s], in whole samples (``SLACK_SAMPLE_S``) up to the last one:
+        0 when the last sample's was at or above it (an empty upper strand counts as 0 N)."""
+        return self._slack_samples * self.SLACK_SAMPLE_S
+
+    @property
+    def slack_sample_steps(self) -> int:
+        """Coupling steps per sample of the slack window (``SLACK_SAMPLE_S``)."""
+        return self._slack_sample_steps
+
+    @property
+    def slack_window_samples(self) -> int:
+        """Samples in ``SLACK_PERSISTENCE_S``, the slack window."""
+        return len(self._slack_window)
+
+    def _book_slack(self) -> None:
+        """The least upper-strand pin tension now (0 N with no pin there) into the slack
+        window and the run of slack samples: a sample, taken after every
+        ``slack_sample_steps``-th step (:meth:`step`)."""
+        d = self.data
+        if self._has_hinged_pins:
+            mujoco.mj_rnePostConstraint(self.model, d)
+        least = _least_upper_tension(d.efc_force, d.cfrc_int, d.xmat, self._link_body,
+                                     self._connect_of_pin, d.geom_xpos, self._pin_geom,
+                                     self._qpos, self._chassis_q, self._strand_bounds,
+                                     self._tension, self._upper, self._lower)
+        self._slack_window[self._slack_at] = least
+        self._slack_at = (self._slack_at + 1) % len(self._slack_window)
+        self._slack_samples = self._slack_samples + 1 if least < self.SLACK_TENSION_N else 0
+
     def derailment(self) -> DerailmentStatus:
         """The derailment indicators now (thresholds ``MIN_SEATED_PINS``,
-        ``ENVELOPE_THRESHOLD_M``, ``SLACK_TENSION_N``) and where each is worst: the pin
-        furthest outside the home envelope and the upper-strand pin of least tension."""
+        ``ENVELOPE_THRESHOLD_M``; ``SLACK_TENSION_N`` held for ``SLACK_PERSISTENCE_S``)
+        and where each is worst: the pin furthest outside the home envelope and the
+        upper-strand pin of least tension now. The strand is slack when its least pin
+        tension was below ``SLACK_TENSION_N`` at each sample (every ``SLACK_SAMPLE_S``) of
+        the last ``SLACK_PERSISTENCE_S`` (:attr:`slack_duration_s`)."""
         excursion = self.envelope_excursion_m()
         worst = int(excursion.argmax())
         upper = self.upper_strand_pins()
@@ -734,9 +846,10 @@ class TrackPlant:
         return DerailmentStatus(
             sprocket_disengaged=seated < self.MIN_SEATED_PINS,
             links_off_envelope=float(excursion[worst]) > self.ENVELOPE_THRESHOLD_M,
-            slack_strand=min_upper < self.SLACK_TENSION_N,
+            slack_strand=self._slack_samples >= len(self._slack_window),
             max_envelope_excursion_m=float(excursion[worst]),
             min_upper_strand_tension_N=min_upper,
+            held_upper_strand_tension_N=float(self._slack_window.max()),
             seated_pins=seated,
             worst_envelope_pin=worst,
             worst_envelope_strand=self.pin_strand(worst),
@@ -770,6 +883,8 @@ class TrackPlant:
             "envelope_threshold_m": np.array([self.ENVELOPE_THRESHOLD_M]),
             "seat_tolerance_m": np.array([self.SEAT_TOLERANCE_M]),
             "slack_tension_N": np.array([self.SLACK_TENSION_N]),
+            "slack_sample_steps": np.array([self.slack_sample_steps]),
+            "slack_window_samples": np.array([self.slack_window_samples]),
             "min_seated_pins": np.array([self.MIN_SEATED_PINS]),
             "link_body": self._link_body, "pin_geom": self._pin_geom,
             "connect_of_pin": self._connect_of_pin, "pins_per_connect": self._pins_per_connect,
@@ -795,7 +910,9 @@ class TrackPlant:
 
         With several MuJoCo substeps the law is held and the element is completed with
         the mean velocity over the step (displacement / step), which keeps the work
-        exchanged consistent with the stroke change.
+        exchanged consistent with the stroke change. Every ``slack_sample_steps``-th
+        step (of :attr:`step_count`) samples the upper strand's least pin tension into the
+        slack window (:meth:`derailment`).
         """
         m, d = self.model, self.data
         stroke0 = self.stroke_m
@@ -829,6 +946,9 @@ class TrackPlant:
         else:
             velocity = (stroke - stroke0) / COUPLING_STEP_S
         self.time_s += COUPLING_STEP_S
+        self.step_count += 1
+        if not self.step_count % self._slack_sample_steps:
+            self._book_slack()
         element.complete_step(self.time_s, stroke, velocity)
         return law
 

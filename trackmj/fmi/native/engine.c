@@ -475,10 +475,14 @@ typedef struct {
     int32_t park_pending;           /* asked for at a zero command, not yet applied */
     int32_t hitch_loaded;
     int32_t initialized;
+    /* slack-window samples (one after every slack_sample_steps-th of the steps) in a row, up
+       to the window, whose least upper-strand pin tension was below the slack tension
+       (plant._slack_samples) */
+    int32_t slack_samples;
     double kinematics[N_KINEMATICS];
 } Scalars;
 
-#define STATE_MAGIC 0x74726b6d6a310002ULL   /* "trkmj1" + layout 2 */
+#define STATE_MAGIC 0x74726b6d6a310003ULL   /* "trkmj1" + layout 3 */
 
 struct Engine {
     mjModel *m;
@@ -505,6 +509,8 @@ struct Engine {
     double envelope_threshold_m, seat_tolerance_m, slack_tension_N;
     double closure_max_m;   /* a pin gap beyond this: the loop is broken (sim's guard) */
     int min_seated_pins;
+    int slack_sample_steps; /* the slack window samples after every this many steps ... */
+    int slack_window_samples;   /* ... and is slack when this many in a row were below */
     double *tension;        /* (n,) pin tensions [N] */
     unsigned char *upper, *lower;
     /* the state */
@@ -641,6 +647,8 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
         || cfg_into(e, cfg, "slack_tension_N", &e->slack_tension_N, 1)
         || cfg_into(e, cfg, "closure_max_m", &e->closure_max_m, 1)
         || cfg_into_int(e, cfg, "min_seated_pins", &e->min_seated_pins, 1)
+        || cfg_into_int(e, cfg, "slack_sample_steps", &e->slack_sample_steps, 1)
+        || cfg_into_int(e, cfg, "slack_window_samples", &e->slack_window_samples, 1)
         || cfg_into_int(e, cfg, "foundation_width", &f->width, 1)
         || cfg_into(e, cfg, "foundation_law", f->law, N_LAW))
         return -1;
@@ -683,6 +691,12 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
         || cfg_into(e, cfg, "initial_kinematics", kinematics, N_KINEMATICS)
         || cfg_into(e, cfg, "initial_brake", initial_brake, 3))
         return -1;
+    if (e->slack_sample_steps < 1 || e->slack_window_samples < 1) {
+        logf_engine(e, ENGINE_ERROR, "logStatusError", "resources/track.cfg: slack window of "
+                    "%d samples, one every %d steps", e->slack_window_samples,
+                    e->slack_sample_steps);
+        return -1;
+    }
     e->has_hinged = 0;
     for (int k = 0; k < n; k++)
         if (e->connect_of_pin[k] < 0) e->has_hinged = 1;
@@ -714,7 +728,7 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
     s0->parked = initial_brake[0] != 0.0;
     s0->park_pending = initial_brake[1] != 0.0;
     s0->brake_anchor = initial_brake[2];
-    return 0;
+    return 0;   /* step 0, no slack sample yet: the plant's clock and window just cleared */
 }
 
 /* The ground parameters into the foundation's law (their values as set). */
@@ -1018,6 +1032,26 @@ static double closure_error(const Engine *e) {
     return largest;
 }
 
+/* The pin tensions and strand masks now (into e->tension, e->upper, e->lower) and the mean
+   strand tensions (into the outputs). */
+static void read_strands(Engine *e) {
+    pin_tensions(e);
+    strands(e, &e->s.out_real[OUT_UPPER], &e->s.out_real[OUT_LOWER]);
+}
+
+/* A slack-window sample from read_strands' tensions: the least upper-strand pin tension
+   (0 N with no pin there) against the slack tension; the run of slack samples goes on, up
+   to the window, or ends (plant._book_slack; NaN ends it as there). */
+static void book_slack(Engine *e) {
+    double least = INFINITY;
+    for (int k = 0; k < e->n; k++)
+        if (e->upper[k] && e->tension[k] < least) least = e->tension[k];
+    if (isinf(least)) least = 0.0;
+    if (!(least < e->slack_tension_N)) e->s.slack_samples = 0;
+    else if (e->s.slack_samples < e->slack_window_samples) e->s.slack_samples++;
+}
+
+/* The outputs after the last step of a doStep; the strands' come from its read_strands. */
 static void read_outputs(Engine *e, double stroke0) {
     const mjData *d = e->d;
     double *out = e->s.out_real;
@@ -1029,17 +1063,11 @@ static void read_outputs(Engine *e, double stroke0) {
                      / e->m->opt.timestep;
     double torque = e->drive_gain * (d->ctrl[e->drive] - d->qvel[e->sprocket_v]);
     out[OUT_TORQUE] = fmin(fmax(torque, -e->drive_limit), e->drive_limit);
-    pin_tensions(e);
-    strands(e, &out[OUT_UPPER], &out[OUT_LOWER]);
     out[OUT_EXCURSION] = envelope_excursion(e);
-    double least = INFINITY;
-    for (int k = 0; k < e->n; k++)
-        if (e->upper[k] && e->tension[k] < least) least = e->tension[k];
-    double min_upper = isinf(least) ? 0.0 : least;
     int *flags = e->s.out_bool;
     flags[OUT_DISENGAGED] = seated_pins(e) < e->min_seated_pins;
     flags[OUT_OFF_ENVELOPE] = out[OUT_EXCURSION] > e->envelope_threshold_m;
-    flags[OUT_SLACK] = min_upper < e->slack_tension_N;
+    flags[OUT_SLACK] = e->s.slack_samples >= e->slack_window_samples;
     flags[OUT_DERAILED] = flags[OUT_DISENGAGED] || flags[OUT_OFF_ENVELOPE] || flags[OUT_SLACK];
     out[OUT_CLOSURE] = closure_error(e);
 }
@@ -1173,7 +1201,14 @@ EngineStatus engine_step(Engine *e, long steps) {
                         engine_time(e), why, force, speed, pull);
             return ENGINE_ERROR;
         }
-        if (done == steps - 1) read_outputs(e, stroke0);
+        /* the slack window samples after every slack_sample_steps-th step (plant.step_count,
+           both from 0 at the settled state); the strands are read for it and for the
+           outputs after the doStep's last step, once when both fall on a step */
+        const int sample = e->s.steps % (uint64_t)e->slack_sample_steps == 0;
+        const int last = done == steps - 1;
+        if (sample || last) read_strands(e);
+        if (sample) book_slack(e);
+        if (last) read_outputs(e, stroke0);
     }
     MUJOCO_LEAVE(outer, previous);
     return ENGINE_OK;

@@ -101,6 +101,10 @@ def configuration_text(plant: TrackPlant) -> str:
     law = plant.last_law
     if law is None:
         raise ValueError("the track has not been settled (no step taken)")
+    if plant.step_count or plant.time_s:
+        raise ValueError(f"the track's clock is at step {plant.step_count}, t = "
+                         f"{plant.time_s:g} s: the engine starts its clock and slack window "
+                         "at 0 (settled_track clears them)")
     state = np.zeros(mujoco.mj_stateSize(plant.model, mujoco.mjtState.mjSTATE_INTEGRATION))
     mujoco.mj_getState(plant.model, plant.data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
     arrays = {**plant.configuration(), "initial_state": state,

@@ -113,7 +113,9 @@ OUTPUTS = (
     Variable("links_off_envelope", 21, "Boolean", "output", "discrete", None,
              "a pin more than 0.10 m outside the home envelope"),
     Variable("slack_strand", 22, "Boolean", "output", "discrete", None,
-             "the upper strand's least pin tension below 1000 N (it hangs on its weight)"),
+             "the upper strand's least pin tension below 1000 N at every 10 ms sample of "
+             "the last 0.1 s (it hangs on its weight; a tooth's brief compression of one "
+             "pin is not slack)"),
     Variable("derailed", 23, "Boolean", "output", "discrete", None,
              "any of the three derailment indicators"),
 )
