@@ -345,12 +345,16 @@ def test_chains_longer_than_measured_are_refused_naming_the_key() -> None:
 def test_a_hitch_load_reaches_the_idler_as_on_free_links_when_every_pin_is_compliant(
         tmp_path) -> None:
     """W3's calibration rig (hold mode, seed 0), LF1352: at its calibrated tow and push
-    (+4873 / −3380 N) slides change the idler load as free links do to 2.5 % (measured
-    −1488 / −1473 N, +1963 / +2001 N; chains of 4 as close). At a 6126 N tow the upper
+    (+4873 / −3380 N) slides change the idler load as free links do to 6 %, twice the rig's
+    own spread on one start: settled 1.000-1.020 s, the slides' push reads +1900 to
+    +2006 N (models/README.md, "Parking brake"). Measured parked through the settle:
+    −1488 / −1462 N and +1908 / +2019 N (on the servo alone −1488 / −1473 N and
+    +1963 / +2001 N; chains of 4 as close). At a 6126 N tow the upper
     strand nears slack, where its sag turns on fractions of a millimetre of length: there
     the pins' stretch decides, and slides stay nearer the free links than chains of 4, whose
-    4-link rigid spans lump it (−1838 and −1551 against −1955 N; on the armature and soft
-    margin 2, −1923 and −1481 against −1930 N; models/README.md, "Loop structure")."""
+    4-link rigid spans lump it (parked: −1821 and −1531 against −1944 N; on the servo alone
+    −1838 and −1551 against −1955 N; on the armature and soft margin 2, −1923 and −1481
+    against −1930 N; models/README.md, "Loop structure")."""
     models = Path(__file__).resolve().parents[1] / "models"
     text = (models / "lf1352.toml").read_text()
     line = next(x for x in text.splitlines() if x.startswith("structure = "))
@@ -370,7 +374,7 @@ def test_a_hitch_load_reaches_the_idler_as_on_free_links_when_every_pin_is_compl
                              for load in loads}
     slides, free = change["slides"], change["free"]
     for load in (4873.3, -3379.9):
-        assert slides[load] == pytest.approx(free[load], rel=0.025), load
+        assert slides[load] == pytest.approx(free[load], rel=0.06), load
     assert free[6126.4] < -1700.0                   # the near-slack regime
     assert (abs(slides[6126.4] - free[6126.4])
             < 0.5 * abs(change["chains"][6126.4] - free[6126.4]))
