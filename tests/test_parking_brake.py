@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from trackmj.machines.track_plant import load_plant
-from trackmj.track.foundation import S_ON
 from trackmj.track.plant import PassiveTensioner, TrackPlant
 
 G = 9.81
@@ -30,25 +29,16 @@ def _parked_on_slope(grade: float, overrides: dict[str, float] | None = None,
 
 
 def test_a_parked_machines_hull_holds_on_a_one_in_two_slope() -> None:
-    """On tan θ = 0.5 with the parking brake applied: after 3 s the ground pins slide less
-    than 0.5 mm/s (the regularised law: 8.1 mm/s), and so does the hull (6.7 mm/s without
-    the brake, the drive's servo yielding); the ground's friction carries the weight's slope
-    component, and the drive line holds the sprocket as the stated spring: drive torque =
-    k_b·windup (the servo's damping adds kv·ω, ~0 at rest)."""
+    """On tan θ = 0.5 with the parking brake applied, 1 s after 3 s: the hull moves less
+    than 0.5 mm/s (6.7 mm/s without the brake, the drive's servo yielding; its ground pins'
+    slip and friction: tests/test_ground_contract.py, the same set-up), and the drive line
+    holds the sprocket as the stated spring: drive torque = k_b·windup (the servo's damping
+    adds kv·ω, ~0 at rest)."""
     plant, element = _parked_on_slope(0.5)
     assert plant.parked
-    x0 = plant.pin_positions()[:, 0]
     hull0 = float(plant.chassis_pose[0])
-    touching0 = plant.foundation.state[:, S_ON] > 0.0
     plant.run(element, 1.0, 0.0)
-    touching = touching0 & (plant.foundation.state[:, S_ON] > 0.0)
-    slip = np.abs(plant.pin_positions()[:, 0] - x0)[touching] / 1.0
-    assert touching.sum() >= 15
-    assert slip.max() < 0.5e-3
     assert abs(float(plant.chassis_pose[0]) - hull0) / 1.0 < 0.5e-3
-    weight = float(plant.model.body_subtreemass[0]) * G
-    assert plant.foundation.friction_forces_N.sum() == pytest.approx(   # uphill: +x
-        weight * math.sin(math.atan(0.5)), rel=0.02)
     brake = plant.params.parking_brake
     assert brake is not None
     assert plant.drive_torque_N_m == pytest.approx(
