@@ -89,7 +89,7 @@ each pin's dofs and :attr:`Foundation.memory` what a step leaves for the next (j
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -546,6 +546,7 @@ class Foundation:
         """Steps kept after :data:`MAX_ATTEMPTS` attempts still missed the law."""
         saved_mass, saved_qvel = np.zeros(model.nM), np.zeros(model.nv)
         self._saved_qvel = saved_qvel
+        self._mass, self._saved_mass = data.M, saved_mass
         # views into data's buffers (they live as long as data): the kernels' arguments
         self._apply_args = (data.geom_xpos, data.xipos, data.cdof, data.subtree_com,
                             data.qvel, data.M, data.xfrc_applied, self.pins, self.dofs,
@@ -583,6 +584,11 @@ class Foundation:
     def apply(self) -> None:
         """Forces and implicit terms of the step (after ``mj_step1``, before ``mj_step2``)."""
         self.active = foundation_apply(*self._apply_args)
+
+    def discard(self) -> None:
+        """The true mass matrix back into the data's ``M`` after an attempt taken again
+        before :meth:`finish` judged it (:func:`step`'s ``retake``)."""
+        self._mass[:] = self._saved_mass
 
     def finish(self, final: bool = True, advance: bool = True) -> int:
         """After ``mj_step2``: the true mass matrix back into the data's ``M``, the force
@@ -690,13 +696,16 @@ class ImplicitSprings:
 
 
 def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
-         springs: ImplicitSprings, saved: np.ndarray | None = None) -> None:
+         springs: ImplicitSprings, saved: np.ndarray | None = None,
+         retake: Callable[[], bool] | None = None) -> None:
     """One MuJoCo step with the foundation bound to ``data`` (see :class:`Foundation`) and
     the ``springs`` integrated implicitly (:class:`ImplicitSprings`), its ``mj_step2`` taken
     again while the law contradicts an attempt's active set, at most :data:`MAX_ATTEMPTS`
     times, from what the integration changed (kept in ``saved``, of ``mj_stateSize`` of
     :data:`REDO_STATE`, allocated here if not given; ``mj_step1``'s results stay valid:
-    they depend on positions and velocities only)."""
+    they depend on positions and velocities only). ``retake``, if given, is asked after
+    the first ``mj_step2``, before the foundation judges it: True (having changed what the
+    step should do differently, e.g. the model's actuator clamps) takes it once more."""
     if saved is None:
         saved = np.zeros(mujoco.mj_stateSize(model, REDO_STATE))
     mujoco.mj_step1(model, data)
@@ -706,6 +715,15 @@ def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
         springs.apply()
         mujoco.mj_factorM(model, data)
         mujoco.mj_step2(model, data)
+        if retake is not None:
+            if retake():
+                foundation.discard()
+                mujoco.mj_setState(model, data, saved, REDO_STATE)
+                foundation.apply()
+                springs.apply()
+                mujoco.mj_factorM(model, data)
+                mujoco.mj_step2(model, data)
+            retake = None
         final = attempt == MAX_ATTEMPTS - 1
         if not foundation.finish(final):
             return

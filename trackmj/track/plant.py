@@ -532,8 +532,10 @@ class TrackPlant:
     def drive_torque_N_m(self) -> float:
         """Torque of the sprocket drive on the sprocket over the last step [N·m], > 0 driving
         the vehicle forward: the velocity servo's kv·(ω_cmd − ω) at the end-of-step speed
-        (what ``implicitfast`` integrates), within the drive's torque limit. What a drive
-        measures (motor pressure × displacement × gear ratio, or a torque shaft)."""
+        (what ``implicitfast`` integrates), within the drive's torque limit (a step that
+        starts at the limit and would end inside it is taken with the servo linear:
+        :meth:`_drive_unclamp`). What a drive measures (motor pressure × displacement ×
+        gear ratio, or a torque shaft)."""
         torque = self._drive_gain * (self._ctrl[self._drive] - self._qvel[self._sprocket_v])
         limit = self._drive_limit
         return float(min(max(torque, -limit), limit))
@@ -542,6 +544,11 @@ class TrackPlant:
     def track_speed_m_s(self) -> float:
         """Sprocket pitch-line speed [m/s] (positive drives the vehicle forward)."""
         return self.sprocket_speed_rad_s * self.params.sprocket_pitch_radius_m
+
+    @property
+    def speed_command_m_s(self) -> float:
+        """The sprocket pitch-line speed commanded [m/s] (:meth:`set_track_speed`)."""
+        return self._speed_command
 
     def set_track_speed(self, speed_m_s: float, *, park: bool = True) -> None:
         """Command the sprocket velocity servo to a pitch-line speed [m/s]. Zero asks for the
@@ -552,13 +559,12 @@ class TrackPlant:
         the brake."""
         if not math.isfinite(speed_m_s):
             raise ValueError(f"track speed must be finite, got {speed_m_s!r}")
+        self._speed_command = speed_m_s
         if speed_m_s == 0.0 and park and self._brake_ratio > 0.0:
             if not self.parked:
                 self._park_pending = True
-                self._ctrl[self._drive] = 0.0
             return
         self.parked = self._park_pending = False
-        self._ctrl[self._drive] = speed_m_s / self.params.sprocket_pitch_radius_m
 
     @property
     def park_pending(self) -> bool:
@@ -600,7 +606,6 @@ class TrackPlant:
         zero, because it acts in the rotating chassis frame)."""
         if inputs.track_speed_m_s != self._speed_command:
             self.set_track_speed(inputs.track_speed_m_s)
-            self._speed_command = inputs.track_speed_m_s
         hitch = (inputs.hitch_pull_N, inputs.hitch_down_N)
         if hitch != (0.0, 0.0) or self._hitch_loaded:
             self.set_hitch_force(*hitch)
@@ -929,12 +934,20 @@ class TrackPlant:
             self._brake_anchor = float(self._qpos[self._sprocket_q])
         parked = self.parked
         if parked:
-            self._ctrl[self._drive] = self._brake_ratio * (
-                self._brake_anchor - self._qpos[self._sprocket_q])
+            command = self._brake_ratio * (self._brake_anchor - self._qpos[self._sprocket_q])
+        else:
+            command = self._speed_command / self.params.sprocket_pitch_radius_m
+        self._ctrl[self._drive] = command
         for _ in range(self.substeps):
-            foundation_step(m, d, self.foundation, self.springs, self._saved_state)
+            # a step that starts at the drive's torque limit may end inside it
+            saturated = (abs(self._drive_gain * (command - self._qvel[self._sprocket_v]))
+                         >= self._drive_limit * (1.0 - 1e-9))
+            foundation_step(m, d, self.foundation, self.springs, self._saved_state,
+                            self._drive_unclamp if saturated else None)
             if on_substep is not None:
                 on_substep()
+            if saturated:
+                m.actuator_forcelimited[self._drive] = True
         if parked:   # the brake slips: its anchor follows, the spring at the holding torque
             angle = float(self._qpos[self._sprocket_q])
             if abs(self._brake_anchor - angle) > self._brake_slip_rad:
@@ -951,6 +964,25 @@ class TrackPlant:
             self._book_slack()
         element.complete_step(self.time_s, stroke, velocity)
         return law
+
+    def _drive_unclamp(self) -> bool:
+        """After a step MuJoCo took with the drive clamped at its torque limit (applied
+        explicitly, its damping out of the implicit step): whether the servo's torque at the
+        step's end, kv·(ω_cmd − ω₁), is back inside the limit. Then the step overshot
+        (at an abrupt stop a light sprocket reverses in one step and the clamp flips every
+        step after) and is taken again with the clamp lifted, the servo linear and implicit:
+        as the torque at ω₁ falls with the torque applied, that linear step's torque lies
+        inside the limit and is backward Euler's of the clamped servo (one solution)."""
+        d, drive = self.data, self._drive
+        low, high = self.model.actuator_forcerange[drive]
+        applied = d.actuator_force[drive]
+        torque = self._drive_gain * (self._ctrl[drive] - self._qvel[self._sprocket_v])
+        if (applied <= low and torque <= low) or (applied >= high and torque >= high):
+            return False       # not clamped, or still at the same limit: the clamp was right
+        if low < applied < high:
+            return False
+        self.model.actuator_forcelimited[drive] = False
+        return True
 
     def run(self, element: TensionerElement, duration_s: float,
             track_speed: Callable[[float], float] | float = 0.0,

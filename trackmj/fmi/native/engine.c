@@ -361,7 +361,29 @@ static void implicit_springs_apply(const mjModel *m, mjData *d, const Foundation
 }
 
 /* One MuJoCo step with the foundation and the implicit springs (foundation.step). */
-static void foundation_step(const mjModel *m, mjData *d, Foundation *f, double *redo) {
+/* The sprocket drive's velocity servo for a step that starts at its torque limit
+   (TrackPlant._drive_unclamp): if MuJoCo's clamp, applied explicitly, leaves the servo's
+   torque at the step's end kv·(ctrl − ω₁) inside the limit or past the other one, the
+   step overshot; it is taken again with the clamp lifted (the servo linear and implicit). */
+typedef struct {
+    int actuator, dof;
+    double gain;
+} Drive;
+
+static int drive_unclamp(mjModel *m, const mjData *d, const Drive *drive) {
+    const double low = m->actuator_forcerange[2 * drive->actuator];
+    const double high = m->actuator_forcerange[2 * drive->actuator + 1];
+    const double applied = d->actuator_force[drive->actuator];
+    const double torque = drive->gain * (d->ctrl[drive->actuator] - d->qvel[drive->dof]);
+    if ((applied <= low && torque <= low) || (applied >= high && torque >= high)) return 0;
+    if (low < applied && applied < high) return 0;
+    m->actuator_forcelimited[drive->actuator] = 0;
+    return 1;
+}
+
+/* foundation.step; `drive` (or NULL) as its `retake` */
+static void foundation_step(mjModel *m, mjData *d, Foundation *f, double *redo,
+                            const Drive *drive) {
     mj_step1(m, d);
     mj_getState(m, d, redo, REDO_STATE);
     for (int attempt = 0; attempt < MAX_ATTEMPTS; attempt++) {
@@ -369,6 +391,17 @@ static void foundation_step(const mjModel *m, mjData *d, Foundation *f, double *
         implicit_springs_apply(m, d, f);
         mj_factorM(m, d);
         mj_step2(m, d);
+        if (drive) {
+            if (drive_unclamp(m, d, drive)) {   /* Foundation.discard, then again */
+                memcpy(d->M, f->saved_mass, sizeof(double) * (size_t)m->nC);
+                mj_setState(m, d, redo, REDO_STATE);
+                foundation_apply(m, d, f);
+                implicit_springs_apply(m, d, f);
+                mj_factorM(m, d);
+                mj_step2(m, d);
+            }
+            drive = NULL;
+        }
         int final = attempt == MAX_ATTEMPTS - 1;
         if (!foundation_finish(m, d, f, final, 1)) return;
         if (final) {
@@ -1153,13 +1186,9 @@ EngineStatus engine_step(Engine *e, long steps) {
         /* the scenario inputs (TrackPlant.apply) */
         if (speed != e->s.speed_command) {   /* TrackPlant.set_track_speed */
             if (speed == 0.0 && e->brake_ratio > 0.0) {
-                if (!e->s.parked) {
-                    e->s.park_pending = 1;
-                    d->ctrl[e->drive] = 0.0;
-                }
+                if (!e->s.parked) e->s.park_pending = 1;
             } else {
                 e->s.parked = e->s.park_pending = 0;
-                d->ctrl[e->drive] = speed / e->pitch_radius_m;
             }
             e->s.speed_command = speed;
         }
@@ -1177,9 +1206,17 @@ EngineStatus engine_step(Engine *e, long steps) {
             e->s.brake_anchor = d->qpos[e->sprocket_q];
         }
         const int parked = e->s.parked;
-        if (parked)
-            d->ctrl[e->drive] = e->brake_ratio * (e->s.brake_anchor - d->qpos[e->sprocket_q]);
-        for (int sub = 0; sub < e->substeps; sub++) foundation_step(m, d, &e->f, e->redo);
+        const double command = parked
+            ? e->brake_ratio * (e->s.brake_anchor - d->qpos[e->sprocket_q])
+            : e->s.speed_command / e->pitch_radius_m;
+        d->ctrl[e->drive] = command;
+        const Drive drive = {e->drive, e->sprocket_v, e->drive_gain};
+        for (int sub = 0; sub < e->substeps; sub++) {
+            const int saturated = fabs(e->drive_gain * (command - d->qvel[e->sprocket_v]))
+                                  >= e->drive_limit * (1.0 - 1e-9);
+            foundation_step(m, d, &e->f, e->redo, saturated ? &drive : NULL);
+            if (saturated) m->actuator_forcelimited[e->drive] = 1;
+        }
         if (parked) {   /* the brake slips: its anchor follows, the spring at the limit */
             double angle = d->qpos[e->sprocket_q];
             if (fabs(e->s.brake_anchor - angle) > e->brake_slip_rad)

@@ -105,6 +105,9 @@ def configuration_text(plant: TrackPlant) -> str:
         raise ValueError(f"the track's clock is at step {plant.step_count}, t = "
                          f"{plant.time_s:g} s: the engine starts its clock and slack window "
                          "at 0 (settled_track clears them)")
+    if plant.speed_command_m_s != 0.0:
+        raise ValueError(f"the track is commanded to {plant.speed_command_m_s:g} m/s: the "
+                         "engine starts at the track-speed input's start value, 0")
     state = np.zeros(mujoco.mj_stateSize(plant.model, mujoco.mjtState.mjSTATE_INTEGRATION))
     mujoco.mj_getState(plant.model, plant.data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
     arrays = {**plant.configuration(), "initial_state": state,
