@@ -87,8 +87,10 @@ def test_a_zero_command_applies_the_brake_only_once_the_machine_has_stopped() ->
     assert parked[-1]
     first = int(np.argmax(parked))
     # the step that applied it started below the speed; every step before started above
-    assert first > 1
-    assert speed[first - 1] < plant.BRAKE_APPLY_SPEED_M_S <= speed[:first - 1].min()
+    # (the servo at its limit stops the sprocket within a step or two: test_drive_servo.py)
+    assert first >= 1
+    assert speed[first - 1] < plant.BRAKE_APPLY_SPEED_M_S
+    assert np.all(speed[:first - 1] >= plant.BRAKE_APPLY_SPEED_M_S)
     plant.run(element, 2.0, 0.0)   # the abrupt stop rings the hull's surge (2 Hz, ±7 mm)
     assert abs(plant.track_speed_m_s) < 1e-3
     x0 = float(plant.chassis_pose[0])

@@ -39,6 +39,7 @@ from trackmj.track.foundation import step as foundation_step
 from trackmj.track.mechanics import ModelParams
 from trackmj.track.mjcf.names import link_name, pin_name
 from trackmj.track.mjcf.structure import equalise_link_weights, pin_slide_ids, torsion_hinge_ids
+from trackmj.track.servo import DriveRetake
 
 
 @numba.njit(cache=True)
@@ -329,6 +330,8 @@ class TrackPlant:
         self._drive_gain = float(m.actuator_gainprm[self._drive, 0])   # kv [N·m·s/rad], gear 1
         self._drive_limit = (float(m.actuator_forcerange[self._drive, 1])
                              if m.actuator_forcelimited[self._drive] else math.inf)
+        self._drive_retake = DriveRetake(m, self.data, self._drive, self._sprocket_v,
+                                         self._drive_gain, self._drive_limit)
         # the parking brake at a zero speed command: the servo's command becomes
         # (k_b/kv)·(anchor − θ), so it applies k_b·(anchor − θ) − kv·ω; the anchor slips
         # to keep k_b·|anchor − θ| within the holding torque (none: ratio 0)
@@ -533,9 +536,9 @@ class TrackPlant:
         """Torque of the sprocket drive on the sprocket over the last step [N·m], > 0 driving
         the vehicle forward: the velocity servo's kv·(ω_cmd − ω) at the end-of-step speed
         (what ``implicitfast`` integrates), within the drive's torque limit (a step that
-        starts at the limit and would end inside it is taken with the servo linear:
-        :meth:`_drive_unclamp`). What a drive measures (motor pressure × displacement ×
-        gear ratio, or a torque shaft)."""
+        starts at the limit and would end inside it applies backward Euler's torque:
+        :class:`~trackmj.track.servo.DriveRetake`). What a drive measures (motor pressure ×
+        displacement × gear ratio, or a torque shaft)."""
         torque = self._drive_gain * (self._ctrl[self._drive] - self._qvel[self._sprocket_v])
         limit = self._drive_limit
         return float(min(max(torque, -limit), limit))
@@ -943,11 +946,11 @@ class TrackPlant:
             saturated = (abs(self._drive_gain * (command - self._qvel[self._sprocket_v]))
                          >= self._drive_limit * (1.0 - 1e-9))
             foundation_step(m, d, self.foundation, self.springs, self._saved_state,
-                            self._drive_unclamp if saturated else None)
+                            self._drive_retake.start() if saturated else None)
             if on_substep is not None:
                 on_substep()
             if saturated:
-                m.actuator_forcelimited[self._drive] = True
+                self._drive_retake.restore()
         if parked:   # the brake slips: its anchor follows, the spring at the holding torque
             angle = float(self._qpos[self._sprocket_q])
             if abs(self._brake_anchor - angle) > self._brake_slip_rad:
@@ -964,25 +967,6 @@ class TrackPlant:
             self._book_slack()
         element.complete_step(self.time_s, stroke, velocity)
         return law
-
-    def _drive_unclamp(self) -> bool:
-        """After a step MuJoCo took with the drive clamped at its torque limit (applied
-        explicitly, its damping out of the implicit step): whether the servo's torque at the
-        step's end, kv·(ω_cmd − ω₁), is back inside the limit. Then the step overshot
-        (at an abrupt stop a light sprocket reverses in one step and the clamp flips every
-        step after) and is taken again with the clamp lifted, the servo linear and implicit:
-        as the torque at ω₁ falls with the torque applied, that linear step's torque lies
-        inside the limit and is backward Euler's of the clamped servo (one solution)."""
-        d, drive = self.data, self._drive
-        low, high = self.model.actuator_forcerange[drive]
-        applied = d.actuator_force[drive]
-        torque = self._drive_gain * (self._ctrl[drive] - self._qvel[self._sprocket_v])
-        if (applied <= low and torque <= low) or (applied >= high and torque >= high):
-            return False       # not clamped, or still at the same limit: the clamp was right
-        if low < applied < high:
-            return False
-        self.model.actuator_forcelimited[drive] = False
-        return True
 
     def run(self, element: TensionerElement, duration_s: float,
             track_speed: Callable[[float], float] | float = 0.0,

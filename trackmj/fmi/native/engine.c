@@ -362,28 +362,50 @@ static void implicit_springs_apply(const mjModel *m, mjData *d, const Foundation
 
 /* One MuJoCo step with the foundation and the implicit springs (foundation.step). */
 /* The sprocket drive's velocity servo for a step that starts at its torque limit
-   (TrackPlant._drive_unclamp): if MuJoCo's clamp, applied explicitly, leaves the servo's
-   torque at the step's end kv·(ctrl − ω₁) inside the limit or past the other one, the
-   step overshot; it is taken again with the clamp lifted (the servo linear and implicit). */
+   (trackmj/track/servo.py, DriveRetake): after MuJoCo's clamped attempt, if the servo's
+   torque at the step's end kv·(ctrl − ω₁) is no longer at that limit, the step is taken
+   again at an explicit zero torque, then at the torque T* = kv·(ctrl − ω₁(T*)) of the line
+   through the last two attempts (secants) until the residual is below DRIVE_CONSISTENCY
+   of the limit, at most DRIVE_MAX_ATTEMPTS attempts. */
+#define DRIVE_CONSISTENCY 1e-3
+#define DRIVE_MAX_ATTEMPTS 6
+
 typedef struct {
-    int actuator, dof;
-    double gain;
+    int actuator, dof, attempt;
+    double gain, limit;
+    double previous_torque, previous_speed;
 } Drive;
 
-static int drive_unclamp(mjModel *m, const mjData *d, const Drive *drive) {
-    const double low = m->actuator_forcerange[2 * drive->actuator];
-    const double high = m->actuator_forcerange[2 * drive->actuator + 1];
-    const double applied = d->actuator_force[drive->actuator];
-    const double torque = drive->gain * (d->ctrl[drive->actuator] - d->qvel[drive->dof]);
-    if ((applied <= low && torque <= low) || (applied >= high && torque >= high)) return 0;
-    if (low < applied && applied < high) return 0;
-    m->actuator_forcelimited[drive->actuator] = 0;
+static int drive_retake(mjModel *m, const mjData *d, Drive *drive) {
+    const int a = drive->actuator;
+    const double applied = d->actuator_force[a], speed = d->qvel[drive->dof];
+    const double command = d->ctrl[a];
+    const double residual = applied - drive->gain * (command - speed);
+    drive->attempt++;
+    if (drive->attempt == 1) {
+        if (-drive->limit < applied && applied < drive->limit) return 0;
+        if ((applied <= -drive->limit && residual >= 0.0)
+            || (applied >= drive->limit && residual <= 0.0)) return 0;
+        drive->previous_torque = applied;
+        drive->previous_speed = speed;
+        m->actuator_forcerange[2 * a] = m->actuator_forcerange[2 * a + 1] = 0.0;
+        return 1;
+    }
+    if (fabs(residual) <= DRIVE_CONSISTENCY * drive->limit
+        || drive->attempt == DRIVE_MAX_ATTEMPTS) return 0;
+    const double slope = (drive->previous_speed - speed) / (drive->previous_torque - applied);
+    double torque = drive->gain * (command - speed + slope * applied)
+                    / (1.0 + drive->gain * slope);
+    torque = fmin(fmax(torque, -drive->limit), drive->limit);
+    drive->previous_torque = applied;
+    drive->previous_speed = speed;
+    m->actuator_forcerange[2 * a] = m->actuator_forcerange[2 * a + 1] = torque;
     return 1;
 }
 
 /* foundation.step; `drive` (or NULL) as its `retake` */
 static void foundation_step(mjModel *m, mjData *d, Foundation *f, double *redo,
-                            const Drive *drive) {
+                            Drive *drive) {
     mj_step1(m, d);
     mj_getState(m, d, redo, REDO_STATE);
     for (int attempt = 0; attempt < MAX_ATTEMPTS; attempt++) {
@@ -392,7 +414,7 @@ static void foundation_step(mjModel *m, mjData *d, Foundation *f, double *redo,
         mj_factorM(m, d);
         mj_step2(m, d);
         if (drive) {
-            if (drive_unclamp(m, d, drive)) {   /* Foundation.discard, then again */
+            while (drive_retake(m, d, drive)) {   /* Foundation.discard, then again */
                 memcpy(d->M, f->saved_mass, sizeof(double) * (size_t)m->nC);
                 mj_setState(m, d, redo, REDO_STATE);
                 foundation_apply(m, d, f);
@@ -1210,12 +1232,16 @@ EngineStatus engine_step(Engine *e, long steps) {
             ? e->brake_ratio * (e->s.brake_anchor - d->qpos[e->sprocket_q])
             : e->s.speed_command / e->pitch_radius_m;
         d->ctrl[e->drive] = command;
-        const Drive drive = {e->drive, e->sprocket_v, e->drive_gain};
+        Drive drive = {e->drive, e->sprocket_v, 0, e->drive_gain, e->drive_limit, 0.0, 0.0};
         for (int sub = 0; sub < e->substeps; sub++) {
             const int saturated = fabs(e->drive_gain * (command - d->qvel[e->sprocket_v]))
                                   >= e->drive_limit * (1.0 - 1e-9);
+            drive.attempt = 0;
             foundation_step(m, d, &e->f, e->redo, saturated ? &drive : NULL);
-            if (saturated) m->actuator_forcelimited[e->drive] = 1;
+            if (saturated) {   /* DriveRetake.restore */
+                m->actuator_forcerange[2 * e->drive] = -e->drive_limit;
+                m->actuator_forcerange[2 * e->drive + 1] = e->drive_limit;
+            }
         }
         if (parked) {   /* the brake slips: its anchor follows, the spring at the limit */
             double angle = d->qpos[e->sprocket_q];
