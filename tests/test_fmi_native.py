@@ -39,7 +39,7 @@ from wine import require, run_under_wine, windows_path, wine_available
 from trackmj.elements.prescribed import ConstantForce
 from trackmj.fmi.fmu import FmuLog, fmi2_callbacks
 from trackmj.fmi.native import toolchain
-from trackmj.fmi.native.export import export_track
+from trackmj.fmi.native.export import configuration_text, export_track
 from trackmj.ports import StepInputs
 from trackmj.sim.mechanics import settled_track
 from trackmj.sim.setup import prepare
@@ -151,6 +151,18 @@ def drive(step: Callable[[float, float], tuple[float, ...]], seconds: float,
     rows = [step(force_at(k * 1e-3), 0.0 if k * 1e-3 < parked_s else speed_m_s)
             for k in range(round(seconds / 1e-3))]
     return np.array(rows)
+
+
+def test_a_track_commanded_to_move_is_not_exported() -> None:
+    """The engine takes the drive's command from its track-speed input, which starts at 0:
+    a settled track commanded to another speed would start differently, so it is refused."""
+    plant = settled_track(prepare("W1"), FORCE_N)
+    plant.set_track_speed(1.0)
+    with pytest.raises(ValueError, match=r"commanded to 1 m/s: the engine starts at the "
+                                         r"track-speed input's start value, 0"):
+        configuration_text(plant)
+    plant.set_track_speed(0.0)
+    assert configuration_text(plant).startswith("substeps 1 ")
 
 
 @pytest.mark.slow
