@@ -153,6 +153,35 @@ def drive(step: Callable[[float, float], tuple[float, ...]], seconds: float,
     return np.array(rows)
 
 
+PLANT_READOUTS: dict[str, Callable[[TrackPlant], float]] = {
+    "stroke_m": lambda p: p.stroke_m, "velocity_m_s": lambda p: p.stroke_velocity_m_s,
+    "tension_N": lambda p: p.idler_force_N, "closure_error_m": lambda p: p.closure_error_m,
+    "drive_torque_N_m": lambda p: p.drive_torque_N_m}
+"""The Python plant's readout behind each FMU output compared here."""
+
+
+def plant_stepper(plant: TrackPlant, outputs: tuple[str, ...]
+                  ) -> Callable[[float, float], tuple[float, ...]]:
+    """``step(F0, speed)`` of the Python plant under the W1-like law's constant force with
+    DAMPING_N_S_M, returning the readouts of ``outputs`` (FMU output names)."""
+    def step(force: float, speed: float) -> tuple[float, ...]:
+        plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))
+        plant.step(ConstantForce(force, DAMPING_N_S_M))
+        return tuple(PLANT_READOUTS[name](plant) for name in outputs)
+    return step
+
+
+def fmu_stepper(fmu: Any, outputs: tuple[str, ...]
+                ) -> Callable[[float, float], tuple[float, ...]]:
+    """The same step of a started slave (its force slope set to −DAMPING_N_S_M)."""
+    def step(force: float, speed: float) -> tuple[float, ...]:
+        fmu.set("force_N", force)
+        fmu.set("track_speed_m_s", speed)
+        fmu.step()
+        return tuple(fmu.get(name) for name in outputs)
+    return step
+
+
 def test_a_track_commanded_to_move_is_not_exported() -> None:
     """The engine takes the drive's command from its track-speed input, which starts at 0:
     a settled track commanded to another speed would start differently, so it is refused."""
@@ -174,24 +203,13 @@ def test_the_fmu_steps_as_the_python_plant(native, which) -> None:
     plant = python_plant({"fmi2": "flat", "road": "W2", "grade": str(CLIMB)}[which])
     parked_s = 1.0 if which == "grade" else 0.0
 
-    def python_step(force: float, speed: float) -> tuple[float, float, float]:
-        plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))
-        plant.step(ConstantForce(force, DAMPING_N_S_M))
-        return plant.stroke_m, plant.stroke_velocity_m_s, plant.idler_force_N
-
+    outputs = ("stroke_m", "velocity_m_s", "tension_N")
     with slave(native[which]) as fmu:
         fmu.start()
         fmu.set("force_dv_N_s_m", -DAMPING_N_S_M)
-
-        def fmu_step(force: float, speed: float) -> tuple[float, float, float]:
-            fmu.set("force_N", force)
-            fmu.set("track_speed_m_s", speed)
-            fmu.step()
-            return fmu.get("stroke_m"), fmu.get("velocity_m_s"), fmu.get("tension_N")
-
-        ours = drive(fmu_step, 5.0, parked_s=parked_s)
+        ours = drive(fmu_stepper(fmu, outputs), 5.0, parked_s=parked_s)
         fmu.close()
-    theirs = drive(python_step, 5.0, parked_s=parked_s)
+    theirs = drive(plant_stepper(plant, outputs), 5.0, parked_s=parked_s)
     scale = np.abs(theirs).max(axis=0)
     assert np.abs(ours - theirs).max(axis=0) / scale == pytest.approx(0.0, abs=1e-9)
     assert theirs[:, 1].std() > 1e-3   # the comparison saw a moving idler
@@ -216,30 +234,21 @@ def test_a_slipping_parking_brake_steps_as_the_python_plant(tmp_path) -> None:
         """Parked 1 s, 1.5 m/s for 1 s, then commanded to stop [m/s] at step ``k``."""
         return 1.5 if 1000 <= k < 2000 else 0.0
 
-    def python_step(force: float, speed: float) -> tuple[float, ...]:
-        plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))
-        plant.step(ConstantForce(force, DAMPING_N_S_M))
-        return (plant.stroke_m, plant.stroke_velocity_m_s, plant.idler_force_N,
-                plant.drive_torque_N_m, plant.sprocket_speed_rad_s)
-
+    outputs = ("stroke_m", "velocity_m_s", "tension_N", "drive_torque_N_m")
     with slave(fmu_path) as fmu:
         fmu.start()
         fmu.set("force_dv_N_s_m", -DAMPING_N_S_M)
-
-        def fmu_step(force: float, speed: float) -> tuple[float, ...]:
-            fmu.set("force_N", force)
-            fmu.set("track_speed_m_s", speed)
-            fmu.step()
-            return (fmu.get("stroke_m"), fmu.get("velocity_m_s"), fmu.get("tension_N"),
-                    fmu.get("drive_torque_N_m"), math.nan)
-
+        fmu_step = fmu_stepper(fmu, outputs)
         ours = np.array([fmu_step(force_at(k * 1e-3), speed_at(k)) for k in range(2600)])
         fmu.close()
-    theirs = np.array([python_step(force_at(k * 1e-3), speed_at(k)) for k in range(2600)])
-    scale = np.abs(theirs[:, :4]).max(axis=0)
-    assert np.abs(ours[:, :4] - theirs[:, :4]).max(axis=0) / scale == pytest.approx(0.0,
-                                                                                  abs=1e-9)
-    assert theirs[500:1000, 4].mean() < -1e-3   # parked, the sprocket turned back: slipping
+    python_step = plant_stepper(plant, outputs)
+    theirs, sprocket = [], []
+    for k in range(2600):
+        theirs.append(python_step(force_at(k * 1e-3), speed_at(k)))
+        sprocket.append(plant.sprocket_speed_rad_s)
+    scale = np.abs(np.array(theirs)).max(axis=0)
+    assert np.abs(ours - theirs).max(axis=0) / scale == pytest.approx(0.0, abs=1e-9)
+    assert np.mean(sprocket[500:1000]) < -1e-3   # parked, the sprocket turned back: slipping
     assert not plant.park_pending and plant.parked   # stopped again: the brake re-applied
 
 
@@ -257,26 +266,13 @@ def test_a_track_with_pin_slides_steps_as_the_python_plant(tmp_path) -> None:
     plant = settled_track(prepare("W1", model=model), FORCE_N)
     assert plant.model.nv == 196
 
-    def python_step(force: float, speed: float) -> tuple[float, ...]:
-        plant.apply(StepInputs(speed, 0.0, 0.0, math.nan))
-        plant.step(ConstantForce(force, DAMPING_N_S_M))
-        return (plant.stroke_m, plant.stroke_velocity_m_s, plant.idler_force_N,
-                plant.closure_error_m)
-
+    outputs = ("stroke_m", "velocity_m_s", "tension_N", "closure_error_m")
     with slave(fmu_path) as fmu:
         fmu.start()
         fmu.set("force_dv_N_s_m", -DAMPING_N_S_M)
-
-        def fmu_step(force: float, speed: float) -> tuple[float, ...]:
-            fmu.set("force_N", force)
-            fmu.set("track_speed_m_s", speed)
-            fmu.step()
-            return (fmu.get("stroke_m"), fmu.get("velocity_m_s"), fmu.get("tension_N"),
-                    fmu.get("closure_error_m"))
-
-        ours = drive(fmu_step, 2.0)
+        ours = drive(fmu_stepper(fmu, outputs), 2.0)
         fmu.close()
-    theirs = drive(python_step, 2.0)
+    theirs = drive(plant_stepper(plant, outputs), 2.0)
     scale = np.abs(theirs).max(axis=0)
     assert np.abs(ours - theirs).max(axis=0) / scale == pytest.approx(0.0, abs=1e-9)
     # the largest gap is one pin's stretch: a few T/K (~30 µm) on the start's traction peak
