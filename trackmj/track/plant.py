@@ -330,6 +330,9 @@ class TrackPlant:
         self._drive_gain = float(m.actuator_gainprm[self._drive, 0])   # kv [N·m·s/rad], gear 1
         self._drive_limit = (float(m.actuator_forcerange[self._drive, 1])
                              if m.actuator_forcelimited[self._drive] else math.inf)
+        # the servo's command [rad/s] this far from the sprocket's speed (a billionth
+        # inside) starts a step at the torque limit (step(), DriveRetake)
+        self._drive_band = self._drive_limit / self._drive_gain * (1.0 - 1e-9)
         self._drive_retake = DriveRetake(m, self.data, self._drive, self._sprocket_v,
                                          self._drive_gain, self._drive_limit)
         # the parking brake at a zero speed command: the servo's command becomes
@@ -566,8 +569,10 @@ class TrackPlant:
         if speed_m_s == 0.0 and park and self._brake_ratio > 0.0:
             if not self.parked:
                 self._park_pending = True
+                self._ctrl[self._drive] = 0.0
             return
         self.parked = self._park_pending = False
+        self._ctrl[self._drive] = speed_m_s / self.params.sprocket_pitch_radius_m
 
     @property
     def park_pending(self) -> bool:
@@ -881,6 +886,7 @@ class TrackPlant:
             "sprocket_body": np.array([self._sprocket_body]),
             "drive_gain": np.array([self._drive_gain]),
             "drive_limit": np.array([self._drive_limit]),
+            "drive_band": np.array([self._drive_band]),
             "sprocket_q": np.array([self._sprocket_q]),
             "parking_brake": np.array([self._brake_ratio, self._brake_slip_rad,
                                        self._brake_apply_rad_s]),
@@ -938,13 +944,12 @@ class TrackPlant:
         parked = self.parked
         if parked:
             command = self._brake_ratio * (self._brake_anchor - self._qpos[self._sprocket_q])
+            self._ctrl[self._drive] = command
         else:
-            command = self._speed_command / self.params.sprocket_pitch_radius_m
-        self._ctrl[self._drive] = command
+            command = self._ctrl.item(self._drive)   # set_track_speed's
         for _ in range(self.substeps):
             # a step that starts at the drive's torque limit may end inside it
-            saturated = (abs(self._drive_gain * (command - self._qvel[self._sprocket_v]))
-                         >= self._drive_limit * (1.0 - 1e-9))
+            saturated = abs(command - self._qvel.item(self._sprocket_v)) >= self._drive_band
             foundation_step(m, d, self.foundation, self.springs, self._saved_state,
                             self._drive_retake.start() if saturated else None)
             if on_substep is not None:

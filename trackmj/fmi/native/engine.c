@@ -550,7 +550,7 @@ struct Engine {
     /* indices (TrackPlant's) */
     int slide_q, slide_v, sprocket_q, sprocket_v, chassis_q[3], chassis_v[3], tensioner, drive;
     int hitch_site, chassis_body, sprocket_body;
-    double drive_gain, drive_limit, stroke_offset_m, pitch_radius_m, ride_height_m;
+    double drive_gain, drive_limit, drive_band, stroke_offset_m, pitch_radius_m, ride_height_m;
     /* parking brake: k_b/kv [1/s], slip angle [rad], sprocket speed it applies below [rad/s] */
     double brake_ratio, brake_slip_rad, brake_apply_rad_s;
     int n;                  /* pins (= links) */
@@ -692,6 +692,7 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
         || cfg_into_int(e, cfg, "sprocket_body", &e->sprocket_body, 1)
         || cfg_into(e, cfg, "drive_gain", &e->drive_gain, 1)
         || cfg_into(e, cfg, "drive_limit", &e->drive_limit, 1)
+        || cfg_into(e, cfg, "drive_band", &e->drive_band, 1)
         || cfg_into(e, cfg, "parking_brake", brake, 3)
         || cfg_into(e, cfg, "stroke_offset_m", &e->stroke_offset_m, 1)
         || cfg_into(e, cfg, "pitch_radius_m", &e->pitch_radius_m, 1)
@@ -1234,8 +1235,7 @@ EngineStatus engine_step(Engine *e, long steps) {
         d->ctrl[e->drive] = command;
         Drive drive = {e->drive, e->sprocket_v, 0, e->drive_gain, e->drive_limit, 0.0, 0.0};
         for (int sub = 0; sub < e->substeps; sub++) {
-            const int saturated = fabs(e->drive_gain * (command - d->qvel[e->sprocket_v]))
-                                  >= e->drive_limit * (1.0 - 1e-9);
+            const int saturated = fabs(command - d->qvel[e->sprocket_v]) >= e->drive_band;
             drive.attempt = 0;
             foundation_step(m, d, &e->f, e->redo, saturated ? &drive : NULL);
             if (saturated) {   /* DriveRetake.restore */
