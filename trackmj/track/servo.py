@@ -45,9 +45,6 @@ class DriveRetake:
         self.actuator, self.dof, self.kv, self.limit = actuator, dof, kv, limit
         self._attempt = 0
         self._previous = (0.0, 0.0)   # (torque [N·m], end speed [rad/s]) of the last attempt
-        self.consistency_N_m = 0.0
-        """|T − kv·(ω_cmd − ω₁)| of the last retaken step's applied torque T [N·m]: what
-        the active set's changes between attempts left of backward Euler's."""
 
     def start(self) -> DriveRetake:
         """Ready for a new step; returns itself."""
@@ -69,11 +66,10 @@ class DriveRetake:
             self._previous = (applied, speed)
             m.actuator_forcerange[a] = (0.0, 0.0)   # explicit zero torque
             return True
-        self.consistency_N_m = abs(residual)
-        if (self.consistency_N_m <= CONSISTENCY * self.limit
-                or self._attempt == MAX_ATTEMPTS):
-            return False
         torque_b, speed_b = self._previous
+        if (abs(residual) <= CONSISTENCY * self.limit or self._attempt == MAX_ATTEMPTS
+                or applied == torque_b):   # the same torque again (T* clipped): no secant
+            return False
         slope = (speed_b - speed) / (torque_b - applied)   # end speed per torque [rad/s/N·m]
         torque = self.kv * (command - speed + slope * applied) / (1.0 + self.kv * slope)
         torque = min(max(torque, -self.limit), self.limit)

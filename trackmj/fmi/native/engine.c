@@ -360,7 +360,6 @@ static void implicit_springs_apply(const mjModel *m, mjData *d, const Foundation
     }
 }
 
-/* One MuJoCo step with the foundation and the implicit springs (foundation.step). */
 /* The sprocket drive's velocity servo for a step that starts at its torque limit
    (trackmj/track/servo.py, DriveRetake): after MuJoCo's clamped attempt, if the servo's
    torque at the step's end kv·(ctrl − ω₁) is no longer at that limit, the step is taken
@@ -392,7 +391,8 @@ static int drive_retake(mjModel *m, const mjData *d, Drive *drive) {
         return 1;
     }
     if (fabs(residual) <= DRIVE_CONSISTENCY * drive->limit
-        || drive->attempt == DRIVE_MAX_ATTEMPTS) return 0;
+        || drive->attempt == DRIVE_MAX_ATTEMPTS
+        || applied == drive->previous_torque) return 0;   /* the same torque: no secant */
     const double slope = (drive->previous_speed - speed) / (drive->previous_torque - applied);
     double torque = drive->gain * (command - speed + slope * applied)
                     / (1.0 + drive->gain * slope);
@@ -403,7 +403,8 @@ static int drive_retake(mjModel *m, const mjData *d, Drive *drive) {
     return 1;
 }
 
-/* foundation.step; `drive` (or NULL) as its `retake` */
+/* One MuJoCo step with the foundation and the implicit springs (foundation.step); `drive`
+   (or NULL) as its `retake`. */
 static void foundation_step(mjModel *m, mjData *d, Foundation *f, double *redo,
                             Drive *drive) {
     mj_step1(m, d);
