@@ -1,9 +1,9 @@
-"""The sprocket drive's velocity servo at its torque limit (trackmj/track/plant.py,
-``DriveRetake``): MuJoCo applies a clamped actuator's force explicitly, so a
-light sprocket commanded far from its speed overshot the command in one step and the clamp
+"""The sprocket drive's velocity servo at its torque limit (``DriveRetake``,
+trackmj/track/servo.py): MuJoCo applies a clamped actuator's force explicitly, so a light
+sprocket commanded far from its speed overshot the command in one step and the clamp
 flipped sign every step after (an abrupt stop on LF1352: +1.5 / −0.6 m/s for 10 ms, the
 torque ±15 kN·m in turn). A step that starts clamped and would end inside the limit is now
-taken again at backward Euler's torque of the clamped servo (trackmj/track/servo.py)."""
+taken again at backward Euler's torque of the clamped servo."""
 
 from __future__ import annotations
 
