@@ -6,7 +6,7 @@ the implicit step), which is right while the servo stays saturated but overshoot
 step that reaches the command: a light sprocket at an abrupt stop reversed in one step and
 the clamp flipped sign every step after (LF1352: +1.5 / −0.6 m/s for 10 ms). Unclamping
 that step would not do either: MuJoCo's implicit damping is not seen by its constraint
-solver, which would then answer the start-of-step torque kv·(ω_cmd − ω₀), ~10 L.
+solver, which would then answer the start-of-step torque kv·(ω_cmd − ω₀), 18 L at 1.5 m/s.
 
 :class:`DriveRetake` asks after a step MuJoCo took clamped whether the torque at its end,
 kv·(ω_cmd − ω₁), is still at the same limit. If not, backward Euler's torque lies inside
