@@ -704,9 +704,9 @@ def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
     times, from what the integration changed (kept in ``saved``, of ``mj_stateSize`` of
     :data:`REDO_STATE`, allocated here if not given; ``mj_step1``'s results stay valid:
     they depend on positions and velocities only). ``retake``, if given, is asked after
-    the first ``mj_step2``, before the foundation judges it, and again after each attempt
-    it asked for: True (having changed what the step should do differently, e.g. an
-    actuator's force range: :class:`trackmj.track.servo.DriveRetake`) takes it again."""
+    every ``mj_step2``, before the foundation judges the attempt: True (having changed what
+    the step should do differently, e.g. an actuator's force range:
+    :class:`trackmj.track.servo.DriveRetake`) takes it again."""
     if saved is None:
         saved = np.zeros(mujoco.mj_stateSize(model, REDO_STATE))
     mujoco.mj_step1(model, data)
@@ -716,15 +716,13 @@ def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
         springs.apply()
         mujoco.mj_factorM(model, data)
         mujoco.mj_step2(model, data)
-        if retake is not None:
-            while retake():
-                foundation.discard()
-                mujoco.mj_setState(model, data, saved, REDO_STATE)
-                foundation.apply()
-                springs.apply()
-                mujoco.mj_factorM(model, data)
-                mujoco.mj_step2(model, data)
-            retake = None
+        while retake is not None and retake():
+            foundation.discard()
+            mujoco.mj_setState(model, data, saved, REDO_STATE)
+            foundation.apply()
+            springs.apply()
+            mujoco.mj_factorM(model, data)
+            mujoco.mj_step2(model, data)
         final = attempt == MAX_ATTEMPTS - 1
         if not foundation.finish(final):
             return

@@ -14,8 +14,9 @@ the limit: T* = kv·(ω_cmd − ω₁(T*)). The step's end speed is affine in an
 while the contacts' active set holds (one linear solve), so a second attempt at T = 0
 gives a line through both and T* from it, applied explicitly by a third (the force range
 pinned to [T*, T*], so the constraint solver sees the torque the step applies); where the
-active set changed between them, secants through the last two attempts go on until the
-residual is below :data:`CONSISTENCY` of L.
+active set changed between them (the contacts', or the ground's when its check takes the
+step again), secants through the last two attempts go on until the residual is below
+:data:`CONSISTENCY` of L.
 """
 
 from __future__ import annotations
@@ -24,14 +25,16 @@ import mujoco
 
 CONSISTENCY = 1e-3
 """Torque residual |T − kv·(ω_cmd − ω₁)| a retaken step stops at, as a fraction of L."""
-MAX_ATTEMPTS = 6
-"""Attempts of a retaken step (MuJoCo's, T = 0, then secants) before the last is kept."""
+MAX_ATTEMPTS = 8
+"""Attempts a step is retaken for the drive (T = 0, then secants, also after the ground's
+check took the step again) before the last is kept."""
 
 
 class DriveRetake:
     """:func:`trackmj.track.foundation.step`'s ``retake`` for a step of a velocity servo
-    that starts at its torque limit: called after each attempt's ``mj_step2``, True to take
-    the step again with the force range it set. :meth:`restore` puts the limit back (after
+    that starts at its torque limit: called after every attempt's ``mj_step2`` (the
+    ground's retakes included, whose new active set moves ω₁), True to take the step again
+    with the force range it set. :meth:`restore` puts the limit back (after
     whatever reads the step, e.g. an energy ledger, which sees the range it was taken
     with).
 
@@ -43,37 +46,44 @@ class DriveRetake:
                  kv: float, limit: float) -> None:
         self.model, self.data = model, data
         self.actuator, self.dof, self.kv, self.limit = actuator, dof, kv, limit
+        self._retaking = False
         self._attempt = 0
         self._previous = (0.0, 0.0)   # (torque [N·m], end speed [rad/s]) of the last attempt
 
     def start(self) -> DriveRetake:
         """Ready for a new step; returns itself."""
+        self._retaking = False
         self._attempt = 0
         return self
 
     def __call__(self) -> bool:
         m, d, a = self.model, self.data, self.actuator
-        self._attempt += 1
         applied, speed = float(d.actuator_force[a]), float(d.qvel[self.dof])
         command = float(d.ctrl[a])
         residual = applied - self.kv * (command - speed)
-        if self._attempt == 1:   # MuJoCo's own attempt
+        if not self._retaking:   # an attempt MuJoCo's clamp decided
             if -self.limit < applied < self.limit:
                 return False                      # not clamped: implicit, as MuJoCo does
             if (applied <= -self.limit and residual >= 0.0) or (
                     applied >= self.limit and residual <= 0.0):
                 return False                      # still at the limit: the clamp was right
+            self._retaking = True
             self._previous = (applied, speed)
             m.actuator_forcerange[a] = (0.0, 0.0)   # explicit zero torque
             return True
-        torque_b, speed_b = self._previous
-        if (abs(residual) <= CONSISTENCY * self.limit or self._attempt == MAX_ATTEMPTS
-                or applied == torque_b):   # the same torque again (T* clipped): no secant
+        self._attempt += 1
+        if abs(residual) <= CONSISTENCY * self.limit or self._attempt >= MAX_ATTEMPTS:
             return False
+        torque_b, speed_b = self._previous
+        self._previous = (applied, speed)
+        if applied == torque_b:
+            # the same torque again: on the active set the ground's check chose since, or
+            # T* clipped to the limit twice; a new second point at zero torque
+            m.actuator_forcerange[a] = (0.0, 0.0)
+            return True
         slope = (speed_b - speed) / (torque_b - applied)   # end speed per torque [rad/s/N·m]
         torque = self.kv * (command - speed + slope * applied) / (1.0 + self.kv * slope)
         torque = min(max(torque, -self.limit), self.limit)
-        self._previous = (applied, speed)
         m.actuator_forcerange[a] = (torque, torque)
         return True
 

@@ -361,16 +361,17 @@ static void implicit_springs_apply(const mjModel *m, mjData *d, const Foundation
 }
 
 /* The sprocket drive's velocity servo for a step that starts at its torque limit
-   (trackmj/track/servo.py, DriveRetake): after MuJoCo's clamped attempt, if the servo's
-   torque at the step's end kv·(ctrl − ω₁) is no longer at that limit, the step is taken
-   again at an explicit zero torque, then at the torque T* = kv·(ctrl − ω₁(T*)) of the line
-   through the last two attempts (secants) until the residual is below DRIVE_CONSISTENCY
-   of the limit, at most DRIVE_MAX_ATTEMPTS attempts. */
+   (trackmj/track/servo.py, DriveRetake), asked after every mj_step2: if MuJoCo's clamped
+   attempt leaves the servo's torque at the step's end kv·(ctrl − ω₁) no longer at that
+   limit, the step is taken again at an explicit zero torque, then at the torque
+   T* = kv·(ctrl − ω₁(T*)) of the line through the last two attempts (secants; a repeated
+   torque, as after the ground's check took the step again, probes zero torque anew) until
+   the residual is below DRIVE_CONSISTENCY of the limit, at most DRIVE_MAX_ATTEMPTS. */
 #define DRIVE_CONSISTENCY 1e-3
-#define DRIVE_MAX_ATTEMPTS 6
+#define DRIVE_MAX_ATTEMPTS 8
 
 typedef struct {
-    int actuator, dof, attempt;
+    int actuator, dof, retaking, attempt;
     double gain, limit;
     double previous_torque, previous_speed;
 } Drive;
@@ -380,25 +381,30 @@ static int drive_retake(mjModel *m, const mjData *d, Drive *drive) {
     const double applied = d->actuator_force[a], speed = d->qvel[drive->dof];
     const double command = d->ctrl[a];
     const double residual = applied - drive->gain * (command - speed);
-    drive->attempt++;
-    if (drive->attempt == 1) {
+    if (!drive->retaking) {
         if (-drive->limit < applied && applied < drive->limit) return 0;
         if ((applied <= -drive->limit && residual >= 0.0)
             || (applied >= drive->limit && residual <= 0.0)) return 0;
+        drive->retaking = 1;
         drive->previous_torque = applied;
         drive->previous_speed = speed;
         m->actuator_forcerange[2 * a] = m->actuator_forcerange[2 * a + 1] = 0.0;
         return 1;
     }
+    drive->attempt++;
     if (fabs(residual) <= DRIVE_CONSISTENCY * drive->limit
-        || drive->attempt == DRIVE_MAX_ATTEMPTS
-        || applied == drive->previous_torque) return 0;   /* the same torque: no secant */
-    const double slope = (drive->previous_speed - speed) / (drive->previous_torque - applied);
+        || drive->attempt >= DRIVE_MAX_ATTEMPTS) return 0;
+    const double torque_b = drive->previous_torque, speed_b = drive->previous_speed;
+    drive->previous_torque = applied;
+    drive->previous_speed = speed;
+    if (applied == torque_b) {   /* the same torque again: a new point at zero torque */
+        m->actuator_forcerange[2 * a] = m->actuator_forcerange[2 * a + 1] = 0.0;
+        return 1;
+    }
+    const double slope = (speed_b - speed) / (torque_b - applied);
     double torque = drive->gain * (command - speed + slope * applied)
                     / (1.0 + drive->gain * slope);
     torque = fmin(fmax(torque, -drive->limit), drive->limit);
-    drive->previous_torque = applied;
-    drive->previous_speed = speed;
     m->actuator_forcerange[2 * a] = m->actuator_forcerange[2 * a + 1] = torque;
     return 1;
 }
@@ -414,16 +420,13 @@ static void foundation_step(mjModel *m, mjData *d, Foundation *f, double *redo,
         implicit_springs_apply(m, d, f);
         mj_factorM(m, d);
         mj_step2(m, d);
-        if (drive) {
-            while (drive_retake(m, d, drive)) {   /* Foundation.discard, then again */
-                memcpy(d->M, f->saved_mass, sizeof(double) * (size_t)m->nC);
-                mj_setState(m, d, redo, REDO_STATE);
-                foundation_apply(m, d, f);
-                implicit_springs_apply(m, d, f);
-                mj_factorM(m, d);
-                mj_step2(m, d);
-            }
-            drive = NULL;
+        while (drive && drive_retake(m, d, drive)) {   /* Foundation.discard, then again */
+            memcpy(d->M, f->saved_mass, sizeof(double) * (size_t)m->nC);
+            mj_setState(m, d, redo, REDO_STATE);
+            foundation_apply(m, d, f);
+            implicit_springs_apply(m, d, f);
+            mj_factorM(m, d);
+            mj_step2(m, d);
         }
         int final = attempt == MAX_ATTEMPTS - 1;
         if (!foundation_finish(m, d, f, final, 1)) return;
@@ -1234,10 +1237,10 @@ EngineStatus engine_step(Engine *e, long steps) {
             ? e->brake_ratio * (e->s.brake_anchor - d->qpos[e->sprocket_q])
             : e->s.speed_command / e->pitch_radius_m;
         d->ctrl[e->drive] = command;
-        Drive drive = {e->drive, e->sprocket_v, 0, e->drive_gain, e->drive_limit, 0.0, 0.0};
+        Drive drive = {e->drive, e->sprocket_v, 0, 0, e->drive_gain, e->drive_limit, 0.0, 0.0};
         for (int sub = 0; sub < e->substeps; sub++) {
             const int saturated = fabs(command - d->qvel[e->sprocket_v]) >= e->drive_band;
-            drive.attempt = 0;
+            drive.retaking = drive.attempt = 0;   /* DriveRetake.start */
             foundation_step(m, d, &e->f, e->redo, saturated ? &drive : NULL);
             if (saturated) {   /* DriveRetake.restore */
                 m->actuator_forcerange[2 * e->drive] = -e->drive_limit;
