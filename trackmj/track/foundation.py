@@ -709,20 +709,21 @@ def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
     :class:`trackmj.track.servo.DriveRetake`) takes it again."""
     if saved is None:
         saved = np.zeros(mujoco.mj_stateSize(model, REDO_STATE))
-    mujoco.mj_step1(model, data)
-    mujoco.mj_getState(model, data, saved, REDO_STATE)
-    for attempt in range(MAX_ATTEMPTS):
+
+    def integrate() -> None:   # one attempt: the laws into M and the forces, then mj_step2
         foundation.apply()
         springs.apply()
         mujoco.mj_factorM(model, data)
         mujoco.mj_step2(model, data)
+
+    mujoco.mj_step1(model, data)
+    mujoco.mj_getState(model, data, saved, REDO_STATE)
+    for attempt in range(MAX_ATTEMPTS):
+        integrate()
         while retake is not None and retake():
             foundation.discard()
             mujoco.mj_setState(model, data, saved, REDO_STATE)
-            foundation.apply()
-            springs.apply()
-            mujoco.mj_factorM(model, data)
-            mujoco.mj_step2(model, data)
+            integrate()
         final = attempt == MAX_ATTEMPTS - 1
         if not foundation.finish(final):
             return

@@ -411,22 +411,24 @@ static int drive_retake(mjModel *m, const mjData *d, Drive *drive) {
 
 /* One MuJoCo step with the foundation and the implicit springs (foundation.step); `drive`
    (or NULL) as its `retake`. */
+/* One attempt of foundation_step: the laws into M and the forces, then mj_step2. */
+static void foundation_integrate(mjModel *m, mjData *d, Foundation *f) {
+    foundation_apply(m, d, f);
+    implicit_springs_apply(m, d, f);
+    mj_factorM(m, d);
+    mj_step2(m, d);
+}
+
 static void foundation_step(mjModel *m, mjData *d, Foundation *f, double *redo,
                             Drive *drive) {
     mj_step1(m, d);
     mj_getState(m, d, redo, REDO_STATE);
     for (int attempt = 0; attempt < MAX_ATTEMPTS; attempt++) {
-        foundation_apply(m, d, f);
-        implicit_springs_apply(m, d, f);
-        mj_factorM(m, d);
-        mj_step2(m, d);
+        foundation_integrate(m, d, f);
         while (drive && drive_retake(m, d, drive)) {   /* Foundation.discard, then again */
             memcpy(d->M, f->saved_mass, sizeof(double) * (size_t)m->nC);
             mj_setState(m, d, redo, REDO_STATE);
-            foundation_apply(m, d, f);
-            implicit_springs_apply(m, d, f);
-            mj_factorM(m, d);
-            mj_step2(m, d);
+            foundation_integrate(m, d, f);
         }
         int final = attempt == MAX_ATTEMPTS - 1;
         if (!foundation_finish(m, d, f, final, 1)) return;
