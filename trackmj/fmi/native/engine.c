@@ -409,8 +409,6 @@ static int drive_retake(mjModel *m, const mjData *d, Drive *drive) {
     return 1;
 }
 
-/* One MuJoCo step with the foundation and the implicit springs (foundation.step); `drive`
-   (or NULL) as its `retake`. */
 /* One attempt of foundation_step: the laws into M and the forces, then mj_step2. */
 static void foundation_integrate(mjModel *m, mjData *d, Foundation *f) {
     foundation_apply(m, d, f);
@@ -419,6 +417,8 @@ static void foundation_integrate(mjModel *m, mjData *d, Foundation *f) {
     mj_step2(m, d);
 }
 
+/* One MuJoCo step with the foundation and the implicit springs (foundation.step); `drive`
+   (or NULL) as its `retake`. */
 static void foundation_step(mjModel *m, mjData *d, Foundation *f, double *redo,
                             Drive *drive) {
     mj_step1(m, d);
