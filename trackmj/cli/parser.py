@@ -199,6 +199,11 @@ def _add_drive(sub: Subcommands) -> None:
     drive.add_argument("--grade", type=float, default=0.0, metavar="TAN",
                        help="slope driven on, tan θ (rise over run, > 0 uphill driving "
                        "forward, in [-1, 1]); e.g. 0.2")
+    drive.add_argument("--stop-at", type=float, metavar="T", dest="stop_at",
+                       help="command the sprocket to 0 at once at T [s] (an abrupt stop: "
+                       "the drive stops it at its torque limit, the parking brake applies "
+                       "once it is still); the summary says what the stop did to the idler "
+                       "and the hull; e.g. 3")
     drive.add_argument("--out", metavar="DIR", help="directory for metrics.json, "
                        "timeseries.parquet and the figure drive.png (default: "
                        "runs/drive-MACHINE-SPEEDmps-HASH, HASH of the other inputs)")

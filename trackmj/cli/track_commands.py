@@ -287,10 +287,12 @@ def cmd_drive(args: argparse.Namespace) -> int:
     result = drive(args.speed, args.duration, model=args.model, mjcf=args.mjcf,
                    preload_N=args.preload, out_dir=out, tensioner=args.tensioner,
                    machine=args.machine, overrides=overrides, hitch_pull_N=args.hitch_pull,
-                   grade=args.grade)
+                   grade=args.grade, stop_s=args.stop_at)
     m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
-    print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s: {m['real_time_factor']:.2f}x "
-          f"real time ({m['plant_real_time_factor']:.2f}x for the plant steps alone)")
+    stop = "" if args.stop_at is None else f", stopped at {args.stop_at:g} s"
+    print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s{stop}: "
+          f"{m['real_time_factor']:.2f}x real time ({m['plant_real_time_factor']:.2f}x for "
+          "the plant steps alone)")
     if m["tensioner"]["element"] == "fmu":
         print(tensioner_line(m["tensioner"]))
     if "preload_N" in m:
@@ -305,6 +307,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
           + (f" (hitch load {args.hitch_pull / 1e3:g} kN)" if args.hitch_pull else "")
           + (f" (grade {args.grade:g})" if args.grade else "")
           + _parked_text(m))
+    if m["stop"] is not None:
+        print(stop_line(m["stop"], s))
     contacts = sum(e["contact_work_J"].values())
     print(f"energy [kJ]        drive {e['drive_work_J'] / 1e3:.3f}, tensioner "
           f"{e['tensioner_work_J'] / 1e3:.3f}, suspension {e['suspension_loss_J'] / 1e3:.3f}, "
@@ -315,15 +319,32 @@ def cmd_drive(args: argparse.Namespace) -> int:
           f"{m['mujoco_warnings']}")
     created = m["integrator_created_rel"] > INTEGRATOR_CREATION_MAX_REL
     if created:
+        term, joules = max(e["numerical_terms_J"].items(), key=lambda item: item[1])
         print(f"integrator         created {100 * m['integrator_created_rel']:.1f} % of the "
-              f"drive work (more than {100 * INTEGRATOR_CREATION_MAX_REL:g} %): the 1 ms step "
-              "pumps the pins' soft rows at this speed; the forces are not to be trusted "
-              "(models/README.md, 'The net numerical term against speed')")
+              f"drive work (more than {100 * INTEGRATOR_CREATION_MAX_REL:g} %; most in "
+              f"{term}, {joules / 1e3:+.3f} kJ): the 1 ms step pumps the pins' soft rows at "
+              "speed, and an abrupt stop's impact the contacts' explicit springs; the forces "
+              "are not to be trusted (models/README.md, 'The net numerical term against "
+              "speed')")
     for line in derailment_lines(m):
         print(line)
     print(f"wrote {result.out_dir} (metrics.json, timeseries.parquet, drive.png)")
     healthy = m["mujoco_warnings"] == 0 and m["derailment_checks_failed"] == 0
     return 0 if healthy and not created else 1
+
+
+def stop_line(stop: dict[str, float], steady: dict[str, float]) -> str:
+    """The summary line of an abrupt stop (:func:`trackmj.sim.drive.stop_metrics`): the
+    idler force's peak against its steady maximum before the stop, the drive torque's
+    extreme, when the sprocket and the hull came to rest, and the hull's rebound."""
+    def rest(seconds: float) -> str:
+        return "still moving at the end" if math.isnan(seconds) else f"{seconds:.2f} s"
+
+    return (f"stop               idler force peak {stop['idler_force_max_N'] / 1e3:.2f} kN "
+            f"(steady max {steady['idler_force_max_N'] / 1e3:.2f}), drive torque "
+            f"{stop['drive_torque_extreme_N_m'] / 1e3:.2f} kN·m; at rest after: sprocket "
+            f"{rest(stop['sprocket_still_after_s'])}, hull {rest(stop['hull_still_after_s'])}"
+            f" (rebound {stop['hull_rebound_m_s']:.2f} m/s)")
 
 
 def _parked_text(metrics: dict[str, Any]) -> str:
@@ -339,15 +360,17 @@ def _parked_text(metrics: dict[str, Any]) -> str:
 
 def _drive_folder(args: argparse.Namespace) -> str:
     """Default folder of ``drive``: ``runs/drive-MACHINE-SPEED`` and the first 8 digits of
-    the SHA-256 of its other inputs (duration, preload, a hitch load, a grade, ``--set``, and the
-    content of the model, MJCF and tensioner files), so drives of other inputs never share a
-    folder and a drive of the same inputs replaces its old result."""
+    the SHA-256 of its other inputs (duration, preload, a hitch load, a grade, a stop,
+    ``--set``, and the content of the model, MJCF and tensioner files), so drives of other
+    inputs never share a folder and a drive of the same inputs replaces its old result."""
     inputs: dict[str, object] = {"duration_s": args.duration, "preload_N": args.preload,
                                  "set": sorted(args.set)}
     if args.hitch_pull:
         inputs["hitch_pull_N"] = args.hitch_pull
     if args.grade:
         inputs["grade"] = args.grade
+    if args.stop_at is not None:
+        inputs["stop_s"] = args.stop_at
     for option in ("model", "mjcf", "tensioner", "machine"):
         given = getattr(args, option)
         if given is not None and Path(given).is_file():

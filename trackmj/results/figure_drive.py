@@ -117,7 +117,11 @@ def drive_figure(metrics: Mapping[str, Any], series: Mapping[str, np.ndarray],
     ax_s.set_xlabel("time [s]")
     ax_s.set_xlim(0.0, float(t[-1]))
 
+    stop_s = metrics.get("stop_s")
     for ax in axes:
+        if stop_s is not None:
+            ax.axvline(stop_s, color="0.4", ls="--", lw=1.0,
+                       label="commanded to 0 (abrupt stop)" if ax is ax_f else None)
         ax.grid(alpha=0.3)
         legend_above(ax, ncol=2)
     fig.suptitle(_title(metrics), fontsize=11)
@@ -148,14 +152,15 @@ def _indicator(ax: Axes, t: np.ndarray, held: np.ndarray, rows: np.ndarray, labe
 
 
 def _title(metrics: Mapping[str, Any]) -> str:
-    """Machine, speed (and grade), duration and tensioner (a passive one's preload beside
-    its settled force, :func:`~trackmj.results.store.passive_text`); below, the derailment
-    count with how the checks are made."""
+    """Machine, speed (and grade), duration (and a stop) and tensioner (a passive one's
+    preload beside its settled force, :func:`~trackmj.results.store.passive_text`); below,
+    the derailment count with how the checks are made."""
     tensioner = (passive_text(metrics) if "preload_N" in metrics
                  else f"tensioner {metrics['tensioner'].get('file', '')}")
     failed = metrics["derailment_checks_failed"]
     slope = running_text({"grade": metrics.get("grade")})
+    stop = "" if metrics.get("stop_s") is None else f", stopped at {metrics['stop_s']:g} s"
     return (f"drive: {metrics['machine']}, {metrics['speed_m_s']:g} m/s{slope}, "
-            f"{metrics['duration_s']:g} s; {tensioner}\nderailment checks failed {failed} of "
-            f"{metrics['derailment_checks']} (every "
+            f"{metrics['duration_s']:g} s{stop}; {tensioner}\nderailment checks failed "
+            f"{failed} of {metrics['derailment_checks']} (every "
             f"{metrics['derailment_check_interval_s']:g} s, values held between checks)")

@@ -116,9 +116,11 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
           out_dir: str | Path | None = None,
           tensioner: str | Path | None = None, machine: str | Path | None = None,
           overrides: dict[str, Any] | None = None, hitch_pull_N: float = 0.0,
-          grade: float = 0.0) -> DriveResult:
+          grade: float = 0.0, stop_s: float | None = None) -> DriveResult:
     """Drive the track at ``speed_m_s`` [m/s] (ramped over min(1 s, duration/4)) for
-    ``duration_s`` [s] with the passive tensioner (its ``preload_N`` [N] if given) or the
+    ``duration_s`` [s], commanded to 0 at once from ``stop_s`` [s] if given (an abrupt stop:
+    the drive stops the sprocket at its torque limit, the parking brake applies once it is
+    still), with the passive tensioner (its ``preload_N`` [N] if given) or the
     ``tensioner`` file's, book the energy ledger from rest and check derailment every
     :data:`DERAILMENT_CHECK_S`; write ``out_dir`` (metrics, timeseries, figure) if given.
     ``hitch_pull_N`` [N]: a horizontal load on the rear hitch, rearward (a towed load: the
@@ -131,11 +133,11 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
 
     Raises ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s, a
     hitch load outside ±:data:`MAX_HITCH_N`, a grade outside [−1, 1] or at or past the
-    ground's friction,
+    ground's friction, a stop outside (0, duration) or of a standing drive,
     ParameterError for a bad tensioner file (before any work), PhysicsError if the track
     leaves physics, PhysicsError or FmuError if an FMU tensioner leaves physics or fails.
     """
-    _check_drive(speed_m_s, duration_s, tensioner, preload_N, hitch_pull_N, grade)
+    _check_drive(speed_m_s, duration_s, tensioner, preload_N, hitch_pull_N, grade, stop_s)
     plant = load_plant(mjcf, model, machine=machine, overrides=overrides)
     check_grade_held(grade, plant.params.track.ground_friction, "grade ",
                      "[track].ground_friction")
@@ -147,7 +149,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     steps = round(duration_s / COUPLING_STEP_S)
     ledger = TrackEnergyLedger(plant)
     series, checks, wall, plant_wall = _drive_loop(plant, element, ledger, speed_m_s,
-                                                   ramp_s, steps, hitch_pull_N)
+                                                   ramp_s, steps, hitch_pull_N, stop_s)
     rows = [row for row, _ in checks]
     statuses = [status for _, status in checks]
     series |= derailment_columns(rows, statuses, steps)
@@ -155,7 +157,7 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
                              statuses)   # to 1 µs: the sum of 1 ms steps drifts in the 16th digit
     energy = ledger.finish()
     metrics = {
-        "speed_m_s": speed_m_s, "duration_s": duration_s, "ramp_s": ramp_s,
+        "speed_m_s": speed_m_s, "duration_s": duration_s, "ramp_s": ramp_s, "stop_s": stop_s,
         "hitch_pull_N": hitch_pull_N, "grade": grade,
         "machine": resolve(machine).name,
         "model_file": None if model is None else str(model),
@@ -166,7 +168,8 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
         "real_time_factor": duration_s / wall, "plant_real_time_factor": duration_s / plant_wall,
         "wall_time_s": wall, "host": host_machine(),
         "track_energy": energy.to_dict(),
-        "steady": _steady_means(series, ramp_s + 1.0 if duration_s > ramp_s + 1.0 else 0.0),
+        "steady": _steady_means(series, _steady_from_s(ramp_s, duration_s, stop_s), stop_s),
+        "stop": None if stop_s is None else stop_metrics(series, stop_s),
         "max_pin_gap_m": float(series["max_pin_gap_m"].max()),
         "mujoco_warnings": plant.warning_count,
         "parked": plant.parked,
@@ -208,10 +211,11 @@ def integrator_created_rel(numerical_J: float, drive_work_J: float) -> float:
 
 
 def _check_drive(speed_m_s: float, duration_s: float, tensioner: str | Path | None,
-                 preload_N: float | None, hitch_pull_N: float, grade: float) -> None:
+                 preload_N: float | None, hitch_pull_N: float, grade: float,
+                 stop_s: float | None) -> None:
     """ValueError for a speed outside [−5, 5] m/s, a duration outside (0, 3600] s, a hitch
-    load outside ±:data:`MAX_HITCH_N`, a grade outside [−1, 1] or both a preload and a
-    tensioner file."""
+    load outside ±:data:`MAX_HITCH_N`, a grade outside [−1, 1], a stop outside (0, duration)
+    or of a standing drive, or both a preload and a tensioner file."""
     if not (math.isfinite(speed_m_s) and abs(speed_m_s) <= TRACK_SPEED_MAX_M_S):
         raise ValueError(f"speed {speed_m_s!r} m/s: allowed [-{TRACK_SPEED_MAX_M_S}, "
                          f"{TRACK_SPEED_MAX_M_S}]")
@@ -222,6 +226,12 @@ def _check_drive(speed_m_s: float, duration_s: float, tensioner: str | Path | No
                          f"{MAX_HITCH_N:g}]")
     if not (math.isfinite(grade) and abs(grade) <= 1.0):
         raise ValueError(f"grade {grade!r}: allowed [-1, 1] (tan θ)")
+    if stop_s is not None:
+        if not (math.isfinite(stop_s) and 0.0 < stop_s < duration_s):
+            raise ValueError(f"stop at {stop_s!r} s: allowed (0, {duration_s:g}) s, inside "
+                             "the drive's duration")
+        if speed_m_s == 0.0:
+            raise ValueError("a stop needs a speed to stop from (the speed is 0)")
     if tensioner is not None and preload_N is not None:
         raise ValueError("give a preload or a tensioner file, not both")
 
@@ -259,10 +269,12 @@ def passive_metrics(plant: TrackPlant, passive: PassiveTensioner | None) -> dict
 
 
 def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnergyLedger,
-                speed_m_s: float, ramp_s: float, steps: int, hitch_pull_N: float
+                speed_m_s: float, ramp_s: float, steps: int, hitch_pull_N: float,
+                stop_s: float | None
                 ) -> tuple[dict[str, np.ndarray], list[tuple[int, DerailmentStatus]], float,
                            float]:
-    """``steps`` coupling steps at the ramped sprocket speed and hitch load, booking
+    """``steps`` coupling steps at the ramped sprocket speed (0 from ``stop_s`` [s] on, if
+    given) and hitch load, booking
     ``ledger``; returns
     the time series (column -> (steps,), :data:`STEP_UNITS`), the derailment checks (row,
     status) every :data:`DERAILMENT_CHECK_S`, the loop's and the plant steps' wall times
@@ -284,7 +296,9 @@ def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnerg
     start = time.perf_counter()
     for k in range(steps):
         pull = hitch_pull_N * min(1.0, plant.time_s / (2.0 * ramp_s))
-        plant.apply(StepInputs(speed_m_s * min(1.0, plant.time_s / ramp_s), pull, 0.0,
+        stopped = stop_s is not None and plant.time_s >= stop_s - 0.5 * COUPLING_STEP_S
+        command = 0.0 if stopped else speed_m_s * min(1.0, plant.time_s / ramp_s)
+        plant.apply(StepInputs(command, pull, 0.0,
                                math.nan))   # no supply: the tensioner is passive or a file's
         before = time.perf_counter()
         plant.step(element, on_substep=per_substep)
@@ -440,10 +454,19 @@ def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStat
     return table
 
 
-def _steady_means(series: dict[str, np.ndarray], from_s: float) -> dict[str, float]:
+def _steady_from_s(ramp_s: float, duration_s: float, stop_s: float | None) -> float:
+    """Start [s] of the steady window: 1 s after the ramp if the drive (to its stop, if
+    any) lasts longer than that, else 0."""
+    end = duration_s if stop_s is None else stop_s
+    return ramp_s + 1.0 if end > ramp_s + 1.0 else 0.0
+
+
+def _steady_means(series: dict[str, np.ndarray], from_s: float, to_s: float | None
+                  ) -> dict[str, float]:
     """Mean, min and max of the force and tension columns, and the means of speeds, stroke
-    and drive torque, from ``from_s`` [s] on."""
-    keep = series["t_s"] >= from_s
+    and drive torque, from ``from_s`` [s] to ``to_s`` [s] (the end if None)."""
+    t = series["t_s"]
+    keep = (t >= from_s) & (t < to_s) if to_s is not None else t >= from_s
     out: dict[str, float] = {"from_s": from_s}
     for name in ("idler_force_N", "upper_strand_tension_N", "lower_strand_tension_N"):
         values = series[name][keep]
@@ -455,6 +478,38 @@ def _steady_means(series: dict[str, np.ndarray], from_s: float) -> dict[str, flo
     out["drive_torque_mean_N_m"] = float(series["drive_torque_N_m"][keep].mean())
     out["track_speed_mean_m_s"] = float(series["track_speed_m_s"][keep].mean())
     return out
+
+
+STILL_M_S = 0.05
+"""What counts as still after a stop [m/s]: the parking brake's own threshold on the
+sprocket's pitch speed, applied to the hull too."""
+
+
+def stop_metrics(series: Mapping[str, np.ndarray], stop_s: float) -> dict[str, float]:
+    """What an abrupt stop at ``stop_s`` [s] did: the idler force's peak [N] and the drive
+    torque's largest magnitude, signed [N·m], after it; how long after it the sprocket's
+    pitch speed and the hull's speed fell below :data:`STILL_M_S` for good [s] (NaN if they
+    were still moving at the end); the hull's rebound, its speed the most against the
+    travel before the stop [m/s] (≤ 0; 0 if it never reversed)."""
+    t = series["t_s"]
+    after = t > stop_s - 0.5 * COUPLING_STEP_S
+    hull, sprocket = series["vehicle_speed_m_s"], series["track_speed_m_s"]
+    travel = np.sign(hull[~after][-1]) if (~after).any() else 0.0
+    torque = series["drive_torque_N_m"][after]
+
+    def still_after(speed: np.ndarray) -> float:
+        moving = np.flatnonzero(np.abs(speed[after]) >= STILL_M_S)
+        if len(moving) == 0:
+            return 0.0
+        if moving[-1] == int(after.sum()) - 1:
+            return math.nan
+        return float(t[after][moving[-1] + 1] - stop_s)
+
+    return {"idler_force_max_N": float(series["idler_force_N"][after].max()),
+            "drive_torque_extreme_N_m": float(torque[np.argmax(np.abs(torque))]),
+            "sprocket_still_after_s": still_after(sprocket),
+            "hull_still_after_s": still_after(hull),
+            "hull_rebound_m_s": float(min(0.0, np.min(travel * hull[after])))}
 
 
 def write_drive(out_dir: str | Path, metrics: Mapping[str, Any],
