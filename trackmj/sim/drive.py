@@ -480,7 +480,7 @@ def _steady_means(series: dict[str, np.ndarray], from_s: float, to_s: float | No
     return out
 
 
-STILL_M_S = 0.05
+STILL_M_S = TrackPlant.BRAKE_APPLY_SPEED_M_S
 """What counts as still after a stop [m/s]: the parking brake's own threshold on the
 sprocket's pitch speed, applied to the hull too."""
 
