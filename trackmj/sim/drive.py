@@ -45,6 +45,7 @@ from trackmj.machines.assembly import resolve
 from trackmj.machines.track_plant import load_plant
 from trackmj.ports import COUPLING_STEP_S, Command, Readout, StepInputs, TensionerElement
 from trackmj.results.figure_drive import drive_figure
+from trackmj.results.signals import settling_time
 from trackmj.results.store import ResultWriter, finite_or_null, metrics_as_read, parquet_bytes
 from trackmj.scenarios.schema import TRACK_SPEED_MAX_M_S
 from trackmj.sim.mechanics import SETTLE_S
@@ -488,7 +489,8 @@ sprocket's pitch speed, applied to the hull too."""
 def stop_metrics(series: Mapping[str, np.ndarray], stop_s: float) -> dict[str, float]:
     """What an abrupt stop at ``stop_s`` [s] did: the idler force's peak [N] and the drive
     torque's largest magnitude, signed [N·m], after it; how long after it the sprocket's
-    pitch speed and the hull's speed fell below :data:`STILL_M_S` for good [s] (NaN if they
+    pitch speed and the hull's speed fell below :data:`STILL_M_S` for good [s]
+    (:func:`~trackmj.results.signals.settling_time`: the last exit interpolated, NaN if they
     were still moving at the end); the hull's rebound, its speed the most against the
     travel before the stop [m/s] (≤ 0; 0 if it never reversed)."""
     t = series["t_s"]
@@ -496,19 +498,11 @@ def stop_metrics(series: Mapping[str, np.ndarray], stop_s: float) -> dict[str, f
     hull, sprocket = series["vehicle_speed_m_s"], series["track_speed_m_s"]
     travel = np.sign(hull[~after][-1]) if (~after).any() else 0.0
     torque = series["drive_torque_N_m"][after]
-
-    def still_after(speed: np.ndarray) -> float:
-        moving = np.flatnonzero(np.abs(speed[after]) >= STILL_M_S)
-        if len(moving) == 0:
-            return 0.0
-        if moving[-1] == int(after.sum()) - 1:
-            return math.nan
-        return float(t[after][moving[-1] + 1] - stop_s)
-
     return {"idler_force_max_N": float(series["idler_force_N"][after].max()),
             "drive_torque_extreme_N_m": float(torque[np.argmax(np.abs(torque))]),
-            "sprocket_still_after_s": still_after(sprocket),
-            "hull_still_after_s": still_after(hull),
+            "sprocket_still_after_s": settling_time(t, sprocket, 0.0, stop_s,
+                                                    band_abs=STILL_M_S),
+            "hull_still_after_s": settling_time(t, hull, 0.0, stop_s, band_abs=STILL_M_S),
             "hull_rebound_m_s": float(min(0.0, np.min(travel * hull[after])))}
 
 
