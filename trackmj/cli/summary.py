@@ -229,7 +229,8 @@ def _limit_text(check: str, row: dict) -> str:
         return f"fails below {threshold / 1e3:.2f} kN throughout {row['window_s']:g} s"
     if check == "links_off_envelope":
         return f"fails above {threshold * 1e3:.0f} mm"
-    return f"fails below {threshold:.0f} pins"
+    return (f"fails below {threshold:.0f} pins within {row['seat_tolerance_m'] * 1e3:.0f} mm "
+            "of the pitch circle")
 
 
 def _where_text(check: str, where: dict) -> str:

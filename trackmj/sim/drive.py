@@ -50,7 +50,7 @@ from trackmj.results.store import ResultWriter, finite_or_null, metrics_as_read,
 from trackmj.scenarios.schema import TRACK_SPEED_MAX_M_S
 from trackmj.sim.mechanics import SETTLE_S
 from trackmj.track.energy import TrackEnergyLedger
-from trackmj.track.plant import DerailmentStatus, PassiveTensioner, TrackPlant
+from trackmj.track.plant import DerailmentLimits, DerailmentStatus, PassiveTensioner, TrackPlant
 from trackmj.track.terrain import check_grade_held, gravity_on_grade
 
 STEP_UNITS: dict[str, str] = {
@@ -154,8 +154,9 @@ def drive(speed_m_s: float, duration_s: float, *, model: str | Path | None = Non
     rows = [row for row, _ in checks]
     statuses = [status for _, status in checks]
     series |= derailment_columns(rows, statuses, steps)
+    # the check times to 1 µs: the sum of 1 ms steps drifts in the 16th digit
     table = derailment_table([round(float(series["t_s"][row]), 6) for row in rows],
-                             statuses)   # to 1 µs: the sum of 1 ms steps drifts in the 16th digit
+                             statuses, plant.limits)
     energy = ledger.finish()
     metrics = {
         "speed_m_s": speed_m_s, "duration_s": duration_s, "ramp_s": ramp_s, "stop_s": stop_s,
@@ -380,17 +381,22 @@ def _where(check: str, s: DerailmentStatus, t_s: float) -> dict[str, Any]:
     return {"t_s": t_s, "failing": [c for c in DERAILMENT_CHECKS[:-1] if _fails(c, s)]}
 
 
-def _thresholds() -> dict[str, tuple[str, float | None]]:
-    """Each check's failing condition (words) and threshold (SI; None for ``derailed``)."""
+def _thresholds(limits: DerailmentLimits) -> dict[str, tuple[str, float | None]]:
+    """Each check's failing condition (words) and threshold (SI; None for ``derailed``) at
+    the machine's ``limits``."""
     p = TrackPlant
     return {
         "slack_strand": (f"upper-strand min pin tension < {p.SLACK_TENSION_N:g} N at every "
                          f"{p.SLACK_SAMPLE_S * 1e3:g} ms sample for "
                          f"{p.SLACK_PERSISTENCE_S:g} s", p.SLACK_TENSION_N),
-        "links_off_envelope": (f"a pin > {p.ENVELOPE_THRESHOLD_M:g} m outside its home "
-                               "envelope (chassis frame)", p.ENVELOPE_THRESHOLD_M),
-        "sprocket_disengaged": (f"seated sprocket pins < {p.MIN_SEATED_PINS}",
-                                float(p.MIN_SEATED_PINS)),
+        "links_off_envelope": (f"a pin > {limits.envelope_threshold_m:.3g} m outside its "
+                               f"home envelope (chassis frame; "
+                               f"{DerailmentLimits.ENVELOPE_PITCHES:.3g} link pitches)",
+                               limits.envelope_threshold_m),
+        "sprocket_disengaged": (f"seated sprocket pins (within "
+                                f"{limits.seat_tolerance_m * 1e3:.3g} mm of the pitch "
+                                f"circle) < {limits.min_seated_pins}",
+                                float(limits.min_seated_pins)),
         "derailed": ("any of the other checks fails", None)}
 
 
@@ -422,27 +428,30 @@ class DerailmentChecks:
 
     def metrics(self) -> dict[str, Any]:
         return metrics_as_read(derailment_metrics(
-            derailment_table(self.times_s, self.statuses), len(self.statuses)))
+            derailment_table(self.times_s, self.statuses, self.track.limits),
+            len(self.statuses)))
 
 
-def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStatus]
-                     ) -> dict[str, dict[str, Any]]:
+def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStatus],
+                     limits: DerailmentLimits) -> dict[str, dict[str, Any]]:
     """The ``derailment`` table of metrics.json, one entry per check
     (:data:`DERAILMENT_CHECKS`) of the ``statuses`` taken at ``times_s`` [s]: its failing
     condition (``fails_when``, ``threshold`` SI; the slack strand's window ``window_s``
-    [s]), ``failing_checks`` (how many checks
+    [s], the sprocket's ``seat_tolerance_m`` [m]), ``failing_checks`` (how many checks
     failed), ``first_s`` and ``last_s`` (None when it never failed), what it measured and
     where at its first failure (``at_first``, None when it never failed) and at its worst
     over every check, passing or failing (``worst``: the margin of a healthy run; None
-    with no check)."""
+    with no check), against the machine's ``limits``."""
     table = {}
-    conditions = _thresholds()
+    conditions = _thresholds(limits)
     for check in DERAILMENT_CHECKS:
         words, threshold = conditions[check]
         failing = [i for i, s in enumerate(statuses) if _fails(check, s)]
         worst = (min(range(len(statuses)), key=lambda i: _severity(check, statuses[i]))
                  if statuses else None)
-        window = {"window_s": TrackPlant.SLACK_PERSISTENCE_S} if check == "slack_strand" else {}
+        window = ({"window_s": TrackPlant.SLACK_PERSISTENCE_S} if check == "slack_strand"
+                  else {"seat_tolerance_m": limits.seat_tolerance_m}
+                  if check == "sprocket_disengaged" else {})
         table[check] = {
             "fails_when": words, "threshold": threshold, **window,
             "failing_checks": len(failing),

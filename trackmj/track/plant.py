@@ -37,6 +37,7 @@ from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElemen
 from trackmj.track.foundation import REDO_STATE, Foundation, FoundationLaw, ImplicitSprings
 from trackmj.track.foundation import step as foundation_step
 from trackmj.track.mechanics import ModelParams
+from trackmj.track.mjcf.layout import MIN_SEATED_PINS
 from trackmj.track.mjcf.names import link_name, pin_name
 from trackmj.track.mjcf.structure import equalise_link_weights, pin_slide_ids, torsion_hinge_ids
 from trackmj.track.servo import DriveRetake
@@ -175,6 +176,46 @@ sprocket and idler, the run under the road wheels)."""
 
 
 @dataclass(frozen=True)
+class DerailmentLimits:
+    """The thresholds of :meth:`TrackPlant.derailment` for one machine, sized by its track
+    and sprocket (:meth:`for_params`), so a track twice the size is judged alike.
+
+    ``envelope_threshold_m`` [m]: a pin further than this outside its home envelope is off
+    it. ``seat_tolerance_m`` [m]: a pin within this of the sprocket pitch circle is seated;
+    fewer than ``min_seated_pins`` seated pins is a disengaged sprocket."""
+
+    envelope_threshold_m: float
+    seat_tolerance_m: float
+    min_seated_pins: int = MIN_SEATED_PINS
+
+    ENVELOPE_PITCHES = 4.0 / 3.0
+    """The envelope threshold in link pitches: assumed, set on LF1352 (100 mm at its 75 mm
+    pitch, 5-10x the 10-17 mm its healthy runs reach at 1.5-3 m/s) and scaled with the
+    pitch, as every displacement of a geometrically similar track scales. A fixed 100 mm
+    judged M113's 154 mm-pitch rubber-bushed strand derailed when its slack lower run
+    sagged 102 mm on a 2 m/s start, the state LF1352's run reaches at ~50 mm."""
+    SEAT_LIFT_FRACTION = 0.3
+    """The seat tolerance as a fraction of the tooth lift (:meth:`tooth_lift_m`: how far out
+    a pin riding on a tooth's tip sits): assumed, set on LF1352 (12 mm of its 39 mm lift),
+    scaled with the tooth; a pin that has climbed under a third of the way up its tooth
+    is still in its pocket."""
+
+    @staticmethod
+    def tooth_lift_m(params: ModelParams) -> float:
+        """How far outside the pitch circle [m] a pin riding on a tooth's tip sits: the
+        tooth's offset plus its radius plus the pin's, o + r_tooth + r_pin (LF1352 0.039 m,
+        M113 0.0813 m, compact3 0.047 m)."""
+        s = params.sprocket
+        return s.tooth_radial_offset_m + s.tooth_radius_m + params.track.pin_radius_m
+
+    @classmethod
+    def for_params(cls, params: ModelParams) -> DerailmentLimits:
+        """The limits of the machine ``params`` describes (LF1352: 0.100 m, 0.0117 m)."""
+        return cls(envelope_threshold_m=cls.ENVELOPE_PITCHES * params.track.pitch_m,
+                   seat_tolerance_m=cls.SEAT_LIFT_FRACTION * cls.tooth_lift_m(params))
+
+
+@dataclass(frozen=True)
 class DerailmentStatus:
     """Indicators that the track is losing its guidance (all False when healthy), with where
     each is worst. Pin indices k as in :meth:`TrackPlant.pin_tensions_N`; strands as in
@@ -266,9 +307,6 @@ class TrackPlant:
         The parameters the model was generated from (geometry, contacts, pins).
     """
 
-    ENVELOPE_THRESHOLD_M = 0.10
-    SEAT_TOLERANCE_M = 0.012
-    MIN_SEATED_PINS = 2
     BRAKE_APPLY_SPEED_M_S = 0.05
     """Pitch speed [m/s] below which a zero speed command applies the parking brake: the
     machine has stopped (a brake applied at speed would lock a moving machine). Above the
@@ -415,6 +453,7 @@ class TrackPlant:
         self.last_law: ForceLaw | None = None
         self.reset("home" if model.nkey else None)
         self._envelope = self._home_envelope()
+        self.limits = DerailmentLimits.for_params(params)
         _ = self.closure_error_m   # load (or compile) the kernel here, not in the first step
 
     # ------------------------------------------------------------------ construction
@@ -755,12 +794,13 @@ class TrackPlant:
         return [k for k in rollers.values() if k not in touched]
 
     def seated_sprocket_pins(self) -> int:
-        """Pins within ``SEAT_TOLERANCE_M`` of the sprocket pitch circle; a pin riding on a
-        tooth tip sits about 40 mm further out."""
+        """Pins within the seat tolerance (:attr:`limits`) of the sprocket pitch circle; a
+        pin riding on a tooth tip sits the tooth lift further out
+        (:meth:`DerailmentLimits.tooth_lift_m`)."""
         centre = self.data.xpos[self._sprocket_body][[0, 2]]
         radius = np.linalg.norm(self.pin_positions() - centre, axis=1)
         off = np.abs(radius - self.params.sprocket_pitch_radius_m)
-        return int(np.count_nonzero(off < self.SEAT_TOLERANCE_M))
+        return int(np.count_nonzero(off < self.limits.seat_tolerance_m))
 
     # ------------------------------------------------------------------ derailment
     def _chassis_frame_pins(self) -> np.ndarray:
@@ -842,8 +882,8 @@ class TrackPlant:
         self._slack_samples = self._slack_samples + 1 if least < self.SLACK_TENSION_N else 0
 
     def derailment(self) -> DerailmentStatus:
-        """The derailment indicators now (thresholds ``MIN_SEATED_PINS``,
-        ``ENVELOPE_THRESHOLD_M``; ``SLACK_TENSION_N`` held for ``SLACK_PERSISTENCE_S``)
+        """The derailment indicators now (thresholds :attr:`limits`; ``SLACK_TENSION_N``
+        held for ``SLACK_PERSISTENCE_S``)
         and where each is worst: the pin furthest outside the home envelope and the
         upper-strand pin of least tension now. The strand is slack when its least pin
         tension was below ``SLACK_TENSION_N`` at each sample (every ``SLACK_SAMPLE_S``) of
@@ -857,8 +897,8 @@ class TrackPlant:
         seated = self.seated_sprocket_pins()
         x, z = self.pins_layout_frame()[worst]
         return DerailmentStatus(
-            sprocket_disengaged=seated < self.MIN_SEATED_PINS,
-            links_off_envelope=float(excursion[worst]) > self.ENVELOPE_THRESHOLD_M,
+            sprocket_disengaged=seated < self.limits.min_seated_pins,
+            links_off_envelope=float(excursion[worst]) > self.limits.envelope_threshold_m,
             slack_strand=self._slack_samples >= len(self._slack_window),
             max_envelope_excursion_m=float(excursion[worst]),
             min_upper_strand_tension_N=min_upper,
@@ -894,12 +934,12 @@ class TrackPlant:
             "pitch_radius_m": np.array([self.params.sprocket_pitch_radius_m]),
             "ride_height_m": np.array([self.params.chassis.ride_height_m]),
             "strand_bounds": self._strand_bounds,
-            "envelope_threshold_m": np.array([self.ENVELOPE_THRESHOLD_M]),
-            "seat_tolerance_m": np.array([self.SEAT_TOLERANCE_M]),
+            "envelope_threshold_m": np.array([self.limits.envelope_threshold_m]),
+            "seat_tolerance_m": np.array([self.limits.seat_tolerance_m]),
             "slack_tension_N": np.array([self.SLACK_TENSION_N]),
             "slack_sample_steps": np.array([self.slack_sample_steps]),
             "slack_window_samples": np.array([self.slack_window_samples]),
-            "min_seated_pins": np.array([self.MIN_SEATED_PINS]),
+            "min_seated_pins": np.array([self.limits.min_seated_pins]),
             "link_body": self._link_body, "pin_geom": self._pin_geom,
             "connect_of_pin": self._connect_of_pin, "pins_per_connect": self._pins_per_connect,
             "stretch_qpos": self._stretch_qpos,

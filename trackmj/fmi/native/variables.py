@@ -109,9 +109,10 @@ OUTPUTS = (
     Variable("closure_error_m", 18, "Float64", "output", "continuous", "m",
              "largest deflection of one pin compliance, at the start of the last step"),
     Variable("sprocket_disengaged", 20, "Boolean", "output", "discrete", None,
-             "fewer than 2 pins seated on the sprocket pitch circle"),
+             "fewer than 2 pins seated on the sprocket pitch circle (within 0.3 of "
+             "the tooth lift: o + r_tooth + r_pin)"),
     Variable("links_off_envelope", 21, "Boolean", "output", "discrete", None,
-             "a pin more than 0.10 m outside the home envelope"),
+             "a pin more than 4/3 link pitch outside the home envelope"),
     Variable("slack_strand", 22, "Boolean", "output", "discrete", None,
              "the upper strand's least pin tension below 1000 N at every 10 ms sample of "
              "the last 0.1 s (it hangs on its weight; a tooth's brief compression of one "
