@@ -98,15 +98,17 @@ def drive_figure(metrics: Mapping[str, Any], series: Mapping[str, np.ndarray],
     _indicator(ax_e, t, series["envelope_excursion_max_m"] * 1e3, rows,
                "largest pin excursion outside the home envelope at each check")
     ax_e.axhline(limit * 1e3, color=THRESHOLD_COLOUR, ls=":", lw=1.4,
-                 label=f"off envelope above {limit * 1e3:g} mm")
+                 label=f"off envelope above {limit * 1e3:.0f} mm")
     _shade(ax_e, t, series["links_off_envelope"], "links_off_envelope",
            "links off envelope (to the next check)")
     ax_e.set_ylim(bottom=0.0)
     ax_e.set_ylabel("excursion [mm]")
 
     least = table["sprocket_disengaged"]["threshold"]
+    seat_mm = table["sprocket_disengaged"]["seat_tolerance_m"] * 1e3
     _indicator(ax_s, t, series["sprocket_seated_pins"], rows,
-               "pins seated on the sprocket at each check")
+               f"pins seated on the sprocket (within {seat_mm:.0f} mm of its pitch circle) "
+               "at each check")
     ax_s.axhline(least, color=THRESHOLD_COLOUR, ls=":", lw=1.4,
                  label=f"disengaged below {least:g} pins")
     _shade(ax_s, t, series["sprocket_disengaged"], "sprocket_disengaged",
