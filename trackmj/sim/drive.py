@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+from numpy.typing import ArrayLike
 
 from trackmj.elements.fmu import FmuElement
 from trackmj.elements.tensioner_file import load_tensioner
@@ -298,7 +299,7 @@ def _drive_loop(plant: TrackPlant, element: TensionerElement, ledger: TrackEnerg
     start = time.perf_counter()
     for k in range(steps):
         pull = hitch_pull_N * min(1.0, plant.time_s / (2.0 * ramp_s))
-        stopped = stop_s is not None and plant.time_s >= stop_s - 0.5 * COUPLING_STEP_S
+        stopped = stop_s is not None and bool(_from_stop(plant.time_s, stop_s))
         command = 0.0 if stopped else speed_m_s * min(1.0, plant.time_s / ramp_s)
         plant.apply(StepInputs(command, pull, 0.0,
                                math.nan))   # no supply: the tensioner is passive or a file's
@@ -495,6 +496,12 @@ STILL_M_S = TrackPlant.BRAKE_APPLY_SPEED_M_S
 sprocket's pitch speed, applied to the hull too."""
 
 
+def _from_stop(t_s: ArrayLike, stop_s: float) -> np.ndarray:
+    """Whether each time ``t_s`` [s] on the 1 ms step grid is at or after ``stop_s`` [s],
+    robust to the grid's rounding (half a step of slack)."""
+    return np.asarray(t_s) >= stop_s - 0.5 * COUPLING_STEP_S
+
+
 def stop_metrics(series: Mapping[str, np.ndarray], stop_s: float) -> dict[str, float]:
     """What an abrupt stop at ``stop_s`` [s] did: the idler force's peak [N] and the drive
     torque's largest magnitude, signed [N·m], after it; how long after it the sprocket's
@@ -503,7 +510,7 @@ def stop_metrics(series: Mapping[str, np.ndarray], stop_s: float) -> dict[str, f
     were still moving at the end); the hull's rebound, its speed the most against the
     travel before the stop [m/s] (≤ 0; 0 if it never reversed)."""
     t = series["t_s"]
-    after = t > stop_s - 0.5 * COUPLING_STEP_S
+    after = _from_stop(t, stop_s)   # from the row at the stop instant (the last step's end)
     hull, sprocket = series["vehicle_speed_m_s"], series["track_speed_m_s"]
     travel = np.sign(hull[~after][-1]) if (~after).any() else 0.0
     torque = series["drive_torque_N_m"][after]
