@@ -190,10 +190,10 @@ class DerailmentLimits:
 
     ENVELOPE_PITCHES = 4.0 / 3.0
     """The envelope threshold in link pitches: assumed, set on LF1352 (100 mm at its 75 mm
-    pitch, 5-10x the 10-17 mm its healthy runs reach at 1.5-3 m/s) and scaled with the
+    pitch, 10x the 9-10 mm its passive drives reach at 1.5 and 3 m/s) and scaled with the
     pitch, as every displacement of a geometrically similar track scales. A fixed 100 mm
     judged M113's 154 mm-pitch rubber-bushed strand derailed when its slack lower run
-    sagged 102 mm on a 2 m/s start, the state LF1352's run reaches at ~50 mm."""
+    sagged 102 mm on a 2 m/s start: 50 mm at LF1352's pitch."""
     SEAT_LIFT_FRACTION = 0.3
     """The seat tolerance as a fraction of the tooth lift (:meth:`tooth_lift_m`: how far out
     a pin riding on a tooth's tip sits): assumed, set on LF1352 (12 mm of its 39 mm lift),
