@@ -119,9 +119,15 @@ def test_a_drive_whose_strand_hangs_names_each_failing_check_with_its_first_time
 
 
 def test_healthy_drive_reports_no_failure_with_null_times(tmp_path, capsys) -> None:
-    """The default preload at 1 m/s for 1 s (a 0.25 s ramp) keeps the track guided."""
+    """The default preload at 1 m/s for 1 s (a 0.25 s ramp, a quarter of the drive, which
+    the summary says) keeps the track guided."""
     code, printed, m, c, _ = _drive(tmp_path, capsys, "--speed", "1", "--duration", "1")
     assert code == 0
+    assert m["ramp_s"] == 0.25 and "drove 1.0 s at 1.00 m/s (from rest in 0.25 s)" in printed
+    t = c["t_s"]
+    speed = c["track_speed_m_s"]
+    assert speed[np.argmin(np.abs(t - 0.125))] == pytest.approx(0.5, abs=0.1)   # mid-ramp
+    assert speed[np.argmin(np.abs(t - 0.5))] == pytest.approx(1.0, abs=0.05)
     assert m["derailment_checks"] == 10 and m["derailment_checks_failed"] == 0
     for check in CHECKS:
         row = m["derailment"][check]

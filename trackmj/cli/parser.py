@@ -188,7 +188,9 @@ def _add_drive(sub: Subcommands) -> None:
                "interrupted")
     _model_args(drive)
     drive.add_argument("--speed", type=float, default=1.5,
-                       help="sprocket pitch speed [m/s], negative in reverse")
+                       help="sprocket pitch speed [m/s], negative in reverse, reached from "
+                       "rest by a linear ramp over min(1 s, duration/4): a drive shorter than "
+                       "4 s starts harder")
     drive.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
     drive.add_argument("--preload", type=float, metavar="N",
                        help="tensioner preload [N], e.g. 12e3")

@@ -290,7 +290,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
                    grade=args.grade, stop_s=args.stop_at)
     m, s, e = result.metrics, result.metrics["steady"], result.metrics["track_energy"]
     stop = "" if args.stop_at is None else f", stopped at {args.stop_at:g} s"
-    print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s{stop}: "
+    print(f"drove {args.duration:.1f} s at {args.speed:.2f} m/s (from rest in "
+          f"{m['ramp_s']:.2f} s){stop}: "
           f"{m['real_time_factor']:.2f}x real time ({m['plant_real_time_factor']:.2f}x for "
           "the plant steps alone)")
     if m["tensioner"]["element"] == "fmu":
