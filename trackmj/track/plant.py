@@ -37,7 +37,7 @@ from trackmj.ports import COUPLING_STEP_S, ForceLaw, StepInputs, TensionerElemen
 from trackmj.track.foundation import REDO_STATE, Foundation, FoundationLaw, ImplicitSprings
 from trackmj.track.foundation import step as foundation_step
 from trackmj.track.mechanics import ModelParams
-from trackmj.track.mjcf.layout import MIN_SEATED_PINS
+from trackmj.track.mjcf.layout import MIN_SEATED_PINS, sprocket_outer_radius
 from trackmj.track.mjcf.names import link_name, pin_name
 from trackmj.track.mjcf.structure import equalise_link_weights, pin_slide_ids, torsion_hinge_ids
 from trackmj.track.servo import DriveRetake
@@ -205,8 +205,8 @@ class DerailmentLimits:
         """How far outside the pitch circle [m] a pin riding on a tooth's tip sits: the
         tooth's offset plus its radius plus the pin's, o + r_tooth + r_pin (LF1352 0.039 m,
         M113 0.0813 m, compact3 0.047 m)."""
-        s = params.sprocket
-        return s.tooth_radial_offset_m + s.tooth_radius_m + params.track.pin_radius_m
+        return (sprocket_outer_radius(params) + params.track.pin_radius_m
+                - params.sprocket_pitch_radius_m)
 
     @classmethod
     def for_params(cls, params: ModelParams) -> DerailmentLimits:
