@@ -445,16 +445,15 @@ def derailment_table(times_s: Sequence[float], statuses: Sequence[DerailmentStat
     with no check), against the machine's ``limits``."""
     table = {}
     conditions = _thresholds(limits)
+    extras = {"slack_strand": {"window_s": TrackPlant.SLACK_PERSISTENCE_S},
+              "sprocket_disengaged": {"seat_tolerance_m": limits.seat_tolerance_m}}
     for check in DERAILMENT_CHECKS:
         words, threshold = conditions[check]
         failing = [i for i, s in enumerate(statuses) if _fails(check, s)]
         worst = (min(range(len(statuses)), key=lambda i: _severity(check, statuses[i]))
                  if statuses else None)
-        window = ({"window_s": TrackPlant.SLACK_PERSISTENCE_S} if check == "slack_strand"
-                  else {"seat_tolerance_m": limits.seat_tolerance_m}
-                  if check == "sprocket_disengaged" else {})
         table[check] = {
-            "fails_when": words, "threshold": threshold, **window,
+            "fails_when": words, "threshold": threshold, **extras.get(check, {}),
             "failing_checks": len(failing),
             "first_s": times_s[failing[0]] if failing else None,
             "last_s": times_s[failing[-1]] if failing else None,
