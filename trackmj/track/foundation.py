@@ -695,6 +695,15 @@ class ImplicitSprings:
                 "spring_h_stiffness": self.gain}
 
 
+def _integrate(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
+               springs: ImplicitSprings) -> None:
+    """One attempt of :func:`step`: the laws into M and the forces, then ``mj_step2``."""
+    foundation.apply()
+    springs.apply()
+    mujoco.mj_factorM(model, data)
+    mujoco.mj_step2(model, data)
+
+
 def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
          springs: ImplicitSprings, saved: np.ndarray | None = None,
          retake: Callable[[], bool] | None = None) -> None:
@@ -709,21 +718,14 @@ def step(model: mujoco.MjModel, data: mujoco.MjData, foundation: Foundation,
     :class:`trackmj.track.servo.DriveRetake`) takes it again."""
     if saved is None:
         saved = np.zeros(mujoco.mj_stateSize(model, REDO_STATE))
-
-    def integrate() -> None:   # one attempt: the laws into M and the forces, then mj_step2
-        foundation.apply()
-        springs.apply()
-        mujoco.mj_factorM(model, data)
-        mujoco.mj_step2(model, data)
-
     mujoco.mj_step1(model, data)
     mujoco.mj_getState(model, data, saved, REDO_STATE)
     for attempt in range(MAX_ATTEMPTS):
-        integrate()
+        _integrate(model, data, foundation, springs)
         while retake is not None and retake():
             foundation.discard()
             mujoco.mj_setState(model, data, saved, REDO_STATE)
-            integrate()
+            _integrate(model, data, foundation, springs)
         final = attempt == MAX_ATTEMPTS - 1
         if not foundation.finish(final):
             return
