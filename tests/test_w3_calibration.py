@@ -213,13 +213,15 @@ def test_w3_calibrates_on_a_front_sprocket_compact3_within_the_tipping_limit() -
 
 
 RECOVERY_NOT_MET = {
-    "m113": ("issue 32's floor, not met (seed 0, edges 6/8/18/20 s: never/1.25/0.83/1.68 s; "
+    "m113": ("issue 32's floor, not met (seed 0, edges 6/8/18/20 s: never/1.26/0.86/2.16 s, "
+             "measured 2026-12-08; "
              "the 0.5 s mean stays in 18.6-25.2 kN, inside the 13.3-26.7 kN band, over the "
              "5 seeds): on Chrono's rubber bushings the pulses are a 5.6 kN tow and a "
              "3.8 kN push (a 15.0 kN push that pitched the chassis by 38 mrad on the steel "
              "pins); the tow's +13 % (with the sprocket at the front a tow tightens the top "
              "strand over the idler) is not back within 5 % before it ends 2 s later, and "
-             "the push's release takes 1.7 s (models/README.md, W3 on M113)"),
+             "the push's release takes 2.2 s; neither the estimator's drive-torque filter nor its "
+             "y0 random walk brings them within 1 s (models/README.md, W3 on M113)"),
     "compact3": ("issue 32's floor, not met: its oil column takes only 16 % of an idler "
                  "load step in hold, so the +13 % braking pulse needs a 5.3 kN push, 36 % of "
                  "the side's weight; while it lasts the 0.5 s mean does not come back within "
