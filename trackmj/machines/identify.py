@@ -162,7 +162,15 @@ def check_single_dof(mass_kg: float, damping_N_s_m: float, skill: float,
 def fit_modal(freq_Hz: np.ndarray, compliance: np.ndarray) -> tuple[ModalTerm, ...]:
     """Idler mode (r + q·s)/(…), body mode r/(…) and a relaxation r/(s + p) fitted to
     ``compliance`` (errors weighted by |H|^-½), started from the idler mode at the largest
-    |H|, body modes at 7-9 Hz and relaxation rates 100-1000 1/s; the best start kept."""
+    |H|, body modes at 7-9 Hz and relaxation rates 100-1000 1/s; the best start kept.
+
+    The residues r are bounded at 0 from below: ``compliance`` is a driving-point
+    compliance (stroke over the force on the same carrier), and a passive structure's
+    driving-point residues are φ²/m ≥ 0 for every mode (and a relaxation's, a spring
+    behind a dashpot, likewise). Left free, two terms at one frequency with opposite
+    residues cancel into a fit of the noise (M113's shipped file had +0.0106 at 5.37 Hz and
+    −0.0102 at 5.46 Hz). A body residue at 0 says the band shows no body mode apart from the
+    idler's. The velocity residue q (non-proportional damping) keeps its sign free."""
     omega = 2.0 * math.pi * freq_Hz
     peak = float(freq_Hz[np.argmax(np.abs(compliance))])
 
@@ -175,7 +183,7 @@ def fit_modal(freq_Hz: np.ndarray, compliance: np.ndarray) -> tuple[ModalTerm, .
         err = (model - compliance) / np.abs(compliance) ** 0.5
         return np.concatenate([err.real, err.imag])
 
-    low = [-1.0, -1.0, 0.5, 0.01, -1.0, 0.5, 0.01, -1.0, 1.0]
+    low = [0.0, -1.0, 0.5, 0.01, 0.0, 0.5, 0.01, 0.0, 1.0]
     high = [1.0, 1.0, 60.0, 1.5, 1.0, 60.0, 1.5, 1.0, 1e4]
     scale = [1e-2, 1e-4, 5.0, 0.1, 1e-4, 2.0, 0.1, 1e-4, 100.0]
     best = None
