@@ -78,6 +78,9 @@ def summary_table(results: list, title: str) -> str:
         lines.append(f"low-pass: zero-phase 2nd-order Butterworth at "
                      f"{', '.join(f'{c:g}' for c in sorted(cutoff))} Hz on F_ten; raw: the "
                      "1 kHz F_ten (see README, Metrics)")
+    bands = {_bands_text(w) for w in windows} - {""}
+    if bands:
+        lines.append("ripple bands: " + "; ".join(sorted(bands)))
     names = [title.format(r=r) if len(results) > 1 else "" for r in results]
     verdicts = [line for r, name in zip(results, names, strict=True)
                 if (line := acceptance_line(r.metrics, name))]
@@ -88,6 +91,16 @@ def summary_table(results: list, title: str) -> str:
     if warnings:
         lines += ["", *warnings]
     return "\n".join(lines)
+
+
+def _bands_text(window: Mapping[str, Any]) -> str:
+    """The tooth-passing and body-mode bands of a run's windows in words ("" without
+    either), e.g. "tooth passing 8.8-10.7 Hz, body mode 5.2-7.7 Hz"."""
+    parts = [f"{label} {band[0]:.3g}-{band[1]:.3g} Hz"
+             for label, key in (("tooth passing", "tooth_passing_band_Hz"),
+                                ("body mode", "body_mode_band_Hz"))
+             if (band := window.get(key))]
+    return ", ".join(parts)
 
 
 def acceptance_line(metrics: Mapping[str, Any], run: str = "") -> str:

@@ -93,6 +93,28 @@ def modal_compliance(modes: Iterable[ModalTerm], omega: np.ndarray) -> np.ndarra
     return sum((term.compliance(omega) for term in modes), np.zeros_like(omega, dtype=complex))
 
 
+def first_mode_Hz(modes: Iterable[ModalTerm]) -> float | None:
+    """Frequency [Hz] of the lowest mode of a modal model that the response shows (residue
+    > 0; the relaxation term is no mode); None if it shows none."""
+    shown = [t.frequency_Hz for t in modes if t.frequency_Hz > 0.0 and t.residue > 0.0]
+    return min(shown) if shown else None
+
+
+def body_mode_band_Hz(idler: EquivalentIdler, reference: EquivalentIdler,
+                      reference_band_Hz: tuple[float, float]) -> tuple[float, float]:
+    """The track–idler–body mode band [Hz] (low, high) of the machine whose idler is
+    ``idler``: ``reference_band_Hz``, the band on the machine of ``reference``, moved with
+    the ratio of the two machines' first identified modes (:func:`first_mode_Hz`), so its
+    edges sit at the same multiples of the machine's own mode. ValueError if either modal
+    model shows no mode."""
+    own, ref = first_mode_Hz(idler.modes), first_mode_Hz(reference.modes)
+    if own is None or ref is None:
+        raise ValueError("no body-mode band: the idler's modal model shows no mode "
+                         "(every residue 0)")
+    ratio = own / ref
+    return reference_band_Hz[0] * ratio, reference_band_Hz[1] * ratio
+
+
 @dataclass(frozen=True)
 class ModeTable(Parameters):
     """One term of the modal compliance model (``trackmj.machines.idler.ModalTerm``)."""

@@ -42,7 +42,8 @@ Raw only:
   ``f_Hz``, ``tension_N2_Hz`` (raw F_ten), ``chassis_acc_m2_s4_Hz`` (chassis vertical
   acceleration; null without a chassis);
 - ``chassis_acc_body_mode_rms_m_s2``: chassis vertical acceleration RMS in the body-mode
-  band (8-12 Hz in W1-W5), steady window;
+  band (the machine's: 8-12 Hz on LF1352, ``trackmj.sim.setup.machine_body_mode_band``),
+  steady window;
 - ``constraint_violation_s``: time with F outside [force_min_N, force_max_N];
   ``valve_switches`` and ``valve_switch_rate_Hz``: valve mode changes (count, per s);
   NaN (null) when ``valve_mode_applied`` is false: the tensioner takes no valve mode (a

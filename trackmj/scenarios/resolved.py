@@ -21,6 +21,7 @@ from trackmj.results.metric_windows import MetricWindows
 from trackmj.scenarios.inputs import INPUT_NAMES, read_inputs
 from trackmj.scenarios.schema import (
     REFERENCE_MAX_N,
+    STUDY_BODY_MODE_BAND_HZ,
     TRACK_SPEED_MAX_M_S,
     Evaluation,
     Header,
@@ -313,7 +314,8 @@ class Scenario:
 
     def metric_windows(self, duration_s: float | None = None, *,
                        link_pitch_m: float | None = None,
-                       drive_load: tuple[float, float] | None = None) -> MetricWindows:
+                       drive_load: tuple[float, float] | None = None,
+                       body_mode_band_Hz: tuple[float, float] | None = None) -> MetricWindows:
         """Windows for :func:`trackmj.results.metrics.compute_metrics`: the first reference step
         (evaluated until the next step or ramp start), load pulses and supply drops as
         disturbances, the steady window from steady_start_s to the end, and the
@@ -322,7 +324,10 @@ class Scenario:
         sprocket every pitch); without it (or standing still) there is none. On an iso8608
         road the band it excites, speed × [n_min, n_max] cycles/m, is recorded too. With the
         machine's ``drive_load`` (g [1/m], σ; :mod:`trackmj.machines.drive_load`) the
-        acceptance also takes the drive's floor under the idler load."""
+        acceptance also takes the drive's floor under the idler load. The body-mode band
+        [Hz] is the scenario's ``body_mode_band_Hz``, else the machine's
+        ``body_mode_band_Hz`` (:func:`trackmj.sim.setup.machine_body_mode_band`), else the
+        study's on LF1352 (:data:`~trackmj.scenarios.schema.STUDY_BODY_MODE_BAND_HZ`)."""
         duration = self.duration_s if duration_s is None else duration_s
         dist, labels, states = self._disturbances()
         ev, speed = self.evaluation, self.steady_pace_m_s(duration)
@@ -333,7 +338,8 @@ class Scenario:
             disturbance_labels=labels, disturbance_states=states,
             steady=(ev.steady_start_s, duration), settle_band_rel=ev.settle_band_rel,
             min_hold_s=ev.min_hold_s, lowpass_cutoff_Hz=ev.lowpass_cutoff_Hz,
-            body_mode_band_Hz=ev.body_mode_band_Hz,
+            body_mode_band_Hz=(ev.body_mode_band_Hz or body_mode_band_Hz
+                               or STUDY_BODY_MODE_BAND_HZ),
             tooth_passing_band_Hz=self._tooth_band_Hz(speed, link_pitch_m),
             road_band_Hz=self._road_band_Hz(speed), psd_resolution_Hz=ev.psd_resolution_Hz,
             psd_max_Hz=ev.psd_max_Hz, mean_window_s=ev.mean_window_s,

@@ -327,7 +327,8 @@ def _run_metrics(setup: RunSetup, asm: Assembly, result: Result, recorder: Recor
     drive = drive_load(setup.model)
     windows = setup.scenario.metric_windows(setup.duration_s,
                                             link_pitch_m=setup.model.track.pitch_m,
-                                            drive_load=(drive.gain_1_m, drive.tight_sign))
+                                            drive_load=(drive.gain_1_m, drive.tight_sign),
+                                            body_mode_band_Hz=setup.body_mode_band_Hz)
     m = compute_metrics(result.columns(), windows, control_period_s=controller.period_s,
                         solve_times_s=recorder.solve_times_s,
                         solve_success=recorder.solve_success, wall_time_s=wall_s,

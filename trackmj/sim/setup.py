@@ -43,6 +43,7 @@ from trackmj.machines.idler import (
     SCALARS,
     EquivalentIdler,
     ModalTerm,
+    body_mode_band_Hz,
     identification_for,
     load_idler,
 )
@@ -51,7 +52,7 @@ from trackmj.ports import COUPLING_STEP_S
 from trackmj.scenarios.events import check_duration
 from trackmj.scenarios.load import load_scenario
 from trackmj.scenarios.resolved import Scenario
-from trackmj.scenarios.schema import Variant
+from trackmj.scenarios.schema import STUDY_BODY_MODE_BAND_HZ, Variant
 from trackmj.sim.control_plant import nominal_plant_params
 from trackmj.sim.controllers import CONTROLLERS, ESTIMATORS
 from trackmj.sim.entries import by_name
@@ -203,6 +204,9 @@ class RunSetup:
     tensioner: TensionerFile | None = None
     controller_file: Any = None
     machine: Machine = field(default_factory=lambda: resolve(DEFAULT_MACHINE))
+    body_mode_band_Hz: tuple[float, float] | None = None
+    """The machine's body-mode band [Hz] for a scenario that states none
+    (:func:`machine_body_mode_band`)."""
 
     @property
     def steps(self) -> int:
@@ -314,6 +318,32 @@ def _check_bands_agree(sc: Scenario, control: ControlConfig, control_file: str) 
             f"{enforced[0]:g}, {enforced[1]:g} N: the band the metrics judge must be the one "
             "the controllers enforce; set both (e.g. --set scenario.limits.force_max_N=... "
             "--set control.controller.force_max_N=...)")
+
+
+def machine_body_mode_band(sc: Scenario, machine: Machine) -> tuple[float, float] | None:
+    """The track–idler–body mode band [Hz] the metrics take on ``machine`` when the scenario
+    states none: the study's 8-12 Hz on LF1352, moved with the ratio of the machine's first
+    identified mode to LF1352's (its own mechanics' idler, as the MPC weights;
+    :func:`trackmj.machines.idler.body_mode_band_Hz`). ParameterError, naming the scenario
+    key, where that band does not lie above the scenario's low-pass cut-off (the band splits
+    the ripple the low-pass leaves). None if the scenario states a band."""
+    ev = sc.evaluation
+    if ev.body_mode_band_Hz is not None:
+        return None
+    own = _idler(mechanics(machine), machine)
+    try:
+        band = body_mode_band_Hz(own, load_idler(), STUDY_BODY_MODE_BAND_HZ)
+    except ValueError as error:
+        raise ParameterError(f"{sc.source.name} [evaluation] body_mode_band_Hz: {machine.name}: "
+                             f"{error}; state the band") from None
+    if not band[0] > ev.lowpass_cutoff_Hz:
+        raise ParameterError(
+            f"{sc.source.name} [evaluation] body_mode_band_Hz: {machine.name}'s band "
+            f"{band[0]:.3g}-{band[1]:.3g} Hz (the study's {STUDY_BODY_MODE_BAND_HZ[0]:g}-"
+            f"{STUDY_BODY_MODE_BAND_HZ[1]:g} Hz moved with its first identified mode) does "
+            f"not lie above lowpass_cutoff_Hz = {ev.lowpass_cutoff_Hz:g}; state the band "
+            "or a lower cut-off")
+    return band
 
 
 @functools.cache
@@ -436,4 +466,4 @@ def prepare(scenario: Scenario | str | Path, *, architecture: str = REFERENCE_AR
         overrides={f"{kind}.{key}": value for kind, keys in sets.items()
                    for key, value in keys.items()},
         element=element, tensioner=tensioner_file, controller_file=controller_file,
-        machine=mach)
+        machine=mach, body_mode_band_Hz=machine_body_mode_band(sc, mach))
