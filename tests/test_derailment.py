@@ -567,3 +567,27 @@ def test_m113s_slack_lower_run_on_a_2_m_s_start_is_inside_its_own_bound(tmp_path
     assert envelope["threshold"] == pytest.approx(4.0 / 3.0 * 0.154)
     assert 0.08 < envelope["worst"]["excursion_m"] < envelope["threshold"]
     assert envelope["worst"]["strand"] == "lower run"
+
+
+HIGH_DRIVE = {"sprocket.z_m": 0.6, "track.link_count": 49}
+"""compact3 with its sprocket raised 0.3 m above its home height, 0.38 m above the idler
+(a high-drive layout, as on elevated-sprocket dozers), two links longer for the loop."""
+
+
+@pytest.mark.parametrize("machine, overrides", [
+    ("lf1352", None), ("compact3", None), ("m113", None), ("compact3", HIGH_DRIVE)])
+def test_the_upper_strand_runs_from_the_idler_to_the_sprocket(machine, overrides) -> None:
+    """At home the pins the slack check watches span the free strand between the idler's
+    top and the sprocket's, to within a wheel radius at each end, on every shipped machine
+    and on a high-drive layout. Counting only the pins above the higher wheel centre, the
+    high-drive compact3's strand was its 9 pins nearest the sprocket (x −0.94 to −0.28 m of
+    a strand reaching the idler at 0.80 m): its slack check watched a wrap, not the span."""
+    plant = load_plant(machine=machine, overrides=overrides)
+    p = plant.params
+    x = plant.pin_positions()[plant.upper_strand_pins(), 0]
+    ends = sorted((p.sprocket.x_m, p.idler.x_m))
+    reach = max(p.sprocket_pitch_radius_m, p.idler.radius_m)
+    assert x.min() <= ends[0] + reach and x.max() >= ends[1] - reach
+    # and every upper pin is on top: above both wheels' lowest points
+    z = plant.pin_positions()[plant.upper_strand_pins(), 1]
+    assert z.min() > min(p.sprocket.z_m, p.idler.z_m)

@@ -87,6 +87,32 @@ def _pin_tensions(efc_force: np.ndarray, cfrc_int: np.ndarray, xmat: np.ndarray,
         out[k] = (fx * bx + fy * by + fz * bz) / norm
 
 
+STRAND_MARGIN_REL = 0.3
+"""The strands' margin off the wheel centres' line, as a share of the smaller of the
+sprocket's pitch radius and the idler's radius [-] (LF1352: 51 mm; M113: 75 mm): a pin a
+strand carries straight between the wheels' tops lies a radius off it, one on a wheel's
+side below the margin is still wrapped. Assumed; by geometric similarity it keeps the 5 cm
+that LF1352's strands were classified with."""
+
+
+def strand_bounds(params: ModelParams) -> np.ndarray:
+    """What :func:`_strands` classifies the pins by, shape (6,): (ride height, the upper
+    level at chassis x = 0, its slope dz/dx; the sprocket's lower run: x from, x to, its
+    level) [m, -]. The upper strand lies above the line through the sprocket's and the
+    idler's centres raised by the margin (:data:`STRAND_MARGIN_REL`), so it follows a
+    sprocket set high above the idler (a high-drive layout) instead of counting only the
+    pins above the higher centre; the lower run lies between the sprocket and its nearest
+    road wheel, the margin below the sprocket's centre. Heights in the chassis frame
+    (above the ride height)."""
+    ride, spr, idler = params.chassis.ride_height_m, params.sprocket, params.idler
+    margin = STRAND_MARGIN_REL * min(params.sprocket_pitch_radius_m, idler.radius_m)
+    slope = (idler.z_m - spr.z_m) / (idler.x_m - spr.x_m)
+    wheels = params.road_wheels.x_m
+    lo, hi = (spr.x_m, min(wheels)) if spr.x_m < idler.x_m else (max(wheels), spr.x_m)
+    return np.array([ride, spr.z_m - ride - slope * spr.x_m + margin, slope, lo, hi,
+                     spr.z_m - ride - margin])
+
+
 @numba.njit(cache=True)
 def _strands(geom_xpos: np.ndarray, pin_geom: np.ndarray, qpos: np.ndarray,
              chassis_q: np.ndarray, bounds: np.ndarray, tension: np.ndarray,
@@ -94,8 +120,7 @@ def _strands(geom_xpos: np.ndarray, pin_geom: np.ndarray, qpos: np.ndarray,
     """Upper-strand and lower-run masks of the pins (written into ``upper``, ``lower``) and
     the mean ``tension`` over each [N] (NaN for an empty strand). Pins are taken in the
     chassis frame: world (x, z) less the chassis origin (x, ride + z), turned back by its
-    pitch; ``bounds``: (ride height, upper level, lower run x from, x to, lower level) [m],
-    see :meth:`TrackPlant.upper_strand_pins`, :meth:`TrackPlant.lower_strand_pins`."""
+    pitch; ``bounds``: :func:`strand_bounds`."""
     x0, z0 = qpos[chassis_q[0]], bounds[0] + qpos[chassis_q[1]]
     c, s = math.cos(qpos[chassis_q[2]]), math.sin(qpos[chassis_q[2]])
     sum_u = sum_l = 0.0
@@ -103,8 +128,8 @@ def _strands(geom_xpos: np.ndarray, pin_geom: np.ndarray, qpos: np.ndarray,
     for k in range(len(pin_geom)):
         rx, rz = geom_xpos[pin_geom[k], 0] - x0, geom_xpos[pin_geom[k], 2] - z0
         px, pz = c * rx - s * rz, s * rx + c * rz   # undo the rotation about +y by pitch
-        upper[k] = pz > bounds[1]
-        lower[k] = bounds[2] < px < bounds[3] and pz < bounds[4]
+        upper[k] = pz > bounds[1] + bounds[2] * px
+        lower[k] = bounds[3] < px < bounds[4] and pz < bounds[5]
         if upper[k]:
             sum_u += tension[k]
             n_u += 1
@@ -425,14 +450,8 @@ class TrackPlant:
         self._start_qvel, self._timestep = self.foundation.start_velocity, m.opt.timestep
         self._chassis_vz = int(self._chassis_v[1])
         self._chassis_body = m.body("chassis").id
-        # strands in the chassis frame (ride height, upper level; the sprocket's lower run:
-        # x from, to, level): 5 cm above the higher of sprocket and idler centres; between
-        # the sprocket and its nearest road wheel, 5 cm below the sprocket centre
-        ride, spr = params.chassis.ride_height_m, params.sprocket
-        wheels = params.road_wheels.x_m
-        lo, hi = (spr.x_m, min(wheels)) if spr.x_m < params.idler.x_m else (max(wheels), spr.x_m)
-        self._strand_bounds = np.array([ride, max(spr.z_m, params.idler.z_m) - ride + 0.05,
-                                        lo, hi, spr.z_m - ride - 0.05])
+        # strands in the chassis frame (:func:`strand_bounds`)
+        self._strand_bounds = strand_bounds(params)
         self._upper, self._lower = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
         # the least upper-strand pin tension sampled every _slack_sample_steps coupling
         # steps over the last SLACK_PERSISTENCE_S (a ring, oldest at _slack_at) and how
@@ -832,14 +851,15 @@ class TrackPlant:
         return np.maximum((pts @ normals.T - offsets).max(axis=1), 0.0)
 
     def upper_strand_pins(self) -> np.ndarray:
-        """Indices of pins in the upper strand (5 cm above the higher of the sprocket and
-        idler centres, chassis frame)."""
+        """Indices of pins in the upper strand (above the line through the sprocket's and
+        the idler's centres, raised by the margin; :func:`strand_bounds`)."""
         self._strands(self._tension)
         return np.nonzero(self._upper)[0]
 
     def lower_strand_pins(self) -> np.ndarray:
         """Indices of pins in the sprocket's lower run: between the sprocket and its
-        nearest road wheel, 5 cm below the sprocket centre. With the sprocket at the rear
+        nearest road wheel, the margin below the sprocket centre (:func:`strand_bounds`).
+        With the sprocket at the rear
         it is the tight side driving forward; at the front the upper strand is."""
         self._strands(self._tension)
         return np.nonzero(self._lower)[0]

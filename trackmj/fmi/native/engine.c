@@ -564,7 +564,7 @@ struct Engine {
     int *stretch_qpos;      /* structure "slides": qpos of every pin slide */
     double *pins_per_connect;
     int connects, has_hinged, stretches;
-    double strand_bounds[5];
+    double strand_bounds[6];
     int hull_n;
     double *hull;           /* (hull_n, 2) home envelope, chassis frame, counter-clockwise */
     double envelope_threshold_m, seat_tolerance_m, slack_tension_N;
@@ -703,7 +703,7 @@ static int load_configuration(Engine *e, const Cfg *cfg) {
         || cfg_into(e, cfg, "stroke_offset_m", &e->stroke_offset_m, 1)
         || cfg_into(e, cfg, "pitch_radius_m", &e->pitch_radius_m, 1)
         || cfg_into(e, cfg, "ride_height_m", &e->ride_height_m, 1)
-        || cfg_into(e, cfg, "strand_bounds", e->strand_bounds, 5)
+        || cfg_into(e, cfg, "strand_bounds", e->strand_bounds, 6)
         || cfg_into(e, cfg, "envelope_threshold_m", &e->envelope_threshold_m, 1)
         || cfg_into(e, cfg, "seat_tolerance_m", &e->seat_tolerance_m, 1)
         || cfg_into(e, cfg, "slack_tension_N", &e->slack_tension_N, 1)
@@ -1035,8 +1035,8 @@ static void strands(Engine *e, double *upper_N, double *lower_N) {
     for (int k = 0; k < e->n; k++) {
         double px, pz;
         chassis_frame_pin(e, k, &px, &pz);
-        e->upper[k] = pz > bounds[1];
-        e->lower[k] = bounds[2] < px && px < bounds[3] && pz < bounds[4];
+        e->upper[k] = pz > bounds[1] + bounds[2] * px;
+        e->lower[k] = bounds[3] < px && px < bounds[4] && pz < bounds[5];
         if (e->upper[k]) { sum_u += e->tension[k]; n_u++; }
         if (e->lower[k]) { sum_l += e->tension[k]; n_l++; }
     }
