@@ -111,3 +111,15 @@ def test_the_summary_names_the_bands_it_split_the_ripple_into() -> None:
     run = SimpleNamespace(metrics={"evaluation": windows})
     table = summary_table([run], "m113")
     assert "ripple bands: tooth passing 8.77-10.7 Hz, body mode 5.16-7.75 Hz" in table
+
+
+def test_the_summary_says_when_the_bands_overlap() -> None:
+    """M113 at 1.0 m/s passes teeth at 6.5 Hz, inside its 5.2-7.7 Hz body-mode band: the
+    footnote says both rows count what they share (their squares no longer add up to the
+    ripple's)."""
+    windows = {"tooth_passing_band_Hz": [5.84, 7.14], "body_mode_band_Hz": [5.164, 7.746]}
+    table = summary_table([SimpleNamespace(metrics={"evaluation": windows})], "m113")
+    assert "(overlapping: both rows count the ripple they share)" in table
+    apart = {"tooth_passing_band_Hz": [8.766, 10.714], "body_mode_band_Hz": [5.164, 7.746]}
+    assert "overlapping" not in summary_table([SimpleNamespace(metrics={"evaluation": apart})],
+                                              "m113")

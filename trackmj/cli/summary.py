@@ -95,12 +95,16 @@ def summary_table(results: list, title: str) -> str:
 
 def _bands_text(window: Mapping[str, Any]) -> str:
     """The tooth-passing and body-mode bands of a run's windows in words ("" without
-    either), e.g. "tooth passing 8.8-10.7 Hz, body mode 5.2-7.7 Hz"."""
+    either), e.g. "tooth passing 8.77-10.7 Hz, body mode 5.16-7.75 Hz"; where they overlap
+    (a track speed whose tooth passing falls on the body mode) it says that both rows count
+    the overlap."""
+    tooth, body = window.get("tooth_passing_band_Hz"), window.get("body_mode_band_Hz")
     parts = [f"{label} {band[0]:.3g}-{band[1]:.3g} Hz"
-             for label, key in (("tooth passing", "tooth_passing_band_Hz"),
-                                ("body mode", "body_mode_band_Hz"))
-             if (band := window.get(key))]
-    return ", ".join(parts)
+             for label, band in (("tooth passing", tooth), ("body mode", body)) if band]
+    text = ", ".join(parts)
+    if tooth and body and tooth[0] <= body[1] and body[0] <= tooth[1]:
+        text += " (overlapping: both rows count the ripple they share)"
+    return text
 
 
 def acceptance_line(metrics: Mapping[str, Any], run: str = "") -> str:
