@@ -34,7 +34,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.model_description import CoSimulation, ModelDescription, ModelVariable
 from fmpy.validation import validate_fmu
-from wine import require, run_under_wine, windows_path, wine_available
+from wine import require, run_under_wine, windows_path, wine_available, wine_missing
 
 from trackmj.elements.prescribed import ConstantForce
 from trackmj.fmi.fmu import FmuLog, fmi2_callbacks
@@ -438,7 +438,7 @@ def test_the_windows_binary_under_wine_steps_as_the_linux_one(native, which,
     Windows' own DLLs (MuJoCo's is delay-loaded from beside it) and gives the Linux
     binary's stroke after 0.5 s at 13 kN within 0.01 mm (Windows' C runtime may round its
     maths functions differently)."""
-    require(wine_available(), "Wine cannot run Windows programs here")
+    require(wine_available(), wine_missing("Wine cannot run Windows programs here"))
     found = toolchain.win64_toolchain()
     require(not isinstance(found, toolchain.Missing), getattr(found, "reason", ""))
     assert isinstance(found, toolchain.Toolchain)

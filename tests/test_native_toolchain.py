@@ -15,7 +15,7 @@ from pathlib import Path
 
 import mujoco
 import pytest
-from wine import require, run_under_wine, windows_path, wine_available
+from wine import require, run_under_wine, windows_path, wine_available, wine_missing
 
 from trackmj.fmi.native import toolchain
 
@@ -137,7 +137,7 @@ def test_a_win64_build_under_wine_loads_mujoco_dll_from_its_own_folder(win64,
     next to the host, not the DLL): the DLL's first MuJoCo call answers MuJoCo's version,
     it imports only Windows system DLLs (mujoco.dll is delay-loaded from its folder) and,
     without mujoco.dll, trackmj_mujoco_load_error says why."""
-    require(wine_available(), "Wine cannot run MinGW-w64 programs here")
+    require(wine_available(), wine_missing("Wine cannot run MinGW-w64 programs here"))
     dll = _probe(win64, tmp_path / "fmu")
     assert all(map(_system_dll, toolchain.imported_libraries(dll))), \
         toolchain.imported_libraries(dll)

@@ -30,30 +30,53 @@ def windows_path(path: Path) -> str:
     return str(PureWindowsPath("Z:\\", *path.resolve().parts[1:]))
 
 
+_PROBE_ATTEMPTS = 2
+"""Runs of the probe per loader: the prefix's first boot (wineboot) runs under the first
+program, and once in a CI run (2026-12-08) the first worker's probe did not print while the
+other worker's did; a second run then finds the prefix booted."""
+_probe_failures: list[str] = []
+"""What each failed probe saw, for :func:`wine_missing`."""
+
+
 @functools.cache
 def wine_available() -> str | None:
     """The path of a Wine loader (wine64 or wine) that runs a trivial program MinGW-w64
-    built, or None (no MinGW-w64, no Wine, or a Wine that cannot run it). Checked once."""
+    built, or None (no MinGW-w64, no Wine, or a Wine that cannot run it; what the probes
+    saw in :func:`wine_missing`). Checked once."""
     compiler = shutil.which(MINGW_GCC)
     if compiler is None:
+        _probe_failures.append(f"no {MINGW_GCC} on PATH")
         return None
     work = Path(_session_dir())
     (work / "hello.c").write_text(_HELLO_C)
     built = subprocess.run([compiler, str(work / "hello.c"), "-o", str(work / "hello.exe")],
-                           capture_output=True)
+                           capture_output=True, text=True)
     if built.returncode != 0:
+        _probe_failures.append(f"{MINGW_GCC} failed: {built.stderr.strip()[-300:]}")
         return None
     for candidate in _CANDIDATES:
         wine = shutil.which(candidate)
         if wine is None:
             continue
-        try:
-            run = _run(wine, work / "hello.exe", [], timeout=300)
-        except subprocess.TimeoutExpired:
-            continue
-        if run.returncode == 0 and run.stdout.strip() == "hello from wine":
-            return wine
+        for _ in range(_PROBE_ATTEMPTS):
+            try:
+                run = _run(wine, work / "hello.exe", [], timeout=300)
+            except subprocess.TimeoutExpired:
+                _probe_failures.append(f"{wine}: no answer in 300 s")
+                continue
+            if run.returncode == 0 and run.stdout.strip() == "hello from wine":
+                return wine
+            _probe_failures.append(f"{wine}: exit {run.returncode}, stdout "
+                                   f"{run.stdout.strip()[-200:]!r}, stderr "
+                                   f"{run.stderr.strip()[-300:]!r}")
+    if not _probe_failures:
+        _probe_failures.append(f"none of {', '.join(_CANDIDATES)} on PATH")
     return None
+
+
+def wine_missing(why: str) -> str:
+    """``why`` with what the probes of :func:`wine_available` saw (call after it)."""
+    return f"{why}: {'; '.join(_probe_failures)}" if _probe_failures else why
 
 
 def run_under_wine(exe: Path, args: list[str], timeout: float
