@@ -588,6 +588,6 @@ def test_the_upper_strand_runs_from_the_idler_to_the_sprocket(machine, overrides
     ends = sorted((p.sprocket.x_m, p.idler.x_m))
     reach = max(p.sprocket_pitch_radius_m, p.idler.radius_m)
     assert x.min() <= ends[0] + reach and x.max() >= ends[1] - reach
-    # and every upper pin is on top: above both wheels' lowest points
+    # and every upper pin is on top: above the lower of the two wheel centres
     z = plant.pin_positions()[plant.upper_strand_pins(), 1]
     assert z.min() > min(p.sprocket.z_m, p.idler.z_m)
